@@ -131,19 +131,161 @@ def _conductor_rgb(a: Tensor, r0: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
     return geo[:, None] * (x[:, None] + r0 * (1.0 - x[:, None]))
 
 
+def _compile(fn):
+    """torch.compile(dynamic=True) on request (``NBRDF_COMPILE=1`` or
+    ``simulate(..., compile=True)``): the kernels below are pure elementwise
+    functions, which inductor fuses into one loop each."""
+    state = {"compiled": None}
+
+    def call(*args, compiled: bool = False):
+        if not compiled:
+            return fn(*args)
+        if state["compiled"] is None:
+            state["compiled"] = torch.compile(fn, dynamic=True)
+        return state["compiled"](*args)
+
+    call.__wrapped__ = fn
+    call.__doc__ = fn.__doc__
+    return call
+
+
+def _isotropic(u: Tensor) -> Tensor:
+    z = 1.0 - 2.0 * u[:, 0]
+    r = torch.sqrt((1.0 - z * z).clamp_min(0.0))
+    ph = 2.0 * math.pi * u[:, 1]
+    return torch.stack([r * torch.cos(ph), r * torch.sin(ph), z], -1)
+
+
+def _nee_to_top(z: Tensor, wo: Tensor, a0: Tensor, e0: Tensor, tau0: Tensor, u: Tensor):
+    """Samples the top interface from wo (forced transmission). Returns the
+    direction v leaving the vertex toward the top, the factor
+    Tr * f_top(-v, wo) / pdf (0 when the sample failed) and that pdf."""
+    wt, _, pdf_nee = _forced_transmission_sample(a0, e0, wo, u)
+    v = -wt
+    ok = pdf_nee > 0
+    tr = torch.exp(-tau0 * z / v[:, 2].clamp_min(1e-12))
+    f_t = GGXDielectric(a0, e0).eval(wt, wo)
+    scale = torch.where(ok, tr * f_t / torch.where(ok, pdf_nee, torch.ones_like(pdf_nee)), torch.zeros_like(tr))
+    return v, scale, pdf_nee
+
+
+@_compile
+def _k_flight(depth: Tensor, uz: Tensor, slab_top: Tensor, tau: Tensor, u: Tensor):
+    """Free flight in the current slab: (scatters, new depth)."""
+    down = uz < 0
+    dist_b = torch.where(down, (slab_top + 1.0 - depth) / (-uz).clamp_min(1e-12), (depth - slab_top) / uz.clamp_min(1e-12))
+    t = -torch.log1p(-u) / tau.clamp_min(1e-30)
+    scatter = (tau > 0) & (t < dist_b)
+    new_depth = torch.where(scatter, depth - t * uz, torch.where(down, slab_top + 1.0, slab_top))
+    return scatter, new_depth
+
+
+@_compile
+def _k_medium(beta: Tensor, depth: Tensor, alb: Tensor, nee_on: Tensor, wo: Tensor, a0: Tensor, e0: Tensor,
+              tau0: Tensor, u: Tensor):
+    """Scattering in a medium: NEE (in the top slab) and phase sampling."""
+    v, scale, pdf_nee = _nee_to_top(depth, wo, a0, e0, tau0, u[:, 0:2])
+    mis = pdf_nee / (pdf_nee + INV_4PI)
+    contrib = beta * alb * (INV_4PI * scale * mis * nee_on)[:, None]
+    return contrib, beta * alb, _isotropic(u[:, 2:4])
+
+
+@_compile
+def _k_top(beta: Tensor, pdir: Tensor, pdf_last: Tensor, wo: Tensor, a0: Tensor, e0: Tensor, u: Tensor):
+    """The walk reaches the top from below: evaluate the exit toward wo (MIS
+    against NEE with the consistent pdf), then sample the interface."""
+    top = GGXDielectric(a0, e0)
+    w_in = -pdir
+    f_t = top.eval(w_in, wo)
+    pdf_nee = _forced_transmission_pdf(a0, e0, wo, w_in)
+    mis = pdf_last / (pdf_last + pdf_nee)
+    contrib = beta * (f_t * mis)[:, None]
+    s = top.sample(w_in, u)
+    stays = (s.pdf > 0) & (s.w[:, 2] < 0)
+    return contrib, beta * s.weight[:, None], s.w, s.pdf, stays
+
+
+@_compile
+def _k_interface(beta: Tensor, pdir: Tensor, a: Tensor, e: Tensor, nee_on: Tensor, wo: Tensor, a0: Tensor,
+                 e0: Tensor, tau0: Tensor, u: Tensor):
+    """An internal interface hit from either side; NEE when it bounds the top slab."""
+    itf = GGXDielectric(a, e)
+    w_in = -pdir
+    v, scale, pdf_nee = _nee_to_top(torch.ones_like(a), wo, a0, e0, tau0, u[:, 0:2])
+    kern = itf.eval(w_in, v) * v[:, 2].abs()
+    mis = pdf_nee / (pdf_nee + itf.pdf(w_in, v))
+    contrib = beta * (kern * scale * mis * nee_on)[:, None]
+    s = itf.sample(w_in, u[:, 2:5])
+    ok = s.pdf > 0
+    crossed = ok & (w_in[:, 2] * s.w[:, 2] < 0)
+    return contrib, beta * s.weight[:, None], s.w, s.pdf, ok, crossed
+
+
+@_compile
+def _k_base_conductor(beta: Tensor, pdir: Tensor, a: Tensor, r0: Tensor, nee_on: Tensor, wo: Tensor, a0: Tensor,
+                      e0: Tensor, tau0: Tensor, u: Tensor):
+    geo = GGXConductor(a, 1.0)  # directions do not depend on r0
+    w_in = -pdir
+    v, scale, pdf_nee = _nee_to_top(torch.ones_like(a), wo, a0, e0, tau0, u[:, 0:2])
+    kern = _conductor_rgb(a, r0, w_in, v) * v[:, 2:3].abs()
+    mis = pdf_nee / (pdf_nee + geo.pdf(w_in, v))
+    contrib = beta * kern * (scale * mis * nee_on)[:, None]
+    s = geo.sample(w_in, u[:, 2:5])
+    ok = s.pdf > 0
+    h = w_in + s.w
+    h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-30)
+    x = (1.0 - (w_in * h).sum(-1).abs().clamp(max=1.0)) ** 5
+    fres = x[:, None] + r0 * (1.0 - x[:, None])
+    return contrib, beta * s.weight[:, None] * fres, s.w, s.pdf, ok
+
+
+@_compile
+def _k_base_diffuse(beta: Tensor, pdir: Tensor, alb: Tensor, nee_on: Tensor, wo: Tensor, a0: Tensor, e0: Tensor,
+                    tau0: Tensor, u: Tensor):
+    lam = Lambertian(1.0)
+    w_in = -pdir
+    v, scale, pdf_nee = _nee_to_top(torch.ones_like(a0), wo, a0, e0, tau0, u[:, 0:2])
+    pdf_x = lam.pdf(w_in, v)
+    mis = pdf_nee / (pdf_nee + pdf_x)
+    contrib = beta * alb * (v[:, 2].clamp_min(0.0) / math.pi * scale * mis * nee_on)[:, None]
+    s = lam.sample(w_in, u[:, 2:5])
+    ok = s.pdf > 0
+    return contrib, beta * alb, s.w, s.pdf, ok
+
+
+@_compile
+def _k_base_dielectric(beta: Tensor, pdir: Tensor, a: Tensor, e: Tensor, nee_on: Tensor, wo: Tensor, a0: Tensor,
+                       e0: Tensor, tau0: Tensor, u: Tensor):
+    d = GGXDielectric(a, e)
+    w_in = -pdir
+    v, scale, pdf_nee = _nee_to_top(torch.ones_like(a), wo, a0, e0, tau0, u[:, 0:2])
+    kern = d.eval(w_in, v) * v[:, 2].abs()
+    mis = pdf_nee / (pdf_nee + d.pdf(w_in, v))
+    contrib = beta * (kern * scale * mis * nee_on)[:, None]
+    s = d.sample(w_in, u[:, 2:5])
+    ok = (s.pdf > 0) & (s.w[:, 2] > 0)  # what is transmitted leaves the stack
+    return contrib, beta * torch.where(ok, s.weight, torch.zeros_like(s.weight))[:, None], s.w, s.pdf, ok
+
+
 def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: int = 0, *,
-             dtype: torch.dtype = torch.float32, rr_depth: int = 4, max_depth: int = 10_000,
-             include_top_reflection: bool = True, stats: SimStats | None = None,
-             progress=None) -> tuple[Tensor, Tensor]:
+             dtype: torch.dtype = torch.float32, rr_depth: int = 4, max_depth: int = 100_000,
+             include_top_reflection: bool = True, compile: bool | None = None,
+             stats: SimStats | None = None) -> tuple[Tensor, Tensor]:
     """Mean and standard error of the stack's BRDF f(wi, wo) per pair.
 
     ``wi``, ``wo``: (N, 3) upper-hemisphere unit vectors; ``spp`` paths per
     pair; ``include_top_reflection=False`` leaves out the closed-form single
-    reflection off the top (to test the walk alone). Returns tensors (N, C) (or (N,) for single-channel input without a
-    channel dim) in ``dtype``. Deterministic for a given seed and batch."""
+    reflection off the top (to test the walk alone); ``compile`` fuses the
+    kernels with torch.compile (default: env ``NBRDF_COMPILE=1``). Returns
+    tensors (N, C) (or (N,) for single-channel input without a channel dim)
+    in ``dtype``. Deterministic for a given seed, batch and ``compile``."""
+    import os
     import time
 
     t0 = time.perf_counter()
+    if compile is None:
+        compile = os.environ.get("NBRDF_COMPILE", "0") == "1"
+    kw = {"compiled": bool(compile)}
     p, squeeze = stack.normalized(dtype)
     wi = wi.to(dtype)
     wo = wo.to(dtype)
@@ -155,8 +297,8 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
         return torch.rand(n, k, generator=gen, dtype=dtype)
 
     # Closed-form single reflection off the top interface.
-    top_all = GGXDielectric(p.roughness[:, 0], p.ior[:, 0])
-    f_top_refl = top_all.eval(wi, wo) if include_top_reflection else torch.zeros(N, dtype=dtype)
+    f_top_refl = (GGXDielectric(p.roughness[:, 0], p.ior[:, 0]).eval(wi, wo) if include_top_reflection
+                  else torch.zeros(N, dtype=dtype))
 
     # Lanes: spp paths per pair, laid out pair-major.
     n_lanes = N * spp
@@ -164,182 +306,89 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     acc = torch.zeros(n_lanes, C, dtype=dtype)
     lane = torch.arange(n_lanes)
 
-    # Entry: forced refraction of wi through the top interface (stratified over spp).
+    # Entry: forced refraction of wi through the top interface, stratified over spp.
     u = rand(n_lanes, 2)
     if spp > 1:
-        j = torch.arange(n_lanes) % spp
-        u[:, 0] = (j + u[:, 0]) / spp
-    a0, e0 = p.roughness[pid, 0], p.ior[pid, 0]
-    d_in, w_entry, _ = _forced_transmission_sample(a0, e0, wi[pid], u)
+        u[:, 0] = (torch.arange(n_lanes) % spp + u[:, 0]) / spp
+    d_in, w_entry, _ = _forced_transmission_sample(p.roughness[pid, 0], p.ior[pid, 0], wi[pid], u)
     beta = w_entry[:, None].expand(n_lanes, C).clone()
-    pdir = d_in  # photon travel direction (down into slab 0)
+    pdir = d_in  # photon travel direction
     depth = torch.zeros(n_lanes, dtype=dtype)
     slab = torch.zeros(n_lanes, dtype=torch.long)
-    pdf_last = torch.zeros(n_lanes, dtype=dtype)  # sampling pdf of the current direction at its vertex
-    bounces = 0
-    alive = beta.amax(-1) > 0
-    pid, lane, beta, pdir, depth, slab, pdf_last = (t[alive] for t in (pid, lane, beta, pdir, depth, slab, pdf_last))
-    vertices = 0
-
-    def nee(idx: Tensor, z: Tensor, kernel_and_pdf):
-        """NEE from vertices ``idx`` at depth z in slab 0 toward wo."""
-        q = pid[idx]
-        w_o = wo[q]
-        uu = rand(idx.numel(), 2)
-        a, e = p.roughness[q, 0], p.ior[q, 0]
-        wt, _, pdf_nee = _forced_transmission_sample(a, e, w_o, uu)
-        v = -wt  # direction leaving the vertex, upward
-        ok = pdf_nee > 0
-        kern, pdf_x = kernel_and_pdf(idx, v)  # (n, C), (n,)
-        tau = p.sigma_t[q, 0]
-        tr = torch.exp(-tau * z / v[:, 2].clamp_min(1e-12))
-        f_t = GGXDielectric(a, e).eval(wt, w_o)
-        mis = pdf_nee / (pdf_nee + pdf_x)
-        scale = torch.where(ok, tr * f_t * mis / torch.where(ok, pdf_nee, torch.ones_like(pdf_nee)), torch.zeros_like(tr))
-        acc.index_add_(0, lane[idx], beta[idx] * kern * scale[:, None])
+    pdf_last = torch.zeros(n_lanes, dtype=dtype)  # density of pdir at the vertex that chose it
+    keep = w_entry > 0
+    pid, lane, beta, pdir, depth, slab, pdf_last = (t[keep] for t in (pid, lane, beta, pdir, depth, slab, pdf_last))
+    # Top-interface parameters per pair, reused by every NEE.
+    a0_all, e0_all, tau0_all = p.roughness[:, 0], p.ior[:, 0], p.sigma_t[:, 0]
+    bounces = vertices = 0
 
     while pid.numel() > 0 and bounces < max_depth:
         n = pid.numel()
         vertices += n
         bounces += 1
-        # Free flight inside the current slab.
-        tau = p.sigma_t[pid, slab]
-        uz = pdir[:, 2]
-        going_down = uz < 0
-        top_of_slab = slab.to(dtype)
-        dist_b = torch.where(going_down, (top_of_slab + 1.0 - depth) / (-uz).clamp_min(1e-12),
-                             (depth - top_of_slab) / uz.clamp_min(1e-12))
-        t = -torch.log1p(-rand(n, 1)[:, 0]) / tau.clamp_min(1e-30)
-        scatter = (tau > 0) & (t < dist_b)
-        depth = torch.where(scatter, depth - t * uz,
-                            torch.where(going_down, top_of_slab + 1.0, top_of_slab))
-        new_dir = pdir.clone()
-        new_pdf = pdf_last.clone()
-        kill = torch.zeros(n, dtype=torch.bool)
-        # Classify every lane's event before any state changes.
-        hit_lower = ~scatter & going_down
-        k_if = torch.where(hit_lower, slab + 1, slab)  # index of the interface hit (L = base)
-        itop = (~scatter & (k_if == 0)).nonzero().squeeze(-1)
-        iint = (~scatter & (k_if >= 1) & (k_if < L)).nonzero().squeeze(-1)
-        ibase = (~scatter & (k_if == L)).nonzero().squeeze(-1)
+        u = rand(n, 7)
+        scatter, depth = _k_flight(depth, pdir[:, 2], slab.to(dtype), p.sigma_t[pid, slab], u[:, 0], **kw)
+        going_down = pdir[:, 2] < 0
+        k_if = torch.where(going_down, slab + 1, slab)  # the interface reached (L = base)
+        alive = torch.ones(n, dtype=torch.bool)
+        new_dir, new_pdf = pdir.clone(), pdf_last.clone()
 
-        # --- medium scattering --------------------------------------------
-        im = scatter.nonzero().squeeze(-1)
-        if im.numel():
-            alb = p.albedo[pid[im], slab[im]]
-            in0 = im[slab[im] == 0]
-            if in0.numel():
-                alb0 = p.albedo[pid[in0], 0]
-                nee(in0, depth[in0], lambda idx, v, alb0=alb0: (alb0 * INV_4PI, torch.full((idx.numel(),), INV_4PI, dtype=dtype)))
-            beta[im] = beta[im] * alb
-            uu = rand(im.numel(), 2)
-            zc = 1.0 - 2.0 * uu[:, 0]
-            r = torch.sqrt((1.0 - zc * zc).clamp_min(0.0))
-            ph = 2.0 * math.pi * uu[:, 1]
-            new_dir[im] = torch.stack([r * torch.cos(ph), r * torch.sin(ph), zc], -1)
-            new_pdf[im] = INV_4PI
+        def common(idx: Tensor):
+            q = pid[idx]
+            return wo[q], a0_all[q], e0_all[q], tau0_all[q]
 
-        # --- top interface from below -----------------------------------------
-        if itop.numel():
-            q = pid[itop]
-            a, e = p.roughness[q, 0], p.ior[q, 0]
-            top = GGXDielectric(a, e)
-            w_in = -pdir[itop]  # points down, away from the interface
-            f_t = top.eval(w_in, wo[q])
-            pdf_nee = _forced_transmission_pdf(a, e, wo[q], w_in)
-            mis = pdf_last[itop] / (pdf_last[itop] + pdf_nee)
-            acc.index_add_(0, lane[itop], beta[itop] * (f_t * mis)[:, None])
-            s = top.sample(w_in, rand(itop.numel(), 3))
-            refl = (s.pdf > 0) & (s.w[:, 2] < 0)  # stays inside
-            wgt = s.weight
-            beta[itop] = beta[itop] * wgt[:, None]
-            new_dir[itop] = s.w
-            new_pdf[itop] = s.pdf
-            kill[itop] = ~refl
+        def absorb(idx: Tensor, contrib: Tensor, b: Tensor, d: Tensor, pdf: Tensor, ok: Tensor) -> None:
+            acc.index_add_(0, lane[idx], contrib)
+            beta[idx], new_dir[idx], new_pdf[idx] = b, d, pdf
+            alive[idx] = ok
 
-        # --- internal interfaces (k >= 1), from above or below ---------------
-        if iint.numel():
-            q, k = pid[iint], k_if[iint]
-            itf = GGXDielectric(p.roughness[q, k], p.ior[q, k])
-            w_in = -pdir[iint]
-            at1 = k == 1
-            if at1.any():
-                sel = iint[at1]
-                itf1 = GGXDielectric(p.roughness[pid[sel], 1], p.ior[pid[sel], 1])
-                w1 = -pdir[sel]
-                nee(sel, torch.ones(sel.numel(), dtype=dtype),
-                    lambda idx, v, itf1=itf1, w1=w1: (itf1.eval(w1, v)[:, None] * v[:, 2:3].abs(), itf1.pdf(w1, v)))
-            s = itf.sample(w_in, rand(iint.numel(), 3))
-            ok = s.pdf > 0
-            beta[iint] = beta[iint] * s.weight[:, None]
-            new_dir[iint] = s.w
-            new_pdf[iint] = s.pdf
-            crossed = ok & (w_in[:, 2] * s.w[:, 2] < 0)
-            # crossing downward enters slab k, crossing upward enters slab k-1
-            slab_new = torch.where(crossed, torch.where(w_in[:, 2] > 0, k, k - 1), slab[iint])
-            slab[iint] = slab_new
-            kill[iint] = ~ok
+        idx = scatter.nonzero().squeeze(-1)
+        if idx.numel():
+            q, s_ = pid[idx], slab[idx]
+            contrib, b, d = _k_medium(beta[idx], depth[idx], p.albedo[q, s_], (s_ == 0).to(dtype), *common(idx),
+                                      torch.cat([u[idx, 1:3], u[idx, 3:5]], 1), **kw)
+            absorb(idx, contrib, b, d, torch.full_like(depth[idx], INV_4PI), torch.ones_like(s_, dtype=torch.bool))
 
-        # --- base -------------------------------------------------------------
-        if ibase.numel():
-            q = pid[ibase]
-            w_in = -pdir[ibase]
-            if L == 1:
-                def kern(idx, v, w_in=w_in, q=q):
-                    if p.base == "conductor":
-                        f = _conductor_rgb(p.base_roughness[q], p.base_r0[q], w_in, v)
-                        pdf = GGXConductor(p.base_roughness[q], 0.0).pdf(w_in, v)
-                    elif p.base == "diffuse":
-                        f = p.base_albedo[q] / math.pi * (v[:, 2:3] > 0)
-                        pdf = Lambertian(1.0).pdf(w_in, v)
-                    else:
-                        d = GGXDielectric(p.base_roughness[q], p.base_ior[q])
-                        f = d.eval(w_in, v)[:, None].expand(-1, C)
-                        pdf = d.pdf(w_in, v)
-                    return f * v[:, 2:3].abs(), pdf
-                nee(ibase, torch.ones(ibase.numel(), dtype=dtype), kern)
-            uu = rand(ibase.numel(), 3)
+        idx = (~scatter & (k_if == 0)).nonzero().squeeze(-1)
+        if idx.numel():
+            w_o, a0, e0, _ = common(idx)
+            absorb(idx, *_k_top(beta[idx], pdir[idx], pdf_last[idx], w_o, a0, e0, u[idx, 3:6], **kw))
+
+        idx = (~scatter & (k_if >= 1) & (k_if < L)).nonzero().squeeze(-1)
+        if idx.numel():
+            q, k = pid[idx], k_if[idx]
+            contrib, b, d, pdf, ok, crossed = _k_interface(
+                beta[idx], pdir[idx], p.roughness[q, k], p.ior[q, k], (k == 1).to(dtype), *common(idx),
+                u[idx, 1:6], **kw)
+            absorb(idx, contrib, b, d, pdf, ok)
+            # Crossing downward enters slab k, upward slab k - 1.
+            slab[idx] = torch.where(crossed, torch.where(pdir[idx, 2] < 0, k, k - 1), slab[idx])
+
+        idx = (~scatter & (k_if == L)).nonzero().squeeze(-1)
+        if idx.numel():
+            q = pid[idx]
+            nee_on = torch.full((idx.numel(),), 1.0 if L == 1 else 0.0, dtype=dtype)
+            args = (beta[idx], pdir[idx])
             if p.base == "conductor":
-                geo = GGXConductor(p.base_roughness[q], 1.0)  # direction sampling is channel-free
-                s = geo.sample(w_in, uu)
-                ok = s.pdf > 0
-                h = w_in + s.w
-                h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-30)
-                cos_h = (w_in * h).sum(-1, keepdim=True).abs()
-                fres = p.base_r0[q] + (1.0 - p.base_r0[q]) * (1.0 - cos_h.clamp(max=1.0)) ** 5
-                wgt = s.weight[:, None] * fres
+                out = _k_base_conductor(*args, p.base_roughness[q], p.base_r0[q], nee_on, *common(idx), u[idx, 1:6], **kw)
             elif p.base == "diffuse":
-                s = Lambertian(1.0).sample(w_in, uu)
-                ok = s.pdf > 0
-                wgt = torch.where(ok[:, None], p.base_albedo[q], torch.zeros_like(p.base_albedo[q]))
+                out = _k_base_diffuse(*args, p.base_albedo[q], nee_on, *common(idx), u[idx, 1:6], **kw)
             else:
-                s = GGXDielectric(p.base_roughness[q], p.base_ior[q]).sample(w_in, uu)
-                ok = (s.pdf > 0) & (s.w[:, 2] > 0)  # transmission leaves the stack
-                wgt = torch.where(ok, s.weight, torch.zeros_like(s.weight))[:, None]
-            beta[ibase] = beta[ibase] * wgt
-            new_dir[ibase] = s.w
-            new_pdf[ibase] = s.pdf
-            kill[ibase] = ~ok
+                out = _k_base_dielectric(*args, p.base_roughness[q], p.base_ior[q], nee_on, *common(idx), u[idx, 1:6], **kw)
+            absorb(idx, *out)
 
         pdir, pdf_last = new_dir, new_pdf
-        # Russian roulette.
-        if bounces >= rr_depth:
-            qsurv = beta.amax(-1).clamp(max=0.95)
-            survive = rand(n, 1)[:, 0] < qsurv
-            beta = beta / torch.where(survive, qsurv, torch.ones_like(qsurv))[:, None]
-            kill = kill | ~survive
-        kill = kill | ~(beta.amax(-1) > 0)
-        keep = ~kill
-        pid, lane, beta, pdir, depth, slab, pdf_last = (t[keep] for t in (pid, lane, beta, pdir, depth, slab, pdf_last))
-        if progress is not None:
-            progress(bounces, pid.numel())
+        if bounces >= rr_depth:  # Russian roulette on the largest channel weight
+            q_s = beta.amax(-1).clamp(max=0.95)
+            survive = u[:, 6] < q_s
+            beta = beta / torch.where(survive, q_s, torch.ones_like(q_s))[:, None]
+            alive &= survive
+        alive &= beta.amax(-1) > 0
+        pid, lane, beta, pdir, depth, slab, pdf_last = (t[alive] for t in (pid, lane, beta, pdir, depth, slab, pdf_last))
 
     per = acc.view(N, spp, C)
     mean = per.mean(1) + f_top_refl[:, None]
-    if spp > 1:
-        stderr = per.std(1, unbiased=True) / math.sqrt(spp)
-    else:
-        stderr = torch.full_like(mean, float("inf"))
+    stderr = per.std(1) / math.sqrt(spp) if spp > 1 else torch.full_like(mean, float("inf"))
     if stats is not None:
         stats.paths += n_lanes
         stats.vertices += vertices

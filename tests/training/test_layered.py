@@ -49,7 +49,9 @@ def test_agrees_with_analog_walk(index):
     a, a_se = analog_bins(layers, base, wi, 120_000, N_THETA, N_PHI, seed)
     wo = uniform_in_bins(N_THETA, N_PHI, K, seed + 1)
     n = wo.shape[0]
-    m, _ = simulate(_stack(layers, base, n), wi.expand(n, 3), wo, spp=1, seed=seed + 2,
+    # 16 paths per direction: products of two sharp lobes (a smooth top over a
+    # nearly index-matched interface) make single paths heavy-tailed.
+    m, _ = simulate(_stack(layers, base, n), wi.expand(n, 3), wo, spp=16, seed=seed + 2,
                     dtype=torch.float64, include_top_reflection=False)
     area = (1 / N_THETA) * (2 * math.pi / N_PHI)
     v = (m * wo[:, 2] * area).view(N_THETA, N_PHI, K)

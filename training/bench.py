@@ -1,0 +1,67 @@
+"""``nbrdf bench reference``: Monte Carlo throughput and time to a converged
+standard lobe, on the standard two-layer stack."""
+from __future__ import annotations
+
+import os
+import platform
+import time
+
+import numpy as np
+import torch
+
+from neural.material import parse_material
+from neural.metrics import noise_psnr
+from training.layered import SimStats, simulate
+from training.reference import converged_lobe, stack_params
+
+#: The standard stack of the benchmark (issue: ground truth).
+STANDARD_STACK = {
+    "format": "nbrdf-material/1",
+    "name": "bench standard two-layer",
+    "layers": [
+        {"type": "dielectric", "roughness": 0.1, "ior": 1.5},
+        {"type": "medium", "albedo": 0.9, "sigma_t": 1.0},
+        {"type": "conductor", "roughness": 0.3, "r0": 0.9},
+    ],
+}
+#: A reference lobe counts as converged when its noise PSNR reaches this:
+#: 10 dB below the strictest error the project measures (40 dB lobe PSNR).
+CONVERGED_NOISE_PSNR = 50.0
+
+
+def machine() -> dict:
+    return {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+            "torch_threads": torch.get_num_threads(), "torch": torch.__version__}
+
+
+def bench_reference(quick: bool = False) -> dict:
+    """Paths per second (one path = one sample of one pair, RGB together) and
+    seconds to a converged 64 x 64 lobe at theta_i = 30 degrees."""
+    mat = parse_material(STANDARD_STACK)
+    n_pairs, spp = (256, 64) if quick else (4096, 256)
+    g = torch.Generator().manual_seed(0)
+    u = torch.rand(2, n_pairs, 2, generator=g)
+    z = torch.sqrt(1 - u[..., 0])
+    r = torch.sqrt(u[..., 0])
+    d = torch.stack([r * torch.cos(6.2832 * u[..., 1]), r * torch.sin(6.2832 * u[..., 1]), z], -1)
+    sp = stack_params(mat, n_pairs)
+    simulate(stack_params(mat, 16), d[0, :16], d[1, :16], spp=4, seed=0)  # warm-up
+    st = SimStats()
+    simulate(sp, d[0], d[1], spp=spp, seed=1, stats=st)
+    out = {
+        "stack": "dielectric a=0.1 ior=1.5 / medium albedo=0.9 sigma_t=1 / conductor a=0.3 r0=0.9",
+        "paths": st.paths,
+        "paths_per_second": round(st.paths / st.seconds),
+        "vertices_per_path": round(st.vertices / st.paths, 2),
+    }
+    t0 = time.perf_counter()
+    img, se, spp_used = converged_lobe(mat, 30.0, target_noise_psnr=20.0 if quick else CONVERGED_NOISE_PSNR)
+    out.update({
+        "lobe_theta_i": 30.0,
+        "lobe_target_noise_psnr_db": 20.0 if quick else CONVERGED_NOISE_PSNR,
+        "lobe_noise_psnr_db": round(noise_psnr(img, se), 2),
+        "lobe_spp": spp_used,
+        "lobe_seconds": round(time.perf_counter() - t0, 2),
+        "machine": machine(),
+    })
+    return out

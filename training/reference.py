@@ -1,0 +1,148 @@
+"""Ground truth of a material (SPEC section 8, ``--method reference``).
+
+Single interfaces are evaluated in closed form (standard error 0); layered
+stacks by the Monte Carlo simulator, all three channels on shared paths.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import torch
+
+from neural.errors import NbrdfError
+from neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured, Medium
+from training.analytic import GGXConductor, GGXDielectric, Lambertian
+from training.layered import SimStats, StackParams, simulate
+
+Tensor = torch.Tensor
+
+#: Paths traced at once; bounds memory (about 200 bytes a lane in float32).
+MAX_LANES = 1 << 21
+
+
+def _rgb(v) -> Tensor:
+    return torch.tensor(Material.rgb(v), dtype=torch.float64)
+
+
+def _check_uniform(material: Material) -> None:
+    if material.is_textured:
+        place = material.textures()[0][0]
+        raise NbrdfError(f"{place}: a texture-mapped parameter has no single reference; "
+                         "evaluate a uniform material (or one texel of it)")
+
+
+def stack_params(material: Material, n: int = 1) -> StackParams:
+    """The material's layer stack as simulator parameters, 3 channels, n copies."""
+    _check_uniform(material)
+    interfaces = material.interfaces
+    base = material.base
+    if not interfaces:
+        raise NbrdfError("a single-layer material needs no simulation")
+    rough = torch.tensor([[i.roughness for i, _ in interfaces]], dtype=torch.float64)
+    ior = torch.tensor([[i.ior for i, _ in interfaces]], dtype=torch.float64)
+    tau = torch.tensor([[m.sigma_t if m is not None else 0.0 for _, m in interfaces]], dtype=torch.float64)
+    alb = torch.stack([_rgb(m.albedo) if m is not None else torch.zeros(3, dtype=torch.float64)
+                       for _, m in interfaces])[None]
+    kw = dict(base_roughness=torch.tensor([0.5], dtype=torch.float64))
+    if isinstance(base, Conductor):
+        kind = "conductor"
+        kw = dict(base_roughness=torch.tensor([base.roughness], dtype=torch.float64), base_r0=_rgb(base.r0)[None])
+    elif isinstance(base, Diffuse):
+        kind = "diffuse"
+        kw["base_albedo"] = _rgb(base.albedo)[None]
+    elif isinstance(base, Dielectric):
+        kind = "dielectric"
+        kw = dict(base_roughness=torch.tensor([base.roughness], dtype=torch.float64),
+                  base_ior=torch.tensor([base.ior], dtype=torch.float64))
+    else:
+        raise NbrdfError(f"layers[{len(material.layers) - 1}]: a {type(base).__name__.lower()} base "
+                         "has no Monte Carlo reference under other layers")
+    rep = lambda t: t.expand(n, *t.shape[1:]).contiguous()
+    return StackParams(roughness=rep(rough), ior=rep(ior), albedo=rep(alb), sigma_t=rep(tau), base=kind,
+                       **{k: rep(v) for k, v in kw.items()})
+
+
+def single_layer_eval(layer, wi: Tensor, wo: Tensor) -> Tensor:
+    """Closed-form RGB values (N, 3) of a lone conductor, dielectric or diffuse layer."""
+    wi3 = wi[:, None, :].expand(-1, 3, -1)
+    wo3 = wo[:, None, :].expand(-1, 3, -1)
+    up = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
+    if isinstance(layer, Conductor):
+        f = GGXConductor(layer.roughness, _rgb(layer.r0).to(wi.dtype)).eval(wi3, wo3)
+    elif isinstance(layer, Dielectric):
+        f = GGXDielectric(layer.roughness, layer.ior).eval(wi, wo)[:, None].expand(-1, 3)
+    elif isinstance(layer, Diffuse):
+        f = Lambertian(_rgb(layer.albedo).to(wi.dtype)).eval(wi3, wo3)
+    else:
+        raise TypeError(type(layer))
+    return torch.where(up, f, torch.zeros_like(f))
+
+
+def reference_eval(material: Material, wi: Tensor, wo: Tensor, spp: int = 256, seed: int = 0, *,
+                   dtype: torch.dtype = torch.float32, stats: SimStats | None = None,
+                   progress: Callable[[int], None] | None = None) -> tuple[Tensor, Tensor]:
+    """Reference f(wi, wo) (N, 3) and its standard error (N, 3) for N pairs.
+    Pairs with a direction below the horizon give 0 (the BRDF's support)."""
+    _check_uniform(material)
+    wi = wi.to(dtype)
+    wo = wo.to(dtype)
+    n = wi.shape[0]
+    base = material.base
+    if isinstance(base, Medium):  # the parser forbids it; guard all the same
+        raise NbrdfError("a medium cannot be the base")
+    if not material.interfaces:
+        if isinstance(base, Measured):
+            from training.merl import MerlBRDF
+
+            f = MerlBRDF.load(base.resolved).eval(wi, wo)
+        elif isinstance(base, LatentBase):
+            raise NbrdfError(f"layers[0]: a latent base has no reference; use --method neural")
+        else:
+            f = single_layer_eval(base, wi, wo)
+        return f.to(dtype), torch.zeros(n, 3, dtype=dtype)
+    up = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    mean = torch.zeros(n, 3, dtype=dtype)
+    err = torch.zeros(n, 3, dtype=dtype)
+    idx = up.nonzero().squeeze(-1)
+    chunk = max(1, MAX_LANES // max(spp, 1))
+    params = stack_params(material, 1)
+    for k, start in enumerate(range(0, idx.numel(), chunk)):
+        sel = idx[start:start + chunk]
+        sp = stack_params(material, sel.numel())
+        m, e = simulate(sp, wi[sel], wo[sel], spp=spp, seed=seed * 1_000_003 + k, dtype=dtype, stats=stats)
+        mean[sel], err[sel] = m, e
+        if progress is not None:
+            progress(sel.numel())
+    del params
+    return mean, err
+
+
+def converged_lobe(material: Material, theta_i_deg: float, target_noise_psnr: float = 50.0,
+                   start_spp: int = 64, max_spp: int = 1 << 16, seed: int = 0):
+    """A reference lobe image refined until its own noise PSNR reaches the
+    target. Returns (image, stderr image, total spp). Rounds double the paths
+    and are pooled by their path counts."""
+    import numpy as np
+
+    from neural.geometry import incidence, lobe_grid
+    from neural.metrics import noise_psnr
+
+    wo, mask = lobe_grid()
+    d = wo[mask]
+    wi = incidence(theta_i_deg).expand(d.shape[0], 3)
+    total, s1, var = 0, None, None
+    spp, k = start_spp, 0
+    while True:
+        m, e = reference_eval(material, wi, d, spp=spp, seed=seed + 7919 * k)
+        m, e = m.double() * d[:, 2:3].double(), e.double() * d[:, 2:3].double()
+        s1 = m * spp if s1 is None else s1 + m * spp
+        var = (e * spp) ** 2 if var is None else var + (e * spp) ** 2
+        total += spp
+        img = torch.zeros(64, 64, 3, dtype=torch.float64)
+        se = torch.zeros_like(img)
+        img[mask], se[mask] = s1 / total, var.sqrt() / total
+        img_np, se_np = img.numpy().astype(np.float32), se.numpy().astype(np.float32)
+        if noise_psnr(img_np, se_np) >= target_noise_psnr or total >= max_spp:
+            return img_np, se_np, total
+        spp, k = total, k + 1  # double the total each round

@@ -1,0 +1,231 @@
+"""The ``nbrdf`` command line (SPEC section 8).
+
+Each subcommand parses its arguments, calls the library, and writes files.
+Bad input of any kind ends with one line on stderr and exit status 2; an
+internal failure ends with one line and exit status 1 (``NBRDF_DEBUG=1``
+shows the traceback).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from neural.errors import NbrdfError
+
+PROG = "nbrdf"
+METHODS = ("reference", "neural", "projected")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports a usage error as one line and exit status 2."""
+
+    def error(self, message: str):  # type: ignore[override]
+        raise NbrdfError(f"{self.prog}: {message}")
+
+
+def run_guarded(prog: str, fn: Callable[[], int]) -> int:
+    """Runs ``fn``; turns bad input into one line + exit 2, a crash into one line + exit 1."""
+    try:
+        return fn()
+    except NbrdfError as e:
+        print(f"{prog}: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # noqa: BLE001 - the last line of defence
+        if os.environ.get("NBRDF_DEBUG"):
+            raise
+        print(f"{prog}: internal error: {type(e).__name__}: {e} (set NBRDF_DEBUG=1 for details)", file=sys.stderr)
+        return 1
+
+
+# --- input helpers ----------------------------------------------------------------
+def load_pairs(path: str) -> tuple["np.ndarray", "np.ndarray"]:
+    """(wi, wo) float32 (N, 3) each from an (N, 6) .npy, checked."""
+    p = Path(path)
+    if not p.is_file():
+        raise NbrdfError(f"{path}: no such file")
+    try:
+        arr = np.load(p, allow_pickle=False)
+    except Exception as e:  # noqa: BLE001 - any unreadable file is bad input
+        raise NbrdfError(f"{path}: not a readable .npy file ({e})") from None
+    if arr.ndim != 2 or arr.shape[1] != 6:
+        raise NbrdfError(f"{path}: expected an (N, 6) array of wi.xyz, wo.xyz, got shape {arr.shape}")
+    if not np.issubdtype(arr.dtype, np.floating):
+        raise NbrdfError(f"{path}: expected float32 values, got {arr.dtype}")
+    arr = arr.astype(np.float32)
+    bad = ~np.isfinite(arr).all(1)
+    if bad.any():
+        raise NbrdfError(f"{path}: row {int(np.argmax(bad))} holds a NaN or infinite value")
+    for name, sl in (("wi", slice(0, 3)), ("wo", slice(3, 6))):
+        n = np.linalg.norm(arr[:, sl], axis=1)
+        off = np.abs(n - 1) > 1e-3
+        if off.any():
+            i = int(np.argmax(off))
+            raise NbrdfError(f"{path}: row {i}: {name} is not a unit vector (length {n[i]:.4g})")
+    return arr[:, :3], arr[:, 3:]
+
+
+def out_path(path: str, suffixes: Sequence[str]) -> Path:
+    p = Path(path)
+    if p.suffix.lower() not in suffixes:
+        raise NbrdfError(f"{path}: the output must end in {' or '.join(suffixes)}")
+    if p.parent and not p.parent.exists():
+        raise NbrdfError(f"{path}: the folder {p.parent} does not exist")
+    return p
+
+
+def stderr_path(p: Path) -> Path:
+    """F.npy -> F.stderr.npy"""
+    return p.with_name(p.stem + ".stderr" + p.suffix)
+
+
+def _progress(total: int, desc: str):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="pair", disable=None, leave=False, file=sys.stderr)
+
+
+# --- evaluation back ends ------------------------------------------------------------
+def make_evaluator(material, method: str, spp: int, seed: int, want_stderr: bool = False):
+    """fn(wi, wo) -> (f (N,3), stderr (N,3) or None) for a method of SPEC section 8."""
+    import torch
+
+    if method == "reference":
+        from training.reference import reference_eval
+
+        def ref(wi: torch.Tensor, wo: torch.Tensor):
+            with _progress(wi.shape[0], "reference") as bar:
+                return reference_eval(material, wi, wo, spp=spp, seed=seed, progress=bar.update)
+
+        return ref
+    if method == "neural":
+        from neural.pipeline import neural_evaluator  # the full neural path (issue: operations)
+
+        fn = neural_evaluator(material)
+        return lambda wi, wo: (fn(wi, wo), None)
+    if method == "projected":
+        from training.project import projected_evaluator
+
+        fn = projected_evaluator(material, seed=seed)
+        return lambda wi, wo: (fn(wi, wo), None)
+    raise NbrdfError(f"unknown method {method!r}")
+
+
+def _load_material(path: str):
+    from neural.material import load_material
+
+    return load_material(path)
+
+
+# --- subcommands -----------------------------------------------------------------------
+def cmd_eval(a: argparse.Namespace) -> int:
+    import torch
+
+    material = _load_material(a.material)
+    wi, wo = load_pairs(a.pairs)
+    out = out_path(a.out, (".npy",))
+    fn = _guard_method(material, a.method, a.spp, a.seed)
+    f, se = fn(torch.from_numpy(wi), torch.from_numpy(wo))
+    np.save(out, f.detach().numpy().astype(np.float32))
+    if a.method == "reference":
+        np.save(stderr_path(out), se.detach().numpy().astype(np.float32))
+    return 0
+
+
+def cmd_lobe(a: argparse.Namespace) -> int:
+    import torch
+
+    from neural.metrics import lobe_image
+
+    material = _load_material(a.material)
+    out = out_path(a.out, (".npy", ".png"))
+    if not (0.0 <= a.theta_i < 90.0):
+        raise NbrdfError(f"--theta-i: {a.theta_i} is outside [0, 90)")
+    fn = _guard_method(material, a.method, a.spp, a.seed)
+    errs: list = []
+
+    def values(wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
+        f, se = fn(wi, wo)
+        errs.append(se)
+        return f
+
+    img = lobe_image(values, a.theta_i)
+    npy = out.with_suffix(".npy") if out.suffix.lower() == ".png" else out
+    np.save(npy, img)
+    if a.method == "reference" and errs[0] is not None:
+        se_img = lobe_image(lambda wi, wo: errs[0] / wo[:, 2:3].clamp_min(1e-12), a.theta_i)
+        np.save(stderr_path(npy), se_img)
+    if out.suffix.lower() == ".png":
+        from training.plots import save_lobe_png
+
+        save_lobe_png(img, out, title=f"{material.name}  theta_i={a.theta_i:g}  ({a.method})")
+    return 0
+
+
+def _guard_method(material, method: str, spp: int, seed: int):
+    if spp < 1:
+        raise NbrdfError(f"--spp: {spp} must be at least 1")
+    try:
+        return make_evaluator(material, method, spp, seed)
+    except ModuleNotFoundError as e:
+        if e.name and e.name.split(".")[0] in ("neural", "training"):
+            raise NbrdfError(f"--method {method}: not available in this version ({e.name} is missing)") from None
+        raise
+
+
+def cmd_bench_reference(a: argparse.Namespace) -> int:
+    from training.bench import bench_reference
+
+    print(json.dumps(bench_reference(quick=a.quick), indent=2))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog=PROG, description="Neural layered BRDFs: ground truth, representation, operations.")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    e = sub.add_parser("eval", help="evaluate a material's BRDF on direction pairs")
+    e.add_argument("--material", required=True, help="material JSON (SPEC section 4)")
+    e.add_argument("--pairs", required=True, help="float32 (N, 6) .npy: wi.xyz, wo.xyz in the local frame")
+    e.add_argument("--out", required=True, help="float32 (N, 3) .npy of RGB BRDF values (no cosine)")
+    e.add_argument("--method", choices=METHODS, default="reference")
+    e.add_argument("--spp", type=int, default=256, help="Monte Carlo paths per pair (reference of a stack)")
+    e.add_argument("--seed", type=int, default=0)
+    e.set_defaults(fn=cmd_eval)
+
+    lo = sub.add_parser("lobe", help="the standard 64x64 lobe image (SPEC section 9)")
+    lo.add_argument("--material", required=True)
+    lo.add_argument("--theta-i", type=float, required=True, help="incidence angle in degrees (phi_i = 0)")
+    lo.add_argument("--method", choices=METHODS, default="reference")
+    lo.add_argument("--out", required=True, help=".npy (the array) or .png (a picture, plus the .npy beside it)")
+    lo.add_argument("--spp", type=int, default=1024)
+    lo.add_argument("--seed", type=int, default=0)
+    lo.set_defaults(fn=cmd_lobe)
+
+    b = sub.add_parser("bench", help="speed benchmarks, printed as JSON")
+    bsub = b.add_subparsers(dest="what", required=True, parser_class=_Parser)
+    br = bsub.add_parser("reference", help="Monte Carlo paths per second and time to a converged lobe")
+    br.add_argument("--quick", action="store_true", help="a short run (for tests)")
+    br.set_defaults(fn=cmd_bench_reference)
+    return p
+
+
+def nbrdf_main(argv: Sequence[str] | None = None) -> int:
+    def go() -> int:
+        args = build_parser().parse_args(argv)
+        return args.fn(args)
+
+    return run_guarded(PROG, go)
+
+
+if __name__ == "__main__":
+    sys.exit(nbrdf_main())
