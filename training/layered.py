@@ -267,6 +267,28 @@ def _k_base_dielectric(beta: Tensor, pdir: Tensor, a: Tensor, e: Tensor, nee_on:
     return contrib, beta * torch.where(ok, s.weight, torch.zeros_like(s.weight))[:, None], s.w, s.pdf, ok
 
 
+class _Tables:
+    """Per-lane parameter lookup: a gather by pair index, or a broadcast of
+    the one row when every stack shares the parameter."""
+
+    def __init__(self, p: StackParams):
+        self.p = p
+        names = ("roughness", "ior", "sigma_t", "albedo", "base_roughness", "base_r0", "base_ior", "base_albedo")
+        self.shared = {k: bool((getattr(p, k) == getattr(p, k)[:1]).all()) for k in names}
+
+    def layer(self, name: str, q: Tensor, k: Tensor) -> Tensor:
+        t = getattr(self.p, name)
+        return t[0][k] if self.shared[name] else t[q, k]
+
+    def top(self, name: str, q: Tensor) -> Tensor:
+        t = getattr(self.p, name)[:, 0]
+        return t[:1].expand(q.shape[0]) if self.shared[name] else t[q]
+
+    def base(self, name: str, q: Tensor) -> Tensor:
+        t = getattr(self.p, name)
+        return t[:1].expand(q.shape[0], *t.shape[1:]) if self.shared[name] else t[q]
+
+
 def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: int = 0, *,
              dtype: torch.dtype = torch.float32, rr_depth: int = 4, max_depth: int = 100_000,
              include_top_reflection: bool = True, compile: bool | None = None,
@@ -320,6 +342,9 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     pid, lane, beta, pdir, depth, slab, pdf_last = (t[keep] for t in (pid, lane, beta, pdir, depth, slab, pdf_last))
     # Top-interface parameters per pair, reused by every NEE.
     a0_all, e0_all, tau0_all = p.roughness[:, 0], p.ior[:, 0], p.sigma_t[:, 0]
+    # Parameters shared by every stack (one material's lobe, say) are
+    # broadcast instead of gathered per lane.
+    tab = _Tables(p)
     bounces = vertices = 0
 
     while pid.numel() > 0 and bounces < max_depth:
@@ -327,7 +352,7 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
         vertices += n
         bounces += 1
         u = rand(n, 7)
-        scatter, depth = _k_flight(depth, pdir[:, 2], slab.to(dtype), p.sigma_t[pid, slab], u[:, 0], **kw)
+        scatter, depth = _k_flight(depth, pdir[:, 2], slab.to(dtype), tab.layer("sigma_t", pid, slab), u[:, 0], **kw)
         going_down = pdir[:, 2] < 0
         k_if = torch.where(going_down, slab + 1, slab)  # the interface reached (L = base)
         alive = torch.ones(n, dtype=torch.bool)
@@ -335,7 +360,7 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
 
         def common(idx: Tensor):
             q = pid[idx]
-            return wo[q], a0_all[q], e0_all[q], tau0_all[q]
+            return wo[q], tab.top("roughness", q), tab.top("ior", q), tab.top("sigma_t", q)
 
         def absorb(idx: Tensor, contrib: Tensor, b: Tensor, d: Tensor, pdf: Tensor, ok: Tensor) -> None:
             acc.index_add_(0, lane[idx], contrib)
@@ -345,7 +370,7 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
         idx = scatter.nonzero().squeeze(-1)
         if idx.numel():
             q, s_ = pid[idx], slab[idx]
-            contrib, b, d = _k_medium(beta[idx], depth[idx], p.albedo[q, s_], (s_ == 0).to(dtype), *common(idx),
+            contrib, b, d = _k_medium(beta[idx], depth[idx], tab.layer("albedo", q, s_), (s_ == 0).to(dtype), *common(idx),
                                       torch.cat([u[idx, 1:3], u[idx, 3:5]], 1), **kw)
             absorb(idx, contrib, b, d, torch.full_like(depth[idx], INV_4PI), torch.ones_like(s_, dtype=torch.bool))
 
@@ -358,7 +383,7 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
         if idx.numel():
             q, k = pid[idx], k_if[idx]
             contrib, b, d, pdf, ok, crossed = _k_interface(
-                beta[idx], pdir[idx], p.roughness[q, k], p.ior[q, k], (k == 1).to(dtype), *common(idx),
+                beta[idx], pdir[idx], tab.layer("roughness", q, k), tab.layer("ior", q, k), (k == 1).to(dtype), *common(idx),
                 u[idx, 1:6], **kw)
             absorb(idx, contrib, b, d, pdf, ok)
             # Crossing downward enters slab k, upward slab k - 1.
@@ -370,11 +395,13 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
             nee_on = torch.full((idx.numel(),), 1.0 if L == 1 else 0.0, dtype=dtype)
             args = (beta[idx], pdir[idx])
             if p.base == "conductor":
-                out = _k_base_conductor(*args, p.base_roughness[q], p.base_r0[q], nee_on, *common(idx), u[idx, 1:6], **kw)
+                out = _k_base_conductor(*args, tab.base("base_roughness", q), tab.base("base_r0", q), nee_on, *common(idx),
+                                        u[idx, 1:6], **kw)
             elif p.base == "diffuse":
-                out = _k_base_diffuse(*args, p.base_albedo[q], nee_on, *common(idx), u[idx, 1:6], **kw)
+                out = _k_base_diffuse(*args, tab.base("base_albedo", q), nee_on, *common(idx), u[idx, 1:6], **kw)
             else:
-                out = _k_base_dielectric(*args, p.base_roughness[q], p.base_ior[q], nee_on, *common(idx), u[idx, 1:6], **kw)
+                out = _k_base_dielectric(*args, tab.base("base_roughness", q), tab.base("base_ior", q), nee_on,
+                                         *common(idx), u[idx, 1:6], **kw)
             absorb(idx, *out)
 
         pdir, pdf_last = new_dir, new_pdf
