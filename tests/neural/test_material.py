@@ -1,0 +1,177 @@
+"""Material JSON (SPEC section 4): every preset parses, the SPEC's error
+messages, unknown keys, texture references, and load -> save -> load."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from neural.errors import NbrdfError
+from neural.material import (Conductor, Dielectric, Medium, TextureRef, load_material, material_to_dict,
+                             parse_material, save_material)
+
+PRESETS = sorted((Path(__file__).resolve().parents[2] / "viewer" / "assets" / "materials").glob("*.json"))
+SPEC_EXAMPLE = {
+    "format": "nbrdf-material/1",
+    "name": "varnished copper",
+    "layers": [
+        {"type": "dielectric", "roughness": 0.02, "ior": 1.5},
+        {"type": "medium", "albedo": [0.95, 0.9, 0.8], "sigma_t": 0.5},
+        {"type": "conductor", "roughness": 0.25, "r0": [0.95, 0.64, 0.54]},
+    ],
+}
+
+
+def doc(*layers, **extra):
+    return {"format": "nbrdf-material/1", "name": "t", "layers": list(layers), **extra}
+
+
+def test_spec_example_structure():
+    m = parse_material(SPEC_EXAMPLE)
+    assert [type(l) for l in m.layers] == [Dielectric, Medium, Conductor]
+    (top, med), = m.interfaces
+    assert top.ior == 1.5 and med.sigma_t == 0.5 and m.base.r0 == (0.95, 0.64, 0.54)
+    assert m.rgb(m.base.r0) == (0.95, 0.64, 0.54) and m.rgb(0.5) == (0.5, 0.5, 0.5)
+
+
+@pytest.mark.parametrize("path", PRESETS, ids=[p.stem for p in PRESETS])
+def test_presets_parse_and_round_trip(path, tmp_path):
+    m = load_material(path)
+    save_material(m, tmp_path / "copy.json")
+    again = load_material(tmp_path / "copy.json")
+    assert again == m and material_to_dict(again) == material_to_dict(m)
+    assert material_to_dict(m) == json.loads(path.read_text())
+
+
+def test_presets_cover_the_gallery():
+    names = {p.stem for p in PRESETS}
+    assert {"default", "car_paint", "clear_coat_plastic", "lacquered_wood", "varnished_gold"} <= names
+    assert len(load_material(PRESETS[[p.stem for p in PRESETS].index("car_paint")]).interfaces) == 2
+
+
+C = {"type": "conductor", "roughness": 0.3, "r0": 0.5}
+D = {"type": "dielectric", "roughness": 0.1, "ior": 1.5}
+M = {"type": "medium", "albedo": 0.5, "sigma_t": 1.0}
+
+ERRORS = [
+    (doc(D, M, {**C, "r0": [0.95, 1.3, 0.54]}), "layers[2].r0[1]: 1.3 is outside [0, 1]"),
+    (doc(D, M), "layers[1]: a medium must sit between two interfaces"),
+    (doc(M, C), "layers[0]: a medium must sit between two interfaces"),
+    (doc(D, M, M, C), "layers[2]: a medium must sit between two interfaces"),
+    (doc(C, C), "layers[0]: a conductor can only be the base"),
+    (doc({**C, "colour": 1}), "layers[0].colour: unknown key"),
+    (doc({"type": "conductor", "roughness": 0.3}), 'layers[0]: missing key "r0"'),
+    (doc({**C, "roughness": True}), "layers[0].roughness: expected a number, got a boolean"),
+    (doc({**C, "roughness": "0.3"}), "layers[0].roughness: expected a number"),
+    (doc({**C, "roughness": None}), "layers[0].roughness: expected a number, got null"),
+    (doc({**C, "roughness": float("nan")}), "layers[0].roughness: nan is not a finite number"),
+    (doc({**C, "roughness": [0.1, 0.2, 0.3]}), "layers[0].roughness: roughness is shared"),
+    (doc({**C, "r0": [0.1, 0.2]}), "layers[0].r0: expected 3 values"),
+    (doc({**D, "ior": 2.5}), "layers[0].ior: 2.5 is outside [1.05, 2]"),
+    (doc(D, {**M, "sigma_t": 6}, C), "layers[1].sigma_t: 6 is outside [0, 5]"),
+    (doc({"type": "glass"}), 'layers[0].type: unknown layer type "glass"'),
+    (doc({"roughness": 0.2}), 'layers[0]: missing key "type"'),
+    (doc(), "layers: expected a non-empty list"),
+    ({**doc(C), "format": "nbrdf-material/2"}, 'format: expected "nbrdf-material/1"'),
+    ({**doc(C), "colour": "red"}, "colour: unknown key"),
+    ({"name": "x", "layers": [C]}, 'missing key "format"'),
+    ([1, 2], "expected a JSON object"),
+    (doc({"type": "measured", "path": "nowhere.binary"}), "layers[0].path:"),
+    (doc({**C, "roughness": {"texture": "missing.png"}}), "layers[0].roughness.texture:"),
+]
+
+
+@pytest.mark.parametrize("data,message", ERRORS, ids=[e[1][:40] for e in ERRORS])
+def test_errors_name_the_place(data, message, tmp_path):
+    with pytest.raises(NbrdfError) as e:
+        parse_material(data, tmp_path)
+    assert message in str(e.value)
+    assert "\n" not in str(e.value)
+
+
+def test_file_errors(tmp_path):
+    for content, needle in (("", "empty"), ("{", "line 1, column 2"), ('{"a": NaN}', "NaN is not a number")):
+        (tmp_path / "m.json").write_text(content)
+        with pytest.raises(NbrdfError, match=needle):
+            load_material(tmp_path / "m.json")
+    (tmp_path / "b.json").write_bytes(b"\xff\xfe\x00")
+    with pytest.raises(NbrdfError, match="UTF-8"):
+        load_material(tmp_path / "b.json")
+    with pytest.raises(NbrdfError, match="no such file"):
+        load_material(tmp_path / "none.json")
+
+
+def test_textures_resolve_relative_to_the_file_and_survive_a_move(tmp_path):
+    (tmp_path / "maps").mkdir()
+    (tmp_path / "maps" / "rough.png").write_bytes(b"png")
+    (tmp_path / "n.png").write_bytes(b"png")
+    src = tmp_path / "mat.json"
+    src.write_text(json.dumps(doc(D, M, {**C, "roughness": {"texture": "maps/rough.png", "channel": "g", "range": [0.05, 0.4]},
+                                         "r0": [0.9, {"texture": "maps/rough.png", "channel": "r", "range": [0, 1]}, 0.5]},
+                                  normal_map="n.png")))
+    m = load_material(src)
+    assert m.is_textured and [p for p, _ in m.textures()] == ["layers[2].roughness", "layers[2].r0[1]"]
+    ref = m.base.roughness
+    assert isinstance(ref, TextureRef) and ref.resolved == (tmp_path / "maps" / "rough.png").resolve()
+    (tmp_path / "sub").mkdir()
+    save_material(m, tmp_path / "sub" / "moved.json")
+    moved = load_material(tmp_path / "sub" / "moved.json")
+    assert moved.base.roughness.resolved == ref.resolved
+    assert moved.base.roughness.path == "../maps/rough.png"
+    with pytest.raises(NbrdfError, match=r"layers\[2\].roughness.range\[1\]: 3 is outside"):
+        parse_material(doc(D, M, {**C, "roughness": {"texture": "maps/rough.png", "range": [0.1, 3]}}), tmp_path)
+
+
+unit = st.floats(0, 1, allow_nan=False)
+rough = st.floats(0.01, 1, allow_nan=False)
+rgb = unit | st.lists(unit, min_size=3, max_size=3)
+iface = st.fixed_dictionaries({"type": st.just("dielectric"), "roughness": rough, "ior": st.floats(1.05, 2, allow_nan=False)})
+medium = st.fixed_dictionaries({"type": st.just("medium"), "albedo": rgb, "sigma_t": st.floats(0, 5, allow_nan=False)})
+bases = st.one_of(
+    st.fixed_dictionaries({"type": st.just("conductor"), "roughness": rough, "r0": rgb}),
+    st.fixed_dictionaries({"type": st.just("diffuse"), "albedo": rgb}),
+    iface)
+
+
+@st.composite
+def materials(draw):
+    layers = []
+    for _ in range(draw(st.integers(0, 2))):
+        layers.append(draw(iface))
+        if draw(st.booleans()):
+            layers.append(draw(medium))
+    layers.append(draw(bases))
+    return doc(*layers)
+
+
+@settings(max_examples=80, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=materials())
+def test_round_trip_of_generated_materials(data, tmp_path):
+    m = parse_material(data, tmp_path)
+    assert material_to_dict(m) == data
+    save_material(m, tmp_path / "x.json")
+    assert load_material(tmp_path / "x.json") == m
+
+
+@settings(max_examples=150, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=materials(), where=st.integers(0, 10), what=st.sampled_from(["big", "neg", "str", "bool", "null", "key", "del", "list"]))
+def test_mutations_fail_cleanly(data, where, what, tmp_path):
+    """Mutated valid materials either still parse or fail with one line naming a place."""
+    i = where % len(data["layers"])
+    layer = data["layers"][i]
+    keys = [k for k in layer if k != "type"]
+    k = keys[where % len(keys)] if keys else "type"
+    if what == "key":
+        layer["bogus"] = 1
+    elif what == "del":
+        layer.pop(k)
+    else:
+        layer[k] = {"big": 7.5, "neg": -0.5, "str": "x", "bool": True, "null": None, "list": [1, 2]}[what]
+    try:
+        parse_material(data, tmp_path)
+    except NbrdfError as e:
+        msg = str(e)
+        assert "\n" not in msg and msg.startswith(f"layers[{i}]"), msg
