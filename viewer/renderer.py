@@ -1,0 +1,175 @@
+"""The renderer: one code path for the window and for offscreen renders.
+
+Views (SPEC section 8): ``object`` (a lit mesh), ``lobe`` (the standard lobe
+image of SPEC section 9, computed in GLSL) and ``slice`` (theta_h x theta_d).
+Everything renders linear radiance into a float framebuffer; the object view
+accumulates ``spp`` passes with different random numbers (progressive).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import moderngl
+import numpy as np
+
+from neural.errors import NbrdfError
+from neural.material import Material
+from viewer import shaders
+from viewer.camera import OrbitCamera
+from viewer.materials_gpu import analytic_uniforms
+from viewer.mesh import Mesh, named_mesh
+
+VIEWS = ("object", "lobe", "slice")
+LOBE_SIZE = 64
+
+
+@dataclass
+class ViewState:
+    """Everything that decides a frame besides the material and the mesh."""
+
+    view: str = "object"
+    theta_i: float = 30.0                      # lobe view incidence, degrees
+    camera: OrbitCamera = field(default_factory=OrbitCamera)
+    light_dir: tuple[float, float, float] = (0.4, -0.6, 0.7)   # toward the light, world
+    light_radiance: float = 3.0
+    env_intensity: float = 0.6
+    exposure: float = 0.0                      # stops
+    tonemap: str = "aces"                      # aces | linear
+
+
+class Renderer:
+    """Owns the GL programs, the mesh buffers and the framebuffers."""
+
+    def __init__(self, ctx: moderngl.Context, material: Material, mesh: str | Mesh = "sphere"):
+        self.ctx = ctx
+        snippets = {"brdf": shaders.read("analytic_brdf.glsl")}
+        try:
+            self.obj = ctx.program(vertex_shader=shaders.source("object.vert"),
+                                   fragment_shader=shaders.source("object.frag", snippets))
+            self.lobe = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
+                                    fragment_shader=shaders.source("lobe.frag", snippets))
+            self.slice = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
+                                     fragment_shader=shaders.source("slice.frag", snippets))
+            self.tone = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
+                                    fragment_shader=shaders.source("tonemap.frag"))
+        except moderngl.Error as e:
+            raise NbrdfError(f"shader build failed on {ctx.info.get('GL_RENDERER', '?')}: {str(e).splitlines()[0]}") from None
+        self.empty_vao = ctx.vertex_array(self.lobe, [])
+        self.empty_slice = ctx.vertex_array(self.slice, [])
+        self.empty_tone = ctx.vertex_array(self.tone, [])
+        self.set_mesh(mesh)
+        self.set_material(material)
+        self._fbo: dict[tuple[int, int], tuple[moderngl.Framebuffer, moderngl.Texture]] = {}
+
+    # --- scene -------------------------------------------------------------------
+    def set_mesh(self, mesh: str | Mesh) -> None:
+        m = named_mesh(mesh) if isinstance(mesh, str) else mesh
+        self.mesh = m
+        vbo = self.ctx.buffer(m.interleaved().tobytes())
+        ibo = self.ctx.buffer(m.indices.astype("u4").tobytes())
+        self.obj_vao = self.ctx.vertex_array(
+            self.obj, [(vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")], ibo,
+            skip_errors=True)
+
+    def set_material(self, material: Material) -> None:
+        self.material = material
+        self.uniforms = analytic_uniforms(material)
+        for prog in (self.obj, self.lobe, self.slice):
+            for k, v in self.uniforms.items():
+                if k in prog:
+                    prog[k].value = v
+
+    # --- frames -------------------------------------------------------------------
+    def _target(self, w: int, h: int):
+        key = (w, h)
+        if key not in self._fbo:
+            tex = self.ctx.texture((w, h), 4, dtype="f4")
+            depth = self.ctx.depth_renderbuffer((w, h))
+            self._fbo[key] = (self.ctx.framebuffer([tex], depth), tex)
+        return self._fbo[key]
+
+    def accumulate(self, state: ViewState, w: int, h: int, first_pass: int, passes: int) -> moderngl.Texture:
+        """Adds ``passes`` passes of the view into the (w, h) float target; returns it."""
+        fbo, tex = self._target(w, h)
+        fbo.use()
+        if first_pass == 0:
+            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        if state.view == "object":
+            self._object_passes(state, w, h, first_pass, passes)
+        elif state.view == "lobe":
+            if first_pass == 0:
+                self.lobe["u_wi"].value = _incidence(state.theta_i)
+                self.lobe["u_size"].value = (float(w), float(h))
+                self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+                self.empty_vao.render(moderngl.TRIANGLES, vertices=3)
+        elif state.view == "slice":
+            if first_pass == 0:
+                self.slice["u_size"].value = (float(w), float(h))
+                self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+                self.empty_slice.render(moderngl.TRIANGLES, vertices=3)
+        else:
+            raise NbrdfError(f"--view: unknown view {state.view!r} (expected one of {', '.join(VIEWS)})")
+        return tex
+
+    def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int) -> None:
+        cam = state.camera
+        vp = cam.projection(w / h) @ cam.view()
+        p = self.obj
+        p["u_view_proj"].write(vp.T.astype("f4").tobytes())
+        p["u_model"].write(np.eye(4, dtype="f4").tobytes())
+        p["u_eye"].value = tuple(cam.eye())
+        ld = np.asarray(state.light_dir, dtype=np.float64)
+        p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
+        p["u_light_radiance"].value = (state.light_radiance,) * 3
+        p["u_env_intensity"].value = state.env_intensity
+        fbo = self.ctx.fbo
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        self.ctx.disable(moderngl.BLEND)
+        if first == 0:
+            # Depth pre-pass: the shading passes then add exactly the visible surface.
+            # (moderngl applies a framebuffer's masks when it is bound, hence use().)
+            fbo.color_mask = (False, False, False, False)
+            fbo.use()
+            self.ctx.depth_func = "<"
+            self.obj_vao.render(moderngl.TRIANGLES)
+        fbo.color_mask = (True, True, True, True)
+        fbo.depth_mask = False
+        fbo.use()
+        self.ctx.depth_func = "<="
+        self.ctx.enable(moderngl.BLEND)
+        self.ctx.blend_func = moderngl.ONE, moderngl.ONE
+        for k in range(first, first + passes):
+            p["u_pass"].value = k
+            self.obj_vao.render(moderngl.TRIANGLES)
+        self.ctx.disable(moderngl.BLEND)
+        fbo.depth_mask = True
+        fbo.use()
+        self.ctx.depth_func = "<"
+
+    def render_linear(self, state: ViewState, size: tuple[int, int] = (256, 256), spp: int = 1) -> np.ndarray:
+        """Linear float32 (H, W, 3). Object and slice: row 0 is the top of the
+        image. Lobe: exactly the SPEC section 9 array (64 x 64, row 0 at y = -1)."""
+        w, h = (LOBE_SIZE, LOBE_SIZE) if state.view == "lobe" else size
+        passes = spp if state.view == "object" else 1
+        tex = self.accumulate(state, w, h, 0, passes)
+        img = np.frombuffer(tex.read(), dtype="f4").reshape(h, w, 4)[..., :3] / passes
+        if state.view == "lobe":
+            return img.copy()
+        return np.ascontiguousarray(img[::-1])
+
+    def tonemap_to(self, target: moderngl.Framebuffer, tex: moderngl.Texture, passes: int, state: ViewState) -> None:
+        """Draws the accumulation ``tex`` (sum of ``passes``) to ``target`` as sRGB."""
+        target.use()
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        tex.use(0)
+        self.tone["u_hdr"].value = 0
+        self.tone["u_passes"].value = float(passes)
+        self.tone["u_exposure"].value = state.exposure
+        self.tone["u_tonemap"].value = 1 if state.tonemap == "aces" else 0
+        self.empty_tone.render(moderngl.TRIANGLES, vertices=3)
+
+
+def _incidence(theta_deg: float) -> tuple[float, float, float]:
+    t = math.radians(theta_deg)
+    return (math.sin(t), 0.0, math.cos(t))

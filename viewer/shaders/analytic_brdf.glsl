@@ -1,0 +1,119 @@
+// Closed-form BRDFs (SPEC section 5) and, for layered stacks, a simple analytic
+// layering approximation in the style of Weidlich & Wilkie 2007: the top
+// interface's reflection plus the layers below seen through the Fresnel
+// transmission of the interface in both directions and the medium's
+// attenuation along the refracted directions, with a single-scattering term
+// for the medium. It is a baseline for comparison, not the ground truth.
+//
+// Directions are in the local frame (z = normal); wi to the light, wo to the
+// viewer; the value excludes every cosine.
+
+const int MAX_INTERFACES = 2;
+uniform int u_num_interfaces;                 // interfaces above the base
+uniform float u_if_roughness[MAX_INTERFACES];
+uniform float u_if_ior[MAX_INTERFACES];      // relative IOR (below / above)
+uniform vec3 u_med_albedo[MAX_INTERFACES];
+uniform float u_med_sigma_t[MAX_INTERFACES];
+uniform int u_base_type;                      // 0 conductor, 1 diffuse, 2 dielectric (reflection only)
+uniform float u_base_roughness;
+uniform float u_base_ior;
+uniform vec3 u_base_color;                    // conductor r0 or diffuse albedo
+
+float ggx_d(vec3 m, float a) {
+    if (m.z <= 0.0) return 0.0;
+    float a2 = a * a;
+    float s2 = m.x * m.x + m.y * m.y;
+    float d = s2 + m.z * m.z * a2;
+    return a2 / (PI * d * d);
+}
+
+float smith_g1(vec3 w, vec3 m, float a) {
+    if (dot(w, m) * w.z <= 0.0) return 0.0;
+    float tan2 = (w.x * w.x + w.y * w.y) / max(w.z * w.z, 1e-30);
+    return 2.0 / (1.0 + sqrt(1.0 + a * a * tan2));
+}
+
+float fresnel_dielectric(float cos_i, float eta) {
+    float c = min(abs(cos_i), 1.0);
+    float s2t = (1.0 - c * c) / (eta * eta);
+    if (s2t >= 1.0) return 1.0;
+    float ct = sqrt(1.0 - s2t);
+    float rs = (c - eta * ct) / (c + eta * ct);
+    float rp = (eta * c - ct) / (eta * c + ct);
+    return 0.5 * (rs * rs + rp * rp);
+}
+
+vec3 fresnel_schlick(float cos_i, vec3 r0) {
+    return r0 + (1.0 - r0) * pow(1.0 - min(abs(cos_i), 1.0), 5.0);
+}
+
+// Microfacet reflection with a given Fresnel value, both directions above.
+float microfacet_reflection(vec3 wi, vec3 wo, float a, out vec3 h) {
+    h = normalize(wi + wo);
+    return ggx_d(h, a) * smith_g1(wi, h, a) * smith_g1(wo, h, a) / max(4.0 * wi.z * wo.z, 1e-30);
+}
+
+vec3 conductor_brdf(vec3 wi, vec3 wo, float a, vec3 r0) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
+    vec3 h;
+    float dg = microfacet_reflection(wi, wo, a, h);
+    return fresnel_schlick(dot(wi, h), r0) * dg;
+}
+
+float dielectric_reflection(vec3 wi, vec3 wo, float a, float eta) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return 0.0;
+    vec3 h;
+    float dg = microfacet_reflection(wi, wo, a, h);
+    return fresnel_dielectric(dot(wi, h), eta) * dg;
+}
+
+vec3 base_brdf(vec3 wi, vec3 wo) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
+    if (u_base_type == 0) return conductor_brdf(wi, wo, u_base_roughness, u_base_color);
+    if (u_base_type == 1) return u_base_color / PI;
+    return vec3(dielectric_reflection(wi, wo, u_base_roughness, u_base_ior));
+}
+
+// Direction refracted into the layer below a smooth interface (pointing away, upward).
+vec3 refract_up(vec3 w, float eta) {
+    float s = 1.0 / eta;
+    return normalize(vec3(w.xy * s, sqrt(max(1.0 - s * s * dot(w.xy, w.xy), 1e-8))));
+}
+
+vec3 brdf(vec3 wi, vec3 wo) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
+    // Directions inside every slab, top down.
+    vec3 di[MAX_INTERFACES + 1];
+    vec3 dout[MAX_INTERFACES + 1];
+    di[0] = wi;
+    dout[0] = wo;
+    for (int k = 0; k < MAX_INTERFACES; ++k) {
+        if (k < u_num_interfaces) {
+            di[k + 1] = refract_up(di[k], u_if_ior[k]);
+            dout[k + 1] = refract_up(dout[k], u_if_ior[k]);
+        }
+    }
+    // Bottom up: base, then each slab and interface above it.
+    vec3 f = base_brdf(di[u_num_interfaces], dout[u_num_interfaces]);
+    for (int k = MAX_INTERFACES - 1; k >= 0; --k) {
+        if (k >= u_num_interfaces) continue;
+        vec3 a = di[k + 1], b = dout[k + 1];
+        float tau = u_med_sigma_t[k];
+        float path = 1.0 / a.z + 1.0 / b.z;
+        vec3 below = f * exp(-tau * path);
+        // Single scattering in the slab (isotropic phase), thickness 1.
+        vec3 ss = u_med_albedo[k] / (4.0 * PI) * (1.0 - exp(-tau * path)) / (a.z + b.z);
+        float eta = u_if_ior[k];
+        float ti = 1.0 - fresnel_dielectric(di[k].z, eta);
+        float to = 1.0 - fresnel_dielectric(dout[k].z, eta);
+        f = vec3(dielectric_reflection(di[k], dout[k], u_if_roughness[k], eta)) + ti * to * (below + ss);
+    }
+    return f;
+}
+
+// Roughness of the sharpest lobe a shader should importance-sample: the top
+// interface's, or the base's for a single layer.
+float lobe_roughness() {
+    if (u_num_interfaces > 0) return u_if_roughness[0];
+    return u_base_type == 1 ? 1.0 : u_base_roughness;
+}

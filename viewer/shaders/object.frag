@@ -1,0 +1,51 @@
+// Lit object: one directional light plus a procedural sky, sampled by cosine
+// hemisphere sampling, one sample per pass; passes are averaged (progressive).
+//@INCLUDE common.glsl
+//@INCLUDE brdf
+//@INCLUDE sampling.glsl
+
+in vec3 v_world;
+in vec3 v_normal;
+in vec4 v_tangent;
+in vec2 v_uv;
+
+uniform vec3 u_eye;
+uniform vec3 u_light_dir;       // toward the light, world space
+uniform vec3 u_light_radiance;
+uniform float u_env_intensity;
+uniform uint u_pass;
+
+out vec4 frag;
+
+vec3 sky(vec3 d) {
+    float t = clamp(d.z, -1.0, 1.0);  // world z is up
+    vec3 zenith = vec3(0.35, 0.55, 1.0);
+    vec3 horizon = vec3(1.0, 0.95, 0.85);
+    vec3 ground = vec3(0.25, 0.22, 0.2);
+    return t >= 0.0 ? mix(horizon, zenith, pow(t, 0.6)) : mix(horizon, ground, pow(-t, 0.4));
+}
+
+void main() {
+    vec3 n = normalize(v_normal);
+    vec3 view = normalize(u_eye - v_world);
+    if (dot(n, view) < 0.0) n = -n;  // two-sided
+    mat3 tbn = frame_from_normal(n);
+    mat3 to_local = transpose(tbn);
+    vec3 wo = to_local * view;
+    vec3 color = vec3(0.0);
+    vec3 wl = to_local * normalize(u_light_dir);
+    if (wl.z > 0.0) color += brdf(wl, wo) * u_light_radiance * wl.z;
+    // Environment: one cosine sample and one GGX-lobe sample per pass, balance heuristic.
+    float a = lobe_roughness();
+    float pc;
+    vec3 wc = sample_cosine(rand2(uvec2(gl_FragCoord.xy), u_pass, 0u), pc);
+    float pg_c = pdf_ggx_reflection(wo, wc, a);
+    color += brdf(wc, wo) * wc.z / (pc + pg_c) * sky(tbn * wc) * u_env_intensity;
+    vec3 m = sample_vndf(wo, a, rand2(uvec2(gl_FragCoord.xy), u_pass, 1u));
+    vec3 wg = reflect(-wo, m);
+    if (wg.z > 0.0) {
+        float pg = pdf_ggx_reflection(wo, wg, a);
+        color += brdf(wg, wo) * wg.z / (pg + pdf_cosine(wg)) * sky(tbn * wg) * u_env_intensity;
+    }
+    frag = vec4(color, 1.0);
+}

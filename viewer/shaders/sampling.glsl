@@ -1,0 +1,32 @@
+// Importance sampling helpers for the lit view: cosine-weighted hemisphere
+// and GGX visible-normal reflection (Heitz 2018), with their pdfs, combined
+// by the balance heuristic in object.frag.
+
+vec3 sample_cosine(vec2 u, out float pdf) {
+    float r = sqrt(u.x), phi = 2.0 * PI * u.y;
+    vec3 w = vec3(r * cos(phi), r * sin(phi), sqrt(max(0.0, 1.0 - u.x)));
+    pdf = w.z / PI;
+    return w;
+}
+
+float pdf_cosine(vec3 w) { return max(w.z, 0.0) / PI; }
+
+vec3 sample_vndf(vec3 v, float a, vec2 u) {
+    vec3 vh = normalize(vec3(a * v.x, a * v.y, v.z));
+    float lensq = vh.x * vh.x + vh.y * vh.y;
+    vec3 t1 = lensq > 1e-14 ? vec3(-vh.y, vh.x, 0.0) * inversesqrt(lensq) : vec3(1.0, 0.0, 0.0);
+    vec3 t2 = cross(vh, t1);
+    float r = sqrt(u.x), phi = 2.0 * PI * u.y;
+    float p1 = r * cos(phi), p2 = r * sin(phi);
+    float s = 0.5 * (1.0 + vh.z);
+    p2 = (1.0 - s) * sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2;
+    vec3 nh = p1 * t1 + p2 * t2 + sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2)) * vh;
+    return normalize(vec3(a * nh.x, a * nh.y, max(1e-6, nh.z)));
+}
+
+float pdf_ggx_reflection(vec3 wo, vec3 wi, float a) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return 0.0;
+    vec3 h = normalize(wi + wo);
+    float g1 = 2.0 / (1.0 + sqrt(1.0 + a * a * (wo.x * wo.x + wo.y * wo.y) / (wo.z * wo.z)));
+    return g1 * max(dot(wo, h), 0.0) * ggx_d(h, a) / wo.z / (4.0 * max(dot(wo, h), 1e-8));
+}

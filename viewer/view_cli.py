@@ -1,0 +1,126 @@
+"""``nbrdf-view``: the previewer's command line (SPEC section 8).
+
+With a display it opens the window; with ``--offscreen`` (or when no display
+can be opened) it renders the same view through EGL to an image.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from neural.errors import NbrdfError
+from viewer.cli import _Parser, run_guarded
+
+PROG = "nbrdf-view"
+DEFAULT_MATERIAL = Path(__file__).parent / "assets" / "materials" / "default.json"
+HEADLESS_OUT = "nbrdf-view.png"
+
+
+@dataclass
+class ViewOptions:
+    material: Path
+    mesh: str = "sphere"
+    env: str | None = None
+    view: str = "object"
+    theta_i: float = 30.0
+    offscreen: bool = False
+    out: str | None = None
+    size: tuple[int, int] = (512, 512)
+    spp: int = 16
+    exposure: float = 0.0
+    tonemap: str = "aces"
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise NbrdfError(f"--size: expected WxH such as 512x512, got {text!r}") from None
+    if not (1 <= w <= 16384 and 1 <= h <= 16384):
+        raise NbrdfError(f"--size: {w}x{h} is outside 1..16384 per side")
+    return w, h
+
+
+def parse_args(argv: Sequence[str] | None) -> ViewOptions:
+    p = _Parser(prog=PROG, description="Real-time neural BRDF previewer.")
+    p.add_argument("material", nargs="?", default=str(DEFAULT_MATERIAL), help="material JSON (default: varnished copper)")
+    p.add_argument("--mesh", default="sphere", help="sphere, testmesh, or an OBJ/glTF file")
+    p.add_argument("--env", default=None, help="equirectangular .hdr/.exr environment")
+    p.add_argument("--view", default="object", choices=("object", "lobe", "slice"))
+    p.add_argument("--theta-i", type=float, default=30.0, help="incidence angle of the lobe view, degrees")
+    p.add_argument("--offscreen", action="store_true", help="render through EGL to --out instead of opening a window")
+    p.add_argument("--out", default=None, help="output image: .png (tone-mapped), .exr or .npy (linear float)")
+    p.add_argument("--size", default="512x512", help="WxH")
+    p.add_argument("--spp", type=int, default=16, help="passes accumulated per pixel")
+    p.add_argument("--exposure", type=float, default=0.0, help="stops")
+    p.add_argument("--tonemap", default="aces", choices=("aces", "linear"))
+    a = p.parse_args(argv)
+    if a.spp < 1:
+        raise NbrdfError(f"--spp: {a.spp} must be at least 1")
+    if not (0.0 <= a.theta_i < 90.0):
+        raise NbrdfError(f"--theta-i: {a.theta_i} is outside [0, 90)")
+    if a.offscreen and not a.out:
+        raise NbrdfError("--offscreen needs --out IMG")
+    return ViewOptions(material=Path(a.material), mesh=a.mesh, env=a.env, view=a.view, theta_i=a.theta_i,
+                       offscreen=a.offscreen, out=a.out, size=_size(a.size), spp=a.spp, exposure=a.exposure,
+                       tonemap=a.tonemap)
+
+
+def has_display() -> bool:
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def render_offscreen(opts: ViewOptions) -> Path:
+    """Renders the view through EGL and writes ``opts.out``."""
+    from neural.material import load_material
+    from viewer.gl import offscreen_context
+    from viewer.image_io import write_image
+    from viewer.renderer import Renderer, ViewState
+
+    out = Path(opts.out or HEADLESS_OUT)
+    material = load_material(opts.material)
+    if opts.env is not None:
+        from viewer.image_io import read_environment
+
+        read_environment(opts.env)  # validated now; image-based lighting comes with the GPU renderer
+    ctx = offscreen_context()
+    r = Renderer(ctx, material, opts.mesh)
+    state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap)
+    img = r.render_linear(state, opts.size, opts.spp)
+    if opts.view == "lobe" and out.suffix.lower() == ".png":
+        img = img[::-1]  # a picture shows +y up
+    write_image(out, img, opts.exposure, opts.tonemap)
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    def go() -> int:
+        opts = parse_args(argv)
+        if opts.offscreen:
+            render_offscreen(opts)
+            return 0
+        if not has_display():
+            print(f"{PROG}: no display found; rendering offscreen to {opts.out or HEADLESS_OUT} instead", file=sys.stderr)
+            render_offscreen(opts)
+            return 0
+        from viewer.app import App, WindowUnavailable
+
+        try:
+            app = App(opts)
+        except WindowUnavailable as e:
+            print(f"{PROG}: cannot open a window ({e}); rendering offscreen to {opts.out or HEADLESS_OUT} instead",
+                  file=sys.stderr)
+            render_offscreen(opts)
+            return 0
+        app.run()
+        return 0
+
+    return run_guarded(PROG, go)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
