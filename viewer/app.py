@@ -48,6 +48,7 @@ class App:
         glfw.swap_interval(0)
         self.ctx = moderngl.create_context()
         check_version(self.ctx)
+        self.screen = self.ctx.detect_framebuffer()  # the window's default framebuffer, bound now
         self.renderer = Renderer(self.ctx, load_material(opts.material), opts.mesh)
         self.state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap)
         self.passes = 0
@@ -94,17 +95,15 @@ class App:
         else:
             tex = self.renderer.accumulate(self.state, view_w, view_h, 0, 1)
             self.passes = 1
-        screen = self.ctx.detect_framebuffer()
-        screen.viewport = (0, 0, w, h)
-        self.renderer.tonemap_to(screen, tex, self.passes, self.state)
+        self.screen.viewport = (0, 0, w, h)
+        self.renderer.tonemap_to(self.screen, tex, self.passes, self.state)
         glfw.swap_buffers(self.window)
         self.frame_ms = (time.perf_counter() - t0) * 1000.0
 
     def read_pixels(self) -> np.ndarray:
         """The presented frame as uint8 (H, W, 3), row 0 at the top."""
         w, h = self.framebuffer_size()
-        screen = self.ctx.detect_framebuffer()
-        data = screen.read(viewport=(0, 0, w, h), components=3)
+        data = self.screen.read(viewport=(0, 0, w, h), components=3)
         return np.frombuffer(data, dtype=np.uint8).reshape(h, w, 3)[::-1].copy()
 
     def run(self) -> None:

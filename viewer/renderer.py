@@ -61,6 +61,7 @@ class Renderer:
         self.set_mesh(mesh)
         self.set_material(material)
         self._fbo: dict[tuple[int, int], tuple[moderngl.Framebuffer, moderngl.Texture]] = {}
+        self._dummy = ctx.texture((1, 1), 4, dtype="f4")
 
     # --- scene -------------------------------------------------------------------
     def set_mesh(self, mesh: str | Mesh) -> None:
@@ -168,6 +169,9 @@ class Renderer:
         self.tone["u_exposure"].value = state.exposure
         self.tone["u_tonemap"].value = 1 if state.tonemap == "aces" else 0
         self.empty_tone.render(moderngl.TRIANGLES, vertices=3)
+        # Unbind the accumulation texture: rendering into a texture that is still
+        # bound for sampling is a feedback loop (llvmpipe then drops the blending).
+        self._dummy.use(0)
 
 
 def _incidence(theta_deg: float) -> tuple[float, float, float]:

@@ -1,31 +1,49 @@
 """The window under Xvfb: the App's frame equals the offscreen renderer's
-for the same state (same Renderer code path, different framebuffer)."""
+for the same state (same Renderer code path, different framebuffer).
+
+The window runs in a child process: an EGL context current in this process
+(the offscreen tests' fixture) and a GLX window context do not mix in one
+thread, and Xlib answers that by ending the process."""
 from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 import pytest
 
 from viewer.image_io import tonemap
-from viewer.view_cli import DEFAULT_MATERIAL, ViewOptions
+from viewer.view_cli import DEFAULT_MATERIAL
 
 pytestmark = pytest.mark.gl
 
-
-def test_window_matches_offscreen(xvfb_display, monkeypatch, gl_ctx):
-    monkeypatch.setenv("DISPLAY", xvfb_display)
+SCRIPT = textwrap.dedent("""
+    import sys
+    import numpy as np
     from viewer.app import App
-    from viewer.renderer import Renderer, ViewState
-    from neural.material import load_material
-
-    opts = ViewOptions(material=DEFAULT_MATERIAL, size=(64, 48))
-    app = App(opts, size=(64, 48))
+    from viewer.view_cli import ViewOptions
+    app = App(ViewOptions(material=sys.argv[1], size=(64, 48)), size=(64, 48))
     try:
         for _ in range(4):
             app.step()
-        shown = app.read_pixels().astype(int)
         assert app.passes == 4 and app.frame_ms > 0
+        np.save(sys.argv[2], app.read_pixels())
     finally:
         app.close()
+""")
+
+
+def test_window_matches_offscreen(xvfb_display, gl_ctx, tmp_path):
+    from neural.material import load_material
+    from viewer.renderer import Renderer, ViewState
+
+    env = dict(os.environ, DISPLAY=xvfb_display)
+    r = subprocess.run([sys.executable, "-c", SCRIPT, str(DEFAULT_MATERIAL), str(tmp_path / "win.npy")],
+                       env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    shown = np.load(tmp_path / "win.npy").astype(int)
     ref = Renderer(gl_ctx, load_material(DEFAULT_MATERIAL)).render_linear(ViewState(), (64, 48), spp=4)
     expected = tonemap(ref).astype(int)
     assert shown.shape == expected.shape
