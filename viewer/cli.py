@@ -189,6 +189,96 @@ def cmd_bench_reference(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_data(a: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from training.dataset import PRESETS, generate
+
+    if a.preset not in PRESETS:
+        raise NbrdfError(f"--preset: {a.preset!r} is not one of {', '.join(PRESETS)}")
+    cfg = PRESETS[a.preset]
+    if a.seed is not None:
+        cfg = replace(cfg, seed=a.seed)
+    man = generate(a.out, cfg, preset=a.preset, overwrite=a.overwrite)
+    print(f"data set ready: {man}")
+    return 0
+
+
+def cmd_train_representation(a: argparse.Namespace) -> int:
+    from neural.decoder import DecoderSpec
+    from training.train_representation import TrainConfig, train
+
+    spec = DecoderSpec(width=a.width, depth=a.depth, activation=a.activation)
+    for name in ("epochs", "batch"):
+        if getattr(a, name) < 1:
+            raise NbrdfError(f"--{name}: must be at least 1")
+    cfg = TrainConfig(data=a.data, out=a.out, spec=spec, epochs=a.epochs, batch=a.batch, lr=a.lr,
+                      seed=a.seed, device=a.device)
+    bundle = train(cfg)
+    print(f"decoder written: {bundle}")
+    return 0
+
+
+def cmd_project(a: argparse.Namespace) -> int:
+    from neural.decoder import default_decoder, load_decoder, save_decoder
+    from neural.latent import save_latent
+    from neural.projection import ProjectionConfig
+    from training import project as pj
+
+    out = out_path(a.out, (".safetensors",))
+    given = [x for x in (a.material, a.samples, a.merl) if x]
+    if len(given) != 1:
+        raise NbrdfError("give exactly one of --material, --samples, --merl")
+    if a.steps < 1:
+        raise NbrdfError(f"--steps: {a.steps} must be at least 1")
+    dec = load_decoder(a.decoder) if a.decoder else default_decoder()
+    if a.material:
+        s = pj.material_samples(_load_material(a.material), n=a.pairs, spp=a.spp, seed=a.seed)
+        source = {"material": str(a.material), "spp": a.spp, "pairs": a.pairs}
+    elif a.samples:
+        s = pj.npy_samples(a.samples)
+        source = {"samples": str(a.samples)}
+    else:
+        s = pj.merl_samples(a.merl, n=a.pairs, seed=a.seed)
+        source = {"merl": str(a.merl), "pairs": a.pairs}
+    if a.finetune and not a.merl:
+        raise NbrdfError("--finetune: only for measured (--merl) files")
+    lat, secs = pj.project_to_latent(dec, s, source, ProjectionConfig(steps=a.steps, seed=a.seed))
+    report = {"out": str(out), "decoder_id": lat.decoder_id, "sample_seconds": round(s.seconds, 3),
+              "projection_seconds": round(secs, 3)}
+    if a.finetune:
+        t0 = time.perf_counter()
+        tuned, z = pj.finetune(dec, s, lat.z)
+        dec_path = out.with_name(out.stem + ".decoder.safetensors")
+        lat.decoder_id = save_decoder(tuned, dec_path, trained_on={"finetuned_from": dec.weights_id(),
+                                                                   "merl": str(a.merl)})
+        lat.z = z
+        lat.source["finetuned_decoder"] = dec_path.name
+        report.update(finetune_seconds=round(time.perf_counter() - t0, 3), decoder=str(dec_path),
+                      decoder_id=lat.decoder_id)
+    save_latent(out, lat)
+    print(json.dumps(report))
+    return 0
+
+
+def cmd_report_representation(a: argparse.Namespace) -> int:
+    from neural.decoder import default_decoder, load_decoder
+    from training.evaluate import build_references, projected_method, report_figures, score
+
+    dec = load_decoder(a.decoder) if a.decoder else default_decoder()
+    refs = build_references(a.refs)
+    if a.limit:
+        refs = refs[: a.limit]
+    result = score(refs, projected_method(dec))
+    result["decoder_id"] = dec.weights_id()
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "representation.json").write_text(json.dumps(result, indent=1))
+    report_figures(refs, projected_method(dec), result, out)
+    print(json.dumps(result["summary"], indent=1))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog=PROG, description="Neural layered BRDFs: ground truth, representation, operations.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -210,6 +300,50 @@ def build_parser() -> argparse.ArgumentParser:
     lo.add_argument("--spp", type=int, default=1024)
     lo.add_argument("--seed", type=int, default=0)
     lo.set_defaults(fn=cmd_lobe)
+
+    d = sub.add_parser("data", help="generate a training / validation data set (sharded, resumable)")
+    d.add_argument("--preset", default="tiny", help="tiny (seconds), cpu (the shipped model), paper")
+    d.add_argument("--out", required=True, help="folder for the shards and manifest.json")
+    d.add_argument("--seed", type=int, default=None)
+    d.add_argument("--overwrite", action="store_true", help="replace a data set made with other settings")
+    d.set_defaults(fn=cmd_data)
+
+    t = sub.add_parser("train", help="train networks")
+    tsub = t.add_subparsers(dest="what", required=True, parser_class=_Parser)
+    tr = tsub.add_parser("representation", help="auto-decoder: the shared decoder and training latents")
+    tr.add_argument("--data", required=True, help="a folder made by `nbrdf data`")
+    tr.add_argument("--out", required=True, help="run folder (checkpoint, decoder.safetensors, curves.png)")
+    tr.add_argument("--epochs", type=int, default=40)
+    tr.add_argument("--batch", type=int, default=8192)
+    tr.add_argument("--lr", type=float, default=2e-3)
+    tr.add_argument("--width", type=int, default=64)
+    tr.add_argument("--depth", type=int, default=3)
+    tr.add_argument("--activation", default="relu", choices=("relu", "silu"))
+    tr.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
+    tr.add_argument("--seed", type=int, default=0)
+    tr.set_defaults(fn=cmd_train_representation)
+
+    pr = sub.add_parser("project", help="fit a latent (3 x 32) to a material, samples or a MERL table")
+    pr.add_argument("--material", help="material JSON (fitted through its reference)")
+    pr.add_argument("--samples", help="float (N, 9) .npy: wi.xyz, wo.xyz, f.rgb")
+    pr.add_argument("--merl", help="MERL .binary file")
+    pr.add_argument("--out", required=True, help="latent .safetensors")
+    pr.add_argument("--decoder", help="decoder weights (default: the shipped ones)")
+    pr.add_argument("--finetune", action="store_true", help="measured files: also adapt a copy of the decoder")
+    pr.add_argument("--pairs", type=int, default=2048, help="samples drawn from the material or table")
+    pr.add_argument("--spp", type=int, default=64, help="Monte Carlo paths per pair for a stack's reference")
+    pr.add_argument("--steps", type=int, default=400)
+    pr.add_argument("--seed", type=int, default=0)
+    pr.set_defaults(fn=cmd_project)
+
+    rp = sub.add_parser("report", help="accuracy on the held-out sets (SPEC section 9)")
+    rsub = rp.add_subparsers(dest="what", required=True, parser_class=_Parser)
+    rr = rsub.add_parser("representation", help="projected latents vs converged references")
+    rr.add_argument("--refs", required=True, help="cache folder of held-out references (made on first use)")
+    rr.add_argument("--decoder", help="decoder weights (default: the shipped ones)")
+    rr.add_argument("--out", required=True, help="folder for representation.json and the figures")
+    rr.add_argument("--limit", type=int, default=0, help="score only the first N materials (quick looks)")
+    rr.set_defaults(fn=cmd_report_representation)
 
     b = sub.add_parser("bench", help="speed benchmarks, printed as JSON")
     bsub = b.add_subparsers(dest="what", required=True, parser_class=_Parser)

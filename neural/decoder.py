@@ -1,0 +1,234 @@
+"""The shared BRDF decoder (SPEC section 6): (latent[32], wi, wo) -> f >= 0.
+
+Sized to run per pixel in a shader. Directions enter as isotropic,
+reciprocal features of the Rusinkiewicz angles, so every decoded BRDF is
+isotropic and reciprocal by construction. The network predicts y = log f;
+training compares softplus(y + log cos) = log(1 + f cos) with the target, a
+log compression that keeps sharp peaks and dark tails in one loss.
+
+The latent enters only the first layer, linearly, so its share
+``W1[:, :32] z + b1`` is computed once per material (``latent_share``) and a
+pixel pays for the direction part alone.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import torch
+from torch import nn
+
+from neural.errors import NbrdfError
+
+Tensor = torch.Tensor
+
+FORMAT = "nbrdf-decoder/1"
+LATENT = 32
+ENCODINGS = {"rusink5": 5}  # name -> number of direction features
+ACTIVATIONS = ("relu", "silu")
+
+
+@dataclass(frozen=True)
+class DecoderSpec:
+    """Architecture of a decoder: ``depth`` hidden layers of ``width`` units."""
+
+    latent: int = LATENT
+    width: int = 64
+    depth: int = 3
+    encoding: str = "rusink5"
+    activation: str = "relu"
+
+    def __post_init__(self):
+        if self.encoding not in ENCODINGS:
+            raise NbrdfError(f"decoder encoding {self.encoding!r} is unknown (one of {', '.join(ENCODINGS)})")
+        if self.activation not in ACTIVATIONS:
+            raise NbrdfError(f"decoder activation {self.activation!r} is unknown (one of {', '.join(ACTIVATIONS)})")
+        if not (1 <= self.depth <= 16 and 1 <= self.width <= 1024 and self.latent == LATENT):
+            raise NbrdfError(f"decoder shape depth={self.depth} width={self.width} latent={self.latent} "
+                             f"is unsupported (latent must be {LATENT})")
+
+    @property
+    def features(self) -> int:
+        return ENCODINGS[self.encoding]
+
+    def macs(self, latent_share_cached: bool = True) -> int:
+        """Multiply-adds of one channel evaluation (the encoding's few
+        transcendental functions not counted)."""
+        w, k = self.width, self.features
+        first = k * w + (0 if latent_share_cached else self.latent * w)
+        return first + (self.depth - 1) * w * w + w
+
+    def parameters(self) -> int:
+        w = self.width
+        return (self.latent + self.features + 1) * w + (self.depth - 1) * (w * w + w) + w + 1
+
+
+def encode(wi: Tensor, wo: Tensor) -> Tensor:
+    """Direction features (..., 5): sqrt(2 theta_h / pi), 2 theta_d / pi,
+    cos(2 phi_d), cos(theta_i) cos(theta_o), (cos(theta_i) + cos(theta_o)) / 2.
+
+    All are unchanged by swapping wi and wo and by mirroring both directions,
+    so the decoded BRDF is reciprocal and isotropic."""
+    h = wi + wo
+    h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    cos_h = h[..., 2].clamp(-1.0, 1.0)
+    cos_d = (wi * h).sum(-1).clamp(-1.0, 1.0)
+    theta_h = torch.acos(cos_h)
+    theta_d = torch.acos(cos_d)
+    # cos(2 phi_d) from the component of wi orthogonal to h: its azimuth is
+    # measured from the direction in which h tilts (the projection of z).
+    t = wi - cos_d[..., None] * h
+    b = torch.stack([-h[..., 1], h[..., 0], torch.zeros_like(h[..., 0])], -1)  # z x h: the bitangent
+    bn = b.norm(dim=-1)
+    b = torch.where(bn[..., None] > 1e-7, b / bn.clamp_min(1e-12)[..., None],
+                    torch.tensor([0.0, 1.0, 0.0], dtype=wi.dtype).expand_as(b))
+    tn2 = (t * t).sum(-1)
+    ty = (t * b).sum(-1)
+    cos2 = torch.where(tn2 > 1e-14, 1.0 - 2.0 * ty * ty / tn2.clamp_min(1e-30), torch.ones_like(tn2))
+    ci, co = wi[..., 2], wo[..., 2]
+    return torch.stack([torch.sqrt(theta_h * (2.0 / math.pi)), theta_d * (2.0 / math.pi), cos2, ci * co,
+                        0.5 * (ci + co)], -1)
+
+
+class Decoder(nn.Module):
+    """MLP over [latent, features] -> y = log f (one channel)."""
+
+    def __init__(self, spec: DecoderSpec = DecoderSpec()):
+        super().__init__()
+        self.spec = spec
+        dims = [spec.latent + spec.features] + [spec.width] * spec.depth
+        self.hidden = nn.ModuleList(nn.Linear(a, b) for a, b in zip(dims[:-1], dims[1:]))
+        self.out = nn.Linear(spec.width, 1)
+        self.act = nn.ReLU() if spec.activation == "relu" else nn.SiLU()
+        self.register_buffer("latent_mean", torch.zeros(spec.latent))  # a neutral start for projection
+
+    # -- the network -------------------------------------------------------------------
+    def latent_share(self, z: Tensor) -> Tensor:
+        """The latent's part of the first layer's pre-activation, (..., width)."""
+        first = self.hidden[0]
+        return z @ first.weight[:, : self.spec.latent].T + first.bias
+
+    def log_f_from_share(self, share: Tensor, feats: Tensor) -> Tensor:
+        first = self.hidden[0]
+        x = self.act(share + feats @ first.weight[:, self.spec.latent:].T)
+        for layer in self.hidden[1:]:
+            x = self.act(layer(x))
+        return self.out(x)[..., 0]
+
+    def log_f(self, z: Tensor, feats: Tensor) -> Tensor:
+        """y = log f for latents z (..., 32) and features (..., K), broadcast."""
+        return self.log_f_from_share(self.latent_share(z), feats)
+
+    def forward(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
+        """f >= 0 (...,) for one channel; directions below the horizon give 0."""
+        f = torch.exp(self.log_f(z, encode(wi, wo)).clamp(max=80.0))
+        return torch.where((wi[..., 2] > 0) & (wo[..., 2] > 0), f, torch.zeros_like(f))
+
+    def eval_rgb(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
+        """RGB values (N, 3) of a material latent z (3, 32) at N pairs."""
+        feats = encode(wi, wo)
+        share = self.latent_share(z.to(feats.dtype))  # (3, W)
+        y = self.log_f_from_share(share[None, :, :], feats[:, None, :])
+        f = torch.exp(y.clamp(max=80.0))
+        up = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
+        return torch.where(up, f, torch.zeros_like(f))
+
+    # -- identity ------------------------------------------------------------------------
+    def weights_id(self) -> str:
+        """A short hash of the weights: latents record it, so a latent is never
+        decoded by a network it was not made for."""
+        h = hashlib.sha256()
+        for k, v in sorted(self.state_dict().items()):
+            h.update(k.encode())
+            h.update(v.detach().float().contiguous().numpy().tobytes())
+        return h.hexdigest()[:16]
+
+
+def loss_target(f: Tensor, cos_o: Tensor) -> Tensor:
+    """What the loss compares: log(1 + f cos(theta_o)), the lobe metric's scale."""
+    return torch.log1p(f.clamp_min(0.0) * cos_o)
+
+
+def predicted_target(y: Tensor, cos_o: Tensor) -> Tensor:
+    """log(1 + exp(y) cos) = softplus(y + log cos), stable for any y."""
+    return nn.functional.softplus(y + torch.log(cos_o.clamp_min(1e-6)))
+
+
+# --- weight files --------------------------------------------------------------------
+def save_decoder(dec: Decoder, path: str | Path, trained_on: dict | None = None, accuracy: dict | None = None,
+                 extra: dict[str, Tensor] | None = None, extra_meta: dict | None = None) -> str:
+    """Writes safetensors + JSON metadata; returns the weights id.
+    ``extra`` tensors (other networks of the bundle) travel in the same file."""
+    from safetensors.torch import save_file
+
+    tensors = {f"decoder.{k}": v.detach().float().contiguous() for k, v in dec.state_dict().items()}
+    for k, v in (extra or {}).items():
+        tensors[k] = v.detach().float().contiguous()
+    wid = dec.weights_id()
+    meta = {"format": FORMAT, "architecture": json.dumps(asdict(dec.spec)), "latent_size": str(dec.spec.latent),
+            "weights_id": wid, "trained_on": json.dumps(trained_on or {}), "accuracy": json.dumps(accuracy or {})}
+    meta.update({k: json.dumps(v) for k, v in (extra_meta or {}).items()})
+    save_file(tensors, str(path), metadata=meta)
+    return wid
+
+
+def read_bundle(path: str | Path) -> tuple[dict[str, Tensor], dict[str, str]]:
+    """Tensors and metadata of a weight file, checked for format; never unpickles."""
+    from safetensors import safe_open
+
+    p = Path(path)
+    if not p.is_file():
+        raise NbrdfError(f"{path}: no such weight file")
+    try:
+        with safe_open(str(p), framework="pt") as fh:
+            meta = fh.metadata() or {}
+            tensors = {k: fh.get_tensor(k) for k in fh.keys()}
+    except Exception as e:  # noqa: BLE001 - any unreadable file is bad input
+        raise NbrdfError(f"{path}: not a safetensors weight file ({e})") from None
+    if meta.get("format") != FORMAT:
+        raise NbrdfError(f"{path}: format {meta.get('format')!r} is not {FORMAT}")
+    return tensors, meta
+
+
+def load_decoder(path: str | Path) -> Decoder:
+    tensors, meta = read_bundle(path)
+    try:
+        spec = DecoderSpec(**json.loads(meta["architecture"]))
+    except (KeyError, TypeError, json.JSONDecodeError) as e:
+        raise NbrdfError(f"{path}: architecture metadata is missing or malformed ({e})") from None
+    if meta.get("latent_size") != str(spec.latent):
+        raise NbrdfError(f"{path}: latent size {meta.get('latent_size')} disagrees with the architecture")
+    dec = Decoder(spec)
+    state = {k[len("decoder."):]: v for k, v in tensors.items() if k.startswith("decoder.")}
+    want = dec.state_dict()
+    for k, v in want.items():
+        if k not in state:
+            raise NbrdfError(f"{path}: tensor decoder.{k} is missing")
+        if tuple(state[k].shape) != tuple(v.shape):
+            raise NbrdfError(f"{path}: tensor decoder.{k} has shape {tuple(state[k].shape)}, "
+                             f"the architecture needs {tuple(v.shape)}")
+        if not torch.isfinite(state[k]).all():
+            raise NbrdfError(f"{path}: tensor decoder.{k} holds NaN or infinite values")
+    if set(state) - set(want):
+        raise NbrdfError(f"{path}: unexpected tensors {sorted(set(state) - set(want))[:3]}")
+    dec.load_state_dict(state)
+    dec.eval()
+    if meta.get("weights_id") and meta["weights_id"] != dec.weights_id():
+        raise NbrdfError(f"{path}: weights do not match their recorded id (the file is damaged)")
+    for p_ in dec.parameters():
+        p_.requires_grad_(False)
+    return dec
+
+
+#: The decoder bundle shipped with the package.
+DEFAULT_WEIGHTS = Path(__file__).parent / "data" / "nbrdf_default.safetensors"
+
+
+def default_decoder() -> Decoder:
+    if not DEFAULT_WEIGHTS.is_file():
+        raise NbrdfError(f"the default weights {DEFAULT_WEIGHTS.name} are not installed; "
+                         "train them with `nbrdf train representation`")
+    return load_decoder(DEFAULT_WEIGHTS)

@@ -1,0 +1,70 @@
+"""Projection (SPEC section 6): fit latents to BRDF samples with the decoder frozen.
+
+Works on a batch of B single-channel BRDFs at once (B = 3 for one RGB
+material), each given as n samples (wi, wo, f). The loss is the training
+loss (log(1 + f cos) squared error), so a projection finds the latent that
+training would have found.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from neural.decoder import Decoder, encode, loss_target, predicted_target
+from neural.errors import NbrdfError
+
+Tensor = torch.Tensor
+
+
+@dataclass(frozen=True)
+class ProjectionConfig:
+    steps: int = 400
+    lr: float = 0.05
+    latent_reg: float = 1e-4  # the training's prior on latents
+    seed: int = 0
+
+
+def check_samples(wi: Tensor, wo: Tensor, f: Tensor) -> None:
+    if wi.shape != wo.shape or wi.shape[-1] != 3 or f.shape != wi.shape[:-1]:
+        raise NbrdfError(f"samples: wi {tuple(wi.shape)}, wo {tuple(wo.shape)} and f {tuple(f.shape)} "
+                         "do not fit together (expected (B, n, 3), (B, n, 3), (B, n))")
+    for name, t in (("wi", wi), ("wo", wo), ("f", f)):
+        if not torch.isfinite(t).all():
+            raise NbrdfError(f"samples: {name} holds NaN or infinite values")
+    if (f < 0).any():
+        raise NbrdfError("samples: f holds negative values (a BRDF is never negative)")
+    if not ((wi[..., 2] > 0) & (wo[..., 2] > 0)).any():
+        raise NbrdfError("samples: no pair has both directions above the horizon")
+
+
+def project(dec: Decoder, wi: Tensor, wo: Tensor, f: Tensor, cfg: ProjectionConfig = ProjectionConfig(),
+            z0: Tensor | None = None, weight: Tensor | None = None) -> Tensor:
+    """Latents (B, 32) for B BRDFs sampled at (B, n) pairs."""
+    check_samples(wi, wo, f)
+    up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+    feats = encode(wi.float(), wo.float())
+    cos_o = wo[..., 2].float().clamp_min(0.0)
+    target = loss_target(f.float(), cos_o)
+    w = up.float() if weight is None else weight.float() * up.float()
+    w = w / w.sum(-1, keepdim=True).clamp_min(1e-12)
+    B = wi.shape[0]
+    z = (dec.latent_mean.expand(B, -1).clone() if z0 is None else z0.clone().float()).requires_grad_(True)
+    opt = torch.optim.Adam([z], lr=cfg.lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.steps, eta_min=cfg.lr * 0.02)
+    req = [p.requires_grad for p in dec.parameters()]
+    for p in dec.parameters():
+        p.requires_grad_(False)
+    try:
+        for _ in range(cfg.steps):
+            y = dec.log_f(z[:, None, :], feats)
+            err = (predicted_target(y, cos_o) - target) ** 2
+            loss = (err * w).sum() + cfg.latent_reg * (z * z).sum()
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            sched.step()
+    finally:
+        for p, r in zip(dec.parameters(), req):
+            p.requires_grad_(r)
+    return z.detach()

@@ -1,0 +1,54 @@
+"""Auto-decoder training: it learns, checkpoints, and resumes to the same result."""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import pytest
+import torch
+
+from neural.decoder import DecoderSpec, load_decoder
+from neural.errors import NbrdfError
+from training.dataset import DataConfig, generate
+from training.train_representation import TrainConfig, train
+
+TINY = DataConfig(counts=dict(conductor=4, dielectric=4, two_layer=4, three_layer=1, diffuse_base=1),
+                  val_counts=dict(conductor=1, dielectric=1, two_layer=1), pairs=128, spp=8, shard_size=4)
+SPEC = DecoderSpec(width=16, depth=2)
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    out = tmp_path_factory.mktemp("data")
+    generate(out, TINY, progress=False)
+    return out
+
+
+def test_training_lowers_the_loss_and_writes_its_outputs(data, tmp_path):
+    cfg = TrainConfig(data=str(data), out=str(tmp_path / "run"), spec=SPEC, epochs=6, batch=512, val_every=3)
+    bundle = train(cfg, progress=False)
+    m = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    hist = m["history"]["train"]
+    assert len(hist) == 6 and hist[-1] < 0.7 * hist[0]
+    assert m["macs_per_eval"] == SPEC.macs()
+    dec = load_decoder(bundle)
+    assert dec.spec == SPEC and (tmp_path / "run" / "curves.png").stat().st_size > 1000
+    assert (tmp_path / "run" / "latents.safetensors").exists()
+    assert not torch.all(dec.latent_mean == 0)  # projection starts from the training latents' mean
+
+
+def test_interrupted_run_resumes_to_the_same_weights(data, tmp_path):
+    cfg = TrainConfig(data=str(data), out=str(tmp_path / "a"), spec=SPEC, epochs=3, batch=512, val_every=3)
+    whole = load_decoder(train(cfg, progress=False)).weights_id()
+    cfg_b = replace(cfg, out=str(tmp_path / "b"))
+    train(cfg_b, progress=False, stop_after=1)
+    assert not (tmp_path / "b" / "decoder.safetensors").exists()
+    resumed = load_decoder(train(cfg_b, progress=False)).weights_id()
+    assert resumed == whole
+
+
+def test_a_checkpoint_of_other_settings_is_refused(data, tmp_path):
+    cfg = TrainConfig(data=str(data), out=str(tmp_path / "r"), spec=SPEC, epochs=1, batch=512)
+    train(cfg, progress=False)
+    with pytest.raises(NbrdfError, match="other settings"):
+        train(replace(cfg, lr=1e-4), progress=False)

@@ -1,0 +1,352 @@
+"""Training and validation sets of single-channel BRDFs (``nbrdf data``).
+
+Each BRDF is drawn from the paper's parameter distributions (SPEC section 9)
+in one of five classes; its values are tabulated at direction pairs drawn in
+Rusinkiewicz coordinates (isotropy leaves three angles), with extra density
+near the specular peak. Single interfaces are closed form, stacks come from
+the Monte Carlo simulator (mean and standard error per pair).
+
+On disk: a folder with ``manifest.json`` and one safetensors shard per
+(split, class, block of BRDFs). A shard is written atomically and is never
+recomputed, so an interrupted run resumes where it stopped; every shard's
+random stream derives from (seed, split, class, shard index) alone, so the
+result does not depend on interruptions.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import sys
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+import torch
+
+from neural.errors import NbrdfError
+from neural.material import FORMAT as FORMAT_MATERIAL
+
+Tensor = torch.Tensor
+
+FORMAT = "nbrdf-dataset/1"
+CLASSES = ("conductor", "dielectric", "two_layer", "three_layer", "diffuse_base")
+
+#: Parameter vector columns (single channel); unused columns hold 0.
+PARAM_NAMES = ("class", "top_roughness", "top_ior", "albedo_1", "sigma_t_1", "mid_roughness", "mid_ior",
+               "albedo_2", "sigma_t_2", "base_roughness", "base_value")
+P = {n: i for i, n in enumerate(PARAM_NAMES)}
+
+
+@dataclass(frozen=True)
+class DataConfig:
+    """What a data set holds; the manifest records it, and resuming requires it unchanged."""
+
+    counts: dict[str, int]
+    val_counts: dict[str, int]
+    pairs: int = 1536  # direction pairs per BRDF
+    spp: int = 64  # Monte Carlo paths per pair (stacks)
+    seed: int = 0
+    shard_size: int = 32
+    peak_fraction: float = 0.5  # share of pairs drawn near the half-vector pole
+
+
+PRESETS: dict[str, DataConfig] = {
+    "tiny": DataConfig(counts=dict(conductor=6, dielectric=6, two_layer=8, three_layer=3, diffuse_base=3),
+                       val_counts=dict(conductor=2, dielectric=2, two_layer=2, three_layer=1, diffuse_base=1),
+                       pairs=256, spp=16, shard_size=8),
+    "cpu": DataConfig(counts=dict(conductor=200, dielectric=200, two_layer=800, three_layer=200, diffuse_base=150),
+                      val_counts=dict(conductor=16, dielectric=16, two_layer=32, three_layer=16, diffuse_base=16),
+                      pairs=1536, spp=64),
+    "paper": DataConfig(counts=dict(conductor=300, dielectric=300, two_layer=12720, three_layer=1800,
+                                    diffuse_base=1200),
+                        val_counts=dict(conductor=32, dielectric=32, two_layer=128, three_layer=64, diffuse_base=32),
+                        pairs=4096, spp=128),
+}
+
+
+# --- parameter distributions -------------------------------------------------------------
+def _roughness(g: torch.Generator, n: int) -> Tensor:
+    return (0.216 + 0.784 * torch.rand(n, generator=g, dtype=torch.float64)) ** 3
+
+
+def _ior(g: torch.Generator, n: int) -> Tensor:
+    return 1.05 + 0.95 * torch.rand(n, generator=g, dtype=torch.float64)
+
+
+def _albedo(g: torch.Generator, n: int) -> Tensor:
+    return 1.0 - torch.rand(n, generator=g, dtype=torch.float64) ** 2
+
+
+def _unit(g: torch.Generator, n: int, scale: float = 1.0) -> Tensor:
+    return scale * torch.rand(n, generator=g, dtype=torch.float64)
+
+
+def sample_params(cls: str, n: int, g: torch.Generator) -> Tensor:
+    """n single-channel parameter vectors (n, len(PARAM_NAMES)) of a class."""
+    if cls not in CLASSES:
+        raise NbrdfError(f"unknown BRDF class {cls!r} (one of {', '.join(CLASSES)})")
+    p = torch.zeros(n, len(PARAM_NAMES), dtype=torch.float64)
+    p[:, P["class"]] = CLASSES.index(cls)
+    if cls == "conductor":
+        p[:, P["base_roughness"]], p[:, P["base_value"]] = _roughness(g, n), _unit(g, n)
+    elif cls == "dielectric":
+        p[:, P["top_roughness"]], p[:, P["top_ior"]] = _roughness(g, n), _ior(g, n)
+    else:
+        p[:, P["top_roughness"]], p[:, P["top_ior"]] = _roughness(g, n), _ior(g, n)
+        p[:, P["albedo_1"]], p[:, P["sigma_t_1"]] = _albedo(g, n), _unit(g, n, 5.0)
+        if cls == "three_layer":
+            p[:, P["mid_roughness"]], p[:, P["mid_ior"]] = _roughness(g, n), _ior(g, n)
+            p[:, P["albedo_2"]], p[:, P["sigma_t_2"]] = _albedo(g, n), _unit(g, n, 5.0)
+        if cls == "diffuse_base":
+            p[:, P["base_value"]] = _unit(g, n)
+        else:
+            p[:, P["base_roughness"]], p[:, P["base_value"]] = _roughness(g, n), _unit(g, n)
+    return p
+
+
+def params_to_material(p: Tensor | np.ndarray, name: str = "sample") -> "Material":
+    """The material (scalar colours) that a single-channel parameter vector describes."""
+    from neural.material import parse_material
+
+    p = [float(x) for x in p]
+    cls = CLASSES[int(round(p[0]))]
+    diel = lambda r, i: {"type": "dielectric", "roughness": p[P[r]], "ior": p[P[i]]}
+    med = lambda a, s: {"type": "medium", "albedo": p[P[a]], "sigma_t": p[P[s]]}
+    cond = {"type": "conductor", "roughness": p[P["base_roughness"]], "r0": p[P["base_value"]]}
+    layers: list[dict] = []
+    if cls == "conductor":
+        layers = [cond]
+    elif cls == "dielectric":
+        layers = [diel("top_roughness", "top_ior")]
+    else:
+        layers = [diel("top_roughness", "top_ior"), med("albedo_1", "sigma_t_1")]
+        if cls == "three_layer":
+            layers += [diel("mid_roughness", "mid_ior"), med("albedo_2", "sigma_t_2")]
+        layers.append({"type": "diffuse", "albedo": p[P["base_value"]]} if cls == "diffuse_base" else cond)
+    return parse_material({"format": FORMAT_MATERIAL, "name": name, "layers": layers})
+
+
+# --- directions ----------------------------------------------------------------------
+def sample_pairs(n: int, g: torch.Generator, peak_fraction: float = 0.5) -> tuple[Tensor, Tensor]:
+    """n (wi, wo) pairs, both above the horizon, float64 (n, 3) each.
+
+    A ``peak_fraction`` of them has theta_h = (pi/2) u^2 (dense near the
+    specular peak, where lobes are sharp); the rest is cosine-distributed in
+    wi and wo independently (the whole domain, weighted as the lobe metric)."""
+    out_i, out_o, have = [], [], 0
+    while have < n:
+        m = 2 * (n - have) + 16
+        u = torch.rand(m, 6, generator=g, dtype=torch.float64)
+        peak = u[:, 5] < peak_fraction
+        # Peak pairs: half vector near the pole, difference vector anywhere.
+        th, ph = 0.5 * math.pi * u[:, 0] ** 2, 2 * math.pi * u[:, 1]
+        td, pd = torch.acos(1 - u[:, 2]), 2 * math.pi * u[:, 3]  # uniform over the hemisphere of d
+        h = torch.stack([th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()], -1)
+        d = torch.stack([td.sin() * pd.cos(), td.sin() * pd.sin(), td.cos()], -1)
+        # rotate d from the frame where h is the pole: by theta_h about y, then phi_h about z
+        ct, st, cp, sp = th.cos(), th.sin(), ph.cos(), ph.sin()
+        x1 = ct * d[:, 0] + st * d[:, 2]
+        z1 = -st * d[:, 0] + ct * d[:, 2]
+        wi_p = torch.stack([cp * x1 - sp * d[:, 1], sp * x1 + cp * d[:, 1], z1], -1)
+        wo_p = 2 * (wi_p * h).sum(-1, keepdim=True) * h - wi_p
+        # Cosine pairs.
+        def cosdir(a: Tensor, b: Tensor) -> Tensor:
+            r, phi = a.sqrt(), 2 * math.pi * b
+            return torch.stack([r * phi.cos(), r * phi.sin(), (1 - a).clamp_min(0).sqrt()], -1)
+
+        wi_c, wo_c = cosdir(u[:, 0], u[:, 1]), cosdir(u[:, 2], u[:, 3])
+        wi = torch.where(peak[:, None], wi_p, wi_c)
+        wo = torch.where(peak[:, None], wo_p, wo_c)
+        ok = (wi[:, 2] > 1e-4) & (wo[:, 2] > 1e-4)
+        out_i.append(wi[ok])
+        out_o.append(wo[ok])
+        have += int(ok.sum())
+    wi, wo = torch.cat(out_i)[:n], torch.cat(out_o)[:n]
+    return wi / wi.norm(dim=-1, keepdim=True), wo / wo.norm(dim=-1, keepdim=True)
+
+
+# --- values ------------------------------------------------------------------------
+def _stack_params(params: Tensor, pairs: int):
+    """Simulator parameters for K single-channel stacks of one class, each
+    repeated over its pairs (K * pairs rows)."""
+    from training.layered import StackParams
+
+    cls = CLASSES[int(params[0, 0])]
+    rep = lambda c: params[:, P[c]].repeat_interleave(pairs)
+    cols = [("top_roughness", "top_ior", "albedo_1", "sigma_t_1")]
+    if cls == "three_layer":
+        cols.append(("mid_roughness", "mid_ior", "albedo_2", "sigma_t_2"))
+    st = lambda j: torch.stack([rep(c[j]) for c in cols], -1)
+    kw = dict(roughness=st(0), ior=st(1), albedo=st(2), sigma_t=st(3), base_roughness=rep("base_roughness"))
+    if cls == "diffuse_base":
+        return StackParams(base="diffuse", base_albedo=rep("base_value"), **kw)
+    return StackParams(base="conductor", base_r0=rep("base_value"), **kw)
+
+
+def tabulate(params: Tensor, wi: Tensor, wo: Tensor, spp: int, seed: int) -> tuple[Tensor, Tensor]:
+    """Values and standard errors (K, n) of K BRDFs of one class at their pairs (K, n, 3)."""
+    from training.analytic import GGXConductor, GGXDielectric
+    from training.layered import simulate
+
+    K, n = wi.shape[:2]
+    cls = CLASSES[int(params[0, 0])]
+    fi, fo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+    if cls == "conductor":
+        rep = lambda c: params[:, P[c]].repeat_interleave(n)
+        f = GGXConductor(rep("base_roughness"), rep("base_value")).eval(fi, fo)
+        return f.reshape(K, n), torch.zeros(K, n, dtype=f.dtype)
+    if cls == "dielectric":
+        rep = lambda c: params[:, P[c]].repeat_interleave(n)
+        f = GGXDielectric(rep("top_roughness"), rep("top_ior")).eval(fi, fo)
+        return f.reshape(K, n), torch.zeros(K, n, dtype=f.dtype)
+    from training.reference import MAX_LANES
+
+    per_call = max(1, MAX_LANES // (n * spp))
+    means, errs = [], []
+    for s in range(0, K, per_call):
+        sl = slice(s, s + per_call)
+        k = params[sl].shape[0]
+        m, e = simulate(_stack_params(params[sl], n), wi[sl].reshape(-1, 3).float(), wo[sl].reshape(-1, 3).float(),
+                        spp=spp, seed=seed * 7_919 + s)
+        means.append(m.double().reshape(k, n))
+        errs.append(e.double().reshape(k, n))
+    return torch.cat(means), torch.cat(errs)
+
+
+# --- shards and manifest -------------------------------------------------------------
+def _stream_seed(seed: int, *parts: object) -> int:
+    h = hashlib.sha256(repr((seed,) + parts).encode()).digest()
+    return int.from_bytes(h[:8], "little") & ((1 << 62) - 1)
+
+
+@dataclass
+class Shard:
+    file: str
+    split: str
+    cls: str
+    index: int
+    count: int
+
+
+def plan(cfg: DataConfig) -> list[Shard]:
+    shards = []
+    for split, counts in (("train", cfg.counts), ("val", cfg.val_counts)):
+        for cls in CLASSES:
+            total = counts.get(cls, 0)
+            for i, s in enumerate(range(0, total, cfg.shard_size)):
+                shards.append(Shard(f"{split}-{cls}-{i:04d}.safetensors", split, cls, i,
+                                    min(cfg.shard_size, total - s)))
+    return shards
+
+
+def make_shard(cfg: DataConfig, shard: Shard) -> dict[str, np.ndarray]:
+    g = torch.Generator().manual_seed(_stream_seed(cfg.seed, shard.split, shard.cls, shard.index))
+    params = sample_params(shard.cls, shard.count, g)
+    wi, wo = zip(*(sample_pairs(cfg.pairs, g, cfg.peak_fraction) for _ in range(shard.count)))
+    wi, wo = torch.stack(wi), torch.stack(wo)
+    f, se = tabulate(params, wi, wo, cfg.spp, seed=_stream_seed(cfg.seed, "mc", shard.split, shard.cls, shard.index)
+                     % (1 << 31))
+    return {"params": params.float().numpy(), "wi": wi.float().numpy(), "wo": wo.float().numpy(),
+            "f": f.float().numpy(), "stderr": se.float().numpy()}
+
+
+def _config_dict(cfg: DataConfig) -> dict:
+    return json.loads(json.dumps(asdict(cfg)))
+
+
+def generate(out: str | Path, cfg: DataConfig, preset: str = "custom", overwrite: bool = False,
+             progress: bool = True) -> Path:
+    """Creates (or resumes) a data set in ``out``; returns the manifest path."""
+    from safetensors.numpy import save_file
+    from tqdm import tqdm
+
+    out = Path(out)
+    man_path = out / "manifest.json"
+    shards = plan(cfg)
+    manifest = {"format": FORMAT, "preset": preset, "config": _config_dict(cfg), "param_names": list(PARAM_NAMES),
+                "shards": [asdict(s) for s in shards]}
+    if man_path.exists():
+        old = json.loads(man_path.read_text())
+        if old.get("config") != manifest["config"]:
+            if not overwrite:
+                raise NbrdfError(f"{out}: holds a data set made with other settings; "
+                                 "pass --overwrite to replace it or choose another folder")
+            for s in old.get("shards", []):
+                (out / s["file"]).unlink(missing_ok=True)
+    elif out.exists() and any(out.iterdir()):
+        raise NbrdfError(f"{out}: exists and is not an nbrdf data set; choose an empty or new folder")
+    out.mkdir(parents=True, exist_ok=True)
+    man_path.write_text(json.dumps(manifest, indent=1))
+    todo = [s for s in shards if not (out / s.file).exists()]
+    total = sum(s.count for s in shards)
+    with tqdm(total=total, initial=total - sum(s.count for s in todo), desc="BRDFs", unit="brdf",
+              disable=not progress or None, file=sys.stderr) as bar:
+        for s in todo:
+            arrays = make_shard(cfg, s)
+            tmp = out / (s.file + ".tmp")
+            save_file(arrays, str(tmp), metadata={"class": s.cls, "split": s.split})
+            os.replace(tmp, out / s.file)
+            bar.update(s.count)
+    return man_path
+
+
+# --- reading ------------------------------------------------------------------------
+@dataclass
+class BRDFSet:
+    """All BRDFs of a split in memory: params (K, 11), wi/wo (K, n, 3), f/stderr (K, n)."""
+
+    params: Tensor
+    wi: Tensor
+    wo: Tensor
+    f: Tensor
+    stderr: Tensor
+    classes: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return self.params.shape[0]
+
+
+def load_manifest(folder: str | Path) -> dict:
+    man = Path(folder) / "manifest.json"
+    if not man.is_file():
+        raise NbrdfError(f"{folder}: no manifest.json (make a data set with `nbrdf data`)")
+    try:
+        m = json.loads(man.read_text())
+    except json.JSONDecodeError as e:
+        raise NbrdfError(f"{man}: not valid JSON ({e.msg})") from None
+    if m.get("format") != FORMAT:
+        raise NbrdfError(f"{man}: format {m.get('format')!r} is not {FORMAT}")
+    return m
+
+
+def load_split(folder: str | Path, split: str = "train") -> BRDFSet:
+    """Reads every finished shard of a split (an unfinished data set is an error)."""
+    from safetensors.numpy import load_file
+
+    folder = Path(folder)
+    m = load_manifest(folder)
+    parts: dict[str, list] = {k: [] for k in ("params", "wi", "wo", "f", "stderr")}
+    for s in m["shards"]:
+        if s["split"] != split:
+            continue
+        path = folder / s["file"]
+        if not path.is_file():
+            raise NbrdfError(f"{path}: missing; the data set is unfinished (run the same `nbrdf data` again)")
+        arrays = load_file(str(path))
+        for k in parts:
+            parts[k].append(torch.from_numpy(arrays[k]))
+    if not parts["params"]:
+        raise NbrdfError(f"{folder}: no BRDFs in split {split!r}")
+    cat = {k: torch.cat(v) for k, v in parts.items()}
+    classes = [CLASSES[int(c)] for c in cat["params"][:, 0]]
+    return BRDFSet(classes=classes, **cat)
+
+
+def iter_classes(data: BRDFSet) -> Iterator[tuple[str, Tensor]]:
+    for cls in CLASSES:
+        idx = torch.tensor([i for i, c in enumerate(data.classes) if c == cls], dtype=torch.long)
+        if idx.numel():
+            yield cls, idx

@@ -1,0 +1,193 @@
+"""Held-out accuracy per SPEC section 9 (``nbrdf report representation``).
+
+A held-out set is drawn with a fixed seed from the paper's distributions,
+disjoint from training by its seed stream. For every material it caches
+the converged reference lobes at the standard incidences (with standard
+errors), the reference directional albedos, and the samples a projection
+fits to; then any neural method is scored against them: lobe PSNR (median
+and 10th percentile per class) and albedo error.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+from neural.errors import NbrdfError
+from neural.material import FORMAT as MATERIAL_FORMAT, Material, parse_material
+from neural.metrics import THETAS, albedo_error, directional_albedo, is_converged, lobe_psnr, noise_psnr
+
+Tensor = torch.Tensor
+HELDOUT_SEED = 20_221_122  # never a training seed
+CLASS_COUNTS = {"conductor": 20, "dielectric": 20, "two_layer": 50, "three_layer": 20}
+
+
+def _u(g: np.random.Generator, n: int | None = None):
+    return g.uniform(0, 1, n)
+
+
+def heldout_material(cls: str, g: np.random.Generator, name: str) -> Material:
+    """An RGB material of a class: colours drawn per channel, shared parameters once."""
+    rough = lambda: float(round((0.216 + 0.784 * _u(g)) ** 3, 6))
+    ior = lambda: float(round(1.05 + 0.95 * _u(g), 6))
+    alb = lambda: [float(round(1 - x * x, 6)) for x in _u(g, 3)]
+    sig = lambda: float(round(5 * _u(g), 6))
+    r0 = lambda: [float(round(x, 6)) for x in _u(g, 3)]
+    diel = lambda: {"type": "dielectric", "roughness": rough(), "ior": ior()}
+    med = lambda: {"type": "medium", "albedo": alb(), "sigma_t": sig()}
+    cond = lambda: {"type": "conductor", "roughness": rough(), "r0": r0()}
+    layers = {"conductor": lambda: [cond()], "dielectric": lambda: [diel()],
+              "two_layer": lambda: [diel(), med(), cond()],
+              "three_layer": lambda: [diel(), med(), diel(), med(), cond()]}[cls]()
+    return parse_material({"format": MATERIAL_FORMAT, "name": name, "layers": layers})
+
+
+def heldout_set(counts: dict[str, int] = CLASS_COUNTS, seed: int = HELDOUT_SEED) -> list[tuple[str, Material]]:
+    out = []
+    for k, (cls, n) in enumerate(counts.items()):
+        g = np.random.default_rng([seed, k])
+        out += [(cls, heldout_material(cls, g, f"{cls}-{i:03d}")) for i in range(n)]
+    return out
+
+
+@dataclass
+class Reference:
+    """Cached reference of one held-out material."""
+
+    lobes: np.ndarray  # (4, 64, 64, 3)
+    lobe_stderr: np.ndarray  # (4, 64, 64, 3)
+    albedo: np.ndarray  # (4, 3)
+    wi: np.ndarray  # projection samples (n, 3)
+    wo: np.ndarray
+    f: np.ndarray  # (n, 3)
+
+
+def make_reference(material: Material, noise_target: float = 48.0, seed: int = 0) -> Reference:
+    from training.project import material_samples
+    from training.reference import converged_lobe, reference_eval
+
+    lobes, ses, albs = [], [], []
+    for k, th in enumerate(THETAS):
+        img, se, _ = converged_lobe(material, th, target_noise_psnr=noise_target, start_spp=64, seed=seed + k)
+        lobes.append(img)
+        ses.append(se)
+        albs.append(directional_albedo(lambda wi, wo: reference_eval(material, wi, wo, spp=16, seed=seed + 101 + k)[0],
+                                       th))
+    s = material_samples(material, n=2048, spp=64, seed=seed + 1)
+    return Reference(np.stack(lobes), np.stack(ses), np.stack(albs).astype(np.float32), s.wi.numpy(), s.wo.numpy(),
+                     s.f.numpy())
+
+
+def build_references(folder: str | Path, progress: bool = True) -> list[tuple[str, Material, Reference]]:
+    """Makes (or resumes) the cached references of the held-out set in ``folder``."""
+    from safetensors.numpy import load_file, save_file
+    from tqdm import tqdm
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    out = []
+    items = heldout_set()
+    for i, (cls, m) in enumerate(tqdm(items, desc="held-out references", unit="material", file=sys.stderr,
+                                      disable=not progress or None)):
+        path = folder / f"{m.name}.safetensors"
+        if not path.exists():
+            r = make_reference(m, seed=1000 * i)
+            tmp = path.with_suffix(".tmp")
+            save_file({k: np.ascontiguousarray(v, dtype=np.float32) for k, v in r.__dict__.items()}, str(tmp))
+            tmp.replace(path)
+        arrays = load_file(str(path))
+        out.append((cls, m, Reference(**arrays)))
+    return out
+
+
+Method = Callable[[Material, Reference], Callable[[Tensor, Tensor], Tensor]]
+
+
+def score(refs: list[tuple[str, Material, Reference]], method: Method, progress: bool = True) -> dict:
+    """Per-material lobe PSNR (mean over the 4 incidences) and albedo error,
+    summarised per class."""
+    from tqdm import tqdm
+
+    rows = []
+    for cls, m, r in tqdm(refs, desc="scoring", unit="material", file=sys.stderr, disable=not progress or None):
+        fn = method(m, r)
+        from neural.metrics import lobe_image
+
+        psnrs, errs, conv = [], [], []
+        for k, th in enumerate(THETAS):
+            img = lobe_image(fn, th)
+            p = lobe_psnr(img, r.lobes[k])
+            psnrs.append(p)
+            conv.append(is_converged(r.lobes[k], r.lobe_stderr[k], p))
+            a = directional_albedo(fn, th)
+            errs.append(albedo_error(a, r.albedo[k]))
+        rows.append({"class": cls, "name": m.name, "psnr": psnrs, "albedo_error": np.concatenate(errs).tolist(),
+                     "converged": all(conv)})
+    return {"rows": rows, "summary": summarise(rows)}
+
+
+def summarise(rows: list[dict]) -> dict:
+    out = {}
+    for cls in ["conductor", "dielectric", "two_layer", "three_layer", "diffuse_base"]:
+        sel = [r for r in rows if r["class"] == cls]
+        if not sel:
+            continue
+        ps = np.array([p for r in sel for p in r["psnr"]])
+        ae = np.array([e for r in sel for e in r["albedo_error"]])
+        out[cls] = {"materials": len(sel), "psnr_median": float(np.median(ps)),
+                    "psnr_p10": float(np.percentile(ps, 10)), "albedo_error_median": float(np.median(ae)),
+                    "albedo_error_p90": float(np.percentile(ae, 90)),
+                    "references_converged": f"{sum(r['converged'] for r in sel)}/{len(sel)}"}
+    return out
+
+
+def projected_method(dec) -> Method:
+    """The decoder at latents fitted to the cached projection samples."""
+    from training.project import Samples, fit
+
+    def make(m: Material, r: Reference):
+        z = fit(dec, Samples(torch.from_numpy(r.wi), torch.from_numpy(r.wo), torch.from_numpy(r.f)))
+
+        def fn(wi: Tensor, wo: Tensor) -> Tensor:
+            with torch.no_grad():
+                return dec.eval_rgb(z, wi.float(), wo.float())
+
+        return fn
+
+    return make
+
+
+def report_figures(refs: list[tuple[str, Material, Reference]], method: Method, result: dict, out: Path,
+                   per_class: int = 2) -> None:
+    """Reference vs neural lobes (theta_i 30) with difference maps, a few per
+    class, and PSNR histograms per class."""
+    from neural.metrics import lobe_image
+    from training.plots import _plt, save_lobe_comparison
+
+    rows = []
+    for cls in CLASS_COUNTS:
+        picked = [(c, m, r) for c, m, r in refs if c == cls][:per_class]
+        for c, m, r in picked:
+            row = next(x for x in result["rows"] if x["name"] == m.name)
+            img = lobe_image(method(m, r), THETAS[1])
+            rows.append((f"{m.name} {row['psnr'][1]:.1f} dB", r.lobes[1], img))
+    if rows:
+        save_lobe_comparison(rows, out / "lobes.png")
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 3.5), dpi=100)
+    for cls in CLASS_COUNTS:
+        ps = [p for x in result["rows"] if x["class"] == cls for p in x["psnr"]]
+        if ps:
+            ax.hist(ps, bins=30, alpha=0.5, label=cls)
+    ax.set_xlabel("lobe PSNR (dB)")
+    ax.set_ylabel("lobes")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "psnr_hist.png")
+    plt.close(fig)

@@ -1,0 +1,214 @@
+"""Auto-decoder training (``nbrdf train representation``).
+
+The decoder and one latent per training BRDF are optimised together (the
+paper's auto-decoder); validation BRDFs are projected with the decoder
+frozen, which is how every new BRDF will be met later. Runs on the CPU or on
+CUDA; checkpoints every epoch and resumes from the last one.
+
+A run folder holds: ``checkpoint.pt`` (resume state), ``decoder.safetensors``
+(the bundle, with metadata), ``latents.safetensors`` (training latents and
+their parameters, for the leaf encoders and the layering network),
+``curves.png`` and ``metrics.json``.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import torch
+
+from neural.decoder import Decoder, DecoderSpec, encode, loss_target, predicted_target, save_decoder
+from neural.errors import NbrdfError
+from neural.projection import ProjectionConfig, project
+from training.dataset import CLASSES, BRDFSet, load_manifest, load_split
+
+Tensor = torch.Tensor
+
+
+@dataclass
+class TrainConfig:
+    data: str
+    out: str
+    spec: DecoderSpec = field(default_factory=DecoderSpec)
+    epochs: int = 40
+    batch: int = 8192
+    lr: float = 2e-3
+    latent_lr: float = 1e-2
+    latent_reg: float = 1e-4
+    val_every: int = 5
+    seed: int = 0
+    device: str = "auto"
+
+
+def _device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise NbrdfError("--device cuda: no CUDA device is available")
+    return torch.device(name)
+
+
+@dataclass
+class _Flat:
+    """A split flattened to samples: features, cos(theta_o), target, owner index."""
+
+    feats: Tensor
+    cos_o: Tensor
+    target: Tensor
+    owner: Tensor
+
+
+def flatten(data: BRDFSet) -> _Flat:
+    K, n = data.f.shape
+    feats = encode(data.wi.reshape(-1, 3), data.wo.reshape(-1, 3))
+    cos_o = data.wo[..., 2].reshape(-1)
+    return _Flat(feats, cos_o, loss_target(data.f.reshape(-1), cos_o), torch.arange(K).repeat_interleave(n))
+
+
+def validate(dec: Decoder, val: BRDFSet, steps: int = 150, fit_pairs: int | None = None) -> dict:
+    """Projects the validation BRDFs on half their pairs and reports the loss
+    on the other half, per class and overall."""
+    n = val.f.shape[1]
+    half = fit_pairs or n // 2
+    with torch.enable_grad():
+        z = project(dec, val.wi[:, :half], val.wo[:, :half], val.f[:, :half], ProjectionConfig(steps=steps))
+    wi, wo, f = val.wi[:, half:], val.wo[:, half:], val.f[:, half:]
+    with torch.no_grad():
+        y = dec.log_f(z[:, None, :], encode(wi, wo))
+        cos_o = wo[..., 2]
+        err = ((predicted_target(y, cos_o) - loss_target(f, cos_o)) ** 2).mean(-1)
+    out = {"all": float(err.mean())}
+    for i, cls in enumerate(CLASSES):
+        sel = [k for k, c in enumerate(val.classes) if c == cls]
+        if sel:
+            out[cls] = float(err[sel].mean())
+    return out
+
+
+def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None) -> Path | None:
+    """Trains (or resumes) into ``cfg.out``; returns the decoder bundle path.
+    ``stop_after`` ends this run after that many epochs (a time-boxed
+    session); the next call resumes, and returns None until training ends."""
+    from tqdm import tqdm
+
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    manifest = load_manifest(cfg.data)
+    dev = _device(cfg.device)
+    torch.manual_seed(cfg.seed)
+    train_set = load_split(cfg.data, "train")
+    val_set = load_split(cfg.data, "val")
+    flat = flatten(train_set)
+    K = len(train_set)
+    dec = Decoder(cfg.spec).to(dev)
+    latents = torch.nn.Parameter(torch.randn(K, cfg.spec.latent, device=dev) * 0.01)
+    opt = torch.optim.Adam([{"params": dec.parameters(), "lr": cfg.lr},
+                            {"params": [latents], "lr": cfg.latent_lr}])
+    steps_per_epoch = math.ceil(flat.target.numel() / cfg.batch)
+    total = steps_per_epoch * cfg.epochs
+    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda s: 0.03 + 0.97 * 0.5 * (1 + math.cos(math.pi * min(s, total) / total)))
+    history: dict[str, list] = {"train": [], "val": [], "val_epoch": []}
+    start = 0
+    ck = out / "checkpoint.pt"
+    run_key = {"config": json.loads(json.dumps(asdict(cfg), default=str)), "data": manifest["config"]}
+    if ck.exists():
+        state = torch.load(ck, map_location=dev, weights_only=True)
+        if json.loads(state["run_key"]) != run_key:
+            raise NbrdfError(f"{ck}: belongs to a run with other settings or data; choose another --out")
+        dec.load_state_dict(state["decoder"])
+        with torch.no_grad():
+            latents.copy_(state["latents"])
+        opt.load_state_dict(state["opt"])
+        sched.load_state_dict(state["sched"])
+        history = json.loads(state["history"])
+        start = int(state["epoch"])
+        torch.set_rng_state(state["rng"])
+    f_dev = _Flat(flat.feats.to(dev), flat.cos_o.to(dev), flat.target.to(dev), flat.owner.to(dev))
+    t0 = time.perf_counter()
+    bar = tqdm(total=total, initial=start * steps_per_epoch, desc="train", unit="step", file=sys.stderr,
+               disable=not progress or None)
+    for epoch in range(start, cfg.epochs):
+        if stop_after is not None and epoch - start >= stop_after:
+            bar.close()
+            return None
+        dec.train()
+        perm = torch.randperm(flat.target.numel(), device=dev)
+        run, count = 0.0, 0
+        for s in range(steps_per_epoch):
+            idx = perm[s * cfg.batch:(s + 1) * cfg.batch]
+            z = latents[f_dev.owner[idx]]
+            y = dec.log_f(z, f_dev.feats[idx])
+            loss = ((predicted_target(y, f_dev.cos_o[idx]) - f_dev.target[idx]) ** 2).mean()
+            reg = cfg.latent_reg * (z * z).sum(-1).mean()
+            opt.zero_grad(set_to_none=True)
+            (loss + reg).backward()
+            opt.step()
+            sched.step()
+            run += loss.item()
+            count += 1
+            bar.update(1)
+            if s % 20 == 0:
+                bar.set_postfix(epoch=epoch + 1, loss=f"{run / count:.2e}")
+        history["train"].append(run / count)
+        dec.eval()
+        with torch.no_grad():
+            dec.latent_mean.copy_(latents.mean(0))
+        if (epoch + 1) % cfg.val_every == 0 or epoch + 1 == cfg.epochs:
+            history["val"].append(validate(dec.cpu(), val_set))
+            history["val_epoch"].append(epoch + 1)
+            dec.to(dev)
+            bar.write(f"epoch {epoch + 1}: train {history['train'][-1]:.3e}  val {history['val'][-1]['all']:.3e}")
+        state = {"decoder": dec.state_dict(), "latents": latents.detach(), "opt": opt.state_dict(),
+                 "sched": sched.state_dict(), "history": json.dumps(history), "epoch": epoch + 1,
+                 "rng": torch.get_rng_state(), "run_key": json.dumps(run_key)}
+        torch.save(state, out / "checkpoint.tmp")
+        (out / "checkpoint.tmp").replace(ck)
+        _save_val_curves(history, out / "curves.png")
+    bar.close()
+    dec = dec.cpu().eval()
+    trained_on = {"data": str(cfg.data), "preset": manifest.get("preset"), "data_config": manifest["config"],
+                  "train_brdfs": K, "epochs": cfg.epochs, "seconds_this_run": round(time.perf_counter() - t0, 1),
+                  "device": str(dev)}
+    metrics = {"train_loss": history["train"][-1] if history["train"] else None,
+               "val_loss": history["val"][-1] if history["val"] else None}
+    bundle = out / "decoder.safetensors"
+    save_decoder(dec, bundle, trained_on=trained_on, accuracy=metrics)
+    _save_latents(out / "latents.safetensors", latents.detach().cpu(), train_set, dec.weights_id())
+    (out / "metrics.json").write_text(json.dumps({"trained_on": trained_on, "history": history,
+                                                   "macs_per_eval": dec.spec.macs(),
+                                                   "parameters": dec.spec.parameters()}, indent=1))
+    return bundle
+
+
+def _save_val_curves(history: dict, path: Path) -> None:
+    from training.plots import _plt
+
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
+    ep = range(1, len(history["train"]) + 1)
+    ax.plot(list(ep), history["train"], label="train (auto-decoded)")
+    if history["val"]:
+        for cls in ["all"] + list(CLASSES):
+            ys = [v.get(cls) for v in history["val"]]
+            if all(y is not None for y in ys):
+                ax.plot(history["val_epoch"], ys, marker="o", ms=3, lw=1 if cls != "all" else 2,
+                        label=f"val {cls} (projected)")
+    ax.set_yscale("log")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("mean (log(1+f cos) error)^2")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _save_latents(path: Path, latents: Tensor, data: BRDFSet, decoder_id: str) -> None:
+    from safetensors.torch import save_file
+
+    save_file({"latents": latents.contiguous(), "params": data.params.contiguous()}, str(path),
+              metadata={"format": "nbrdf-latent-table/1", "decoder_id": decoder_id})
