@@ -3,8 +3,9 @@
 Sized to run per pixel in a shader. Directions enter as isotropic,
 reciprocal features of the Rusinkiewicz angles, so every decoded BRDF is
 isotropic and reciprocal by construction. The network predicts y = log f;
-training compares softplus(y + log cos) = log(1 + f cos) with the target, a
-log compression that keeps sharp peaks and dark tails in one loss.
+training compares softplus(y + log cos - log s) = log(1 + f cos / s) with
+the target, a log compression that keeps sharp peaks and dark tails in one
+loss (``loss_target``).
 
 The latent enters only the first layer, linearly, so its share
 ``W1[:, :32] z + b1`` is computed once per material (``latent_share``) and a
@@ -40,6 +41,7 @@ class DecoderSpec:
     depth: int = 3
     encoding: str = "rusink5"
     activation: str = "relu"
+    loss_scale: float = 0.01  # s in the loss log(1 + f cos / s): below s errors count as relative
 
     def __post_init__(self):
         if self.encoding not in ENCODINGS:
@@ -74,10 +76,11 @@ def encode(wi: Tensor, wo: Tensor) -> Tensor:
     so the decoded BRDF is reciprocal and isotropic."""
     h = wi + wo
     h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    cos_h = h[..., 2].clamp(-1.0, 1.0)
     cos_d = (wi * h).sum(-1).clamp(-1.0, 1.0)
-    theta_h = torch.acos(cos_h)
-    theta_d = torch.acos(cos_d)
+    # atan2 forms: accurate near 0, where acos loses half the digits (and
+    # sqrt(theta_h) would amplify the loss right at the specular peak).
+    theta_h = torch.atan2(torch.sqrt(h[..., 0] ** 2 + h[..., 1] ** 2), h[..., 2])
+    theta_d = torch.atan2(torch.linalg.cross(wi, h).norm(dim=-1), cos_d)
     # cos(2 phi_d) from the component of wi orthogonal to h: its azimuth is
     # measured from the direction in which h tilts (the projection of z).
     t = wi - cos_d[..., None] * h
@@ -147,14 +150,17 @@ class Decoder(nn.Module):
         return h.hexdigest()[:16]
 
 
-def loss_target(f: Tensor, cos_o: Tensor) -> Tensor:
-    """What the loss compares: log(1 + f cos(theta_o)), the lobe metric's scale."""
-    return torch.log1p(f.clamp_min(0.0) * cos_o)
+def loss_target(f: Tensor, cos_o: Tensor, scale: float) -> Tensor:
+    """What the loss compares: log(1 + f cos(theta_o) / s). Above s it is a
+    log (relative) error, so sharp peaks and their tails share one loss; below
+    s it fades to an absolute error, so dark regions and Monte Carlo noise
+    there do not dominate."""
+    return torch.log1p(f.clamp_min(0.0) * cos_o / scale)
 
 
-def predicted_target(y: Tensor, cos_o: Tensor) -> Tensor:
-    """log(1 + exp(y) cos) = softplus(y + log cos), stable for any y."""
-    return nn.functional.softplus(y + torch.log(cos_o.clamp_min(1e-6)))
+def predicted_target(y: Tensor, cos_o: Tensor, scale: float) -> Tensor:
+    """log(1 + exp(y) cos / s) = softplus(y + log cos - log s), stable for any y."""
+    return nn.functional.softplus(y + torch.log(cos_o.clamp_min(1e-6)) - math.log(scale))
 
 
 # --- weight files --------------------------------------------------------------------

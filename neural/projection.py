@@ -45,7 +45,7 @@ def project(dec: Decoder, wi: Tensor, wo: Tensor, f: Tensor, cfg: ProjectionConf
     up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
     feats = encode(wi.float(), wo.float())
     cos_o = wo[..., 2].float().clamp_min(0.0)
-    target = loss_target(f.float(), cos_o)
+    target = loss_target(f.float(), cos_o, dec.spec.loss_scale)
     w = up.float() if weight is None else weight.float() * up.float()
     w = w / w.sum(-1, keepdim=True).clamp_min(1e-12)
     B = wi.shape[0]
@@ -58,7 +58,7 @@ def project(dec: Decoder, wi: Tensor, wo: Tensor, f: Tensor, cfg: ProjectionConf
     try:
         for _ in range(cfg.steps):
             y = dec.log_f(z[:, None, :], feats)
-            err = (predicted_target(y, cos_o) - target) ** 2
+            err = (predicted_target(y, cos_o, dec.spec.loss_scale) - target) ** 2
             loss = (err * w).sum() + cfg.latent_reg * (z * z).sum()
             opt.zero_grad(set_to_none=True)
             loss.backward()

@@ -98,7 +98,7 @@ def finetune(dec: Decoder, s: Samples, z: Tensor, steps: int = 300, lr: float = 
     measured BRDF (the shared decoder is left untouched)."""
     wi, wo, f = s.per_channel()
     feats, cos_o = encode(wi, wo), wo[..., 2]
-    target = loss_target(f, cos_o)
+    target = loss_target(f, cos_o, dec.spec.loss_scale)
     tuned = copy.deepcopy(dec)
     for p in tuned.parameters():
         p.requires_grad_(True)
@@ -106,7 +106,7 @@ def finetune(dec: Decoder, s: Samples, z: Tensor, steps: int = 300, lr: float = 
     opt = torch.optim.Adam([{"params": tuned.parameters(), "lr": lr}, {"params": [z], "lr": lr * 10}])
     for _ in range(steps):
         y = tuned.log_f(z[:, None, :], feats)
-        loss = ((predicted_target(y, cos_o) - target) ** 2).mean()
+        loss = ((predicted_target(y, cos_o, dec.spec.loss_scale) - target) ** 2).mean()
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()

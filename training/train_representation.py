@@ -62,11 +62,11 @@ class _Flat:
     owner: Tensor
 
 
-def flatten(data: BRDFSet) -> _Flat:
+def flatten(data: BRDFSet, scale: float) -> _Flat:
     K, n = data.f.shape
     feats = encode(data.wi.reshape(-1, 3), data.wo.reshape(-1, 3))
     cos_o = data.wo[..., 2].reshape(-1)
-    return _Flat(feats, cos_o, loss_target(data.f.reshape(-1), cos_o), torch.arange(K).repeat_interleave(n))
+    return _Flat(feats, cos_o, loss_target(data.f.reshape(-1), cos_o, scale), torch.arange(K).repeat_interleave(n))
 
 
 def validate(dec: Decoder, val: BRDFSet, steps: int = 150, fit_pairs: int | None = None) -> dict:
@@ -80,7 +80,8 @@ def validate(dec: Decoder, val: BRDFSet, steps: int = 150, fit_pairs: int | None
     with torch.no_grad():
         y = dec.log_f(z[:, None, :], encode(wi, wo))
         cos_o = wo[..., 2]
-        err = ((predicted_target(y, cos_o) - loss_target(f, cos_o)) ** 2).mean(-1)
+        s = dec.spec.loss_scale
+        err = ((predicted_target(y, cos_o, s) - loss_target(f, cos_o, s)) ** 2).mean(-1)
     out = {"all": float(err.mean())}
     for i, cls in enumerate(CLASSES):
         sel = [k for k, c in enumerate(val.classes) if c == cls]
@@ -102,7 +103,7 @@ def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None
     torch.manual_seed(cfg.seed)
     train_set = load_split(cfg.data, "train")
     val_set = load_split(cfg.data, "val")
-    flat = flatten(train_set)
+    flat = flatten(train_set, cfg.spec.loss_scale)
     K = len(train_set)
     dec = Decoder(cfg.spec).to(dev)
     latents = torch.nn.Parameter(torch.randn(K, cfg.spec.latent, device=dev) * 0.01)
@@ -142,7 +143,7 @@ def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None
             idx = perm[s * cfg.batch:(s + 1) * cfg.batch]
             z = latents[f_dev.owner[idx]]
             y = dec.log_f(z, f_dev.feats[idx])
-            loss = ((predicted_target(y, f_dev.cos_o[idx]) - f_dev.target[idx]) ** 2).mean()
+            loss = ((predicted_target(y, f_dev.cos_o[idx], cfg.spec.loss_scale) - f_dev.target[idx]) ** 2).mean()
             reg = cfg.latent_reg * (z * z).sum(-1).mean()
             opt.zero_grad(set_to_none=True)
             (loss + reg).backward()
@@ -199,7 +200,7 @@ def _save_val_curves(history: dict, path: Path) -> None:
                         label=f"val {cls} (projected)")
     ax.set_yscale("log")
     ax.set_xlabel("epoch")
-    ax.set_ylabel("mean (log(1+f cos) error)^2")
+    ax.set_ylabel("mean (log(1 + f cos / s) error)^2")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()

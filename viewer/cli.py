@@ -208,14 +208,16 @@ def cmd_train_representation(a: argparse.Namespace) -> int:
     from neural.decoder import DecoderSpec
     from training.train_representation import TrainConfig, train
 
-    spec = DecoderSpec(width=a.width, depth=a.depth, activation=a.activation)
+    spec = DecoderSpec(width=a.width, depth=a.depth, activation=a.activation, loss_scale=a.loss_scale)
     for name in ("epochs", "batch"):
         if getattr(a, name) < 1:
             raise NbrdfError(f"--{name}: must be at least 1")
     cfg = TrainConfig(data=a.data, out=a.out, spec=spec, epochs=a.epochs, batch=a.batch, lr=a.lr,
                       seed=a.seed, device=a.device)
-    bundle = train(cfg)
-    print(f"decoder written: {bundle}")
+    if a.loss_scale <= 0:
+        raise NbrdfError(f"--loss-scale: {a.loss_scale} must be positive")
+    bundle = train(cfg, stop_after=a.stop_after)
+    print(f"decoder written: {bundle}" if bundle else f"stopped after {a.stop_after} epochs; run the same command to resume")
     return 0
 
 
@@ -319,6 +321,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--width", type=int, default=64)
     tr.add_argument("--depth", type=int, default=3)
     tr.add_argument("--activation", default="relu", choices=("relu", "silu"))
+    tr.add_argument("--loss-scale", type=float, default=0.01, help="s in the loss log(1 + f cos / s)")
+    tr.add_argument("--stop-after", type=int, default=None, help="end this run after N epochs (resume later)")
     tr.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
     tr.add_argument("--seed", type=int, default=0)
     tr.set_defaults(fn=cmd_train_representation)

@@ -1,0 +1,100 @@
+"""A decoder packed for the GPU (SPEC section 7).
+
+The weights become one stream of vec4s, read by ``texelFetch`` from an RGBA32F
+texture (OpenGL 3.3 core, fragment shaders) or from an SSBO (OpenGL 4.3,
+compute shaders); the same stream serves both. The GLSL decoder itself lives
+in ``viewer/shaders/neural_decoder.glsl``; what depends on the architecture
+(sizes, offsets, the chain of hidden layers) is emitted here as ``#define``s
+and a short snippet, so sizes are constants and every loop unrolls.
+
+Layout of the stream, in vec4 units (rows padded to whole vec4s):
+  layer 1, direction part: width rows of ceil(features / 4) vec4s (its bias
+    and latent part live in the per-material share, not here);
+  each further hidden layer: width rows of width / 4 vec4s, then the bias;
+  output layer: width / 4 vec4s, then one vec4 whose x is the bias.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from neural.decoder import Decoder, DecoderSpec
+from neural.errors import NbrdfError
+
+TEXTURE_WIDTH = 256  # texels per row of the weight texture
+
+
+@dataclass
+class PackedDecoder:
+    spec: DecoderSpec
+    stream: np.ndarray  # float32 (n, 4)
+    offsets: dict[str, int]
+
+    @property
+    def texture_size(self) -> tuple[int, int]:
+        n = self.stream.shape[0]
+        return TEXTURE_WIDTH, -(-n // TEXTURE_WIDTH)
+
+    def texture_bytes(self) -> bytes:
+        w, h = self.texture_size
+        buf = np.zeros((w * h, 4), np.float32)
+        buf[: self.stream.shape[0]] = self.stream
+        return buf.tobytes()
+
+    def defines(self, ssbo: bool = False) -> dict[str, object]:
+        s = self.spec
+        return {"NB_WIDTH": s.width, "NB_WIDTH4": s.width // 4, "NB_DEPTH": s.depth,
+                "NB_FEATS4": -(-s.features // 4), "NB_ACT": 0 if s.activation == "relu" else 1,
+                "NB_TEX_W": TEXTURE_WIDTH, "NB_SSBO": int(ssbo), "NB_OFF_OUT": self.offsets["out"]}
+
+    def layer_chain(self) -> str:
+        """GLSL statements that run the hidden layers 2..depth, ping-ponging
+        between the arrays ``a`` and ``b``; the result ends in ``a``."""
+        lines, src, dst = [], "a", "b"
+        for k in range(1, self.spec.depth):
+            lines.append(f"    nb_hidden({src}, {dst}, {self.offsets[f'hidden{k}']});")
+            src, dst = dst, src
+        if src != "a":
+            lines.append("    for (int j = 0; j < NB_WIDTH; ++j) a[j] = b[j];")
+        return "\n".join(lines)
+
+
+def pack(dec: Decoder) -> PackedDecoder:
+    s = dec.spec
+    if s.width % 4:
+        raise NbrdfError(f"the GPU decoder needs a width divisible by 4, got {s.width}")
+    rows: list[np.ndarray] = []
+    offsets: dict[str, int] = {}
+    used = 0
+
+    def put(name: str, a: np.ndarray) -> None:
+        nonlocal used
+        offsets[name] = used
+        rows.append(a.astype(np.float32).reshape(-1, 4))
+        used += rows[-1].shape[0]
+
+    def padded(w: np.ndarray, cols: int) -> np.ndarray:
+        out = np.zeros((w.shape[0], cols), np.float32)
+        out[:, : w.shape[1]] = w
+        return out
+
+    with torch.no_grad():
+        w1 = dec.hidden[0].weight.numpy()[:, s.latent:]
+        put("first", padded(w1, 4 * (-(-s.features // 4))))
+        for k, layer in enumerate(dec.hidden[1:], start=1):
+            wb = np.concatenate([layer.weight.numpy().reshape(-1), layer.bias.numpy()])
+            put(f"hidden{k}", wb)
+        wo = np.concatenate([dec.out.weight.numpy().reshape(-1), dec.out.bias.numpy(), np.zeros(3, np.float32)])
+        put("out", wo)
+    return PackedDecoder(s, np.concatenate(rows), offsets)
+
+
+def latent_share(dec: Decoder, z: torch.Tensor) -> np.ndarray:
+    """The per-material share of layer 1 for a (3, 32) latent, laid out as the
+    shader reads it: float32 (width, 3), unit-major, channels RGB."""
+    if z.shape != (3, dec.spec.latent):
+        raise NbrdfError(f"a material latent must have shape (3, {dec.spec.latent}), got {tuple(z.shape)}")
+    with torch.no_grad():
+        return dec.latent_share(z.float()).T.contiguous().numpy().astype(np.float32)

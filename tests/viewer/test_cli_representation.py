@@ -1,0 +1,87 @@
+"""nbrdf data / train representation / project / eval --method projected."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from neural.decoder import Decoder, DecoderSpec, save_decoder
+from neural.latent import load_latent
+from test_cli import DEFAULT, assert_one_line_error, random_pairs, run, write_material
+from training.analytic import GGXConductor
+from training.merl import MerlBRDF
+
+
+@pytest.fixture(scope="module")
+def decoder_file(tmp_path_factory):
+    torch.manual_seed(0)
+    p = tmp_path_factory.mktemp("dec") / "d.safetensors"
+    save_decoder(Decoder(DecoderSpec(width=32, depth=2)), p)
+    return p
+
+
+def test_data_then_train_tiny(tmp_path, capsys):
+    code, out, err = run(["data", "--preset", "tiny", "--out", tmp_path / "ds"], capsys)
+    assert code == 0, err
+    man = json.loads((tmp_path / "ds" / "manifest.json").read_text())
+    assert man["preset"] == "tiny" and all((tmp_path / "ds" / s["file"]).exists() for s in man["shards"])
+    code, out, err = run(["train", "representation", "--data", tmp_path / "ds", "--out", tmp_path / "run",
+                          "--epochs", 2, "--width", 16, "--depth", 2, "--batch", 1024], capsys)
+    assert code == 0, err
+    assert (tmp_path / "run" / "decoder.safetensors").exists()
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["data", "--preset", "huge", "--out", "X"], "--preset"),
+    (["train", "representation", "--data", "/nonexistent", "--out", "R"], "manifest"),
+    (["train", "representation", "--data", "D", "--out", "R", "--epochs", "0"], "--epochs"),
+    (["project", "--out", "z.safetensors"], "exactly one"),
+    (["project", "--samples", "s.npy", "--out", "z.npy"], ".safetensors"),
+    (["project", "--merl", "/nonexistent.binary", "--out", "z.safetensors", "--decoder", "{dec}"], "no such"),
+])
+def test_bad_arguments_are_one_line(tmp_path, capsys, monkeypatch, decoder_file, argv, needle):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "D").mkdir()
+    argv = [a.replace("{dec}", str(decoder_file)) for a in argv]
+    code, _, err = run(argv, capsys)
+    assert_one_line_error(code, err)
+    assert needle in err
+
+
+def test_project_samples_and_merl(tmp_path, capsys, decoder_file):
+    pairs = random_pairs(300, 4)
+    f = np.abs(np.random.default_rng(1).normal(size=(300, 3))).astype(np.float32)
+    np.save(tmp_path / "s.npy", np.concatenate([pairs, f], 1))
+    code, out, err = run(["project", "--samples", tmp_path / "s.npy", "--out", tmp_path / "z.safetensors",
+                          "--decoder", decoder_file, "--steps", 20], capsys)
+    assert code == 0, err
+    rep = json.loads(out)
+    lat = load_latent(tmp_path / "z.safetensors", rep["decoder_id"])
+    assert lat.z.shape == (3, 32)
+
+    c = GGXConductor(0.3, torch.tensor([0.9, 0.6, 0.3], dtype=torch.float64))
+    MerlBRDF.tabulate(lambda wi, wo: c.eval(wi[:, None].expand(-1, 3, -1), wo[:, None].expand(-1, 3, -1))).save(
+        tmp_path / "m.binary")
+    code, out, err = run(["project", "--merl", tmp_path / "m.binary", "--out", tmp_path / "m.safetensors",
+                          "--decoder", decoder_file, "--steps", 20, "--finetune", "--pairs", 512], capsys)
+    assert code == 0, err
+    rep = json.loads(out)
+    tuned = Path(rep["decoder"])
+    assert tuned.exists()
+    # the latent belongs to the fine-tuned copy, not to the shared decoder
+    with pytest.raises(Exception, match="belongs to decoder"):
+        from neural.decoder import load_decoder
+
+        load_latent(tmp_path / "m.safetensors", load_decoder(decoder_file).weights_id())
+    load_latent(tmp_path / "m.safetensors", load_decoder(tuned).weights_id())
+
+
+def test_bad_samples_file(tmp_path, capsys, decoder_file):
+    np.save(tmp_path / "s.npy", np.zeros((10, 5), np.float32))
+    code, _, err = run(["project", "--samples", tmp_path / "s.npy", "--out", tmp_path / "z.safetensors",
+                        "--decoder", decoder_file], capsys)
+    assert_one_line_error(code, err)
+    assert "(N, 9)" in err

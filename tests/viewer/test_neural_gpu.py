@@ -1,0 +1,94 @@
+"""The GLSL decoder against the torch decoder (SPEC section 7 tolerance:
+|a - b| <= 1e-4 (1 + |b|)), through textures and through the SSBO."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from neural.decoder import DEFAULT_WEIGHTS, Decoder, DecoderSpec, load_decoder
+from neural.errors import NbrdfError
+from neural.gpu_pack import latent_share, pack
+from viewer.neural_gpu import GpuDecoder, probe_compute, probe_fragment
+
+
+def pairs(n: int, seed: int):
+    g = torch.Generator().manual_seed(seed)
+    v = torch.randn(2, n, 3, generator=g)
+    v = v / v.norm(dim=-1, keepdim=True)
+    v[..., 2] = v[..., 2].abs()
+    # a few near the specular peak and at grazing, where the encoding is delicate
+    v[1, :50] = v[0, :50] * torch.tensor([-1.0, -1.0, 1.0]) + 1e-3 * torch.randn(50, 3, generator=g)
+    v[1, :50] = v[1, :50] / v[1, :50].norm(dim=-1, keepdim=True)
+    return v[0], v[1]
+
+
+def check_tolerance(gpu: np.ndarray, ref: np.ndarray) -> None:
+    err = np.abs(gpu - ref) / (1 + np.abs(ref))
+    assert err.max() <= 1e-4, f"max scaled error {err.max():.3g} at {np.unravel_index(err.argmax(), err.shape)}"
+
+
+def decoders():
+    torch.manual_seed(3)
+    yield "relu-64x3", Decoder(DecoderSpec())
+    yield "silu-32x2", Decoder(DecoderSpec(width=32, depth=2, activation="silu"))
+    if DEFAULT_WEIGHTS.is_file():
+        yield "shipped", load_decoder(DEFAULT_WEIGHTS)
+
+
+@pytest.mark.parametrize("name,dec", list(decoders()), ids=lambda x: x if isinstance(x, str) else "")
+def test_fragment_decoder_matches_torch(gl_ctx, name, dec):
+    dec = dec.eval()
+    z = torch.randn(3, 32, generator=torch.Generator().manual_seed(5)) * 0.3 + dec.latent_mean
+    wi, wo = pairs(2000, 1)
+    with torch.no_grad():
+        ref = dec.eval_rgb(z, wi, wo).numpy()
+    gpu = probe_fragment(gl_ctx, GpuDecoder(gl_ctx, dec), z, wi.numpy(), wo.numpy())
+    check_tolerance(gpu, ref)
+
+
+def test_compute_decoder_matches_torch(gl_ctx):
+    if gl_ctx.version_code < 430:
+        pytest.skip("no OpenGL 4.3 here")
+    torch.manual_seed(4)
+    dec = Decoder(DecoderSpec()).eval()
+    z = torch.randn(3, 32)
+    wi, wo = pairs(1000, 2)
+    with torch.no_grad():
+        ref = dec.eval_rgb(z, wi, wo).numpy()
+    check_tolerance(probe_compute(gl_ctx, GpuDecoder(gl_ctx, dec, ssbo=True), z, wi.numpy(), wo.numpy()), ref)
+
+
+def test_directions_below_the_horizon_decode_to_zero(gl_ctx):
+    dec = Decoder(DecoderSpec()).eval()
+    wi, wo = pairs(64, 3)
+    wo = wo * torch.tensor([1.0, 1.0, -1.0])
+    out = probe_fragment(gl_ctx, GpuDecoder(gl_ctx, dec), torch.zeros(3, 32), wi.numpy(), wo.numpy())
+    assert (out == 0).all()
+
+
+class _OldContext:
+    version_code = 330
+    info = {"GL_VERSION": "3.3 (test double)"}
+
+
+def test_ssbo_path_on_an_old_context_is_a_clear_error():
+    with pytest.raises(NbrdfError, match="needs OpenGL 4.3"):
+        GpuDecoder(_OldContext(), Decoder(DecoderSpec()), ssbo=True)  # type: ignore[arg-type]
+
+
+def test_packing_layout_and_share():
+    dec = Decoder(DecoderSpec(width=32, depth=3))
+    p = pack(dec)
+    s = dec.spec
+    first = 32 * 2
+    hidden = (32 * 32 + 32) // 4
+    assert p.offsets == {"first": 0, "hidden1": first, "hidden2": first + hidden, "out": first + 2 * hidden}
+    assert p.stream.shape == (first + 2 * hidden + 32 // 4 + 1, 4)
+    np.testing.assert_array_equal(p.stream[first: first + 8].reshape(-1), dec.hidden[1].weight[0].detach().numpy())
+    z = torch.randn(3, 32)
+    np.testing.assert_allclose(latent_share(dec, z), dec.latent_share(z).detach().T.numpy(), rtol=1e-6)
+    with pytest.raises(NbrdfError):
+        latent_share(dec, torch.zeros(2, 32))
+    with pytest.raises(NbrdfError, match="divisible by 4"):
+        pack(Decoder(DecoderSpec(width=30)))

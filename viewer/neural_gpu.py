@@ -1,0 +1,128 @@
+"""The neural decoder on the GPU: weight texture / SSBO, generated GLSL, probes.
+
+``GpuDecoder`` owns the packed weights of one decoder in a context and fills
+in the decoder's part of any program that includes
+``neural_decoder.glsl``; ``set_latent`` uploads a material's share of layer 1.
+The probes evaluate the decoder at arbitrary (wi, wo) pairs, for tests and
+for the decoder-only benchmark.
+"""
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+import torch
+
+from neural.decoder import Decoder
+from neural.errors import NbrdfError
+from neural.gpu_pack import PackedDecoder, latent_share, pack
+from viewer import shaders
+from viewer.gl import check_version
+
+WEIGHT_UNIT = 7  # texture unit of the weight texture
+SSBO_VERSION = 430
+
+
+class GpuDecoder:
+    def __init__(self, ctx: moderngl.Context, dec: Decoder, ssbo: bool = False):
+        if ssbo:
+            check_version(ctx, SSBO_VERSION, "the SSBO / compute-shader decoder")
+        self.ctx, self.dec, self.ssbo = ctx, dec, ssbo
+        self.packed: PackedDecoder = pack(dec)
+        if ssbo:
+            self.buffer = ctx.buffer(self.packed.stream.astype("f4").tobytes())
+        else:
+            w, h = self.packed.texture_size
+            self.texture = ctx.texture((w, h), 4, self.packed.texture_bytes(), dtype="f4")
+            self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+
+    @property
+    def version(self) -> str:
+        return f"#version {SSBO_VERSION} core" if self.ssbo else shaders.VERSION
+
+    def snippets(self) -> dict[str, str]:
+        return {"nb_layers": self.packed.layer_chain()}
+
+    def defines(self) -> dict[str, object]:
+        return self.packed.defines(self.ssbo)
+
+    def source(self, name: str, snippets: dict[str, str] | None = None, defines: dict | None = None) -> str:
+        return shaders.source(name, {**self.snippets(), **(snippets or {})}, version=self.version,
+                              defines={**self.defines(), **(defines or {})})
+
+    def bind(self, prog: moderngl.Program) -> None:
+        """Makes the weights visible to ``prog`` (call before rendering with it)."""
+        if self.ssbo:
+            self.buffer.bind_to_storage_buffer(0)
+        else:
+            self.texture.use(WEIGHT_UNIT)
+            if "u_nb_weights" in prog:
+                prog["u_nb_weights"].value = WEIGHT_UNIT
+
+    def set_latent(self, prog: moderngl.Program, z: torch.Tensor) -> None:
+        """Uploads the (3, 32) material latent's share of layer 1 to ``prog``."""
+        if "u_nb_share" in prog:
+            prog["u_nb_share"].write(latent_share(self.dec, z).astype("f4").tobytes())
+
+
+def _pairs_array(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    n = wi.shape[0]
+    out = np.zeros((2 * n, 4), np.float32)
+    out[0::2, :3], out[1::2, :3] = wi, wo
+    return out
+
+
+def probe_fragment(ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor, wi: np.ndarray, wo: np.ndarray,
+                   prog: moderngl.Program | None = None) -> np.ndarray:
+    """nb_decode at N pairs through a fragment shader (texture weights); (N, 3)."""
+    n = wi.shape[0]
+    prog = prog or ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
+                               fragment_shader=gdec.source("decoder_probe.frag"))
+    tw = 1024
+    pairs = _pairs_array(wi, wo)
+    rows = -(-pairs.shape[0] // tw)
+    buf = np.zeros((rows * tw, 4), np.float32)
+    buf[: pairs.shape[0]] = pairs
+    ptex = ctx.texture((tw, rows), 4, buf.tobytes(), dtype="f4")
+    ptex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    ow = 512
+    oh = -(-n // ow)
+    target = ctx.texture((ow, oh), 4, dtype="f4")
+    fbo = ctx.framebuffer([target])
+    try:
+        fbo.use()
+        ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        gdec.bind(prog)
+        gdec.set_latent(prog, z)
+        ptex.use(0)
+        prog["u_pairs"].value = 0
+        prog["u_pairs_w"].value = tw
+        prog["u_target_w"].value = ow
+        ctx.vertex_array(prog, []).render(moderngl.TRIANGLES, vertices=3)
+        out = np.frombuffer(target.read(), np.float32).reshape(-1, 4)[:n, :3].copy()
+    finally:
+        for r in (fbo, target, ptex):
+            r.release()
+    return out
+
+
+def probe_compute(ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor, wi: np.ndarray,
+                  wo: np.ndarray) -> np.ndarray:
+    """nb_decode at N pairs through a compute shader (SSBO weights); (N, 3)."""
+    if not gdec.ssbo:
+        raise NbrdfError("probe_compute needs a GpuDecoder made with ssbo=True")
+    n = wi.shape[0]
+    prog = ctx.compute_shader(gdec.source("decoder_probe.comp"))
+    pin = ctx.buffer(_pairs_array(wi, wo).tobytes())
+    pout = ctx.buffer(reserve=n * 16)
+    try:
+        gdec.bind(prog)
+        gdec.set_latent(prog, z)
+        pin.bind_to_storage_buffer(1)
+        pout.bind_to_storage_buffer(2)
+        prog["u_count"].value = n
+        prog.run(group_x=-(-n // 64))
+        ctx.finish()
+        return np.frombuffer(pout.read(), np.float32).reshape(n, 4)[:, :3].copy()
+    finally:
+        for r in (pin, pout, prog):
+            r.release()

@@ -1,0 +1,86 @@
+// The shared neural BRDF decoder (SPEC sections 6 and 7), one pixel, RGB.
+//
+// Sizes and offsets arrive as #defines generated from the architecture
+// (neural/gpu_pack.py), so every loop below has constant bounds and unrolls.
+// The three colour channels run together as vec3 lanes: each weight is
+// fetched once per pixel and used for R, G and B.
+//
+// Needs: PI (common.glsl); NB_WIDTH, NB_WIDTH4, NB_DEPTH, NB_FEATS4, NB_ACT,
+// NB_TEX_W, NB_SSBO, NB_OFF_OUT; the chain of hidden layers (snippet
+// nb_layers); and NB_SHARE(j), the latent's share of layer 1 for unit j
+// (default: the uniform array of a uniform material).
+
+#if NB_SSBO
+layout(std430, binding = 0) readonly buffer NbWeights { vec4 nb_w[]; };
+vec4 nb_fetch(int i) { return nb_w[i]; }
+#else
+uniform sampler2D u_nb_weights;
+vec4 nb_fetch(int i) { return texelFetch(u_nb_weights, ivec2(i % NB_TEX_W, i / NB_TEX_W), 0); }
+#endif
+
+#ifndef NB_SHARE
+uniform vec3 u_nb_share[NB_WIDTH];  // W1[:, :32] z + b1 per unit, channels RGB
+#define NB_SHARE(j) u_nb_share[j]
+#endif
+
+vec3 nb_act(vec3 v) {
+#if NB_ACT == 0
+    return max(v, vec3(0.0));
+#else
+    return v / (1.0 + exp(-v));
+#endif
+}
+
+// Direction features, as neural/decoder.py encode(): sqrt(2 theta_h / pi),
+// 2 theta_d / pi, cos(2 phi_d), cos_i cos_o, (cos_i + cos_o) / 2.
+void nb_encode(vec3 wi, vec3 wo, out vec4 e[NB_FEATS4]) {
+    vec3 h = wi + wo;
+    h = h / max(length(h), 1e-12);
+    float cos_d = clamp(dot(wi, h), -1.0, 1.0);
+    float theta_h = atan(length(h.xy), h.z);
+    float theta_d = atan(length(cross(wi, h)), cos_d);
+    vec3 t = wi - cos_d * h;
+    vec3 b = vec3(-h.y, h.x, 0.0);
+    float bn = length(b);
+    b = bn > 1e-7 ? b / max(bn, 1e-12) : vec3(0.0, 1.0, 0.0);
+    float tn2 = dot(t, t);
+    float ty = dot(t, b);
+    float cos2 = tn2 > 1e-14 ? 1.0 - 2.0 * ty * ty / max(tn2, 1e-30) : 1.0;
+    e[0] = vec4(sqrt(theta_h * (2.0 / PI)), theta_d * (2.0 / PI), cos2, wi.z * wo.z);
+    e[1] = vec4(0.5 * (wi.z + wo.z), 0.0, 0.0, 0.0);
+}
+
+// One hidden layer after the first: y = act(W x + b).
+void nb_hidden(in vec3 x[NB_WIDTH], out vec3 y[NB_WIDTH], int off) {
+    for (int o = 0; o < NB_WIDTH; ++o) {
+        vec3 s = vec3(nb_fetch(off + NB_WIDTH * NB_WIDTH4 + o / 4)[o % 4]);
+        for (int k = 0; k < NB_WIDTH4; ++k) {
+            vec4 w = nb_fetch(off + o * NB_WIDTH4 + k);
+            s += w.x * x[4 * k] + w.y * x[4 * k + 1] + w.z * x[4 * k + 2] + w.w * x[4 * k + 3];
+        }
+        y[o] = nb_act(s);
+    }
+}
+
+// f(wi, wo) for R, G, B (no cosine); 0 when a direction is below the horizon.
+vec3 nb_decode(vec3 wi, vec3 wo) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
+    vec4 e[NB_FEATS4];
+    nb_encode(wi, wo, e);
+    vec3 a[NB_WIDTH];
+    vec3 b[NB_WIDTH];
+    // Layer 1: the direction part is the same for all channels; the latent
+    // part (and the bias) is the precomputed share.
+    for (int o = 0; o < NB_WIDTH; ++o) {
+        float d = 0.0;
+        for (int k = 0; k < NB_FEATS4; ++k) d += dot(nb_fetch(o * NB_FEATS4 + k), e[k]);
+        a[o] = nb_act(NB_SHARE(o) + d);
+    }
+//@INCLUDE nb_layers
+    vec3 y = vec3(nb_fetch(NB_OFF_OUT + NB_WIDTH4).x);
+    for (int k = 0; k < NB_WIDTH4; ++k) {
+        vec4 w = nb_fetch(NB_OFF_OUT + k);
+        y += w.x * a[4 * k] + w.y * a[4 * k + 1] + w.z * a[4 * k + 2] + w.w * a[4 * k + 3];
+    }
+    return exp(min(y, vec3(80.0)));
+}
