@@ -68,13 +68,16 @@ class Reference:
     f: np.ndarray  # (n, 3)
 
 
-def make_reference(material: Material, noise_target: float = 48.0, seed: int = 0) -> Reference:
+def make_reference(material: Material, noise_target: float = 48.0, max_spp: int = 2048, seed: int = 0) -> Reference:
+    """Lobes are refined until their noise PSNR reaches ``noise_target`` (10 dB
+    above the strictest target, 38 dB) or ``max_spp`` paths per pixel."""
     from training.project import material_samples
     from training.reference import converged_lobe, reference_eval
 
     lobes, ses, albs = [], [], []
     for k, th in enumerate(THETAS):
-        img, se, _ = converged_lobe(material, th, target_noise_psnr=noise_target, start_spp=64, seed=seed + k)
+        img, se, _ = converged_lobe(material, th, target_noise_psnr=noise_target, start_spp=64, max_spp=max_spp,
+                                    seed=seed + k)
         lobes.append(img)
         ses.append(se)
         albs.append(directional_albedo(lambda wi, wo: reference_eval(material, wi, wo, spp=16, seed=seed + 101 + k)[0],

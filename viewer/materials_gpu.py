@@ -36,3 +36,13 @@ def analytic_uniforms(m: Material) -> dict:
         "u_base_ior": float(ior),
         "u_base_color": tuple(float(c) for c in color),
     }
+
+
+def lobe_roughness_hint(m: Material) -> float:
+    """Roughness of the sharpest lobe the lit view should importance-sample:
+    the top interface's, or a single layer's own (1 for a diffuse one)."""
+    top = m.layers[0]
+    r = getattr(top, "roughness", None)
+    if isinstance(r, (int, float)):
+        return float(r)
+    return 1.0 if isinstance(top, Diffuse) or r is None else 0.3  # texture-mapped: a middle value

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
@@ -17,8 +18,13 @@ from neural.errors import NbrdfError
 from neural.material import Material
 from viewer import shaders
 from viewer.camera import OrbitCamera
-from viewer.materials_gpu import analytic_uniforms
+from viewer.materials_gpu import analytic_uniforms, lobe_roughness_hint
 from viewer.mesh import Mesh, named_mesh
+
+if TYPE_CHECKING:
+    import torch
+
+    from viewer.neural_gpu import GpuDecoder
 
 VIEWS = ("object", "lobe", "slice")
 LOBE_SIZE = 64
@@ -41,16 +47,23 @@ class ViewState:
 class Renderer:
     """Owns the GL programs, the mesh buffers and the framebuffers."""
 
-    def __init__(self, ctx: moderngl.Context, material: Material, mesh: str | Mesh = "sphere"):
+    def __init__(self, ctx: moderngl.Context, material: Material, mesh: str | Mesh = "sphere",
+                 neural: "GpuDecoder | None" = None, latent: "torch.Tensor | None" = None):
+        """``neural`` (with the material's ``latent``, (3, 32)) shades with the
+        decoder in GLSL; without it the closed-form shader is used."""
         self.ctx = ctx
-        snippets = {"brdf": shaders.read("analytic_brdf.glsl")}
+        self.neural = neural
+        if neural is None:
+            frag = lambda name: shaders.source(name, {"brdf": shaders.read("analytic_brdf.glsl")})
+        else:
+            if latent is None:
+                raise NbrdfError("the neural renderer needs the material's latent")
+            frag = lambda name: neural.source(name, {"brdf": shaders.read("neural_brdf.glsl")})
         try:
-            self.obj = ctx.program(vertex_shader=shaders.source("object.vert"),
-                                   fragment_shader=shaders.source("object.frag", snippets))
-            self.lobe = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
-                                    fragment_shader=shaders.source("lobe.frag", snippets))
+            self.obj = ctx.program(vertex_shader=shaders.source("object.vert"), fragment_shader=frag("object.frag"))
+            self.lobe = ctx.program(vertex_shader=shaders.source("fullscreen.vert"), fragment_shader=frag("lobe.frag"))
             self.slice = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
-                                     fragment_shader=shaders.source("slice.frag", snippets))
+                                     fragment_shader=frag("slice.frag"))
             self.tone = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
                                     fragment_shader=shaders.source("tonemap.frag"))
         except moderngl.Error as e:
@@ -59,7 +72,7 @@ class Renderer:
         self.empty_slice = ctx.vertex_array(self.slice, [])
         self.empty_tone = ctx.vertex_array(self.tone, [])
         self.set_mesh(mesh)
-        self.set_material(material)
+        self.set_material(material, latent)
         self._fbo: dict[tuple[int, int], tuple[moderngl.Framebuffer, moderngl.Texture]] = {}
         self._dummy = ctx.texture((1, 1), 4, dtype="f4")
 
@@ -73,13 +86,25 @@ class Renderer:
             self.obj, [(vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")], ibo,
             skip_errors=True)
 
-    def set_material(self, material: Material) -> None:
+    def set_material(self, material: Material, latent: "torch.Tensor | None" = None) -> None:
+        """A new material: closed-form uniforms, or (neural) its latent's share of layer 1."""
         self.material = material
-        self.uniforms = analytic_uniforms(material)
+        if self.neural is None:
+            self.uniforms = analytic_uniforms(material)
+        else:
+            if latent is None:
+                raise NbrdfError("the neural renderer needs the material's latent")
+            self.uniforms = {"u_lobe_roughness": lobe_roughness_hint(material)}
+            for prog in (self.obj, self.lobe, self.slice):
+                self.neural.set_latent(prog, latent)
         for prog in (self.obj, self.lobe, self.slice):
             for k, v in self.uniforms.items():
                 if k in prog:
                     prog[k].value = v
+
+    def _bind(self, prog: moderngl.Program) -> None:
+        if self.neural is not None:
+            self.neural.bind(prog)
 
     # --- frames -------------------------------------------------------------------
     def _target(self, w: int, h: int):
@@ -100,12 +125,14 @@ class Renderer:
             self._object_passes(state, w, h, first_pass, passes)
         elif state.view == "lobe":
             if first_pass == 0:
+                self._bind(self.lobe)
                 self.lobe["u_wi"].value = _incidence(state.theta_i)
                 self.lobe["u_size"].value = (float(w), float(h))
                 self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
                 self.empty_vao.render(moderngl.TRIANGLES, vertices=3)
         elif state.view == "slice":
             if first_pass == 0:
+                self._bind(self.slice)
                 self.slice["u_size"].value = (float(w), float(h))
                 self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
                 self.empty_slice.render(moderngl.TRIANGLES, vertices=3)
@@ -117,6 +144,7 @@ class Renderer:
         cam = state.camera
         vp = cam.projection(w / h) @ cam.view()
         p = self.obj
+        self._bind(p)
         p["u_view_proj"].write(vp.T.astype("f4").tobytes())
         p["u_model"].write(np.eye(4, dtype="f4").tobytes())
         p["u_eye"].value = tuple(cam.eye())

@@ -19,19 +19,7 @@ uniform float u_base_roughness;
 uniform float u_base_ior;
 uniform vec3 u_base_color;                    // conductor r0 or diffuse albedo
 
-float ggx_d(vec3 m, float a) {
-    if (m.z <= 0.0) return 0.0;
-    float a2 = a * a;
-    float s2 = m.x * m.x + m.y * m.y;
-    float d = s2 + m.z * m.z * a2;
-    return a2 / (PI * d * d);
-}
-
-float smith_g1(vec3 w, vec3 m, float a) {
-    if (dot(w, m) * w.z <= 0.0) return 0.0;
-    float tan2 = (w.x * w.x + w.y * w.y) / max(w.z * w.z, 1e-30);
-    return 2.0 / (1.0 + sqrt(1.0 + a * a * tan2));
-}
+//@INCLUDE microfacet.glsl
 
 float fresnel_dielectric(float cos_i, float eta) {
     float c = min(abs(cos_i), 1.0);

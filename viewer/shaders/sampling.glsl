@@ -1,6 +1,7 @@
 // Importance sampling helpers for the lit view: cosine-weighted hemisphere
 // and GGX visible-normal reflection (Heitz 2018), with their pdfs, combined
 // by the balance heuristic in object.frag.
+//@INCLUDE microfacet.glsl
 
 vec3 sample_cosine(vec2 u, out float pdf) {
     float r = sqrt(u.x), phi = 2.0 * PI * u.y;
