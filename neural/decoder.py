@@ -199,6 +199,17 @@ def read_bundle(path: str | Path) -> tuple[dict[str, Tensor], dict[str, str]]:
     return tensors, meta
 
 
+def record_accuracy(path: str | Path, accuracy: dict) -> None:
+    """Merges measured accuracy into a weight file's metadata (weights unchanged)."""
+    from safetensors.torch import save_file
+
+    tensors, meta = read_bundle(path)
+    acc = json.loads(meta.get("accuracy") or "{}")
+    acc.update(accuracy)
+    meta["accuracy"] = json.dumps(acc)
+    save_file(tensors, str(path), metadata=meta)
+
+
 def load_decoder(path: str | Path) -> Decoder:
     tensors, meta = read_bundle(path)
     try:

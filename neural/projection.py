@@ -19,8 +19,8 @@ Tensor = torch.Tensor
 
 @dataclass(frozen=True)
 class ProjectionConfig:
-    steps: int = 400
-    lr: float = 0.05
+    steps: int = 200
+    lr: float = 0.08
     latent_reg: float = 1e-4  # the training's prior on latents
     seed: int = 0
 

@@ -68,7 +68,7 @@ class Reference:
     f: np.ndarray  # (n, 3)
 
 
-def make_reference(material: Material, noise_target: float = 48.0, max_spp: int = 2048, seed: int = 0) -> Reference:
+def make_reference(material: Material, noise_target: float = 48.0, max_spp: int = 256, seed: int = 0) -> Reference:
     """Lobes are refined until their noise PSNR reaches ``noise_target`` (10 dB
     above the strictest target, 38 dB) or ``max_spp`` paths per pixel."""
     from training.project import material_samples

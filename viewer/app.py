@@ -18,7 +18,8 @@ import moderngl
 
 from neural.material import load_material
 from viewer.gl import check_version
-from viewer.renderer import Renderer, ViewState
+from viewer.renderer import ViewState
+from viewer.view_cli import make_renderer
 
 
 class WindowUnavailable(RuntimeError):
@@ -49,7 +50,7 @@ class App:
         self.ctx = moderngl.create_context()
         check_version(self.ctx)
         self.screen = self.ctx.detect_framebuffer()  # the window's default framebuffer, bound now
-        self.renderer = Renderer(self.ctx, load_material(opts.material), opts.mesh)
+        self.renderer = make_renderer(self.ctx, load_material(opts.material), opts)
         self.state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap)
         self.passes = 0
         self.frame_ms = 0.0

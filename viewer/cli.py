@@ -277,7 +277,19 @@ def cmd_report_representation(a: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     (out / "representation.json").write_text(json.dumps(result, indent=1))
     report_figures(refs, projected_method(dec), result, out)
+    if a.record:
+        from neural.decoder import DEFAULT_WEIGHTS, record_accuracy
+
+        record_accuracy(a.decoder or DEFAULT_WEIGHTS, {"heldout_projected": result["summary"]})
     print(json.dumps(result["summary"], indent=1))
+    return 0
+
+
+def cmd_bench_render(a: argparse.Namespace) -> int:
+    from viewer.bench import bench_render
+    from viewer.view_cli import _size
+
+    print(json.dumps(bench_render(_size(a.size), repeats=a.repeats), indent=2))
     return 0
 
 
@@ -336,7 +348,7 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--finetune", action="store_true", help="measured files: also adapt a copy of the decoder")
     pr.add_argument("--pairs", type=int, default=2048, help="samples drawn from the material or table")
     pr.add_argument("--spp", type=int, default=64, help="Monte Carlo paths per pair for a stack's reference")
-    pr.add_argument("--steps", type=int, default=400)
+    pr.add_argument("--steps", type=int, default=200)
     pr.add_argument("--seed", type=int, default=0)
     pr.set_defaults(fn=cmd_project)
 
@@ -347,6 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
     rr.add_argument("--decoder", help="decoder weights (default: the shipped ones)")
     rr.add_argument("--out", required=True, help="folder for representation.json and the figures")
     rr.add_argument("--limit", type=int, default=0, help="score only the first N materials (quick looks)")
+    rr.add_argument("--record", action="store_true", help="write the summary into the decoder file's metadata")
     rr.set_defaults(fn=cmd_report_representation)
 
     b = sub.add_parser("bench", help="speed benchmarks, printed as JSON")
@@ -354,6 +367,10 @@ def build_parser() -> argparse.ArgumentParser:
     br = bsub.add_parser("reference", help="Monte Carlo paths per second and time to a converged lobe")
     br.add_argument("--quick", action="store_true", help="a short run (for tests)")
     br.set_defaults(fn=cmd_bench_reference)
+    bd = bsub.add_parser("render", help="GLSL decoder and full shading frame times, GLSL vs torch throughput")
+    bd.add_argument("--size", default="1920x1080", help="WxH of the timed frames")
+    bd.add_argument("--repeats", type=int, default=3)
+    bd.set_defaults(fn=cmd_bench_render)
     return p
 
 

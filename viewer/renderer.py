@@ -40,6 +40,7 @@ class ViewState:
     light_dir: tuple[float, float, float] = (0.4, -0.6, 0.7)   # toward the light, world
     light_radiance: float = 3.0
     env_intensity: float = 0.6
+    env_on: bool = True                        # False: the directional light alone
     exposure: float = 0.0                      # stops
     tonemap: str = "aces"                      # aces | linear
 
@@ -152,6 +153,7 @@ class Renderer:
         p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
         p["u_light_radiance"].value = (state.light_radiance,) * 3
         p["u_env_intensity"].value = state.env_intensity
+        p["u_env_on"].value = int(state.env_on)
         fbo = self.ctx.fbo
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.disable(moderngl.BLEND)

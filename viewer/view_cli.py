@@ -18,6 +18,7 @@ from viewer.cli import _Parser, run_guarded
 PROG = "nbrdf-view"
 DEFAULT_MATERIAL = Path(__file__).parent / "assets" / "materials" / "default.json"
 HEADLESS_OUT = "nbrdf-view.png"
+BRDF_MODES = ("analytic", "projected")
 
 
 @dataclass
@@ -33,6 +34,7 @@ class ViewOptions:
     spp: int = 16
     exposure: float = 0.0
     tonemap: str = "aces"
+    brdf: str = "analytic"
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -58,6 +60,9 @@ def parse_args(argv: Sequence[str] | None) -> ViewOptions:
     p.add_argument("--spp", type=int, default=16, help="passes accumulated per pixel")
     p.add_argument("--exposure", type=float, default=0.0, help="stops")
     p.add_argument("--tonemap", default="aces", choices=("aces", "linear"))
+    p.add_argument("--brdf", default="analytic", choices=BRDF_MODES,
+                   help="analytic: closed form in GLSL; projected: the shipped decoder in GLSL at latents "
+                        "fitted to the material's reference")
     a = p.parse_args(argv)
     if a.spp < 1:
         raise NbrdfError(f"--spp: {a.spp} must be at least 1")
@@ -67,7 +72,7 @@ def parse_args(argv: Sequence[str] | None) -> ViewOptions:
         raise NbrdfError("--offscreen needs --out IMG")
     return ViewOptions(material=Path(a.material), mesh=a.mesh, env=a.env, view=a.view, theta_i=a.theta_i,
                        offscreen=a.offscreen, out=a.out, size=_size(a.size), spp=a.spp, exposure=a.exposure,
-                       tonemap=a.tonemap)
+                       tonemap=a.tonemap, brdf=a.brdf)
 
 
 def has_display() -> bool:
@@ -88,13 +93,28 @@ def render_offscreen(opts: ViewOptions) -> Path:
 
         read_environment(opts.env)  # validated now; image-based lighting comes with the GPU renderer
     ctx = offscreen_context()
-    r = Renderer(ctx, material, opts.mesh)
+    r = make_renderer(ctx, material, opts)
     state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap)
     img = r.render_linear(state, opts.size, opts.spp)
     if opts.view == "lobe" and out.suffix.lower() == ".png":
         img = img[::-1]  # a picture shows +y up
     write_image(out, img, opts.exposure, opts.tonemap)
     return out
+
+
+def make_renderer(ctx, material, opts: ViewOptions):
+    """The renderer of ``opts.brdf``: closed form, or the decoder in GLSL."""
+    from viewer.renderer import Renderer
+
+    if opts.brdf == "analytic":
+        return Renderer(ctx, material, opts.mesh)
+    from neural.decoder import default_decoder
+    from training.project import fit, material_samples
+    from viewer.neural_gpu import GpuDecoder
+
+    dec = default_decoder()
+    z = fit(dec, material_samples(material))
+    return Renderer(ctx, material, opts.mesh, neural=GpuDecoder(ctx, dec), latent=z)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -85,3 +85,31 @@ def test_bad_samples_file(tmp_path, capsys, decoder_file):
                         "--decoder", decoder_file], capsys)
     assert_one_line_error(code, err)
     assert "(N, 9)" in err
+
+
+def test_eval_projected_with_the_shipped_weights(tmp_path, capsys):
+    """The shipped decoder reproduces a rough conductor through its projected latent."""
+    layer = {"type": "conductor", "roughness": 0.4, "r0": [0.95, 0.64, 0.54]}
+    mat = write_material(tmp_path / "m.json", [layer])
+    pairs = random_pairs(256, 9)
+    np.save(tmp_path / "p.npy", pairs)
+    code, _, err = run(["eval", "--material", mat, "--pairs", tmp_path / "p.npy", "--out", tmp_path / "f.npy",
+                        "--method", "projected"], capsys)
+    assert code == 0, err
+    f = np.load(tmp_path / "f.npy")
+    code, _, err = run(["eval", "--material", mat, "--pairs", tmp_path / "p.npy", "--out", tmp_path / "r.npy"], capsys)
+    ref = np.load(tmp_path / "r.npy")
+    cos_o = pairs[:, 5:6]
+    t = lambda x: x * cos_o / (1 + x * cos_o)
+    psnr = 10 * np.log10(1 / np.mean((t(f) - t(ref)) ** 2))
+    assert f.shape == (256, 3) and (f >= 0).all() and psnr > 35, psnr
+
+
+def test_view_offscreen_with_the_neural_shader(tmp_path, capsys):
+    from viewer.view_cli import main
+
+    out = tmp_path / "lobe.npy"
+    mat = write_material(tmp_path / "m.json", [{"type": "conductor", "roughness": 0.3, "r0": 0.9}])
+    assert main([str(mat), "--offscreen", "--view", "lobe", "--brdf", "projected", "--out", str(out)]) == 0
+    img = np.load(out)
+    assert img.shape == (64, 64, 3) and img.max() > 0.1 and np.isfinite(img).all()

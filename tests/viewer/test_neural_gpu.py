@@ -92,3 +92,31 @@ def test_packing_layout_and_share():
         latent_share(dec, torch.zeros(2, 32))
     with pytest.raises(NbrdfError, match="divisible by 4"):
         pack(Decoder(DecoderSpec(width=30)))
+
+
+def test_lobe_view_matches_the_torch_lobe_image(gl_ctx):
+    """The GLSL lobe view of a neural material is the SPEC section 9 array of
+    the torch decoder at the same latents, within 1e-3."""
+    from neural.material import load_material
+    from neural.metrics import lobe_image
+    from viewer.renderer import Renderer, ViewState
+    from viewer.view_cli import DEFAULT_MATERIAL
+
+    torch.manual_seed(6)
+    dec = Decoder(DecoderSpec()).eval()
+    z = torch.randn(3, 32) * 0.5
+    r = Renderer(gl_ctx, load_material(DEFAULT_MATERIAL), neural=GpuDecoder(gl_ctx, dec), latent=z)
+    for theta in (0.0, 60.0):
+        img = r.render_linear(ViewState(view="lobe", theta_i=theta))
+        with torch.no_grad():
+            ref = lobe_image(lambda wi, wo: dec.eval_rgb(z, wi, wo), theta)
+        assert img.shape == (64, 64, 3)
+        assert np.abs(img - ref).max() <= 1e-3 * max(1.0, float(np.abs(ref).max()))
+
+
+def test_bench_render_reports_both_paths():
+    from viewer.bench import bench_render
+
+    r = bench_render((48, 32), repeats=1, torch_pairs=4096)
+    assert r["size"] == "48x32" and r["decoder_only_ms"] > 0 and r["full_shading_one_light_ms"] > 0
+    assert r["glsl_over_torch"] == pytest.approx(r["glsl_rgb_evals_per_s"] / r["torch_cpu_rgb_evals_per_s"], rel=1e-2)

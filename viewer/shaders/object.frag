@@ -13,6 +13,7 @@ uniform vec3 u_eye;
 uniform vec3 u_light_dir;       // toward the light, world space
 uniform vec3 u_light_radiance;
 uniform float u_env_intensity;
+uniform int u_env_on;           // 0: the light alone (benchmarks, quick previews)
 uniform uint u_pass;
 
 out vec4 frag;
@@ -35,6 +36,7 @@ void main() {
     vec3 color = vec3(0.0);
     vec3 wl = to_local * normalize(u_light_dir);
     if (wl.z > 0.0) color += brdf(wl, wo) * u_light_radiance * wl.z;
+    if (u_env_on == 0) { frag = vec4(color, 1.0); return; }
     // Environment: one cosine sample and one GGX-lobe sample per pass, balance heuristic.
     float a = lobe_roughness();
     float pc;
