@@ -60,6 +60,11 @@ PRESETS: dict[str, DataConfig] = {
     "cpu": DataConfig(counts=dict(conductor=200, dielectric=200, two_layer=800, three_layer=200, diffuse_base=150),
                       val_counts=dict(conductor=16, dielectric=16, two_layer=32, three_layer=16, diffuse_base=16),
                       pairs=1536, spp=64),
+    # stacks with their parameters, for the layering network (many BRDFs, fewer pairs each)
+    "layering": DataConfig(counts=dict(conductor=0, dielectric=0, two_layer=2496, three_layer=640,
+                                       diffuse_base=640),
+                           val_counts=dict(conductor=0, dielectric=0, two_layer=64, three_layer=32, diffuse_base=32),
+                           pairs=768, spp=32, seed=1),
     "paper": DataConfig(counts=dict(conductor=300, dielectric=300, two_layer=12720, three_layer=1800,
                                     diffuse_base=1200),
                         val_counts=dict(conductor=32, dielectric=32, two_layer=128, three_layer=64, diffuse_base=32),
@@ -341,6 +346,11 @@ def load_split(folder: str | Path, split: str = "train") -> BRDFSet:
     if not parts["params"]:
         raise NbrdfError(f"{folder}: no BRDFs in split {split!r}")
     cat = {k: torch.cat(v) for k, v in parts.items()}
+    finite = torch.isfinite(cat["f"]).all(1) & torch.isfinite(cat["params"]).all(1)
+    if not bool(finite.all()):  # data made before the simulator dropped round-off failures
+        print(f"{folder}: skipping {int((~finite).sum())} BRDF(s) of split {split!r} with non-finite values",
+              file=sys.stderr)
+        cat = {k: v[finite] for k, v in cat.items()}
     classes = [CLASSES[int(c)] for c in cat["params"][:, 0]]
     return BRDFSet(classes=classes, **cat)
 

@@ -87,15 +87,16 @@ def make_reference(material: Material, noise_target: float = 48.0, max_spp: int 
                      s.f.numpy())
 
 
-def build_references(folder: str | Path, progress: bool = True) -> list[tuple[str, Material, Reference]]:
-    """Makes (or resumes) the cached references of the held-out set in ``folder``."""
+def build_references(folder: str | Path, progress: bool = True, limit: int = 0) -> list[tuple[str, Material, Reference]]:
+    """Makes (or resumes) the cached references of the held-out set in ``folder``
+    (the first ``limit`` materials only, when given)."""
     from safetensors.numpy import load_file, save_file
     from tqdm import tqdm
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     out = []
-    items = heldout_set()
+    items = heldout_set()[: limit or None]
     for i, (cls, m) in enumerate(tqdm(items, desc="held-out references", unit="material", file=sys.stderr,
                                       disable=not progress or None)):
         path = folder / f"{m.name}.safetensors"
@@ -194,3 +195,108 @@ def report_figures(refs: list[tuple[str, Material, Reference]], method: Method, 
     fig.tight_layout()
     fig.savefig(out / "psnr_hist.png")
     plt.close(fig)
+
+
+# --- the operations: the full neural path against its baselines ---------------------------
+def neural_method(model) -> Method:
+    """Leaf encoders -> recursive layering -> decoder (nothing fitted)."""
+
+    def make(m: Material, r: Reference):
+        z = model.material_latent(m)
+
+        def fn(wi: Tensor, wo: Tensor) -> Tensor:
+            with torch.no_grad():
+                return model.decoder.eval_rgb(z, wi.float(), wo.float())
+
+        return fn
+
+    return make
+
+
+def analytic_method() -> Method:
+    """The analytic layering baseline (``training.analytic_layering``)."""
+    from training.analytic_layering import analytic_layered_eval
+
+    def make(m: Material, r: Reference):
+        return lambda wi, wo: analytic_layered_eval(m, wi.double(), wo.double()).float()
+
+    return make
+
+
+def comparison_table(results: dict[str, dict]) -> str:
+    """Markdown: one row per class, median / p10 PSNR and median albedo error per method."""
+    methods = list(results)
+    classes = [c for c in CLASS_COUNTS if any(c in r["summary"] for r in results.values())]
+    head = "| class | " + " | ".join(f"{m}: PSNR median / p10 (dB), albedo err" for m in methods) + " |"
+    lines = [head, "|---" * (len(methods) + 1) + "|"]
+    for c in classes:
+        cells = []
+        for m in methods:
+            s = results[m]["summary"].get(c)
+            cells.append("n/a" if s is None else
+                         f"{s['psnr_median']:.1f} / {s['psnr_p10']:.1f}, {100 * s['albedo_error_median']:.1f} %")
+        n = next(r["summary"][c]["materials"] for r in results.values() if c in r["summary"])
+        lines.append(f"| {c} ({n}) | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def glossy_stacks(refs: list[tuple[str, Material, Reference]], max_roughness: float = 0.1):
+    """Held-out stacks whose top interface is glossy (roughness below ``max_roughness``)."""
+    return [(c, m, r) for c, m, r in refs
+            if m.interfaces and float(m.interfaces[0][0].roughness) < max_roughness]
+
+
+def sampling_variance(model, material: Material, n: int = 8192, seed: int = 0) -> dict[str, float]:
+    """Variance of the directional-albedo estimator f cos / pdf of the neural
+    BRDF (channel mean), averaged over the standard incidences, for the
+    learned proxy, cosine sampling, and sampling the top interface's GGX lobe."""
+    from neural.sampling import proxy_sample
+    from training.analytic import GGXConductor
+
+    z = model.material_latent(material)
+    sigma, w = model.proxy(z)
+    top = float(material.interfaces[0][0].roughness) if material.interfaces else 0.3
+    g = torch.Generator().manual_seed(seed)
+    out = {"proxy": 0.0, "cosine": 0.0, "top_ggx": 0.0}
+    for th in THETAS:
+        t = math.radians(th)
+        wi = torch.tensor([[math.sin(t), 0.0, math.cos(t)]]).expand(n, 3).contiguous()
+        u = torch.rand(n, 3, generator=g)
+        wo_p, pdf_p = proxy_sample(wi, u, sigma, w)
+        r, phi = u[:, 1].sqrt(), 2 * math.pi * u[:, 2]
+        wo_c = torch.stack([r * phi.cos(), r * phi.sin(), (1 - u[:, 1]).clamp_min(0).sqrt()], -1)
+        pdf_c = wo_c[:, 2] / math.pi
+        s = GGXConductor(top, 1.0).sample(wi, u)
+        for name, wo, pdf in (("proxy", wo_p, pdf_p), ("cosine", wo_c, pdf_c), ("top_ggx", s.w, s.pdf)):
+            ok = (wo[:, 2] > 0) & (pdf > 0)
+            with torch.no_grad():
+                f = model.decoder.eval_rgb(z, wi, torch.where(ok[:, None], wo, wi)).mean(-1)
+            est = torch.where(ok, f * wo[:, 2] / torch.where(ok, pdf, torch.ones_like(pdf)), torch.zeros_like(f))
+            out[name] += float(est.var()) / len(THETAS)
+    return out
+
+
+def interpolation_figure(model, smooth: Material, rough: Material, path: Path, steps: int = 5,
+                         theta_i: float = 30.0) -> dict:
+    """The paper's interpolation figure: lobes of the latent blend (1 - t) z_a
+    + t z_b against the linear blend of the two BRDFs' values, for t from 0 to 1.
+    Returns the lobe peak values per row (a latent blend moves the highlight's
+    width; a value blend stacks two highlights)."""
+    from neural.latent_texture import blend
+    from neural.metrics import lobe_image
+    from training.plots import save_lobe_grid
+
+    za, zb = model.material_latent(smooth), model.material_latent(rough)
+    dec = model.decoder
+    ts = [k / (steps - 1) for k in range(steps)]
+
+    def lobe_of(z: Tensor) -> np.ndarray:
+        return lobe_image(lambda wi, wo: dec.eval_rgb(z, wi.float(), wo.float()).detach(), theta_i)
+
+    la, lb = lobe_of(za), lobe_of(zb)
+    latent_row = [lobe_of(blend([za, zb], [1 - t, t])) for t in ts]
+    linear_row = [(1 - t) * la + t * lb for t in ts]
+    save_lobe_grid([("latent blend", latent_row), ("linear blend of values", linear_row)],
+                   [f"t = {t:.2f}" for t in ts], path)
+    return {"t": ts, "latent_peak": [float(x.max()) for x in latent_row],
+            "linear_peak": [float(x.max()) for x in linear_row]}

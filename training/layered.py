@@ -93,6 +93,7 @@ class SimStats:
     paths: int = 0
     vertices: int = 0
     seconds: float = 0.0
+    dropped: int = 0  # contributions lost to float round-off (non-finite), about one in 10^8 paths
 
 
 def _forced_transmission_pdf(a: Tensor, eta_rel: Tensor, w: Tensor, wt: Tensor) -> Tensor:
@@ -363,6 +364,11 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
             return wo[q], tab.top("roughness", q), tab.top("ior", q), tab.top("sigma_t", q)
 
         def absorb(idx: Tensor, contrib: Tensor, b: Tensor, d: Tensor, pdf: Tensor, ok: Tensor) -> None:
+            finite = torch.isfinite(contrib)
+            if not bool(finite.all()):  # a degenerate float32 configuration: drop it, never poison the mean
+                contrib = torch.where(finite, contrib, torch.zeros_like(contrib))
+                if stats is not None:
+                    stats.dropped += int((~finite).any(-1).sum())
             acc.index_add_(0, lane[idx], contrib)
             beta[idx], new_dir[idx], new_pdf[idx] = b, d, pdf
             alive[idx] = ok

@@ -73,3 +73,24 @@ def save_curves(curves: dict[str, Sequence[float]], path: str | Path, xlabel: st
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def save_lobe_grid(rows: Sequence[tuple[str, Sequence[np.ndarray]]], col_titles: Sequence[str],
+                   path: str | Path) -> None:
+    """Rows of lobe images under shared column titles (e.g. methods or blend weights)."""
+    plt = _plt()
+    ncol = max(len(imgs) for _, imgs in rows)
+    fig, axes = plt.subplots(len(rows), ncol, figsize=(1.9 * ncol + 0.4, 2.0 * len(rows)), dpi=90, squeeze=False)
+    for r, (label, imgs) in enumerate(rows):
+        for c in range(ncol):
+            ax = axes[r, c]
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if c < len(imgs):
+                ax.imshow(lobe_rgb(imgs[c]), origin="lower", interpolation="nearest")
+            if r == 0 and c < len(col_titles):
+                ax.set_title(col_titles[c], fontsize=8)
+        axes[r, 0].set_ylabel(label, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -108,7 +108,7 @@ def make_evaluator(material, method: str, spp: int, seed: int, want_stderr: bool
 
         return ref
     if method == "neural":
-        from neural.pipeline import neural_evaluator  # the full neural path (issue: operations)
+        from neural.model import neural_evaluator
 
         fn = neural_evaluator(material)
         return lambda wi, wo: (fn(wi, wo), None)
@@ -221,6 +221,21 @@ def cmd_train_representation(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train_operation(a: argparse.Namespace) -> int:
+    from neural.decoder import DEFAULT_WEIGHTS
+    from training import train_operations as to
+
+    for name in ("steps", "batch", "pairs"):
+        if getattr(a, name) < 1:
+            raise NbrdfError(f"--{name}: must be at least 1")
+    cfg = to.OpsConfig(decoder=a.decoder or str(DEFAULT_WEIGHTS), out=a.out, steps=a.steps, batch=a.batch,
+                       pairs=a.pairs, lr=a.lr, seed=a.seed, data=getattr(a, "data", None),
+                       recursion_steps=getattr(a, "recursion_steps", 0), width=getattr(a, "width", 0))
+    train = {"leaf": to.train_leaf, "layering": to.train_layering, "sampler": to.train_sampler}[a.what]
+    print(f"bundle written: {train(cfg)}")
+    return 0
+
+
 def cmd_project(a: argparse.Namespace) -> int:
     from neural.decoder import default_decoder, load_decoder, save_decoder
     from neural.latent import save_latent
@@ -268,9 +283,7 @@ def cmd_report_representation(a: argparse.Namespace) -> int:
     from training.evaluate import build_references, projected_method, report_figures, score
 
     dec = load_decoder(a.decoder) if a.decoder else default_decoder()
-    refs = build_references(a.refs)
-    if a.limit:
-        refs = refs[: a.limit]
+    refs = build_references(a.refs, limit=a.limit)
     result = score(refs, projected_method(dec))
     result["decoder_id"] = dec.weights_id()
     out = Path(a.out)
@@ -282,6 +295,87 @@ def cmd_report_representation(a: argparse.Namespace) -> int:
 
         record_accuracy(a.decoder or DEFAULT_WEIGHTS, {"heldout_projected": result["summary"]})
     print(json.dumps(result["summary"], indent=1))
+    return 0
+
+
+def cmd_report_operations(a: argparse.Namespace) -> int:
+    from neural.model import default_model, load_model
+    from training import evaluate as ev
+    from training.plots import save_lobe_grid
+
+    model = load_model(a.model) if a.model else default_model()
+    refs = ev.build_references(a.refs, limit=a.limit)
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    methods = {"neural": ev.neural_method(model), "projected": ev.projected_method(model.decoder),
+               "analytic": ev.analytic_method()}
+    stacks = [x for x in refs if x[1].interfaces]  # single layers: the analytic model is the reference itself
+    results = {name: ev.score(stacks if name == "analytic" else refs, m) for name, m in methods.items()}
+    glossy = ev.glossy_stacks(refs)
+    variances = [dict(name=m.name, **ev.sampling_variance(model, m, seed=i)) for i, (_, m, _) in enumerate(glossy)]
+    ratio = lambda k: float(np.median([v[k] / max(v["proxy"], 1e-30) for v in variances])) if variances else None
+    sampling = {"glossy_stacks": len(variances), "median_variance_reduction_vs_cosine": ratio("cosine"),
+                "median_variance_reduction_vs_top_ggx": ratio("top_ggx"), "per_material": variances}
+    report = {"summary": {k: r["summary"] for k, r in results.items()}, "sampling": sampling,
+              "rows": {k: r["rows"] for k, r in results.items()}}
+    (out / "operations.json").write_text(json.dumps(report, indent=1))
+    (out / "operations.md").write_text(ev.comparison_table(results) + "\n")
+    from neural.metrics import lobe_image
+
+    shown = [(c, m, r) for c, m, r in refs if c in ("two_layer", "three_layer")][:: max(1, a.every)][:6]
+    rows = []
+    for c, m, r in shown:
+        imgs = [r.lobes[1]] + [lobe_image(fn(m, r), ev.THETAS[1]) for fn in methods.values()]
+        rows.append((m.name, imgs))
+    if rows:
+        save_lobe_grid(rows, ["reference"] + list(methods), out / "operations_lobes.png")
+    print(ev.comparison_table(results))
+    print(json.dumps({k: v for k, v in sampling.items() if k != "per_material"}))
+    return 0
+
+
+def cmd_report_interpolation(a: argparse.Namespace) -> int:
+    from neural.model import default_model, load_model
+    from training.evaluate import interpolation_figure
+
+    model = load_model(a.model) if a.model else default_model()
+    out = Path(a.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    res = interpolation_figure(model, _load_material(a.a), _load_material(a.b), out)
+    print(json.dumps(res))
+    return 0
+
+
+def cmd_sample(a: argparse.Namespace) -> int:
+    import math
+
+    import torch
+
+    from neural.model import default_model, load_model
+    from neural.sampling import proxy_sample
+
+    if a.n < 1:
+        raise NbrdfError(f"--n: {a.n} must be at least 1")
+    if not 0 <= a.theta_i < 90:
+        raise NbrdfError(f"--theta-i: {a.theta_i} must lie in [0, 90)")
+    model = load_model(a.model) if a.model else default_model()
+    z = model.material_latent(_load_material(a.material))
+    sigma, w = model.proxy(z)
+    t = math.radians(a.theta_i)
+    wi = torch.tensor([[math.sin(t), 0.0, math.cos(t)]]).expand(a.n, 3).contiguous()
+    u = torch.rand(a.n, 3, generator=torch.Generator().manual_seed(a.seed))
+    wo, pdf = proxy_sample(wi, u, sigma, w)
+    pdf = torch.where(wo[:, 2] > 0, pdf, torch.zeros_like(pdf))  # below the horizon: a failed sample
+    np.save(out_path(a.out, (".npy",)), torch.cat([wo, pdf[:, None]], 1).numpy().astype(np.float32))
+    print(json.dumps({"sigma": sigma, "w": w, "failed": int((pdf == 0).sum())}))
+    return 0
+
+
+def cmd_bench_operations(a: argparse.Namespace) -> int:
+    from neural.bench import bench_operations
+    from neural.model import default_model, load_model
+
+    print(json.dumps(bench_operations(load_model(a.model) if a.model else default_model(), a.repeats), indent=2))
     return 0
 
 
@@ -316,7 +410,7 @@ def build_parser() -> argparse.ArgumentParser:
     lo.set_defaults(fn=cmd_lobe)
 
     d = sub.add_parser("data", help="generate a training / validation data set (sharded, resumable)")
-    d.add_argument("--preset", default="tiny", help="tiny (seconds), cpu (the shipped model), paper")
+    d.add_argument("--preset", default="tiny", help="tiny (seconds), cpu (the shipped decoder), layering (stacks for the layering network), paper")
     d.add_argument("--out", required=True, help="folder for the shards and manifest.json")
     d.add_argument("--seed", type=int, default=None)
     d.add_argument("--overwrite", action="store_true", help="replace a data set made with other settings")
@@ -338,6 +432,24 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
     tr.add_argument("--seed", type=int, default=0)
     tr.set_defaults(fn=cmd_train_representation)
+    ops = {"leaf": ("leaf encoders, through the frozen decoder against closed-form layers", 6000, 32, 128, 2e-3),
+           "layering": ("layering network, through the decoder against Monte Carlo stacks", 5000, 48, 192, 1e-3),
+           "sampler": ("proxy-pdf network, by KL divergence to decoded lobes", 3000, 64, 256, 3e-3)}
+    for what, (help_, steps, batch, pairs, lr) in ops.items():
+        to = tsub.add_parser(what, help=help_)
+        to.add_argument("--decoder", help="bundle to build on (default: the shipped weights)")
+        to.add_argument("--out", required=True, help="run folder (checkpoint, curves, model.safetensors)")
+        to.add_argument("--steps", type=int, default=steps)
+        to.add_argument("--batch", type=int, default=batch, help="BRDFs per step")
+        to.add_argument("--pairs", type=int, default=pairs, help="direction pairs per BRDF per step")
+        to.add_argument("--lr", type=float, default=lr)
+        to.add_argument("--seed", type=int, default=0)
+        if what == "layering":
+            to.add_argument("--data", required=True, help="a folder made by `nbrdf data --preset layering`")
+            to.add_argument("--recursion-steps", type=int, default=2000,
+                            help="final steps that mix in three-layer stacks (recursive layering)")
+            to.add_argument("--width", type=int, default=256)
+        to.set_defaults(fn=cmd_train_operation)
 
     pr = sub.add_parser("project", help="fit a latent (3 x 32) to a material, samples or a MERL table")
     pr.add_argument("--material", help="material JSON (fitted through its reference)")
@@ -362,6 +474,29 @@ def build_parser() -> argparse.ArgumentParser:
     rr.add_argument("--record", action="store_true", help="write the summary into the decoder file's metadata")
     rr.set_defaults(fn=cmd_report_representation)
 
+    ro = rsub.add_parser("operations", help="full neural path vs projection vs analytic layering; sampling variance")
+    ro.add_argument("--refs", required=True, help="cache folder of held-out references (made on first use)")
+    ro.add_argument("--out", required=True, help="folder for operations.json / .md and figures")
+    ro.add_argument("--model", help="bundle (default: the shipped weights)")
+    ro.add_argument("--limit", type=int, default=0, help="score only the first N held-out materials")
+    ro.add_argument("--every", type=int, default=7, help="show every N-th stack in the lobe figure")
+    ro.set_defaults(fn=cmd_report_operations)
+    ri = rsub.add_parser("interpolation", help="latent blend vs linear blend of BRDF values (a figure)")
+    ri.add_argument("--a", required=True, help="first material JSON (t = 0)")
+    ri.add_argument("--b", required=True, help="second material JSON (t = 1)")
+    ri.add_argument("--out", required=True, help="PNG")
+    ri.add_argument("--model", help="bundle (default: the shipped weights)")
+    ri.set_defaults(fn=cmd_report_interpolation)
+
+    sa = sub.add_parser("sample", help="importance-sample wo through the learned proxy pdf")
+    sa.add_argument("--material", required=True)
+    sa.add_argument("--theta-i", type=float, required=True, help="incidence angle in degrees (phi_i = 0)")
+    sa.add_argument("--n", type=int, required=True)
+    sa.add_argument("--out", required=True, help="float32 (N, 4) .npy: wo.xyz, pdf (0 = failed sample)")
+    sa.add_argument("--model", help="bundle (default: the shipped weights)")
+    sa.add_argument("--seed", type=int, default=0)
+    sa.set_defaults(fn=cmd_sample)
+
     b = sub.add_parser("bench", help="speed benchmarks, printed as JSON")
     bsub = b.add_subparsers(dest="what", required=True, parser_class=_Parser)
     br = bsub.add_parser("reference", help="Monte Carlo paths per second and time to a converged lobe")
@@ -371,6 +506,10 @@ def build_parser() -> argparse.ArgumentParser:
     bd.add_argument("--size", default="1920x1080", help="WxH of the timed frames")
     bd.add_argument("--repeats", type=int, default=3)
     bd.set_defaults(fn=cmd_bench_render)
+    bo = bsub.add_parser("operations", help="CPU latency of leaf encoders and layering (what a slider runs)")
+    bo.add_argument("--model", help="bundle (default: the shipped weights)")
+    bo.add_argument("--repeats", type=int, default=1000)
+    bo.set_defaults(fn=cmd_bench_operations)
     return p
 
 

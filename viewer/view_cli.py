@@ -18,7 +18,7 @@ from viewer.cli import _Parser, run_guarded
 PROG = "nbrdf-view"
 DEFAULT_MATERIAL = Path(__file__).parent / "assets" / "materials" / "default.json"
 HEADLESS_OUT = "nbrdf-view.png"
-BRDF_MODES = ("analytic", "projected")
+BRDF_MODES = ("auto", "analytic", "neural", "projected")
 
 
 @dataclass
@@ -34,7 +34,7 @@ class ViewOptions:
     spp: int = 16
     exposure: float = 0.0
     tonemap: str = "aces"
-    brdf: str = "analytic"
+    brdf: str = "auto"
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -60,9 +60,10 @@ def parse_args(argv: Sequence[str] | None) -> ViewOptions:
     p.add_argument("--spp", type=int, default=16, help="passes accumulated per pixel")
     p.add_argument("--exposure", type=float, default=0.0, help="stops")
     p.add_argument("--tonemap", default="aces", choices=("aces", "linear"))
-    p.add_argument("--brdf", default="analytic", choices=BRDF_MODES,
-                   help="analytic: closed form in GLSL; projected: the shipped decoder in GLSL at latents "
-                        "fitted to the material's reference")
+    p.add_argument("--brdf", default="auto", choices=BRDF_MODES,
+                   help="analytic: closed form in GLSL (single layers); neural: the shipped decoder in GLSL at "
+                        "the latents of leaf encoders and layering; projected: at latents fitted to the "
+                        "material's reference; auto: analytic for a single layer, else neural")
     a = p.parse_args(argv)
     if a.spp < 1:
         raise NbrdfError(f"--spp: {a.spp} must be at least 1")
@@ -106,15 +107,23 @@ def make_renderer(ctx, material, opts: ViewOptions):
     """The renderer of ``opts.brdf``: closed form, or the decoder in GLSL."""
     from viewer.renderer import Renderer
 
-    if opts.brdf == "analytic":
+    mode = opts.brdf
+    if mode == "auto":
+        mode = "analytic" if not material.interfaces and material.base.type in ("conductor", "dielectric",
+                                                                               "diffuse") else "neural"
+    if mode == "analytic":
         return Renderer(ctx, material, opts.mesh)
-    from neural.decoder import default_decoder
-    from training.project import fit, material_samples
+    from neural.model import default_model
     from viewer.neural_gpu import GpuDecoder
 
-    dec = default_decoder()
-    z = fit(dec, material_samples(material))
-    return Renderer(ctx, material, opts.mesh, neural=GpuDecoder(ctx, dec), latent=z)
+    model = default_model()
+    if mode == "neural":
+        z = model.material_latent(material)
+    else:
+        from training.project import fit, material_samples
+
+        z = fit(model.decoder, material_samples(material))
+    return Renderer(ctx, material, opts.mesh, neural=GpuDecoder(ctx, model.decoder), latent=z)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -25,7 +25,7 @@ def data(tmp_path_factory):
 
 
 def test_training_lowers_the_loss_and_writes_its_outputs(data, tmp_path):
-    cfg = TrainConfig(data=str(data), out=str(tmp_path / "run"), spec=SPEC, epochs=6, batch=512, val_every=3)
+    cfg = TrainConfig(data=str(data), out=str(tmp_path / "run"), spec=SPEC, epochs=6, batch=128, val_every=3)
     bundle = train(cfg, progress=False)
     m = json.loads((tmp_path / "run" / "metrics.json").read_text())
     hist = m["history"]["train"]

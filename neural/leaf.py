@@ -1,0 +1,77 @@
+"""Leaf encoders (SPEC section 6): a single layer's parameters -> its latent.
+
+One small network per leaf type maps the parameters of one colour channel to
+the latent the decoder turns into that layer's BRDF. They are trained through
+the frozen decoder against the closed-form BRDFs (``training.train_operations``),
+so a slider moves a latent in microseconds instead of a projection's seconds.
+Inputs are reparametrised so the paper's distributions are near uniform:
+roughness enters as its cube root, ior linearly over its legal range.
+"""
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from neural.errors import NbrdfError
+from neural.nets import MLP, MLPSpec
+
+Tensor = torch.Tensor
+
+#: Leaf type -> parameter names, in input order.
+LEAF_PARAMS: dict[str, tuple[str, ...]] = {
+    "conductor": ("roughness", "r0"),
+    "dielectric": ("roughness", "ior"),
+    "diffuse": ("albedo",),
+}
+
+
+def leaf_features(kind: str, params: Tensor) -> Tensor:
+    """Network inputs (N, k) from raw parameters (N, k) in LEAF_PARAMS order."""
+    if kind == "conductor":
+        return torch.stack([params[:, 0].clamp(1e-4, 1).pow(1 / 3), params[:, 1]], -1)
+    if kind == "dielectric":
+        return torch.stack([params[:, 0].clamp(1e-4, 1).pow(1 / 3), (params[:, 1] - 1.05) / 0.95], -1)
+    if kind == "diffuse":
+        return torch.stack([params[:, 0], params[:, 0].clamp_min(0).sqrt()], -1)
+    raise NbrdfError(f"no leaf encoder for {kind!r} (one of {', '.join(LEAF_PARAMS)})")
+
+
+def leaf_spec(kind: str, width: int = 64, depth: int = 3) -> MLPSpec:
+    """Every leaf has two input features (``leaf_features``)."""
+    if kind not in LEAF_PARAMS:
+        raise NbrdfError(f"no leaf encoder for {kind!r} (one of {', '.join(LEAF_PARAMS)})")
+    return MLPSpec(inputs=2, outputs=32, width=width, depth=depth)
+
+
+class LeafEncoders(nn.Module):
+    """The three leaf encoders; ``encode(kind, params)`` -> latents (N, 32)."""
+
+    def __init__(self, specs: dict[str, MLPSpec] | None = None):
+        super().__init__()
+        specs = specs or {k: leaf_spec(k) for k in LEAF_PARAMS}
+        self.specs = specs
+        self.nets = nn.ModuleDict({k: MLP(specs[k]) for k in LEAF_PARAMS})
+
+    def encode(self, kind: str, params: Tensor) -> Tensor:
+        if kind not in self.nets:
+            raise NbrdfError(f"no leaf encoder for {kind!r} (one of {', '.join(LEAF_PARAMS)})")
+        params = torch.as_tensor(params, dtype=torch.float32)
+        if params.dim() != 2 or params.shape[1] != len(LEAF_PARAMS[kind]):
+            raise NbrdfError(f"{kind} leaf: parameters must be (N, {len(LEAF_PARAMS[kind])}) "
+                             f"({', '.join(LEAF_PARAMS[kind])}), got {tuple(params.shape)}")
+        if not torch.isfinite(params).all():
+            raise NbrdfError(f"{kind} leaf: parameters hold NaN or infinite values")
+        return self.nets[kind](leaf_features(kind, params))
+
+    def conductor(self, roughness: Tensor, r0: Tensor) -> Tensor:
+        return self.encode("conductor", torch.stack(torch.broadcast_tensors(_t(roughness), _t(r0)), -1))
+
+    def dielectric(self, roughness: Tensor, ior: Tensor) -> Tensor:
+        return self.encode("dielectric", torch.stack(torch.broadcast_tensors(_t(roughness), _t(ior)), -1))
+
+    def diffuse(self, albedo: Tensor) -> Tensor:
+        return self.encode("diffuse", _t(albedo)[:, None])
+
+
+def _t(x) -> Tensor:
+    return torch.as_tensor(x, dtype=torch.float32).reshape(-1)

@@ -1,0 +1,187 @@
+"""The neural model: the decoder and the networks of the latent operations
+(leaf encoders, layering, sampler), shipped as one bundle in one file.
+
+``material_latent`` is the full neural path for any stack: leaf encoders for
+the base and every interface, then the layering network from the bottom up.
+The operation networks are tied to the decoder they were trained through:
+the file records that decoder's weights id and loading checks it.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import torch
+
+from neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bundle, save_decoder
+from neural.errors import NbrdfError
+from neural.layering import LayeringNet
+from neural.leaf import LEAF_PARAMS, LeafEncoders
+from neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured, TextureRef
+from neural.nets import MLPSpec, load_state, prefixed
+from neural.sampling import SamplerNet
+
+Tensor = torch.Tensor
+OPS_FORMAT = "nbrdf-operations/1"
+PARTS = ("leaf", "layering", "sampler")
+
+
+@dataclass
+class NeuralModel:
+    decoder: Decoder
+    leaf: LeafEncoders | None = None
+    layering: LayeringNet | None = None
+    sampler: SamplerNet | None = None
+    trained_on: dict = field(default_factory=dict)  # per operation part
+    source: str = ""
+
+    def require(self, part: str):
+        net = getattr(self, part)
+        if net is None:
+            raise NbrdfError(f"{self.source or 'the weights'}: no {part} network in this bundle "
+                             f"(train it with `nbrdf train {'leaf' if part == 'leaf' else part}`)")
+        return net
+
+    # -- the full path ---------------------------------------------------------------------
+    def leaf_latent(self, layer, place: str = "layer") -> Tensor:
+        """(3, 32) latents of a single layer, one per colour channel."""
+        if isinstance(layer, LatentBase):
+            from neural.latent import load_latent
+
+            return load_latent(layer.resolved, self.decoder.weights_id()).z
+        if isinstance(layer, Measured):
+            raise NbrdfError(f"{place}: a measured base has no leaf encoder; project it first "
+                             "(`nbrdf project --merl FILE --out Z.safetensors`) and use it as a latent base")
+        leaf = self.require("leaf")
+        with torch.no_grad():
+            if isinstance(layer, Conductor):
+                return leaf.conductor(_scalar(layer.roughness, place), _rgb(layer.r0, place))
+            if isinstance(layer, Dielectric):
+                z = leaf.dielectric(_scalar(layer.roughness, place), _scalar(layer.ior, place))
+                return z.expand(3, -1)
+            if isinstance(layer, Diffuse):
+                return leaf.diffuse(_rgb(layer.albedo, place))
+        raise NbrdfError(f"{place}: a {layer.type} layer has no leaf encoder")
+
+    def material_latent(self, material: Material) -> Tensor:
+        """(3, 32) latents of a uniform material of any number of layers."""
+        n = len(material.layers)
+        z = self.leaf_latent(material.base, f"layers[{n - 1}]")
+        if not material.interfaces:
+            return z
+        net = self.require("layering")
+        # Walk the interfaces bottom-up: each one with its medium covers the stack below.
+        places = [i for i, layer in enumerate(material.layers) if isinstance(layer, Dielectric)][: len(material.interfaces)]
+        with torch.no_grad():
+            for (iface, med), i in reversed(list(zip(material.interfaces, places))):
+                z_top = self.leaf_latent(iface, f"layers[{i}]")
+                alb = _rgb(med.albedo, f"layers[{i + 1}].albedo") if med is not None else torch.zeros(3)
+                sig = _scalar(med.sigma_t, f"layers[{i + 1}].sigma_t") if med is not None else torch.zeros(1)
+                z = net(z_top, z, alb, sig.expand(3))
+        return z
+
+    def proxy(self, z: Tensor) -> tuple[float, float]:
+        """(sigma, w) of the proxy pdf of a material latent (3, 32)."""
+        with torch.no_grad():
+            s, w = self.require("sampler").material_params(z)
+        return float(s), float(w)
+
+
+def _scalar(v, place: str) -> Tensor:
+    if isinstance(v, TextureRef):
+        raise NbrdfError(f"{place}: texture-mapped; evaluate texels through a latent texture")
+    return torch.tensor([float(v)])
+
+
+def _rgb(v, place: str) -> Tensor:
+    try:
+        return torch.tensor(Material.rgb(v), dtype=torch.float32)
+    except NbrdfError:
+        raise NbrdfError(f"{place}: texture-mapped; evaluate texels through a latent texture") from None
+
+
+# --- files -------------------------------------------------------------------------------
+def _specs(model: NeuralModel) -> dict:
+    out: dict = {}
+    if model.leaf is not None:
+        out["leaf"] = {k: asdict(s) for k, s in model.leaf.specs.items()}
+    if model.layering is not None:
+        out["layering"] = asdict(model.layering.spec)
+    if model.sampler is not None:
+        out["sampler"] = asdict(model.sampler.spec)
+    return out
+
+
+def save_model(model: NeuralModel, path: str | Path, like: str | Path | None = None) -> str:
+    """Writes the whole bundle; the decoder's metadata (data, accuracy) is
+    carried over from ``like`` (its source file) when given."""
+    trained, accuracy = {}, {}
+    if like is not None:
+        _, meta = read_bundle(like)
+        trained = json.loads(meta.get("trained_on") or "{}")
+        accuracy = json.loads(meta.get("accuracy") or "{}")
+    extra: dict[str, Tensor] = {}
+    for part in PARTS:
+        net = getattr(model, part)
+        if net is not None:
+            extra.update(prefixed(net, part))
+    ops = {"format": OPS_FORMAT, "decoder_id": model.decoder.weights_id(), "specs": _specs(model),
+           "trained_on": model.trained_on}
+    return save_decoder(model.decoder, path, trained_on=trained, accuracy=accuracy, extra=extra,
+                        extra_meta={"operations": ops})
+
+
+def load_model(path: str | Path | None = None) -> NeuralModel:
+    """Decoder plus whatever operation networks the bundle holds, all checked."""
+    path = Path(path) if path is not None else DEFAULT_WEIGHTS
+    dec = load_decoder(path)
+    tensors, meta = read_bundle(path)
+    model = NeuralModel(dec, source=str(path))
+    if "operations" not in meta:
+        return model
+    try:
+        ops = json.loads(meta["operations"])
+        if ops.get("format") != OPS_FORMAT:
+            raise NbrdfError(f"{path}: operations format {ops.get('format')!r} is not {OPS_FORMAT}")
+        specs = ops["specs"]
+        if ops.get("decoder_id") != dec.weights_id():
+            raise NbrdfError(f"{path}: the operation networks were trained for decoder {ops.get('decoder_id')}, "
+                             f"not for this file's decoder {dec.weights_id()}")
+        if "leaf" in specs:
+            model.leaf = LeafEncoders({k: MLPSpec(**specs["leaf"][k]) for k in LEAF_PARAMS})
+            load_state(model.leaf, tensors, "leaf", str(path))
+        if "layering" in specs:
+            model.layering = LayeringNet(MLPSpec(**specs["layering"]))
+            load_state(model.layering, tensors, "layering", str(path))
+        if "sampler" in specs:
+            model.sampler = SamplerNet(MLPSpec(**specs["sampler"]))
+            load_state(model.sampler, tensors, "sampler", str(path))
+        model.trained_on = ops.get("trained_on", {})
+    except (KeyError, TypeError, json.JSONDecodeError) as e:
+        raise NbrdfError(f"{path}: operations metadata is missing or malformed ({e})") from None
+    return model
+
+
+_DEFAULT: dict[str, NeuralModel] = {}
+
+
+def default_model() -> NeuralModel:
+    """The shipped bundle, loaded once per process."""
+    if "m" not in _DEFAULT:
+        if not DEFAULT_WEIGHTS.is_file():
+            raise NbrdfError(f"the default weights {DEFAULT_WEIGHTS.name} are not installed")
+        _DEFAULT["m"] = load_model(DEFAULT_WEIGHTS)
+    return _DEFAULT["m"]
+
+
+def neural_evaluator(material: Material, model: NeuralModel | None = None):
+    """fn(wi, wo) -> RGB values (N, 3) of a material through the full neural path."""
+    model = model or default_model()
+    z = model.material_latent(material)
+
+    def fn(wi: Tensor, wo: Tensor) -> Tensor:
+        with torch.no_grad():
+            return model.decoder.eval_rgb(z, wi.float(), wo.float())
+
+    return fn

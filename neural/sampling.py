@@ -1,0 +1,126 @@
+"""Importance sampling of neural BRDFs through a proxy pdf (SPEC section 6).
+
+The proxy is (1 - w) times an isotropic Gaussian of width sigma over the
+projected half vector (h_x, h_y), normalised on the unit disk, plus w times
+a Lambertian (cosine) lobe. A small network predicts (sigma, w) from the
+material's latent once per material; sampling then costs a few
+transcendental functions and the returned pdf is exact for the proxy
+(half-vector Jacobian included), so estimators f cos / pdf stay unbiased
+however well the proxy fits.
+
+The Gaussian half-vector lobe is a bijection from the upper hemisphere of h
+onto the sphere of wo (wo = reflect(wi, h)), so the proxy pdf integrates to 1
+over the sphere; samples below the horizon are failures (f = 0).
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import nn
+
+from neural.nets import MLP, MLPSpec
+
+Tensor = torch.Tensor
+SIGMA_RANGE = (0.003, 2.0)
+W_RANGE = (0.02, 0.98)  # a floor on both lobes keeps the weights f cos / pdf bounded
+
+
+def sampler_spec(width: int = 64, depth: int = 2) -> MLPSpec:
+    return MLPSpec(inputs=32, outputs=2, width=width, depth=depth)
+
+
+class SamplerNet(nn.Module):
+    """Material latent (3, 32) or (N, 32) -> proxy parameters (sigma, w)."""
+
+    def __init__(self, spec: MLPSpec | None = None):
+        super().__init__()
+        self.spec = spec or sampler_spec()
+        self.mlp = MLP(self.spec)
+
+    def forward(self, z: Tensor) -> tuple[Tensor, Tensor]:
+        """(sigma, w), each (N,), for latents (N, 32)."""
+        a = self.mlp(z)
+        lo, hi = SIGMA_RANGE
+        sigma = lo + (hi - lo) * torch.sigmoid(a[:, 0])
+        w = W_RANGE[0] + (W_RANGE[1] - W_RANGE[0]) * torch.sigmoid(a[:, 1])
+        return sigma, w
+
+    def material_params(self, z_rgb: Tensor) -> tuple[Tensor, Tensor]:
+        """One (sigma, w) for an RGB material: the proxy of its mean-channel latent."""
+        sigma, w = self(z_rgb.mean(0, keepdim=True))
+        return sigma[0], w[0]
+
+
+# --- the proxy ---------------------------------------------------------------------------
+def _disk_norm(sigma: Tensor) -> Tensor:
+    """Normaliser of exp(-r^2 / (2 sigma^2)) over the unit disk."""
+    return 2 * math.pi * sigma * sigma * -torch.expm1(-0.5 / (sigma * sigma))
+
+
+def gaussian_pdf(wi: Tensor, wo: Tensor, sigma: Tensor) -> Tensor:
+    """Solid-angle pdf of wo under the half-vector Gaussian, over the sphere."""
+    h = wi + wo
+    h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    h = torch.where(h[..., 2:3] < 0, -h, h)
+    r2 = h[..., 0] ** 2 + h[..., 1] ** 2
+    p_disk = torch.exp(-0.5 * r2 / (sigma * sigma)) / _disk_norm(sigma)
+    return p_disk * h[..., 2] / (4 * (wi * h).sum(-1).abs().clamp_min(1e-12))
+
+
+def lambert_pdf(wo: Tensor) -> Tensor:
+    return wo[..., 2].clamp_min(0) / math.pi
+
+
+def proxy_pdf(wi: Tensor, wo: Tensor, sigma: Tensor, w: Tensor) -> Tensor:
+    """The proxy's solid-angle pdf of wo given wi; sigma and w broadcast."""
+    return (1 - w) * gaussian_pdf(wi, wo, sigma) + w * lambert_pdf(wo)
+
+
+def proxy_sample(wi: Tensor, u: Tensor, sigma: Tensor, w: Tensor) -> tuple[Tensor, Tensor]:
+    """wo (N, 3) drawn from the proxy with uniforms u (N, 3), and its pdf.
+    wo may point below the horizon (a failed sample for a BRDF)."""
+    sigma = torch.as_tensor(sigma, dtype=wi.dtype).expand(wi.shape[0])
+    w = torch.as_tensor(w, dtype=wi.dtype).expand(wi.shape[0])
+    u0, u1, u2 = u[:, 0], u[:, 1], u[:, 2]
+    phi = 2 * math.pi * u2
+    # Gaussian over the disk by inverting its radial CDF.
+    trunc = -torch.expm1(-0.5 / (sigma * sigma))
+    r = (sigma * torch.sqrt(-2 * torch.log1p(-u1 * trunc))).clamp(max=1.0)
+    h = torch.stack([r * phi.cos(), r * phi.sin(), (1 - r * r).clamp_min(0).sqrt()], -1)
+    wo_g = 2 * (wi * h).sum(-1, keepdim=True) * h - wi
+    # Cosine-weighted hemisphere.
+    rl = u1.sqrt()
+    wo_l = torch.stack([rl * phi.cos(), rl * phi.sin(), (1 - u1).clamp_min(0).sqrt()], -1)
+    wo = torch.where((u0 < w)[:, None], wo_l, wo_g)
+    wo = wo / wo.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    return wo, proxy_pdf(wi, wo, sigma, w)
+
+
+def gndf(fn, n: int = 64, n_wi: int = 64, seed: int = 0) -> Tensor:
+    """The GNDF of a single-channel BRDF ``fn(wi, wo)``: the density of the
+    projected half vector (n x n grid over the unit disk, rows along y) of
+    f cos(theta_o)-distributed wo, averaged over cosine-distributed wi."""
+    g = torch.Generator().manual_seed(seed)
+    a, b = torch.rand(n_wi, generator=g), torch.rand(n_wi, generator=g)
+    wi = torch.stack([a.sqrt() * torch.cos(2 * math.pi * b), a.sqrt() * torch.sin(2 * math.pi * b),
+                      (1 - a).sqrt()], -1)
+    c = (torch.arange(n) + 0.5) / n * 2 - 1
+    y, x = torch.meshgrid(c, c, indexing="ij")
+    r2 = x * x + y * y
+    inside = r2 < 1
+    h = torch.stack([x, y, (1 - r2).clamp_min(0).sqrt()], -1)[inside]  # (P, 3)
+    out = torch.zeros(n, n)
+    acc = torch.zeros(h.shape[0])
+    for k in range(n_wi):
+        wik = wi[k].expand_as(h)
+        wo = 2 * (wik * h).sum(-1, keepdim=True) * h - wik
+        ok = wo[:, 2] > 0
+        # density over the disk: f cos * |d wo / d h_disk| = f cos * 4 |wi.h| / h_z
+        v = fn(wik, wo) * wo[:, 2].clamp_min(0) * 4 * (wik * h).sum(-1).abs() / h[:, 2].clamp_min(1e-6)
+        v = torch.where(ok, v, torch.zeros_like(v))
+        total = v.sum() * (2.0 / n) ** 2
+        if total > 0:
+            acc += v / total
+    out[inside] = acc / n_wi
+    return out

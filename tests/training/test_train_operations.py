@@ -1,0 +1,90 @@
+"""Operation networks train through the decoder, land in one checked bundle,
+and drive the full neural path."""
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+from safetensors import safe_open
+from safetensors.torch import save_file
+
+from neural.decoder import DEFAULT_WEIGHTS
+from neural.errors import NbrdfError
+from neural.material import parse_material
+from neural.model import load_model
+from neural.neural_brdf import material_brdfs
+from training.dataset import DataConfig, generate
+from training.train_operations import OpsConfig, train_layering, train_leaf, train_sampler
+
+STACKS = DataConfig(counts=dict(conductor=0, dielectric=0, two_layer=6, three_layer=3, diffuse_base=3),
+                    val_counts=dict(conductor=0, dielectric=0, two_layer=2, three_layer=1, diffuse_base=1),
+                    pairs=64, spp=8, shard_size=6)
+THREE = parse_material({"format": "nbrdf-material/1", "name": "t3", "layers": [
+    {"type": "dielectric", "roughness": 0.1, "ior": 1.5}, {"type": "medium", "albedo": [0.9, 0.5, 0.2], "sigma_t": 1},
+    {"type": "dielectric", "roughness": 0.3, "ior": 1.2}, {"type": "medium", "albedo": 0.8, "sigma_t": 0.5},
+    {"type": "conductor", "roughness": 0.2, "r0": [0.9, 0.8, 0.4]}]})
+
+
+@pytest.fixture(scope="module")
+def bundles(tmp_path_factory):
+    root = tmp_path_factory.mktemp("ops")
+    generate(root / "data", STACKS, progress=False)
+    leaf = train_leaf(OpsConfig(decoder=str(DEFAULT_WEIGHTS), out=str(root / "leaf"), steps=100, batch=16,
+                                pairs=64), progress=False)
+    lay = train_layering(OpsConfig(decoder=str(leaf), out=str(root / "lay"), steps=60, batch=8, pairs=32,
+                                   data=str(root / "data"), recursion_steps=30, width=32), progress=False)
+    smp = train_sampler(OpsConfig(decoder=str(lay), out=str(root / "smp"), steps=60, batch=16, pairs=32),
+                        progress=False)
+    return root, leaf, lay, smp
+
+
+def test_leaf_training_lowers_the_loss(bundles):
+    root, leaf, _, _ = bundles
+    hist = json.loads((root / "leaf" / "leaf_metrics.json").read_text())["history"]["train"]
+    assert len(hist) == 2 and hist[1] < 0.8 * hist[0]
+    assert (root / "leaf" / "leaf_curves.png").stat().st_size > 1000
+    m = load_model(leaf)
+    assert m.leaf is not None and m.layering is None
+
+
+def test_the_bundle_drives_the_full_path_for_any_stack(bundles):
+    _, _, _, smp = bundles
+    m = load_model(smp)
+    z = m.material_latent(THREE)
+    assert z.shape == (3, 32) and bool(torch.isfinite(z).all())
+    assert not torch.allclose(z[0], z[2])  # colour reaches the latents
+    sigma, w = m.proxy(z)
+    assert 0.003 <= sigma <= 2.0 and 0.02 <= w <= 0.98
+    wi = torch.nn.functional.normalize(torch.tensor([[0.3, 0.1, 0.9]]).expand(256, 3), dim=-1)
+    for b in material_brdfs(THREE, m):
+        s = b.sample(wi, torch.rand(256, 3, generator=torch.Generator().manual_seed(0)))
+        ok = s.pdf > 0
+        assert torch.allclose(s.pdf[ok], b.pdf(wi[ok], s.w[ok]), rtol=1e-5)
+        assert torch.allclose(s.f[ok], b.eval(wi[ok], s.w[ok]), rtol=1e-5)
+
+
+def test_missing_networks_are_named(bundles):
+    _, leaf, _, _ = bundles
+    with pytest.raises(NbrdfError, match="no layering network"):
+        load_model(leaf).material_latent(THREE)
+
+
+def test_operations_of_another_decoder_are_refused(bundles, tmp_path):
+    _, _, _, smp = bundles
+    with safe_open(str(smp), framework="pt") as fh:
+        meta = fh.metadata()
+        tensors = {k: fh.get_tensor(k) for k in fh.keys()}
+    ops = json.loads(meta["operations"])
+    ops["decoder_id"] = "0" * 16
+    meta["operations"] = json.dumps(ops)
+    save_file(tensors, str(tmp_path / "bad.safetensors"), metadata=meta)
+    with pytest.raises(NbrdfError, match="trained for decoder 0000000000000000"):
+        load_model(tmp_path / "bad.safetensors")
+
+
+def test_a_checkpoint_of_other_settings_is_refused(bundles):
+    root, leaf, _, _ = bundles
+    with pytest.raises(NbrdfError, match="other settings"):
+        train_leaf(OpsConfig(decoder=str(DEFAULT_WEIGHTS), out=str(root / "leaf"), steps=101, batch=16, pairs=64),
+                   progress=False)

@@ -1,0 +1,376 @@
+"""Training of the latent operations (``nbrdf train leaf|layering|sampler``).
+
+All three train *through the frozen decoder*, so every network is judged by
+the BRDF its latents decode to, not by distances in latent space:
+
+- leaf encoders against the closed-form single layers, drawn fresh every
+  step from the legal parameter ranges;
+- the layering network against the Monte Carlo tabulated stacks of a data
+  set (``nbrdf data --preset layering``): first two-layer and diffuse-base
+  stacks, then fine-tuned with three-layer stacks through the recursion
+  (the bottom latent is itself the network's output);
+- the sampler by minimising the KL divergence from the decoded lobe
+  f cos(theta_o) (normalised per incident direction) to the proxy pdf,
+  estimated by importance sampling over latents of random stacks.
+
+Each run checkpoints and resumes, and writes the bundle (decoder plus every
+operation network it has) to ``<out>/model.safetensors``.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+import torch
+
+from neural.decoder import encode, loss_target, predicted_target
+from neural.errors import NbrdfError
+from neural.layering import LayeringNet, layering_spec
+from neural.leaf import LEAF_PARAMS, LeafEncoders
+from neural.model import NeuralModel, load_model, save_model
+from neural.sampling import SamplerNet, lambert_pdf, proxy_pdf, proxy_sample
+from training.analytic import GGXConductor, GGXDielectric, Lambertian
+from training.dataset import CLASSES, P, load_manifest, load_split, sample_pairs, sample_params
+
+Tensor = torch.Tensor
+
+
+@dataclass
+class OpsConfig:
+    """One operation-training run."""
+
+    decoder: str  # bundle whose decoder (and earlier operation networks) it builds on
+    out: str
+    steps: int = 3000
+    batch: int = 64  # BRDFs per step
+    pairs: int = 256  # direction pairs per BRDF per step
+    lr: float = 2e-3
+    seed: int = 0
+    data: str | None = None  # layering: an `nbrdf data --preset layering` folder
+    recursion_steps: int = 1500  # layering: fine-tuning steps with three-layer stacks
+    width: int = 0  # 0: the part's default
+
+
+# --- a small resumable loop ---------------------------------------------------------------
+def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], total: int,
+              step: Callable[[int], Tensor], validate: Callable[[], float], progress: bool) -> dict:
+    """Adam with a cosine schedule; checkpoints every 250 steps into
+    ``<out>/<name>.ckpt.pt`` and resumes from it; returns the history."""
+    from tqdm import tqdm
+
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    params = [p for m in modules.values() for p in m.parameters()]
+    opt = torch.optim.Adam(params, lr=cfg.lr)
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda s: 0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(s, total) / total)))
+    history: dict = {"train": [], "val": [], "val_step": []}
+    ck = out / f"{name}.ckpt.pt"
+    key = json.dumps(asdict(cfg), sort_keys=True)
+    start = 0
+    if ck.exists():
+        state = torch.load(ck, weights_only=True)
+        if state["key"] != key:
+            raise NbrdfError(f"{ck}: belongs to a run with other settings; choose another --out")
+        for k, m in modules.items():
+            m.load_state_dict(state[k])
+        opt.load_state_dict(state["opt"])
+        sched.load_state_dict(state["sched"])
+        history, start = json.loads(state["history"]), int(state["step"])
+        torch.set_rng_state(state["rng"])
+    bar = tqdm(total=total, initial=start, desc=f"train {name}", unit="step", file=sys.stderr,
+               disable=not progress or None)
+    run = []
+    for s in range(start, total):
+        for m in modules.values():
+            m.train()
+        loss = step(s)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        sched.step()
+        run.append(loss.item())
+        bar.update(1)
+        if (s + 1) % 50 == 0:
+            history["train"].append(sum(run) / len(run))
+            bar.set_postfix(loss=f"{history['train'][-1]:.3e}")
+            run = []
+        if (s + 1) % 250 == 0 or s + 1 == total:
+            for m in modules.values():
+                m.eval()
+            with torch.no_grad():
+                history["val"].append(validate())
+            history["val_step"].append(s + 1)
+            state = {k: m.state_dict() for k, m in modules.items()}
+            state.update(opt=opt.state_dict(), sched=sched.state_dict(), history=json.dumps(history), step=s + 1,
+                         rng=torch.get_rng_state(), key=key)
+            torch.save(state, out / f"{name}.ckpt.tmp")
+            (out / f"{name}.ckpt.tmp").replace(ck)
+    bar.close()
+    for m in modules.values():
+        m.eval()
+        for p in m.parameters():
+            p.requires_grad_(False)
+    return history
+
+
+def _finish(name: str, cfg: OpsConfig, model: NeuralModel, history: dict, extra: dict) -> Path:
+    from training.plots import save_curves
+
+    out = Path(cfg.out)
+    save_curves({"train": history["train"]}, out / f"{name}_curves.png", xlabel="step / 50")
+    model.trained_on[name] = {"config": asdict(cfg), **extra}
+    bundle = out / "model.safetensors"
+    save_model(model, bundle, like=cfg.decoder)
+    (out / f"{name}_metrics.json").write_text(json.dumps({"history": history, **extra}, indent=1))
+    return bundle
+
+
+def _decoder_loss(model: NeuralModel, z: Tensor, feats: Tensor, cos_o: Tensor, target: Tensor) -> Tensor:
+    """The decoder's training loss for latents z (B, 32) at pairs (B, P, .)."""
+    y = model.decoder.log_f(z[:, None, :], feats)
+    return ((predicted_target(y, cos_o, model.decoder.spec.loss_scale) - target) ** 2).mean()
+
+
+# --- leaf encoders --------------------------------------------------------------------------
+def random_leaf_params(kind: str, n: int, g: torch.Generator) -> Tensor:
+    """Leaf parameters over their legal ranges, roughness as in SPEC section 9."""
+    u = torch.rand(n, 2, generator=g)
+    rough = (0.216 + 0.784 * u[:, 0]) ** 3
+    if kind == "conductor":
+        return torch.stack([rough, u[:, 1]], -1)
+    if kind == "dielectric":
+        return torch.stack([rough, 1.05 + 0.95 * u[:, 1]], -1)
+    return u[:, :1]
+
+
+def leaf_values(kind: str, params: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
+    """Closed-form values (B, P) of B leaves at pairs (B, P, 3)."""
+    if kind == "conductor":
+        return GGXConductor(params[:, 0:1], params[:, 1:2]).eval(wi, wo)
+    if kind == "dielectric":
+        return GGXDielectric(params[:, 0:1], params[:, 1:2]).eval(wi, wo)
+    return Lambertian(params[:, 0:1]).eval(wi, wo)
+
+
+class _PairPool:
+    """A large fixed pool of direction pairs (the data set's distribution),
+    with their decoder features, drawn from at random each step."""
+
+    def __init__(self, n: int, g: torch.Generator):
+        wi, wo = sample_pairs(n, g)
+        self.wi, self.wo = wi.float(), wo.float()
+        self.feats = encode(self.wi, self.wo)
+
+    def draw(self, b: int, p: int, g: torch.Generator):
+        idx = torch.randint(0, self.wi.shape[0], (b, p), generator=g)
+        return self.wi[idx], self.wo[idx], self.feats[idx]
+
+
+def train_leaf(cfg: OpsConfig, progress: bool = True) -> Path:
+    model = load_model(cfg.decoder)
+    torch.manual_seed(cfg.seed)
+    g = torch.Generator().manual_seed(cfg.seed)
+    pool = _PairPool(1 << 18, g)
+    leaf = LeafEncoders()
+    with torch.no_grad():  # start every encoder at the training latents' mean
+        for net in leaf.nets.values():
+            net.net[-1].bias.copy_(model.decoder.latent_mean)
+    s_ = model.decoder.spec.loss_scale
+    gv = torch.Generator().manual_seed(cfg.seed + 1)
+    val = {k: (random_leaf_params(k, 64, gv), *pool.draw(64, 512, gv)) for k in LEAF_PARAMS}
+
+    def loss_of(kind: str, params: Tensor, wi: Tensor, wo: Tensor, feats: Tensor) -> Tensor:
+        cos_o = wo[..., 2]
+        target = loss_target(leaf_values(kind, params, wi, wo), cos_o, s_)
+        return _decoder_loss(model, leaf.encode(kind, params), feats, cos_o, target)
+
+    def step(_s: int) -> Tensor:
+        return sum(loss_of(k, random_leaf_params(k, cfg.batch, g), *pool.draw(cfg.batch, cfg.pairs, g))
+                   for k in LEAF_PARAMS) / len(LEAF_PARAMS)
+
+    def validate() -> dict:
+        return {k: loss_of(k, *val[k]).item() for k in LEAF_PARAMS}
+
+    t0 = time.perf_counter()
+    history = _run_loop("leaf", cfg, {"leaf": leaf}, cfg.steps, step, validate, progress)
+    model.leaf = leaf
+    return _finish("leaf", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
+                                                 "val_loss": history["val"][-1]})
+
+
+# --- layering -------------------------------------------------------------------------------
+def stack_latents(model: NeuralModel, params: Tensor, layering: LayeringNet | None = None) -> Tensor:
+    """Latents (K, 32) of single-channel data-set BRDFs (``training.dataset``
+    parameter vectors) through leaf encoders and recursive layering;
+    differentiable in the layering network."""
+    leaf = model.require("leaf")
+    net = layering if layering is not None else model.require("layering")
+    cls = params[:, P["class"]].round().long()
+    col = lambda n: params[:, P[n]].float()
+    out = torch.zeros(params.shape[0], 32)
+    for c, name in enumerate(CLASSES):
+        sel = (cls == c).nonzero().squeeze(-1)
+        if sel.numel() == 0:
+            continue
+        pick = lambda n: col(n)[sel]
+        if name == "dielectric":
+            out[sel] = leaf.dielectric(pick("top_roughness"), pick("top_ior"))
+            continue
+        if name == "diffuse_base":
+            z = leaf.diffuse(pick("base_value"))
+        else:
+            z = leaf.conductor(pick("base_roughness"), pick("base_value"))
+        if name == "three_layer":
+            z = net(leaf.dielectric(pick("mid_roughness"), pick("mid_ior")), z, pick("albedo_2"), pick("sigma_t_2"))
+        if name in ("two_layer", "three_layer", "diffuse_base"):
+            z = net(leaf.dielectric(pick("top_roughness"), pick("top_ior")), z, pick("albedo_1"), pick("sigma_t_1"))
+        out = out.index_put((sel,), z)
+    return out
+
+
+class _StackData:
+    """A data set's stacks in memory with decoder features and loss targets."""
+
+    def __init__(self, folder: str, split: str, scale: float):
+        d = load_split(folder, split)
+        self.params = d.params
+        self.feats = encode(d.wi, d.wo)
+        self.cos_o = d.wo[..., 2]
+        self.target = loss_target(d.f, self.cos_o, scale)
+        cls = [CLASSES.index(c) for c in d.classes]
+        self.cls = torch.tensor(cls)
+
+    def index_of(self, *names: str) -> Tensor:
+        return torch.isin(self.cls, torch.tensor([CLASSES.index(n) for n in names])).nonzero().squeeze(-1)
+
+    def batch(self, idx: Tensor, pairs: int, g: torch.Generator):
+        n = self.feats.shape[1]
+        cols = torch.randint(0, n, (idx.numel(), pairs), generator=g) if pairs < n else \
+            torch.arange(n).expand(idx.numel(), n)
+        rows = idx[:, None].expand_as(cols)
+        return self.params[idx], self.feats[rows, cols], self.cos_o[rows, cols], self.target[rows, cols]
+
+
+def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
+    if not cfg.data:
+        raise NbrdfError("--data: the layering network trains on a stack data set (nbrdf data --preset layering)")
+    model = load_model(cfg.decoder)
+    model.require("leaf")
+    manifest = load_manifest(cfg.data)
+    torch.manual_seed(cfg.seed)
+    g = torch.Generator().manual_seed(cfg.seed)
+    s_ = model.decoder.spec.loss_scale
+    train = _StackData(cfg.data, "train", s_)
+    val = _StackData(cfg.data, "val", s_)
+    two = train.index_of("two_layer", "diffuse_base")
+    three = train.index_of("three_layer")
+    if two.numel() == 0:
+        raise NbrdfError(f"{cfg.data}: no two-layer or diffuse-base stacks to train the layering network on")
+    net = LayeringNet(layering_spec(width=cfg.width or 256))
+    with torch.no_grad():  # start as the identity "the top hides nothing"
+        net.mlp.net[-1].weight.mul_(0.1)
+        net.mlp.net[-1].bias.zero_()
+
+    def loss_on(data: _StackData, idx: Tensor, pairs: int) -> Tensor:
+        params, feats, cos_o, target = data.batch(idx, pairs, g)
+        return _decoder_loss(model, stack_latents(model, params, net), feats, cos_o, target)
+
+    def step(s: int) -> Tensor:
+        if s >= cfg.steps - cfg.recursion_steps and three.numel():
+            half = cfg.batch // 2
+            a = two[torch.randint(0, two.numel(), (cfg.batch - half,), generator=g)]
+            b = three[torch.randint(0, three.numel(), (half,), generator=g)]
+            return loss_on(train, torch.cat([a, b]), cfg.pairs)
+        return loss_on(train, two[torch.randint(0, two.numel(), (cfg.batch,), generator=g)], cfg.pairs)
+
+    def validate() -> dict:
+        out = {}
+        for name in ("two_layer", "diffuse_base", "three_layer"):
+            idx = val.index_of(name)
+            if idx.numel():
+                out[name] = loss_on(val, idx, val.feats.shape[1]).item()
+        return out
+
+    t0 = time.perf_counter()
+    history = _run_loop("layering", cfg, {"layering": net}, cfg.steps, step, validate, progress)
+    model.layering = net
+    return _finish("layering", cfg, model, history, {
+        "seconds_this_run": round(time.perf_counter() - t0, 1), "val_loss": history["val"][-1],
+        "data_preset": manifest.get("preset"), "train_stacks": int(two.numel() + three.numel())})
+
+
+# --- sampler --------------------------------------------------------------------------------
+PROPOSAL_SIGMAS = (0.03, 0.12, 0.5)
+
+
+def _proposal(wi: Tensor, g: torch.Generator) -> tuple[Tensor, Tensor]:
+    """wo from an even mixture of a cosine lobe and three half-vector
+    Gaussians (narrow to wide), with the mixture's pdf."""
+    n = wi.shape[0]
+    k = torch.randint(0, 1 + len(PROPOSAL_SIGMAS), (n,), generator=g)
+    sig = torch.tensor((1.0,) + PROPOSAL_SIGMAS)[k]
+    wo, _ = proxy_sample(wi, torch.rand(n, 3, generator=g), sig, (k == 0).float())
+    pdf = lambert_pdf(wo) + sum(proxy_pdf(wi, wo, torch.tensor(s), torch.tensor(0.0)) for s in PROPOSAL_SIGMAS)
+    return wo, pdf / (1 + len(PROPOSAL_SIGMAS))
+
+
+def random_material_params(n: int, g: torch.Generator) -> Tensor:
+    """Data-set parameter vectors over every class, as the paper's distributions."""
+    per = [n // len(CLASSES)] * len(CLASSES)
+    per[2] += n - sum(per)
+    return torch.cat([sample_params(c, k, g) for c, k in zip(CLASSES, per)]).float()
+
+
+def sampler_targets(model: NeuralModel, z: Tensor, n_wi: int, n_wo: int, g: torch.Generator):
+    """Importance-sampled lobes of latents z (M, 32): wi (M, n_wi, 3), wo
+    (M, n_wi, n_wo, 3), normalised weights f cos / proposal per wi."""
+    M = z.shape[0]
+    a, b = torch.rand(M, n_wi, generator=g), torch.rand(M, n_wi, generator=g)
+    wi = torch.stack([a.sqrt() * torch.cos(2 * math.pi * b), a.sqrt() * torch.sin(2 * math.pi * b),
+                      (1 - a).clamp_min(1e-4).sqrt()], -1)
+    wi = wi / wi.norm(dim=-1, keepdim=True)
+    wi_r = wi[:, :, None, :].expand(M, n_wi, n_wo, 3).reshape(-1, 3)
+    wo, pdf = _proposal(wi_r, g)
+    with torch.no_grad():
+        f = model.decoder(z[:, None, :].expand(M, n_wi * n_wo, 32).reshape(-1, 32), wi_r, wo)
+    w = torch.where(wo[:, 2] > 0, f * wo[:, 2].clamp_min(0) / pdf.clamp_min(1e-12), torch.zeros_like(f))
+    w = w.view(M, n_wi, n_wo)
+    w = w / w.sum(-1, keepdim=True).clamp_min(1e-20)
+    return wi_r.view(M, n_wi, n_wo, 3), wo.view(M, n_wi, n_wo, 3), w
+
+
+def train_sampler(cfg: OpsConfig, progress: bool = True) -> Path:
+    model = load_model(cfg.decoder)
+    torch.manual_seed(cfg.seed)
+    g = torch.Generator().manual_seed(cfg.seed)
+    n_mat = max(cfg.batch * 16, 512)
+    with torch.no_grad():
+        z = stack_latents(model, random_material_params(n_mat, g))
+        z_val = stack_latents(model, random_material_params(256, g))
+    wi, wo, w = sampler_targets(model, z, 8, cfg.pairs, g)
+    vwi, vwo, vw = sampler_targets(model, z_val, 8, cfg.pairs, g)
+    net = SamplerNet()
+
+    def cross_entropy(zz: Tensor, a: Tensor, b: Tensor, ww: Tensor) -> Tensor:
+        sigma, lam = net(zz)
+        q = proxy_pdf(a, b, sigma[:, None, None], lam[:, None, None])
+        return -(ww * torch.log(q.clamp_min(1e-30))).sum(-1).mean()
+
+    def step(_s: int) -> Tensor:
+        idx = torch.randint(0, n_mat, (cfg.batch,), generator=g)
+        return cross_entropy(z[idx], wi[idx], wo[idx], w[idx])
+
+    def validate() -> float:
+        return cross_entropy(z_val, vwi, vwo, vw).item()
+
+    t0 = time.perf_counter()
+    history = _run_loop("sampler", cfg, {"sampler": net}, cfg.steps, step, validate, progress)
+    model.sampler = net
+    return _finish("sampler", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
+                                                    "val_cross_entropy": history["val"][-1]})
