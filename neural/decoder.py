@@ -23,6 +23,7 @@ import torch
 from torch import nn
 
 from neural.errors import NbrdfError
+from neural.nets import load_state
 
 Tensor = torch.Tensor
 
@@ -219,24 +220,9 @@ def load_decoder(path: str | Path) -> Decoder:
     if meta.get("latent_size") != str(spec.latent):
         raise NbrdfError(f"{path}: latent size {meta.get('latent_size')} disagrees with the architecture")
     dec = Decoder(spec)
-    state = {k[len("decoder."):]: v for k, v in tensors.items() if k.startswith("decoder.")}
-    want = dec.state_dict()
-    for k, v in want.items():
-        if k not in state:
-            raise NbrdfError(f"{path}: tensor decoder.{k} is missing")
-        if tuple(state[k].shape) != tuple(v.shape):
-            raise NbrdfError(f"{path}: tensor decoder.{k} has shape {tuple(state[k].shape)}, "
-                             f"the architecture needs {tuple(v.shape)}")
-        if not torch.isfinite(state[k]).all():
-            raise NbrdfError(f"{path}: tensor decoder.{k} holds NaN or infinite values")
-    if set(state) - set(want):
-        raise NbrdfError(f"{path}: unexpected tensors {sorted(set(state) - set(want))[:3]}")
-    dec.load_state_dict(state)
-    dec.eval()
+    load_state(dec, tensors, "decoder", str(path))
     if meta.get("weights_id") and meta["weights_id"] != dec.weights_id():
         raise NbrdfError(f"{path}: weights do not match their recorded id (the file is damaged)")
-    for p_ in dec.parameters():
-        p_.requires_grad_(False)
     return dec
 
 

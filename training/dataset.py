@@ -32,7 +32,10 @@ from neural.material import FORMAT as FORMAT_MATERIAL
 Tensor = torch.Tensor
 
 FORMAT = "nbrdf-dataset/1"
-CLASSES = ("conductor", "dielectric", "two_layer", "three_layer", "diffuse_base")
+CLASSES = ("conductor", "dielectric", "two_layer", "three_layer", "diffuse_base", "three_layer_diffuse")
+#: Classes whose base is a Lambertian (base_value = its albedo); the others end in a conductor.
+DIFFUSE_BASED = ("diffuse_base", "three_layer_diffuse")
+THREE_LAYERED = ("three_layer", "three_layer_diffuse")
 
 #: Parameter vector columns (single channel); unused columns hold 0.
 PARAM_NAMES = ("class", "top_roughness", "top_ior", "albedo_1", "sigma_t_1", "mid_roughness", "mid_ior",
@@ -62,8 +65,9 @@ PRESETS: dict[str, DataConfig] = {
                       pairs=1536, spp=64),
     # stacks with their parameters, for the layering network (many BRDFs, fewer pairs each)
     "layering": DataConfig(counts=dict(conductor=0, dielectric=0, two_layer=2496, three_layer=640,
-                                       diffuse_base=640),
-                           val_counts=dict(conductor=0, dielectric=0, two_layer=64, three_layer=32, diffuse_base=32),
+                                       diffuse_base=640, three_layer_diffuse=320),
+                           val_counts=dict(conductor=0, dielectric=0, two_layer=64, three_layer=32, diffuse_base=32,
+                                           three_layer_diffuse=16),
                            pairs=768, spp=32, seed=1),
     "paper": DataConfig(counts=dict(conductor=300, dielectric=300, two_layer=12720, three_layer=1800,
                                     diffuse_base=1200),
@@ -102,10 +106,10 @@ def sample_params(cls: str, n: int, g: torch.Generator) -> Tensor:
     else:
         p[:, P["top_roughness"]], p[:, P["top_ior"]] = _roughness(g, n), _ior(g, n)
         p[:, P["albedo_1"]], p[:, P["sigma_t_1"]] = _albedo(g, n), _unit(g, n, 5.0)
-        if cls == "three_layer":
+        if cls in THREE_LAYERED:
             p[:, P["mid_roughness"]], p[:, P["mid_ior"]] = _roughness(g, n), _ior(g, n)
             p[:, P["albedo_2"]], p[:, P["sigma_t_2"]] = _albedo(g, n), _unit(g, n, 5.0)
-        if cls == "diffuse_base":
+        if cls in DIFFUSE_BASED:
             p[:, P["base_value"]] = _unit(g, n)
         else:
             p[:, P["base_roughness"]], p[:, P["base_value"]] = _roughness(g, n), _unit(g, n)
@@ -128,9 +132,9 @@ def params_to_material(p: Tensor | np.ndarray, name: str = "sample") -> "Materia
         layers = [diel("top_roughness", "top_ior")]
     else:
         layers = [diel("top_roughness", "top_ior"), med("albedo_1", "sigma_t_1")]
-        if cls == "three_layer":
+        if cls in THREE_LAYERED:
             layers += [diel("mid_roughness", "mid_ior"), med("albedo_2", "sigma_t_2")]
-        layers.append({"type": "diffuse", "albedo": p[P["base_value"]]} if cls == "diffuse_base" else cond)
+        layers.append({"type": "diffuse", "albedo": p[P["base_value"]]} if cls in DIFFUSE_BASED else cond)
     return parse_material({"format": FORMAT_MATERIAL, "name": name, "layers": layers})
 
 
@@ -182,11 +186,11 @@ def _stack_params(params: Tensor, pairs: int):
     cls = CLASSES[int(params[0, 0])]
     rep = lambda c: params[:, P[c]].repeat_interleave(pairs)
     cols = [("top_roughness", "top_ior", "albedo_1", "sigma_t_1")]
-    if cls == "three_layer":
+    if cls in THREE_LAYERED:
         cols.append(("mid_roughness", "mid_ior", "albedo_2", "sigma_t_2"))
     st = lambda j: torch.stack([rep(c[j]) for c in cols], -1)
     kw = dict(roughness=st(0), ior=st(1), albedo=st(2), sigma_t=st(3), base_roughness=rep("base_roughness"))
-    if cls == "diffuse_base":
+    if cls in DIFFUSE_BASED:
         return StackParams(base="diffuse", base_albedo=rep("base_value"), **kw)
     return StackParams(base="conductor", base_r0=rep("base_value"), **kw)
 

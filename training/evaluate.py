@@ -25,7 +25,7 @@ from neural.metrics import THETAS, albedo_error, directional_albedo, is_converge
 
 Tensor = torch.Tensor
 HELDOUT_SEED = 20_221_122  # never a training seed
-CLASS_COUNTS = {"conductor": 20, "dielectric": 20, "two_layer": 50, "three_layer": 20}
+CLASS_COUNTS = {"conductor": 20, "dielectric": 20, "two_layer": 50, "three_layer": 20, "three_layer_diffuse": 10}
 
 
 def _u(g: np.random.Generator, n: int | None = None):
@@ -44,7 +44,10 @@ def heldout_material(cls: str, g: np.random.Generator, name: str) -> Material:
     cond = lambda: {"type": "conductor", "roughness": rough(), "r0": r0()}
     layers = {"conductor": lambda: [cond()], "dielectric": lambda: [diel()],
               "two_layer": lambda: [diel(), med(), cond()],
-              "three_layer": lambda: [diel(), med(), diel(), med(), cond()]}[cls]()
+              "three_layer": lambda: [diel(), med(), diel(), med(), cond()],
+              "three_layer_diffuse": lambda: [diel(), med(), diel(), med(),
+                                              {"type": "diffuse", "albedo": [float(round(x, 6)) for x in _u(g, 3)]}],
+              }[cls]()
     return parse_material({"format": MATERIAL_FORMAT, "name": name, "layers": layers})
 
 
@@ -138,7 +141,7 @@ def score(refs: list[tuple[str, Material, Reference]], method: Method, progress:
 
 def summarise(rows: list[dict]) -> dict:
     out = {}
-    for cls in ["conductor", "dielectric", "two_layer", "three_layer", "diffuse_base"]:
+    for cls in CLASS_COUNTS:
         sel = [r for r in rows if r["class"] == cls]
         if not sel:
             continue

@@ -35,7 +35,7 @@ from neural.leaf import LEAF_PARAMS, LeafEncoders
 from neural.model import NeuralModel, load_model, save_model
 from neural.sampling import SamplerNet, lambert_pdf, proxy_pdf, proxy_sample
 from training.analytic import GGXConductor, GGXDielectric, Lambertian
-from training.dataset import CLASSES, P, load_manifest, load_split, sample_pairs, sample_params
+from training.dataset import CLASSES, DIFFUSE_BASED, THREE_LAYERED, P, load_manifest, load_split, sample_pairs, sample_params
 
 Tensor = torch.Tensor
 
@@ -222,13 +222,13 @@ def stack_latents(model: NeuralModel, params: Tensor, layering: LayeringNet | No
         if name == "dielectric":
             out[sel] = leaf.dielectric(pick("top_roughness"), pick("top_ior"))
             continue
-        if name == "diffuse_base":
+        if name in DIFFUSE_BASED:
             z = leaf.diffuse(pick("base_value"))
         else:
             z = leaf.conductor(pick("base_roughness"), pick("base_value"))
-        if name == "three_layer":
+        if name in THREE_LAYERED:
             z = net(leaf.dielectric(pick("mid_roughness"), pick("mid_ior")), z, pick("albedo_2"), pick("sigma_t_2"))
-        if name in ("two_layer", "three_layer", "diffuse_base"):
+        if name != "conductor":
             z = net(leaf.dielectric(pick("top_roughness"), pick("top_ior")), z, pick("albedo_1"), pick("sigma_t_1"))
         out = out.index_put((sel,), z)
     return out
@@ -269,13 +269,16 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
     train = _StackData(cfg.data, "train", s_)
     val = _StackData(cfg.data, "val", s_)
     two = train.index_of("two_layer", "diffuse_base")
-    three = train.index_of("three_layer")
+    three = train.index_of(*THREE_LAYERED)
     if two.numel() == 0:
         raise NbrdfError(f"{cfg.data}: no two-layer or diffuse-base stacks to train the layering network on")
     net = LayeringNet(layering_spec(width=cfg.width or 256))
-    with torch.no_grad():  # start as the identity "the top hides nothing"
-        net.mlp.net[-1].weight.mul_(0.1)
-        net.mlp.net[-1].bias.zero_()
+    if model.layering is not None and model.layering.spec == net.spec:
+        net.load_state_dict(model.layering.state_dict())  # fine-tune the bundle's network
+    else:
+        with torch.no_grad():  # start as the identity "the top hides nothing"
+            net.mlp.net[-1].weight.mul_(0.1)
+            net.mlp.net[-1].bias.zero_()
 
     def loss_on(data: _StackData, idx: Tensor, pairs: int) -> Tensor:
         params, feats, cos_o, target = data.batch(idx, pairs, g)
@@ -291,7 +294,7 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
 
     def validate() -> dict:
         out = {}
-        for name in ("two_layer", "diffuse_base", "three_layer"):
+        for name in ("two_layer", "diffuse_base") + THREE_LAYERED:
             idx = val.index_of(name)
             if idx.numel():
                 out[name] = loss_on(val, idx, val.feats.shape[1]).item()

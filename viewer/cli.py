@@ -437,7 +437,8 @@ def build_parser() -> argparse.ArgumentParser:
            "sampler": ("proxy-pdf network, by KL divergence to decoded lobes", 3000, 64, 256, 3e-3)}
     for what, (help_, steps, batch, pairs, lr) in ops.items():
         to = tsub.add_parser(what, help=help_)
-        to.add_argument("--decoder", help="bundle to build on (default: the shipped weights)")
+        to.add_argument("--decoder", help="bundle to build on (default: the shipped weights); a network of the "
+                                          "same shape already in it is fine-tuned")
         to.add_argument("--out", required=True, help="run folder (checkpoint, curves, model.safetensors)")
         to.add_argument("--steps", type=int, default=steps)
         to.add_argument("--batch", type=int, default=batch, help="BRDFs per step")

@@ -38,11 +38,13 @@ def analytic_uniforms(m: Material) -> dict:
     }
 
 
-def lobe_roughness_hint(m: Material) -> float:
-    """Roughness of the sharpest lobe the lit view should importance-sample:
-    the top interface's, or a single layer's own (1 for a diffuse one)."""
+def proxy_hint(m: Material) -> tuple[float, float]:
+    """A proxy pdf (sigma, w) guessed from the top layer when no sampler
+    network is at hand: the half-vector spread of its GGX lobe (about
+    roughness / sqrt 2), half of the samples cosine-distributed."""
     top = m.layers[0]
     r = getattr(top, "roughness", None)
-    if isinstance(r, (int, float)):
-        return float(r)
-    return 1.0 if isinstance(top, Diffuse) or r is None else 0.3  # texture-mapped: a middle value
+    if isinstance(top, Diffuse):
+        return 1.0, 0.9
+    r = float(r) if isinstance(r, (int, float)) else 0.3  # texture-mapped: a middle value
+    return max(0.01, 0.71 * r), 0.5

@@ -71,38 +71,62 @@ def _pairs_array(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     return out
 
 
-def probe_fragment(ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor, wi: np.ndarray, wo: np.ndarray,
-                   prog: moderngl.Program | None = None) -> np.ndarray:
-    """nb_decode at N pairs through a fragment shader (texture weights); (N, 3)."""
-    n = wi.shape[0]
-    prog = prog or ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
-                               fragment_shader=gdec.source("decoder_probe.frag"))
+def probe_pass(ctx: moderngl.Context, prog: moderngl.Program, texels: np.ndarray, n: int,
+               setup=lambda prog: None) -> np.ndarray:
+    """One fullscreen pass of a probe shader: ``texels`` (M, 4) float32 go in
+    as texture ``u_pairs`` (rows of 1024), pixel k of the (N, 4) result is
+    what the shader writes for item k."""
     tw = 1024
-    pairs = _pairs_array(wi, wo)
-    rows = -(-pairs.shape[0] // tw)
+    rows = -(-texels.shape[0] // tw)
     buf = np.zeros((rows * tw, 4), np.float32)
-    buf[: pairs.shape[0]] = pairs
+    buf[: texels.shape[0]] = texels
     ptex = ctx.texture((tw, rows), 4, buf.tobytes(), dtype="f4")
     ptex.filter = (moderngl.NEAREST, moderngl.NEAREST)
     ow = 512
-    oh = -(-n // ow)
-    target = ctx.texture((ow, oh), 4, dtype="f4")
+    target = ctx.texture((ow, -(-n // ow)), 4, dtype="f4")
     fbo = ctx.framebuffer([target])
     try:
         fbo.use()
         ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
-        gdec.bind(prog)
-        gdec.set_latent(prog, z)
+        setup(prog)
         ptex.use(0)
         prog["u_pairs"].value = 0
         prog["u_pairs_w"].value = tw
         prog["u_target_w"].value = ow
         ctx.vertex_array(prog, []).render(moderngl.TRIANGLES, vertices=3)
-        out = np.frombuffer(target.read(), np.float32).reshape(-1, 4)[:n, :3].copy()
+        return np.frombuffer(target.read(), np.float32).reshape(-1, 4)[:n].copy()
     finally:
         for r in (fbo, target, ptex):
             r.release()
-    return out
+
+
+def probe_fragment(ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor, wi: np.ndarray, wo: np.ndarray,
+                   prog: moderngl.Program | None = None) -> np.ndarray:
+    """nb_decode at N pairs through a fragment shader (texture weights); (N, 3)."""
+    prog = prog or ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
+                               fragment_shader=gdec.source("decoder_probe.frag"))
+
+    def setup(p: moderngl.Program) -> None:
+        gdec.bind(p)
+        gdec.set_latent(p, z)
+
+    return probe_pass(ctx, prog, _pairs_array(wi, wo), wi.shape[0], setup)[:, :3]
+
+
+def probe_proxy_sampling(ctx: moderngl.Context, wi: np.ndarray, u: np.ndarray, sigma: float,
+                         w: float) -> np.ndarray:
+    """GLSL sample_proxy / pdf_proxy for N (wi, u) items: (N, 4) = wo.xyz, pdf."""
+    prog = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
+                       fragment_shader=shaders.source("sampling_probe.frag"))
+
+    def setup(p: moderngl.Program) -> None:
+        p["u_sigma"].value = float(sigma)
+        p["u_w"].value = float(w)
+
+    try:
+        return probe_pass(ctx, prog, _pairs_array(wi, u), wi.shape[0], setup)
+    finally:
+        prog.release()
 
 
 def probe_compute(ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor, wi: np.ndarray,

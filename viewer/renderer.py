@@ -18,7 +18,7 @@ from neural.errors import NbrdfError
 from neural.material import Material
 from viewer import shaders
 from viewer.camera import OrbitCamera
-from viewer.materials_gpu import analytic_uniforms, lobe_roughness_hint
+from viewer.materials_gpu import analytic_uniforms, proxy_hint
 from viewer.mesh import Mesh, named_mesh
 
 if TYPE_CHECKING:
@@ -49,9 +49,11 @@ class Renderer:
     """Owns the GL programs, the mesh buffers and the framebuffers."""
 
     def __init__(self, ctx: moderngl.Context, material: Material, mesh: str | Mesh = "sphere",
-                 neural: "GpuDecoder | None" = None, latent: "torch.Tensor | None" = None):
-        """``neural`` (with the material's ``latent``, (3, 32)) shades with the
-        decoder in GLSL; without it the closed-form shader is used."""
+                 neural: "GpuDecoder | None" = None, latent: "torch.Tensor | None" = None,
+                 proxy: tuple[float, float] | None = None):
+        """``neural`` (with the material's ``latent``, (3, 32), and its proxy
+        pdf's (sigma, w)) shades with the decoder in GLSL; without it the
+        closed-form shader is used."""
         self.ctx = ctx
         self.neural = neural
         if neural is None:
@@ -73,7 +75,7 @@ class Renderer:
         self.empty_slice = ctx.vertex_array(self.slice, [])
         self.empty_tone = ctx.vertex_array(self.tone, [])
         self.set_mesh(mesh)
-        self.set_material(material, latent)
+        self.set_material(material, latent, proxy)
         self._fbo: dict[tuple[int, int], tuple[moderngl.Framebuffer, moderngl.Texture]] = {}
         self._dummy = ctx.texture((1, 1), 4, dtype="f4")
 
@@ -87,15 +89,19 @@ class Renderer:
             self.obj, [(vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")], ibo,
             skip_errors=True)
 
-    def set_material(self, material: Material, latent: "torch.Tensor | None" = None) -> None:
-        """A new material: closed-form uniforms, or (neural) its latent's share of layer 1."""
+    def set_material(self, material: Material, latent: "torch.Tensor | None" = None,
+                     proxy: tuple[float, float] | None = None) -> None:
+        """A new material: closed-form uniforms, or (neural) its latent's share
+        of layer 1 and the (sigma, w) of its proxy pdf (without one, a proxy
+        guessed from the top layer's roughness: slower to converge, never biased)."""
         self.material = material
         if self.neural is None:
             self.uniforms = analytic_uniforms(material)
         else:
             if latent is None:
                 raise NbrdfError("the neural renderer needs the material's latent")
-            self.uniforms = {"u_lobe_roughness": lobe_roughness_hint(material)}
+            sigma, w = proxy if proxy is not None else proxy_hint(material)
+            self.uniforms = {"u_proxy_sigma": float(sigma), "u_proxy_w": float(w)}
             for prog in (self.obj, self.lobe, self.slice):
                 self.neural.set_latent(prog, latent)
         for prog in (self.obj, self.lobe, self.slice):

@@ -80,8 +80,11 @@ def has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
-def render_offscreen(opts: ViewOptions) -> Path:
-    """Renders the view through EGL and writes ``opts.out``."""
+def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
+    """Renders the view through EGL and writes ``opts.out``. As the fallback
+    for a window (``fallback`` = why there is none, said in one line), it is a
+    preview: on software OpenGL at most 256 x 256 and 4 passes, because the
+    neural shader costs minutes there at full size."""
     from neural.material import load_material
     from viewer.gl import offscreen_context
     from viewer.image_io import write_image
@@ -94,6 +97,16 @@ def render_offscreen(opts: ViewOptions) -> Path:
 
         read_environment(opts.env)  # validated now; image-based lighting comes with the GPU renderer
     ctx = offscreen_context()
+    if fallback is not None:
+        note = ""
+        if any(k in ctx.info.get("GL_RENDERER", "").lower() for k in ("llvmpipe", "softpipe", "swrast")):
+            w, h = opts.size
+            scale = min(1.0, 256 / max(w, h))
+            size, spp = (max(1, round(w * scale)), max(1, round(h * scale))), min(opts.spp, 4)
+            if (size, spp) != (opts.size, opts.spp):
+                opts.size, opts.spp = size, spp
+                note = f" (software OpenGL: a {size[0]}x{size[1]}, {spp}-pass preview)"
+        print(f"{PROG}: {fallback}; rendering offscreen to {out} instead{note}", file=sys.stderr)
     r = make_renderer(ctx, material, opts)
     state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap)
     img = r.render_linear(state, opts.size, opts.spp)
@@ -123,7 +136,8 @@ def make_renderer(ctx, material, opts: ViewOptions):
         from training.project import fit, material_samples
 
         z = fit(model.decoder, material_samples(material))
-    return Renderer(ctx, material, opts.mesh, neural=GpuDecoder(ctx, model.decoder), latent=z)
+    proxy = model.proxy(z) if model.sampler is not None else None
+    return Renderer(ctx, material, opts.mesh, neural=GpuDecoder(ctx, model.decoder), latent=z, proxy=proxy)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -133,17 +147,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             render_offscreen(opts)
             return 0
         if not has_display():
-            print(f"{PROG}: no display found; rendering offscreen to {opts.out or HEADLESS_OUT} instead", file=sys.stderr)
-            render_offscreen(opts)
+            render_offscreen(opts, fallback="no display found")
             return 0
         from viewer.app import App, WindowUnavailable
 
         try:
             app = App(opts)
         except WindowUnavailable as e:
-            print(f"{PROG}: cannot open a window ({e}); rendering offscreen to {opts.out or HEADLESS_OUT} instead",
-                  file=sys.stderr)
-            render_offscreen(opts)
+            render_offscreen(opts, fallback=f"cannot open a window ({e})")
             return 0
         app.run()
         return 0

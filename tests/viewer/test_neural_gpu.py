@@ -120,3 +120,21 @@ def test_bench_render_reports_both_paths():
     r = bench_render((48, 32), repeats=1, torch_pairs=4096)
     assert r["size"] == "48x32" and r["decoder_only_ms"] > 0 and r["full_shading_one_light_ms"] > 0
     assert r["glsl_over_torch"] == pytest.approx(r["glsl_rgb_evals_per_s"] / r["torch_cpu_rgb_evals_per_s"], rel=1e-2)
+
+
+def test_glsl_proxy_sampling_matches_torch_for_the_same_random_numbers(gl_ctx):
+    """sample_proxy / pdf_proxy in GLSL against neural/sampling.py, both lobes."""
+    from neural.sampling import proxy_sample
+    from viewer.neural_gpu import probe_proxy_sampling
+
+    g = torch.Generator().manual_seed(11)
+    n = 2048
+    wi = torch.nn.functional.normalize(torch.rand(n, 3, generator=g) * torch.tensor([2.0, 2.0, 1.0])
+                                       - torch.tensor([1.0, 1.0, -0.05]), dim=-1)
+    u = torch.rand(n, 3, generator=g) * 0.998 + 0.001
+    for sigma, w in ((0.05, 0.3), (0.4, 0.7)):
+        wo, pdf = proxy_sample(wi, u, sigma, w)
+        out = probe_proxy_sampling(gl_ctx, wi.numpy(), u.numpy(), sigma, w)
+        np.testing.assert_allclose(out[:, :3], wo.numpy(), atol=2e-4)
+        ok = wo[:, 2].numpy() > 0.01
+        np.testing.assert_allclose(out[ok, 3], pdf.numpy()[ok], rtol=2e-3, atol=1e-4)

@@ -105,3 +105,8 @@ float lobe_roughness() {
     if (u_num_interfaces > 0) return u_if_roughness[0];
     return u_base_type == 1 ? 1.0 : u_base_roughness;
 }
+
+// The lit view's lobe strategy: GGX visible normals of that roughness.
+//@INCLUDE sampling.glsl
+vec3 sample_lobe(vec3 wo, vec3 u) { return reflect(-wo, sample_vndf(wo, lobe_roughness(), u.xy)); }
+float pdf_lobe(vec3 wo, vec3 wi) { return pdf_ggx_reflection(wo, wi, lobe_roughness()); }

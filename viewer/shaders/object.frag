@@ -1,5 +1,6 @@
 // Lit object: one directional light plus a procedural sky, sampled by cosine
-// hemisphere sampling, one sample per pass; passes are averaged (progressive).
+// hemisphere and BRDF-lobe sampling with MIS, one sample of each per pass;
+// passes are averaged (progressive).
 //@INCLUDE common.glsl
 //@INCLUDE brdf
 //@INCLUDE sampling.glsl
@@ -37,17 +38,15 @@ void main() {
     vec3 wl = to_local * normalize(u_light_dir);
     if (wl.z > 0.0) color += brdf(wl, wo) * u_light_radiance * wl.z;
     if (u_env_on == 0) { frag = vec4(color, 1.0); return; }
-    // Environment: one cosine sample and one GGX-lobe sample per pass, balance heuristic.
-    float a = lobe_roughness();
+    // Environment: one cosine sample and one sample of the BRDF's lobe strategy
+    // (sample_lobe / pdf_lobe of the BRDF snippet) per pass, balance heuristic.
     float pc;
     vec3 wc = sample_cosine(rand2(uvec2(gl_FragCoord.xy), u_pass, 0u), pc);
-    float pg_c = pdf_ggx_reflection(wo, wc, a);
-    color += brdf(wc, wo) * wc.z / (pc + pg_c) * sky(tbn * wc) * u_env_intensity;
-    vec3 m = sample_vndf(wo, a, rand2(uvec2(gl_FragCoord.xy), u_pass, 1u));
-    vec3 wg = reflect(-wo, m);
+    color += brdf(wc, wo) * wc.z / (pc + pdf_lobe(wo, wc)) * sky(tbn * wc) * u_env_intensity;
+    vec3 ul = vec3(rand2(uvec2(gl_FragCoord.xy), u_pass, 1u), rand2(uvec2(gl_FragCoord.xy), u_pass, 2u).x);
+    vec3 wg = sample_lobe(wo, ul);
     if (wg.z > 0.0) {
-        float pg = pdf_ggx_reflection(wo, wg, a);
-        color += brdf(wg, wo) * wg.z / (pg + pdf_cosine(wg)) * sky(tbn * wg) * u_env_intensity;
+        color += brdf(wg, wo) * wg.z / (pdf_lobe(wo, wg) + pdf_cosine(wg)) * sky(tbn * wg) * u_env_intensity;
     }
     frag = vec4(color, 1.0);
 }

@@ -31,3 +31,26 @@ float pdf_ggx_reflection(vec3 wo, vec3 wi, float a) {
     float g1 = 2.0 / (1.0 + sqrt(1.0 + a * a * (wo.x * wo.x + wo.y * wo.y) / (wo.z * wo.z)));
     return g1 * max(dot(wo, h), 0.0) * ggx_d(h, a) / wo.z / (4.0 * max(dot(wo, h), 1e-8));
 }
+
+// The learned proxy pdf (neural/sampling.py): (1 - w) an isotropic Gaussian of
+// width s over the projected half vector, normalised on the unit disk, plus w a
+// cosine lobe. Sampled from one direction (the view), reflected about h.
+float proxy_disk_norm(float s) { return 2.0 * PI * s * s * (1.0 - exp(-0.5 / (s * s))); }
+
+float pdf_proxy(vec3 v, vec3 l, float s, float w) {
+    vec3 h = normalize(v + l);
+    if (h.z < 0.0) h = -h;
+    float pg = exp(-0.5 * dot(h.xy, h.xy) / (s * s)) / proxy_disk_norm(s) * h.z / (4.0 * max(abs(dot(v, h)), 1e-12));
+    return (1.0 - w) * pg + w * max(l.z, 0.0) / PI;
+}
+
+vec3 sample_proxy(vec3 v, vec3 u, float s, float w) {
+    float phi = 2.0 * PI * u.z;
+    if (u.x < w) {
+        float r = sqrt(u.y);
+        return vec3(r * cos(phi), r * sin(phi), sqrt(max(0.0, 1.0 - u.y)));
+    }
+    float r = min(s * sqrt(-2.0 * log(1.0 - u.y * (1.0 - exp(-0.5 / (s * s))))), 1.0);
+    vec3 h = vec3(r * cos(phi), r * sin(phi), sqrt(max(0.0, 1.0 - r * r)));
+    return normalize(2.0 * dot(v, h) * h - v);
+}
