@@ -200,6 +200,9 @@ def train_leaf(cfg: OpsConfig, progress: bool = True) -> Path:
     t0 = time.perf_counter()
     history = _run_loop("leaf", cfg, {"leaf": leaf}, cfg.steps, step, validate, progress)
     model.leaf = leaf
+    model.layering = model.sampler = None  # trained on the old leaf latents: retrain them on these
+    for stale in ("layering", "sampler"):
+        model.trained_on.pop(stale, None)
     return _finish("leaf", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
                                                  "val_loss": history["val"][-1]})
 
@@ -303,6 +306,8 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
     t0 = time.perf_counter()
     history = _run_loop("layering", cfg, {"layering": net}, cfg.steps, step, validate, progress)
     model.layering = net
+    model.sampler = None  # trained on the old layered latents: retrain it on these
+    model.trained_on.pop("sampler", None)
     return _finish("layering", cfg, model, history, {
         "seconds_this_run": round(time.perf_counter() - t0, 1), "val_loss": history["val"][-1],
         "data_preset": manifest.get("preset"), "train_stacks": int(two.numel() + three.numel())})

@@ -37,14 +37,16 @@ SCRIPT = textwrap.dedent("""
 
 def test_window_matches_offscreen(xvfb_display, gl_ctx, tmp_path):
     from neural.material import load_material
-    from viewer.renderer import Renderer, ViewState
+    from viewer.renderer import ViewState
+    from viewer.view_cli import ViewOptions, make_renderer
 
     env = dict(os.environ, DISPLAY=xvfb_display)
     r = subprocess.run([sys.executable, "-c", SCRIPT, str(DEFAULT_MATERIAL), str(tmp_path / "win.npy")],
                        env=env, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     shown = np.load(tmp_path / "win.npy").astype(int)
-    ref = Renderer(gl_ctx, load_material(DEFAULT_MATERIAL)).render_linear(ViewState(), (64, 48), spp=4)
+    renderer = make_renderer(gl_ctx, load_material(DEFAULT_MATERIAL), ViewOptions(material=DEFAULT_MATERIAL))
+    ref = renderer.render_linear(ViewState(), (64, 48), spp=4)
     expected = tonemap(ref).astype(int)
     assert shown.shape == expected.shape
     assert np.abs(shown - expected).max() <= 2  # 8-bit rounding in GLSL vs numpy
