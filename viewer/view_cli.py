@@ -83,7 +83,7 @@ def has_display() -> bool:
 def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     """Renders the view through EGL and writes ``opts.out``. As the fallback
     for a window (``fallback`` = why there is none, said in one line), it is a
-    preview: on software OpenGL at most 256 x 256 and 4 passes, because the
+    preview: on software OpenGL at most 256 x 256 and 8 passes, because the
     neural shader costs minutes there at full size."""
     from neural.material import load_material
     from viewer.gl import offscreen_context
@@ -102,7 +102,7 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
         if any(k in ctx.info.get("GL_RENDERER", "").lower() for k in ("llvmpipe", "softpipe", "swrast")):
             w, h = opts.size
             scale = min(1.0, 256 / max(w, h))
-            size, spp = (max(1, round(w * scale)), max(1, round(h * scale))), min(opts.spp, 4)
+            size, spp = (max(1, round(w * scale)), max(1, round(h * scale))), min(opts.spp, 8)
             if (size, spp) != (opts.size, opts.spp):
                 opts.size, opts.spp = size, spp
                 note = f" (software OpenGL: a {size[0]}x{size[1]}, {spp}-pass preview)"

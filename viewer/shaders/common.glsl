@@ -17,8 +17,13 @@ uint pcg_hash(uint v) {
     return (word >> 22u) ^ word;
 }
 
+// Per-pixel random numbers for pass ``pass_index``: the R2 low-discrepancy
+// sequence (Roberts 2018) over passes, shifted per pixel and dimension by a
+// hashed offset (Cranley-Patterson rotation), so the passes of one pixel are
+// stratified and neighbouring pixels decorrelated.
 vec2 rand2(uvec2 pixel, uint pass_index, uint dim) {
-    uint h = pcg_hash(pixel.x + pcg_hash(pixel.y + pcg_hash(pass_index * 16u + dim)));
+    uint h = pcg_hash(pixel.x + pcg_hash(pixel.y + pcg_hash(dim)));
     uint h2 = pcg_hash(h);
-    return vec2(float(h >> 8) / 16777216.0, float(h2 >> 8) / 16777216.0);
+    vec2 offset = vec2(float(h >> 8) / 16777216.0, float(h2 >> 8) / 16777216.0);
+    return fract(offset + float(pass_index) * vec2(0.7548776662466927, 0.5698402909980532));
 }
