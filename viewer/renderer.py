@@ -18,6 +18,7 @@ from neural.errors import NbrdfError
 from neural.material import Material
 from viewer import shaders
 from viewer.camera import OrbitCamera
+from viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
 from viewer.materials_gpu import analytic_uniforms, proxy_hint
 from viewer.mesh import Mesh, named_mesh
 
@@ -40,6 +41,7 @@ class ViewState:
     light_dir: tuple[float, float, float] = (0.4, -0.6, 0.7)   # toward the light, world
     light_radiance: float = 3.0
     env_intensity: float = 0.6
+    env_rotation: float = 0.0                  # degrees about world z
     env_on: bool = True                        # False: the directional light alone
     exposure: float = 0.0                      # stops
     tonemap: str = "aces"                      # aces | linear
@@ -50,10 +52,11 @@ class Renderer:
 
     def __init__(self, ctx: moderngl.Context, material: Material, mesh: str | Mesh = "sphere",
                  neural: "GpuDecoder | None" = None, latent: "torch.Tensor | None" = None,
-                 proxy: tuple[float, float] | None = None):
+                 proxy: tuple[float, float] | None = None, environment: np.ndarray | None = None):
         """``neural`` (with the material's ``latent``, (3, 32), and its proxy
         pdf's (sigma, w)) shades with the decoder in GLSL; without it the
-        closed-form shader is used."""
+        closed-form shader is used. ``environment`` is an equirectangular
+        float32 (H, W, 3) radiance map (default: the project's own sky)."""
         self.ctx = ctx
         self.neural = neural
         if neural is None:
@@ -75,6 +78,8 @@ class Renderer:
         self.empty_slice = ctx.vertex_array(self.slice, [])
         self.empty_tone = ctx.vertex_array(self.tone, [])
         self.set_mesh(mesh)
+        self.env: GpuEnvironment | None = None
+        self.set_environment(environment)
         self.set_material(material, latent, proxy)
         self._fbo: dict[tuple[int, int], tuple[moderngl.Framebuffer, moderngl.Texture]] = {}
         self._dummy = ctx.texture((1, 1), 4, dtype="f4")
@@ -88,6 +93,13 @@ class Renderer:
         self.obj_vao = self.ctx.vertex_array(
             self.obj, [(vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")], ibo,
             skip_errors=True)
+
+    def set_environment(self, radiance: np.ndarray | None = None) -> None:
+        """A new environment map (None: the default sky), sampling tables included."""
+        new = GpuEnvironment(self.ctx, EnvironmentMap(default_environment() if radiance is None else radiance))
+        if self.env is not None:
+            self.env.release()
+        self.env = new
 
     def set_material(self, material: Material, latent: "torch.Tensor | None" = None,
                      proxy: tuple[float, float] | None = None) -> None:
@@ -160,6 +172,8 @@ class Renderer:
         p["u_light_radiance"].value = (state.light_radiance,) * 3
         p["u_env_intensity"].value = state.env_intensity
         p["u_env_on"].value = int(state.env_on)
+        p["u_strategies"].value = 4
+        self.env.bind(p, math.radians(state.env_rotation))
         fbo = self.ctx.fbo
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.disable(moderngl.BLEND)

@@ -6,6 +6,7 @@ can be opened) it renders the same view through EGL to an image.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from dataclasses import dataclass
@@ -35,6 +36,8 @@ class ViewOptions:
     exposure: float = 0.0
     tonemap: str = "aces"
     brdf: str = "auto"
+    env_rotation: float = 0.0
+    env_intensity: float = 0.6
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -51,7 +54,9 @@ def parse_args(argv: Sequence[str] | None) -> ViewOptions:
     p = _Parser(prog=PROG, description="Real-time neural BRDF previewer.")
     p.add_argument("material", nargs="?", default=str(DEFAULT_MATERIAL), help="material JSON (default: varnished copper)")
     p.add_argument("--mesh", default="sphere", help="sphere, testmesh, or an OBJ/glTF file")
-    p.add_argument("--env", default=None, help="equirectangular .hdr/.exr environment")
+    p.add_argument("--env", default=None, help="equirectangular .hdr/.exr environment (default: the built-in sky)")
+    p.add_argument("--env-rotation", type=float, default=0.0, help="environment rotation about the up axis, degrees")
+    p.add_argument("--env-intensity", type=float, default=0.6, help="environment radiance scale")
     p.add_argument("--view", default="object", choices=("object", "lobe", "slice"))
     p.add_argument("--theta-i", type=float, default=30.0, help="incidence angle of the lobe view, degrees")
     p.add_argument("--offscreen", action="store_true", help="render through EGL to --out instead of opening a window")
@@ -69,11 +74,13 @@ def parse_args(argv: Sequence[str] | None) -> ViewOptions:
         raise NbrdfError(f"--spp: {a.spp} must be at least 1")
     if not (0.0 <= a.theta_i < 90.0):
         raise NbrdfError(f"--theta-i: {a.theta_i} is outside [0, 90)")
+    if not (math.isfinite(a.env_intensity) and a.env_intensity >= 0) or not math.isfinite(a.env_rotation):
+        raise NbrdfError("--env-intensity must be finite and >= 0, --env-rotation finite")
     if a.offscreen and not a.out:
         raise NbrdfError("--offscreen needs --out IMG")
     return ViewOptions(material=Path(a.material), mesh=a.mesh, env=a.env, view=a.view, theta_i=a.theta_i,
                        offscreen=a.offscreen, out=a.out, size=_size(a.size), spp=a.spp, exposure=a.exposure,
-                       tonemap=a.tonemap, brdf=a.brdf)
+                       tonemap=a.tonemap, brdf=a.brdf, env_rotation=a.env_rotation, env_intensity=a.env_intensity)
 
 
 def has_display() -> bool:
@@ -92,10 +99,6 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
 
     out = Path(opts.out or HEADLESS_OUT)
     material = load_material(opts.material)
-    if opts.env is not None:
-        from viewer.image_io import read_environment
-
-        read_environment(opts.env)  # validated now; image-based lighting comes with the GPU renderer
     ctx = offscreen_context()
     if fallback is not None:
         note = ""
@@ -108,7 +111,8 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
                 note = f" (software OpenGL: a {size[0]}x{size[1]}, {spp}-pass preview)"
         print(f"{PROG}: {fallback}; rendering offscreen to {out} instead{note}", file=sys.stderr)
     r = make_renderer(ctx, material, opts)
-    state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap)
+    state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap,
+                      env_rotation=opts.env_rotation, env_intensity=opts.env_intensity)
     img = r.render_linear(state, opts.size, opts.spp)
     if opts.view == "lobe" and out.suffix.lower() == ".png":
         img = img[::-1]  # a picture shows +y up
@@ -120,12 +124,17 @@ def make_renderer(ctx, material, opts: ViewOptions):
     """The renderer of ``opts.brdf``: closed form, or the decoder in GLSL."""
     from viewer.renderer import Renderer
 
+    env = None
+    if opts.env is not None:
+        from viewer.image_io import read_environment
+
+        env = read_environment(opts.env)
     mode = opts.brdf
     if mode == "auto":
         mode = "analytic" if not material.interfaces and material.base.type in ("conductor", "dielectric",
                                                                                "diffuse") else "neural"
     if mode == "analytic":
-        return Renderer(ctx, material, opts.mesh)
+        return Renderer(ctx, material, opts.mesh, environment=env)
     from neural.model import default_model
     from viewer.neural_gpu import GpuDecoder
 
@@ -137,7 +146,8 @@ def make_renderer(ctx, material, opts: ViewOptions):
 
         z = fit(model.decoder, material_samples(material))
     proxy = model.proxy(z) if model.sampler is not None else None
-    return Renderer(ctx, material, opts.mesh, neural=GpuDecoder(ctx, model.decoder), latent=z, proxy=proxy)
+    return Renderer(ctx, material, opts.mesh, neural=GpuDecoder(ctx, model.decoder), latent=z, proxy=proxy,
+                    environment=env)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,9 +1,13 @@
-// Lit object: one directional light plus a procedural sky, sampled by cosine
-// hemisphere and BRDF-lobe sampling with MIS, one sample of each per pass;
-// passes are averaged (progressive).
+// Lit object: a directional light plus an HDR environment. Per pass and pixel,
+// one sample each of three strategies -- the environment's luminance CDF, the
+// BRDF's lobe (sample_lobe / pdf_lobe of the BRDF snippet: the learned proxy pdf
+// for neural materials, GGX visible normals for closed-form ones) and the cosine
+// lobe -- combined by the balance heuristic; passes are averaged (progressive).
+// No shadowing: one object under a distant environment.
 //@INCLUDE common.glsl
 //@INCLUDE brdf
 //@INCLUDE sampling.glsl
+//@INCLUDE environment.glsl
 
 in vec3 v_world;
 in vec3 v_normal;
@@ -19,13 +23,8 @@ uniform uint u_pass;
 
 out vec4 frag;
 
-vec3 sky(vec3 d) {
-    float t = clamp(d.z, -1.0, 1.0);  // world z is up
-    vec3 zenith = vec3(0.35, 0.55, 1.0);
-    vec3 horizon = vec3(1.0, 0.95, 0.85);
-    vec3 ground = vec3(0.25, 0.22, 0.2);
-    return t >= 0.0 ? mix(horizon, zenith, pow(t, 0.6)) : mix(horizon, ground, pow(-t, 0.4));
-}
+uniform int u_strategies;  // 4: the light and three environment strategies (a uniform, so the loop
+                           // is not unrolled: one call site of the BRDF keeps the shader small)
 
 void main() {
     vec3 n = normalize(v_normal);
@@ -34,19 +33,27 @@ void main() {
     mat3 tbn = frame_from_normal(n);
     mat3 to_local = transpose(tbn);
     vec3 wo = to_local * view;
+    uvec2 px = uvec2(gl_FragCoord.xy);
     vec3 color = vec3(0.0);
-    vec3 wl = to_local * normalize(u_light_dir);
-    if (wl.z > 0.0) color += brdf(wl, wo) * u_light_radiance * wl.z;
-    if (u_env_on == 0) { frag = vec4(color, 1.0); return; }
-    // Environment: one cosine sample and one sample of the BRDF's lobe strategy
-    // (sample_lobe / pdf_lobe of the BRDF snippet) per pass, balance heuristic.
-    float pc;
-    vec3 wc = sample_cosine(rand2(uvec2(gl_FragCoord.xy), u_pass, 0u), pc);
-    color += brdf(wc, wo) * wc.z / (pc + pdf_lobe(wo, wc)) * sky(tbn * wc) * u_env_intensity;
-    vec3 ul = vec3(rand2(uvec2(gl_FragCoord.xy), u_pass, 1u), rand2(uvec2(gl_FragCoord.xy), u_pass, 2u).x);
-    vec3 wg = sample_lobe(wo, ul);
-    if (wg.z > 0.0) {
-        color += brdf(wg, wo) * wg.z / (pdf_lobe(wo, wg) + pdf_cosine(wg)) * sky(tbn * wg) * u_env_intensity;
+    int count = u_env_on == 0 ? 1 : u_strategies;
+    for (int k = 0; k < count; ++k) {
+        vec3 l;
+        float unused;
+        if (k == 0) l = to_local * normalize(u_light_dir);
+        else if (k == 1) l = to_local * sample_env(rand2(px, u_pass, 0u), unused);
+        else if (k == 2) l = sample_lobe(wo, vec3(rand2(px, u_pass, 1u), rand2(px, u_pass, 2u).x));
+        else l = sample_cosine(rand2(px, u_pass, 3u), unused);
+        if (l.z <= 0.0) continue;
+        vec3 weight;  // radiance over (MIS-weighted) pdf
+        if (k == 0) {
+            weight = u_light_radiance;
+        } else {
+            vec3 lw = tbn * l;
+            float p = pdf_env(lw) + pdf_lobe(wo, l) + pdf_cosine(l);
+            if (p <= 0.0) continue;
+            weight = env_radiance(lw) * u_env_intensity / p;
+        }
+        color += brdf(l, wo) * l.z * weight;
     }
     frag = vec4(color, 1.0);
 }
