@@ -19,6 +19,13 @@ def incidence(theta_i_deg: float, dtype: torch.dtype = torch.float32) -> torch.T
     return torch.tensor([math.sin(t), 0.0, math.cos(t)], dtype=dtype)
 
 
+def cosine_hemisphere(u1: torch.Tensor, u2: torch.Tensor) -> torch.Tensor:
+    """Cosine-distributed unit vectors (..., 3) about +z from uniforms u1, u2
+    (pdf cos(theta) / pi)."""
+    r, phi = u1.sqrt(), 2 * math.pi * u2
+    return torch.stack([r * torch.cos(phi), r * torch.sin(phi), (1 - u1).clamp_min(0).sqrt()], -1)
+
+
 def normalize(v: torch.Tensor, eps: float = 1e-12) -> torch.Tensor:
     return v / v.norm(dim=-1, keepdim=True).clamp_min(eps)
 

@@ -8,6 +8,7 @@ the file records that decoder's weights id and loading checks it.
 """
 from __future__ import annotations
 
+import functools
 import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -40,8 +41,13 @@ class NeuralModel:
         net = getattr(self, part)
         if net is None:
             raise NbrdfError(f"{self.source or 'the weights'}: no {part} network in this bundle "
-                             f"(train it with `nbrdf train {'leaf' if part == 'leaf' else part}`)")
+                             f"(train it with `nbrdf train {part}`)")
         return net
+
+    @functools.cached_property
+    def decoder_id(self) -> str:
+        """The decoder's weights id, hashed once (a loaded model's weights are frozen)."""
+        return self.decoder.weights_id()
 
     # -- the full path ---------------------------------------------------------------------
     def leaf_latent(self, layer, place: str = "layer") -> Tensor:
@@ -49,7 +55,7 @@ class NeuralModel:
         if isinstance(layer, LatentBase):
             from neural.latent import load_latent
 
-            return load_latent(layer.resolved, self.decoder.weights_id()).z
+            return load_latent(layer.resolved, self.decoder_id).z
         if isinstance(layer, Measured):
             raise NbrdfError(f"{place}: a measured base has no leaf encoder; project it first "
                              "(`nbrdf project --merl FILE --out Z.safetensors`) and use it as a latent base")
@@ -145,9 +151,9 @@ def load_model(path: str | Path | None = None) -> NeuralModel:
         if ops.get("format") != OPS_FORMAT:
             raise NbrdfError(f"{path}: operations format {ops.get('format')!r} is not {OPS_FORMAT}")
         specs = ops["specs"]
-        if ops.get("decoder_id") != dec.weights_id():
+        if ops.get("decoder_id") != model.decoder_id:
             raise NbrdfError(f"{path}: the operation networks were trained for decoder {ops.get('decoder_id')}, "
-                             f"not for this file's decoder {dec.weights_id()}")
+                             f"not for this file's decoder {model.decoder_id}")
         if "leaf" in specs:
             model.leaf = LeafEncoders({k: MLPSpec(**specs["leaf"][k]) for k in LEAF_PARAMS})
             load_state(model.leaf, tensors, "leaf", str(path))

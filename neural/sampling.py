@@ -19,6 +19,7 @@ import math
 import torch
 from torch import nn
 
+from neural.geometry import cosine_hemisphere
 from neural.nets import MLP, MLPSpec
 
 Tensor = torch.Tensor
@@ -89,10 +90,7 @@ def proxy_sample(wi: Tensor, u: Tensor, sigma: Tensor, w: Tensor) -> tuple[Tenso
     r = (sigma * torch.sqrt(-2 * torch.log1p(-u1 * trunc))).clamp(max=1.0)
     h = torch.stack([r * phi.cos(), r * phi.sin(), (1 - r * r).clamp_min(0).sqrt()], -1)
     wo_g = 2 * (wi * h).sum(-1, keepdim=True) * h - wi
-    # Cosine-weighted hemisphere.
-    rl = u1.sqrt()
-    wo_l = torch.stack([rl * phi.cos(), rl * phi.sin(), (1 - u1).clamp_min(0).sqrt()], -1)
-    wo = torch.where((u0 < w)[:, None], wo_l, wo_g)
+    wo = torch.where((u0 < w)[:, None], cosine_hemisphere(u1, u2), wo_g)
     wo = wo / wo.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     return wo, proxy_pdf(wi, wo, sigma, w)
 
@@ -103,8 +101,7 @@ def gndf(fn, n: int = 64, n_wi: int = 64, seed: int = 0) -> Tensor:
     f cos(theta_o)-distributed wo, averaged over cosine-distributed wi."""
     g = torch.Generator().manual_seed(seed)
     a, b = torch.rand(n_wi, generator=g), torch.rand(n_wi, generator=g)
-    wi = torch.stack([a.sqrt() * torch.cos(2 * math.pi * b), a.sqrt() * torch.sin(2 * math.pi * b),
-                      (1 - a).sqrt()], -1)
+    wi = cosine_hemisphere(a, b)
     c = (torch.arange(n) + 0.5) / n * 2 - 1
     y, x = torch.meshgrid(c, c, indexing="ij")
     r2 = x * x + y * y

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import torch
 
 from neural.brdf import Sample
+from neural.geometry import cosine_hemisphere
 from training.microfacet import (
     fresnel_dielectric,
     fresnel_schlick,
@@ -165,10 +166,8 @@ class Lambertian:
         return torch.where(w[..., 2] > 0, p, torch.zeros_like(p))
 
     def sample(self, w: Tensor, u: Tensor) -> Sample:
-        r = torch.sqrt(u[..., 0])
-        phi = 2.0 * math.pi * u[..., 1]
-        z = torch.sqrt((1.0 - u[..., 0]).clamp_min(0.0))
-        wo = torch.stack([r * torch.cos(phi), r * torch.sin(phi), z], dim=-1)
+        wo = cosine_hemisphere(u[..., 0], u[..., 1])
+        z = wo[..., 2]
         pdf = torch.where((w[..., 2] > 0) & (z > 0), z / math.pi, torch.zeros_like(z))
         f = torch.where(pdf > 0, self.eval(w, wo), torch.zeros_like(pdf))
         return Sample(wo, f, pdf)

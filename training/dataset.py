@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from neural.errors import NbrdfError
+from neural.geometry import cosine_hemisphere
 from neural.material import FORMAT as FORMAT_MATERIAL
 
 Tensor = torch.Tensor
@@ -162,11 +163,7 @@ def sample_pairs(n: int, g: torch.Generator, peak_fraction: float = 0.5) -> tupl
         wi_p = torch.stack([cp * x1 - sp * d[:, 1], sp * x1 + cp * d[:, 1], z1], -1)
         wo_p = 2 * (wi_p * h).sum(-1, keepdim=True) * h - wi_p
         # Cosine pairs.
-        def cosdir(a: Tensor, b: Tensor) -> Tensor:
-            r, phi = a.sqrt(), 2 * math.pi * b
-            return torch.stack([r * phi.cos(), r * phi.sin(), (1 - a).clamp_min(0).sqrt()], -1)
-
-        wi_c, wo_c = cosdir(u[:, 0], u[:, 1]), cosdir(u[:, 2], u[:, 3])
+        wi_c, wo_c = cosine_hemisphere(u[:, 0], u[:, 1]), cosine_hemisphere(u[:, 2], u[:, 3])
         wi = torch.where(peak[:, None], wi_p, wi_c)
         wo = torch.where(peak[:, None], wo_p, wo_c)
         ok = (wi[:, 2] > 1e-4) & (wo[:, 2] > 1e-4)

@@ -9,7 +9,6 @@ and 10th percentile per class) and albedo error.
 """
 from __future__ import annotations
 
-import json
 import math
 import sys
 from dataclasses import dataclass
@@ -19,9 +18,8 @@ from typing import Callable
 import numpy as np
 import torch
 
-from neural.errors import NbrdfError
 from neural.material import FORMAT as MATERIAL_FORMAT, Material, parse_material
-from neural.metrics import THETAS, albedo_error, directional_albedo, is_converged, lobe_psnr, noise_psnr
+from neural.metrics import THETAS, albedo_error, directional_albedo, is_converged, lobe_psnr
 
 Tensor = torch.Tensor
 HELDOUT_SEED = 20_221_122  # never a training seed
@@ -38,15 +36,15 @@ def heldout_material(cls: str, g: np.random.Generator, name: str) -> Material:
     ior = lambda: float(round(1.05 + 0.95 * _u(g), 6))
     alb = lambda: [float(round(1 - x * x, 6)) for x in _u(g, 3)]
     sig = lambda: float(round(5 * _u(g), 6))
-    r0 = lambda: [float(round(x, 6)) for x in _u(g, 3)]
+    colour = lambda: [float(round(x, 6)) for x in _u(g, 3)]
     diel = lambda: {"type": "dielectric", "roughness": rough(), "ior": ior()}
     med = lambda: {"type": "medium", "albedo": alb(), "sigma_t": sig()}
-    cond = lambda: {"type": "conductor", "roughness": rough(), "r0": r0()}
+    cond = lambda: {"type": "conductor", "roughness": rough(), "r0": colour()}
     layers = {"conductor": lambda: [cond()], "dielectric": lambda: [diel()],
               "two_layer": lambda: [diel(), med(), cond()],
               "three_layer": lambda: [diel(), med(), diel(), med(), cond()],
               "three_layer_diffuse": lambda: [diel(), med(), diel(), med(),
-                                              {"type": "diffuse", "albedo": [float(round(x, 6)) for x in _u(g, 3)]}],
+                                              {"type": "diffuse", "albedo": colour()}],
               }[cls]()
     return parse_material({"format": MATERIAL_FORMAT, "name": name, "layers": layers})
 
@@ -204,16 +202,9 @@ def report_figures(refs: list[tuple[str, Material, Reference]], method: Method, 
 def neural_method(model) -> Method:
     """Leaf encoders -> recursive layering -> decoder (nothing fitted)."""
 
-    def make(m: Material, r: Reference):
-        z = model.material_latent(m)
+    from neural.model import neural_evaluator
 
-        def fn(wi: Tensor, wo: Tensor) -> Tensor:
-            with torch.no_grad():
-                return model.decoder.eval_rgb(z, wi.float(), wo.float())
-
-        return fn
-
-    return make
+    return lambda m, r: neural_evaluator(m, model)
 
 
 def analytic_method() -> Method:
@@ -253,6 +244,7 @@ def sampling_variance(model, material: Material, n: int = 8192, seed: int = 0) -
     """Variance of the directional-albedo estimator f cos / pdf of the neural
     BRDF (channel mean), averaged over the standard incidences, for the
     learned proxy, cosine sampling, and sampling the top interface's GGX lobe."""
+    from neural.geometry import cosine_hemisphere, incidence
     from neural.sampling import proxy_sample
     from training.analytic import GGXConductor
 
@@ -262,12 +254,10 @@ def sampling_variance(model, material: Material, n: int = 8192, seed: int = 0) -
     g = torch.Generator().manual_seed(seed)
     out = {"proxy": 0.0, "cosine": 0.0, "top_ggx": 0.0}
     for th in THETAS:
-        t = math.radians(th)
-        wi = torch.tensor([[math.sin(t), 0.0, math.cos(t)]]).expand(n, 3).contiguous()
+        wi = incidence(th).expand(n, 3).contiguous()
         u = torch.rand(n, 3, generator=g)
         wo_p, pdf_p = proxy_sample(wi, u, sigma, w)
-        r, phi = u[:, 1].sqrt(), 2 * math.pi * u[:, 2]
-        wo_c = torch.stack([r * phi.cos(), r * phi.sin(), (1 - u[:, 1]).clamp_min(0).sqrt()], -1)
+        wo_c = cosine_hemisphere(u[:, 1], u[:, 2])
         pdf_c = wo_c[:, 2] / math.pi
         s = GGXConductor(top, 1.0).sample(wi, u)
         for name, wo, pdf in (("proxy", wo_p, pdf_p), ("cosine", wo_c, pdf_c), ("top_ggx", s.w, s.pdf)):

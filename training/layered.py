@@ -341,8 +341,6 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     pdf_last = torch.zeros(n_lanes, dtype=dtype)  # density of pdir at the vertex that chose it
     keep = w_entry > 0
     pid, lane, beta, pdir, depth, slab, pdf_last = (t[keep] for t in (pid, lane, beta, pdir, depth, slab, pdf_last))
-    # Top-interface parameters per pair, reused by every NEE.
-    a0_all, e0_all, tau0_all = p.roughness[:, 0], p.ior[:, 0], p.sigma_t[:, 0]
     # Parameters shared by every stack (one material's lobe, say) are
     # broadcast instead of gathered per lane.
     tab = _Tables(p)

@@ -5,7 +5,6 @@ stacks by the Monte Carlo simulator, all three channels on shared paths.
 """
 from __future__ import annotations
 
-import math
 from typing import Callable
 
 import torch
@@ -97,7 +96,7 @@ def reference_eval(material: Material, wi: Tensor, wo: Tensor, spp: int = 256, s
 
             f = MerlBRDF.load(base.resolved).eval(wi, wo)
         elif isinstance(base, LatentBase):
-            raise NbrdfError(f"layers[0]: a latent base has no reference; use --method neural")
+            raise NbrdfError("layers[0]: a latent base has no reference; use --method neural")
         else:
             f = single_layer_eval(base, wi, wo)
         return f.to(dtype), torch.zeros(n, 3, dtype=dtype)

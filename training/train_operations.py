@@ -29,6 +29,7 @@ from typing import Callable
 import torch
 
 from neural.decoder import encode, loss_target, predicted_target
+from neural.geometry import cosine_hemisphere
 from neural.errors import NbrdfError
 from neural.layering import LayeringNet, layering_spec
 from neural.leaf import LEAF_PARAMS, LeafEncoders
@@ -340,9 +341,7 @@ def sampler_targets(model: NeuralModel, z: Tensor, n_wi: int, n_wo: int, g: torc
     (M, n_wi, n_wo, 3), normalised weights f cos / proposal per wi."""
     M = z.shape[0]
     a, b = torch.rand(M, n_wi, generator=g), torch.rand(M, n_wi, generator=g)
-    wi = torch.stack([a.sqrt() * torch.cos(2 * math.pi * b), a.sqrt() * torch.sin(2 * math.pi * b),
-                      (1 - a).clamp_min(1e-4).sqrt()], -1)
-    wi = wi / wi.norm(dim=-1, keepdim=True)
+    wi = cosine_hemisphere(a.clamp(max=1 - 1e-4), b)  # never exactly at the horizon
     wi_r = wi[:, :, None, :].expand(M, n_wi, n_wo, 3).reshape(-1, 3)
     wo, pdf = _proposal(wi_r, g)
     with torch.no_grad():

@@ -120,6 +120,13 @@ def make_evaluator(material, method: str, spp: int, seed: int, want_stderr: bool
     raise NbrdfError(f"unknown method {method!r}")
 
 
+def _model(a: argparse.Namespace):
+    """The bundle of ``--model``, or the shipped one."""
+    from neural.model import default_model, load_model
+
+    return load_model(a.model) if a.model else default_model()
+
+
 def _load_material(path: str):
     from neural.material import load_material
 
@@ -299,11 +306,10 @@ def cmd_report_representation(a: argparse.Namespace) -> int:
 
 
 def cmd_report_operations(a: argparse.Namespace) -> int:
-    from neural.model import default_model, load_model
     from training import evaluate as ev
     from training.plots import save_lobe_grid
 
-    model = load_model(a.model) if a.model else default_model()
+    model = _model(a)
     refs = ev.build_references(a.refs, limit=a.limit)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -335,10 +341,9 @@ def cmd_report_operations(a: argparse.Namespace) -> int:
 
 
 def cmd_report_interpolation(a: argparse.Namespace) -> int:
-    from neural.model import default_model, load_model
     from training.evaluate import interpolation_figure
 
-    model = load_model(a.model) if a.model else default_model()
+    model = _model(a)
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     res = interpolation_figure(model, _load_material(a.a), _load_material(a.b), out)
@@ -347,22 +352,19 @@ def cmd_report_interpolation(a: argparse.Namespace) -> int:
 
 
 def cmd_sample(a: argparse.Namespace) -> int:
-    import math
-
     import torch
 
-    from neural.model import default_model, load_model
+    from neural.geometry import incidence
     from neural.sampling import proxy_sample
 
     if a.n < 1:
         raise NbrdfError(f"--n: {a.n} must be at least 1")
     if not 0 <= a.theta_i < 90:
         raise NbrdfError(f"--theta-i: {a.theta_i} must lie in [0, 90)")
-    model = load_model(a.model) if a.model else default_model()
+    model = _model(a)
     z = model.material_latent(_load_material(a.material))
     sigma, w = model.proxy(z)
-    t = math.radians(a.theta_i)
-    wi = torch.tensor([[math.sin(t), 0.0, math.cos(t)]]).expand(a.n, 3).contiguous()
+    wi = incidence(a.theta_i).expand(a.n, 3).contiguous()
     u = torch.rand(a.n, 3, generator=torch.Generator().manual_seed(a.seed))
     wo, pdf = proxy_sample(wi, u, sigma, w)
     pdf = torch.where(wo[:, 2] > 0, pdf, torch.zeros_like(pdf))  # below the horizon: a failed sample
@@ -373,9 +375,8 @@ def cmd_sample(a: argparse.Namespace) -> int:
 
 def cmd_bench_operations(a: argparse.Namespace) -> int:
     from neural.bench import bench_operations
-    from neural.model import default_model, load_model
 
-    print(json.dumps(bench_operations(load_model(a.model) if a.model else default_model(), a.repeats), indent=2))
+    print(json.dumps(bench_operations(_model(a), a.repeats), indent=2))
     return 0
 
 

@@ -82,9 +82,10 @@ class EnvironmentMap:
         j = np.clip(np.searchsorted(self.marginal, u[:, 1], side="right") - 1, 0, h - 1)
         m0, m1 = self.marginal[j], self.marginal[j + 1]
         fv = (u[:, 1] - m0) / np.maximum(m1 - m0, 1e-12)
-        c = self.conditional[j]
-        i = np.clip(np.array([np.searchsorted(c[k], u[k, 0], side="right") - 1 for k in range(len(j))]), 0, w - 1)
-        c0, c1 = c[np.arange(len(j)), i], c[np.arange(len(j)), i + 1]
+        # Every row's CDF lies in [0, 1]: offset row j by 2 j and search all rows at once.
+        flat = (self.conditional + 2.0 * np.arange(h)[:, None]).ravel()
+        i = np.clip(np.searchsorted(flat, u[:, 0] + 2.0 * j, side="right") - 1 - j * (w + 1), 0, w - 1)
+        c0, c1 = self.conditional[j, i], self.conditional[j, i + 1]
         fu = (u[:, 0] - c0) / np.maximum(c1 - c0, 1e-12)
         theta = (j + np.clip(fv, 0, 1)) / h * math.pi
         phi = (i + np.clip(fu, 0, 1)) / w * 2 * math.pi

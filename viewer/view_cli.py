@@ -5,7 +5,6 @@ can be opened) it renders the same view through EGL to an image.
 """
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import sys
@@ -95,7 +94,7 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     from neural.material import load_material
     from viewer.gl import offscreen_context
     from viewer.image_io import write_image
-    from viewer.renderer import Renderer, ViewState
+    from viewer.renderer import ViewState
 
     out = Path(opts.out or HEADLESS_OUT)
     material = load_material(opts.material)
