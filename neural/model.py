@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import json
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -19,7 +20,7 @@ from neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bundle, 
 from neural.errors import NbrdfError
 from neural.layering import LayeringNet
 from neural.leaf import LEAF_PARAMS, LeafEncoders
-from neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured, TextureRef
+from neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured
 from neural.nets import MLPSpec, load_state, prefixed
 from neural.sampling import SamplerNet
 
@@ -51,40 +52,62 @@ class NeuralModel:
 
     # -- the full path ---------------------------------------------------------------------
     def leaf_latent(self, layer, place: str = "layer") -> Tensor:
-        """(3, 32) latents of a single layer, one per colour channel."""
+        """(3, 32) latents of a single uniform layer, one per colour channel."""
+        return self.leaf_latents(layer, place)[0]
+
+    def material_latent(self, material: Material) -> Tensor:
+        """(3, 32) latents of a uniform material of any number of layers."""
+        return self.stack_latents(material)[0]
+
+    def leaf_latents(self, layer, place: str = "layer", values: "ParamValues | None" = None) -> Tensor:
+        """(P, 3, 32) latents of a layer whose parameters ``values`` turns into
+        (P, 3) tensors (P = 1 for a uniform layer, texels for a textured one)."""
+        values = values or uniform_values
         if isinstance(layer, LatentBase):
             from neural.latent import load_latent
 
-            return load_latent(layer.resolved, self.decoder_id).z
+            return load_latent(layer.resolved, self.decoder_id).z[None]
         if isinstance(layer, Measured):
             raise NbrdfError(f"{place}: a measured base has no leaf encoder; project it first "
                              "(`nbrdf project --merl FILE --out Z.safetensors`) and use it as a latent base")
         leaf = self.require("leaf")
         with torch.no_grad():
             if isinstance(layer, Conductor):
-                return leaf.conductor(_scalar(layer.roughness, place), _rgb(layer.r0, place))
+                r, r0 = torch.broadcast_tensors(values(layer.roughness, f"{place}.roughness"),
+                                                values(layer.r0, f"{place}.r0"))
+                return leaf.conductor(r.reshape(-1), r0.reshape(-1)).reshape(r.shape[0], 3, -1)
             if isinstance(layer, Dielectric):
-                z = leaf.dielectric(_scalar(layer.roughness, place), _scalar(layer.ior, place))
-                return z.expand(3, -1)
+                r, ior = torch.broadcast_tensors(values(layer.roughness, f"{place}.roughness"),
+                                                 values(layer.ior, f"{place}.ior"))
+                z = leaf.dielectric(r[:, 0], ior[:, 0])  # achromatic: one latent for all channels
+                return z[:, None].expand(-1, 3, -1)
             if isinstance(layer, Diffuse):
-                return leaf.diffuse(_rgb(layer.albedo, place))
+                a = values(layer.albedo, f"{place}.albedo")
+                return leaf.diffuse(a.reshape(-1)).reshape(a.shape[0], 3, -1)
         raise NbrdfError(f"{place}: a {layer.type} layer has no leaf encoder")
 
-    def material_latent(self, material: Material) -> Tensor:
-        """(3, 32) latents of a uniform material of any number of layers."""
+    def stack_latents(self, material: Material, values: "ParamValues | None" = None) -> Tensor:
+        """(P, 3, 32) latents of a stack: leaf encoders, then the layering
+        network over each interface and its medium from the bottom up."""
         n = len(material.layers)
-        z = self.leaf_latent(material.base, f"layers[{n - 1}]")
+        z = self.leaf_latents(material.base, f"layers[{n - 1}]", values)
         if not material.interfaces:
             return z
+        values = values or uniform_values
         net = self.require("layering")
-        # Walk the interfaces bottom-up: each one with its medium covers the stack below.
         places = [i for i, layer in enumerate(material.layers) if isinstance(layer, Dielectric)][: len(material.interfaces)]
         with torch.no_grad():
             for (iface, med), i in reversed(list(zip(material.interfaces, places))):
-                z_top = self.leaf_latent(iface, f"layers[{i}]")
-                alb = _rgb(med.albedo, f"layers[{i + 1}].albedo") if med is not None else torch.zeros(3)
-                sig = _scalar(med.sigma_t, f"layers[{i + 1}].sigma_t") if med is not None else torch.zeros(1)
-                z = net(z_top, z, alb, sig.expand(3))
+                z_top = self.leaf_latents(iface, f"layers[{i}]", values)
+                if med is not None:
+                    alb = values(med.albedo, f"layers[{i + 1}].albedo")
+                    sig = values(med.sigma_t, f"layers[{i + 1}].sigma_t")
+                else:
+                    alb = sig = torch.zeros(1, 3)
+                z_top, z, alb, sig = _broadcast_texels(z_top, z, alb, sig)
+                p = z.shape[0]
+                z = net(z_top.reshape(p * 3, -1), z.reshape(p * 3, -1), alb.reshape(-1),
+                        sig.reshape(-1)).reshape(p, 3, -1)
         return z
 
     def proxy(self, z: Tensor) -> tuple[float, float]:
@@ -94,17 +117,22 @@ class NeuralModel:
         return float(s), float(w)
 
 
-def _scalar(v, place: str) -> Tensor:
-    if isinstance(v, TextureRef):
-        raise NbrdfError(f"{place}: texture-mapped; evaluate texels through a latent texture")
-    return torch.tensor([float(v)])
+ParamValues = Callable[[object, str], Tensor]
 
 
-def _rgb(v, place: str) -> Tensor:
+def uniform_values(v, place: str) -> Tensor:
+    """A uniform parameter (scalar or per channel) as a (1, 3) tensor."""
     try:
-        return torch.tensor(Material.rgb(v), dtype=torch.float32)
+        return torch.tensor([Material.rgb(v)], dtype=torch.float32)
     except NbrdfError:
-        raise NbrdfError(f"{place}: texture-mapped; evaluate texels through a latent texture") from None
+        raise NbrdfError(f"{place}: texture-mapped; evaluate it through a latent texture "
+                         "(neural.svbrdf.latent_texture)") from None
+
+
+def _broadcast_texels(*xs: Tensor) -> list[Tensor]:
+    """Expands (1, ...) tensors to the texel count P of the others."""
+    p = max(x.shape[0] for x in xs)
+    return [x.expand(p, *x.shape[1:]) for x in xs]
 
 
 # --- files -------------------------------------------------------------------------------

@@ -20,7 +20,7 @@ class OrbitCamera:
     def eye(self) -> np.ndarray:
         y, p = math.radians(self.yaw), math.radians(self.pitch)
         d = np.array([math.cos(p) * math.cos(y), math.cos(p) * math.sin(y), math.sin(p)])
-        return np.asarray(self.target, dtype=np.float64) - d * self.distance
+        return np.asarray(self.target, dtype=np.float64) + d * self.distance
 
     def view(self) -> np.ndarray:
         eye, tgt = self.eye(), np.asarray(self.target, dtype=np.float64)

@@ -46,6 +46,17 @@ def write_image(path: str | Path, img: np.ndarray, exposure: float = 0.0, mode: 
             f.write(str(p))
 
 
+def read_normal_map(path: str | Path) -> np.ndarray:
+    """A tangent-space normal map (OpenGL convention: +y green up) as float32
+    (H, W, 3) in [0, 1], row 0 = v 0."""
+    from neural.svbrdf import read_texels
+
+    x = read_texels(path)
+    if x.shape[2] < 3:
+        raise NbrdfError(f"{path}: a normal map needs RGB, the image has {x.shape[2]} channel(s)")
+    return np.ascontiguousarray(x[..., :3].astype(np.float32))
+
+
 def read_exr(path: str | Path) -> np.ndarray:
     import OpenEXR
 

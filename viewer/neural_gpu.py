@@ -15,10 +15,12 @@ import torch
 from neural.decoder import Decoder
 from neural.errors import NbrdfError
 from neural.gpu_pack import PackedDecoder, latent_share, pack
+from neural.latent_texture import LatentTexture
 from viewer import shaders
 from viewer.gl import check_version
 
 WEIGHT_UNIT = 7  # texture unit of the weight texture
+SHARE_UNIT = 8   # texture unit of a latent texture's per-texel share
 SSBO_VERSION = 430
 
 
@@ -40,7 +42,7 @@ class GpuDecoder:
         return f"#version {SSBO_VERSION} core" if self.ssbo else shaders.VERSION
 
     def snippets(self) -> dict[str, str]:
-        return {"nb_layers": self.packed.layer_chain()}
+        return {"nb_layers": self.packed.layer_chain(), "nb_share": ""}
 
     def defines(self) -> dict[str, object]:
         return self.packed.defines(self.ssbo)
@@ -64,10 +66,48 @@ class GpuDecoder:
             prog["u_nb_share"].write(latent_share(self.dec, z).astype("f4").tobytes())
 
 
-def _pairs_array(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+class GpuLatentTexture:
+    """A latent texture on the GPU as its per-texel share of the decoder's
+    layer 1: a float texture array of 3 x width / 4 RGBA layers (channel-major,
+    four units per layer) with its mip chain. The share is affine in the
+    latent, so the hardware's 2 x 2 mip averages and trilinear filtering are
+    exactly the share of the mip-mapped, trilinearly filtered latent."""
+
+    def __init__(self, ctx: moderngl.Context, gdec: GpuDecoder, tex: LatentTexture):
+        h, w = tex.size
+        width = gdec.dec.spec.width
+        with torch.no_grad():
+            share = gdec.dec.latent_share(tex.levels[0].float())          # (H, W, 3, width)
+        layers = share.reshape(h, w, 3, width // 4, 4).permute(2, 3, 0, 1, 4).reshape(-1, h, w, 4)
+        self.texture = ctx.texture_array((w, h, layers.shape[0]), 4, layers.contiguous().numpy().astype("f4").tobytes(),
+                                         dtype="f4")
+        self.texture.repeat_x = self.texture.repeat_y = True
+        self.texture.build_mipmaps()
+        self.texture.anisotropy = 1.0
+        self.set_mipmapped(True)
+        self.size = (h, w)
+        self.mean_latent = tex.levels[-1][0, 0]                         # (3, 32): the lobe and slice views
+
+    def set_mipmapped(self, on: bool) -> None:
+        """Trilinear lookup by pixel footprint (on) or the finest level only (off: aliases)."""
+        self.mipmapped = on
+        self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR if on else moderngl.LINEAR, moderngl.LINEAR)
+
+    def bind(self, prog: moderngl.Program) -> None:
+        self.texture.use(SHARE_UNIT)
+        if "u_nb_share_tex" in prog:
+            prog["u_nb_share_tex"].value = SHARE_UNIT
+
+    def release(self) -> None:
+        self.texture.release()
+
+
+def _pairs_array(wi: np.ndarray, wo: np.ndarray, uv: np.ndarray | None = None) -> np.ndarray:
     n = wi.shape[0]
     out = np.zeros((2 * n, 4), np.float32)
     out[0::2, :3], out[1::2, :3] = wi, wo
+    if uv is not None:
+        out[0::2, 3], out[1::2, 3] = uv[:, 0], uv[:, 1]
     return out
 
 
@@ -100,17 +140,28 @@ def probe_pass(ctx: moderngl.Context, prog: moderngl.Program, texels: np.ndarray
             r.release()
 
 
-def probe_fragment(ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor, wi: np.ndarray, wo: np.ndarray,
-                   prog: moderngl.Program | None = None) -> np.ndarray:
-    """nb_decode at N pairs through a fragment shader (texture weights); (N, 3)."""
+def probe_fragment(ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor | None, wi: np.ndarray,
+                   wo: np.ndarray, prog: moderngl.Program | None = None,
+                   latent_tex: GpuLatentTexture | None = None, uv: np.ndarray | None = None) -> np.ndarray:
+    """nb_decode at N pairs through a fragment shader (texture weights); (N, 3).
+    With ``latent_tex`` the latent of item k is the texture's at ``uv[k]``."""
+    snippets = {"nb_share": shaders.read("latent_texture.glsl")} if latent_tex is not None else None
+    own = prog is None
     prog = prog or ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
-                               fragment_shader=gdec.source("decoder_probe.frag"))
+                               fragment_shader=gdec.source("decoder_probe.frag", snippets))
 
     def setup(p: moderngl.Program) -> None:
         gdec.bind(p)
-        gdec.set_latent(p, z)
+        if latent_tex is not None:
+            latent_tex.bind(p)
+        else:
+            gdec.set_latent(p, z)
 
-    return probe_pass(ctx, prog, _pairs_array(wi, wo), wi.shape[0], setup)[:, :3]
+    try:
+        return probe_pass(ctx, prog, _pairs_array(wi, wo, uv), wi.shape[0], setup)[:, :3]
+    finally:
+        if own:
+            prog.release()
 
 
 def probe_proxy_sampling(ctx: moderngl.Context, wi: np.ndarray, u: np.ndarray, sigma: float,

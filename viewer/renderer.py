@@ -25,10 +25,12 @@ from viewer.mesh import Mesh, named_mesh
 if TYPE_CHECKING:
     import torch
 
-    from viewer.neural_gpu import GpuDecoder
+    from neural.latent_texture import LatentTexture
+    from viewer.neural_gpu import GpuDecoder, GpuLatentTexture
 
 VIEWS = ("object", "lobe", "slice")
 LOBE_SIZE = 64
+NORMAL_UNIT = 9  # texture unit of a material's normal map
 
 
 @dataclass
@@ -43,6 +45,7 @@ class ViewState:
     env_intensity: float = 0.6
     env_rotation: float = 0.0                  # degrees about world z
     env_on: bool = True                        # False: the directional light alone
+    background: bool = True                    # the environment behind the object
     exposure: float = 0.0                      # stops
     tonemap: str = "aces"                      # aces | linear
 
@@ -52,47 +55,80 @@ class Renderer:
 
     def __init__(self, ctx: moderngl.Context, material: Material, mesh: str | Mesh = "sphere",
                  neural: "GpuDecoder | None" = None, latent: "torch.Tensor | None" = None,
-                 proxy: tuple[float, float] | None = None, environment: np.ndarray | None = None):
+                 proxy: tuple[float, float] | None = None, environment: np.ndarray | None = None,
+                 latent_texture: "LatentTexture | None" = None):
         """``neural`` (with the material's ``latent``, (3, 32), and its proxy
         pdf's (sigma, w)) shades with the decoder in GLSL; without it the
-        closed-form shader is used. ``environment`` is an equirectangular
-        float32 (H, W, 3) radiance map (default: the project's own sky)."""
+        closed-form shader is used. A texture-mapped material comes as its
+        ``latent_texture`` instead of a latent. ``environment`` is an
+        equirectangular float32 (H, W, 3) radiance map (default: the project's own sky)."""
         self.ctx = ctx
         self.neural = neural
-        if neural is None:
-            frag = lambda name: shaders.source(name, {"brdf": shaders.read("analytic_brdf.glsl")})
-        else:
-            if latent is None:
-                raise NbrdfError("the neural renderer needs the material's latent")
-            frag = lambda name: neural.source(name, {"brdf": shaders.read("neural_brdf.glsl")})
+        self._obj_programs: dict[bool, tuple[moderngl.Program, moderngl.VertexArray | None]] = {}
         try:
-            self.obj = ctx.program(vertex_shader=shaders.source("object.vert"), fragment_shader=frag("object.frag"))
-            self.lobe = ctx.program(vertex_shader=shaders.source("fullscreen.vert"), fragment_shader=frag("lobe.frag"))
-            self.slice = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
-                                     fragment_shader=frag("slice.frag"))
-            self.tone = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
-                                    fragment_shader=shaders.source("tonemap.frag"))
+            self.lobe = self._program("fullscreen.vert", "lobe.frag")
+            self.slice = self._program("fullscreen.vert", "slice.frag")
+            self.tone = self._program("fullscreen.vert", "tonemap.frag", plain=True)
+            self.background_prog = self._program("fullscreen.vert", "background.frag", plain=True)
         except moderngl.Error as e:
             raise NbrdfError(f"shader build failed on {ctx.info.get('GL_RENDERER', '?')}: {str(e).splitlines()[0]}") from None
+        self.obj = self._object_program(False)
         self.empty_vao = ctx.vertex_array(self.lobe, [])
         self.empty_slice = ctx.vertex_array(self.slice, [])
         self.empty_tone = ctx.vertex_array(self.tone, [])
+        self.empty_background = ctx.vertex_array(self.background_prog, [])
+        self._fbo: dict[tuple[int, int], tuple[moderngl.Framebuffer, moderngl.Texture]] = {}
+        self._dummy = ctx.texture((1, 1), 4, dtype="f4")
+        self.latent_tex: "GpuLatentTexture | None" = None
+        self.normal_map: moderngl.Texture | None = None
+        self.mesh_source = mesh
         self.set_mesh(mesh)
         self.env: GpuEnvironment | None = None
         self.set_environment(environment)
-        self.set_material(material, latent, proxy)
-        self._fbo: dict[tuple[int, int], tuple[moderngl.Framebuffer, moderngl.Texture]] = {}
-        self._dummy = ctx.texture((1, 1), 4, dtype="f4")
+        self.set_material(material, latent, proxy, latent_texture)
+
+    def _program(self, vert: str, frag: str, plain: bool = False, textured: bool = False) -> moderngl.Program:
+        """A program whose ``//@INCLUDE brdf`` is this renderer's BRDF (closed
+        form, the decoder at a uniform latent, or at a latent texture)."""
+        if plain:
+            return self.ctx.program(vertex_shader=shaders.source(vert), fragment_shader=shaders.source(frag))
+        if self.neural is None:
+            fs = shaders.source(frag, {"brdf": shaders.read("analytic_brdf.glsl")})
+        else:
+            brdf = shaders.read("neural_brdf.glsl")
+            if textured:
+                brdf = shaders.read("latent_texture.glsl") + "\n" + brdf
+            fs = self.neural.source(frag, {"brdf": brdf})
+        return self.ctx.program(vertex_shader=shaders.source(vert), fragment_shader=fs)
+
+    def _object_program(self, textured: bool) -> moderngl.Program:
+        """The lit-object program (built once per kind: uniform or latent texture)."""
+        if textured not in self._obj_programs:
+            try:
+                self._obj_programs[textured] = (self._program("object.vert", "object.frag", textured=textured), None)
+            except moderngl.Error as e:
+                raise NbrdfError(f"shader build failed on {self.ctx.info.get('GL_RENDERER', '?')}: "
+                                 f"{str(e).splitlines()[0]}") from None
+        return self._obj_programs[textured][0]
 
     # --- scene -------------------------------------------------------------------
     def set_mesh(self, mesh: str | Mesh) -> None:
         m = named_mesh(mesh) if isinstance(mesh, str) else mesh
         self.mesh = m
-        vbo = self.ctx.buffer(m.interleaved().tobytes())
-        ibo = self.ctx.buffer(m.indices.astype("u4").tobytes())
-        self.obj_vao = self.ctx.vertex_array(
-            self.obj, [(vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")], ibo,
-            skip_errors=True)
+        self._mesh_buffers = (self.ctx.buffer(m.interleaved().tobytes()), self.ctx.buffer(m.indices.astype("u4").tobytes()))
+        self._obj_programs = {k: (p, None) for k, (p, _) in self._obj_programs.items()}
+
+    @property
+    def obj_vao(self) -> moderngl.VertexArray:
+        """The mesh as drawn by the current object program."""
+        textured = self.obj is not self._obj_programs[False][0]
+        prog, vao = self._obj_programs[textured]
+        if vao is None:
+            vbo, ibo = self._mesh_buffers
+            vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
+                                        ibo, skip_errors=True)
+            self._obj_programs[textured] = (prog, vao)
+        return vao
 
     def set_environment(self, radiance: np.ndarray | None = None) -> None:
         """A new environment map (None: the default sky), sampling tables included."""
@@ -102,16 +138,32 @@ class Renderer:
         self.env = new
 
     def set_material(self, material: Material, latent: "torch.Tensor | None" = None,
-                     proxy: tuple[float, float] | None = None) -> None:
+                     proxy: tuple[float, float] | None = None,
+                     latent_texture: "LatentTexture | GpuLatentTexture | None" = None) -> None:
         """A new material: closed-form uniforms, or (neural) its latent's share
-        of layer 1 and the (sigma, w) of its proxy pdf (without one, a proxy
+        of layer 1 -- per texel from ``latent_texture`` for a texture-mapped
+        material -- and the (sigma, w) of its proxy pdf (without one, a proxy
         guessed from the top layer's roughness: slower to converge, never biased)."""
         self.material = material
+        if self.latent_tex is not None and self.latent_tex is not latent_texture:
+            self.latent_tex.release()
+        self.latent_tex = None
         if self.neural is None:
             self.uniforms = analytic_uniforms(material)
+            self.obj = self._object_program(False)
         else:
+            if latent_texture is not None:
+                from viewer.neural_gpu import GpuLatentTexture
+
+                self.latent_tex = (latent_texture if isinstance(latent_texture, GpuLatentTexture)
+                                   else GpuLatentTexture(self.ctx, self.neural, latent_texture))
+                latent = self.latent_tex.mean_latent if latent is None else latent
+            elif material.is_textured:
+                raise NbrdfError(f"{material.name}: a texture-mapped material needs its latent texture "
+                                 "(neural.svbrdf.latent_texture)")
             if latent is None:
                 raise NbrdfError("the neural renderer needs the material's latent")
+            self.obj = self._object_program(self.latent_tex is not None)
             sigma, w = proxy if proxy is not None else proxy_hint(material)
             self.uniforms = {"u_proxy_sigma": float(sigma), "u_proxy_w": float(w)}
             for prog in (self.obj, self.lobe, self.slice):
@@ -120,10 +172,37 @@ class Renderer:
             for k, v in self.uniforms.items():
                 if k in prog:
                     prog[k].value = v
+        self._set_normal_map(material)
+
+    def _set_normal_map(self, material: Material) -> None:
+        if self.normal_map is not None:
+            self.normal_map.release()
+            self.normal_map = None
+        if material.normal_map is not None:
+            from viewer.image_io import read_normal_map
+
+            img = read_normal_map(material.base_dir / material.normal_map)
+            self.normal_map = self.ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), dtype="f4")
+            self.normal_map.repeat_x = self.normal_map.repeat_y = True
+            self.normal_map.build_mipmaps()
+            self.normal_map.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+
+    def set_mipmapping(self, on: bool) -> None:
+        """Trilinear latent-texture lookup (on) or the finest level (off, to show the aliasing)."""
+        if self.latent_tex is not None:
+            self.latent_tex.set_mipmapped(on)
 
     def _bind(self, prog: moderngl.Program) -> None:
         if self.neural is not None:
             self.neural.bind(prog)
+        if prog is self.obj:
+            if self.latent_tex is not None:
+                self.latent_tex.bind(prog)
+            if "u_has_normal_map" in prog:
+                prog["u_has_normal_map"].value = int(self.normal_map is not None)
+            if self.normal_map is not None:
+                self.normal_map.use(NORMAL_UNIT)
+                prog["u_normal_map"].value = NORMAL_UNIT
 
     # --- frames -------------------------------------------------------------------
     def _target(self, w: int, h: int):
@@ -193,6 +272,13 @@ class Renderer:
         for k in range(first, first + passes):
             p["u_pass"].value = k
             self.obj_vao.render(moderngl.TRIANGLES)
+        if state.background and state.env_on:
+            bg = self.background_prog
+            self.env.bind(bg, math.radians(state.env_rotation))
+            bg["u_inv_view_proj"].write(np.linalg.inv(vp).T.astype("f4").tobytes())
+            bg["u_eye"].value = tuple(cam.eye())
+            bg["u_env_intensity"].value = state.env_intensity * passes  # as many passes as the object
+            self.empty_background.render(moderngl.TRIANGLES, vertices=3)
         self.ctx.disable(moderngl.BLEND)
         fbo.depth_mask = True
         fbo.use()

@@ -37,6 +37,7 @@ class ViewOptions:
     brdf: str = "auto"
     env_rotation: float = 0.0
     env_intensity: float = 0.6
+    background: bool = True
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -56,6 +57,8 @@ def parse_args(argv: Sequence[str] | None) -> ViewOptions:
     p.add_argument("--env", default=None, help="equirectangular .hdr/.exr environment (default: the built-in sky)")
     p.add_argument("--env-rotation", type=float, default=0.0, help="environment rotation about the up axis, degrees")
     p.add_argument("--env-intensity", type=float, default=0.6, help="environment radiance scale")
+    p.add_argument("--no-background", dest="background", action="store_false",
+                   help="black behind the object instead of the environment")
     p.add_argument("--view", default="object", choices=("object", "lobe", "slice"))
     p.add_argument("--theta-i", type=float, default=30.0, help="incidence angle of the lobe view, degrees")
     p.add_argument("--offscreen", action="store_true", help="render through EGL to --out instead of opening a window")
@@ -79,7 +82,8 @@ def parse_args(argv: Sequence[str] | None) -> ViewOptions:
         raise NbrdfError("--offscreen needs --out IMG")
     return ViewOptions(material=Path(a.material), mesh=a.mesh, env=a.env, view=a.view, theta_i=a.theta_i,
                        offscreen=a.offscreen, out=a.out, size=_size(a.size), spp=a.spp, exposure=a.exposure,
-                       tonemap=a.tonemap, brdf=a.brdf, env_rotation=a.env_rotation, env_intensity=a.env_intensity)
+                       tonemap=a.tonemap, brdf=a.brdf, env_rotation=a.env_rotation, env_intensity=a.env_intensity,
+                       background=a.background)
 
 
 def has_display() -> bool:
@@ -111,7 +115,7 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
         print(f"{PROG}: {fallback}; rendering offscreen to {out} instead{note}", file=sys.stderr)
     r = make_renderer(ctx, material, opts)
     state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap,
-                      env_rotation=opts.env_rotation, env_intensity=opts.env_intensity)
+                      env_rotation=opts.env_rotation, env_intensity=opts.env_intensity, background=opts.background)
     img = r.render_linear(state, opts.size, opts.spp)
     if opts.view == "lobe" and out.suffix.lower() == ".png":
         img = img[::-1]  # a picture shows +y up
@@ -129,15 +133,26 @@ def make_renderer(ctx, material, opts: ViewOptions):
 
         env = read_environment(opts.env)
     mode = opts.brdf
+    single = not material.interfaces and material.base.type in ("conductor", "dielectric", "diffuse")
     if mode == "auto":
-        mode = "analytic" if not material.interfaces and material.base.type in ("conductor", "dielectric",
-                                                                               "diffuse") else "neural"
+        mode = "analytic" if single and not material.is_textured else "neural"
     if mode == "analytic":
         return Renderer(ctx, material, opts.mesh, environment=env)
     from neural.model import default_model
     from viewer.neural_gpu import GpuDecoder
 
     model = default_model()
+    if material.is_textured:
+        if mode == "projected":
+            raise NbrdfError("--brdf projected: a texture-mapped material is shaded through its latent texture "
+                             "(use --brdf neural)")
+        from neural.svbrdf import latent_texture
+
+        tex = latent_texture(model, material)
+        z = tex.levels[-1][0, 0]
+        proxy = model.proxy(z) if model.sampler is not None else None
+        return Renderer(ctx, material, opts.mesh, neural=GpuDecoder(ctx, model.decoder), proxy=proxy,
+                        environment=env, latent_texture=tex)
     if mode == "neural":
         z = model.material_latent(material)
     else:

@@ -40,10 +40,13 @@ def test_glsl_lobe_equals_closed_form(gl_ctx, layer, theta):
 
 def test_default_material_views(gl_ctx):
     r = Renderer(gl_ctx, load_material(DEFAULT_MATERIAL))
-    obj = r.render_linear(ViewState(view="object"), (64, 48), spp=4)
+    obj = r.render_linear(ViewState(view="object", background=False), (64, 48), spp=4)
     assert obj.shape == (48, 64, 3) and np.isfinite(obj).all()
     centre, corner = obj[24, 32], obj[1, 1]
-    assert centre.sum() > 0.02 and corner.sum() == 0  # the sphere, and black background
+    assert centre.sum() > 0.02 and corner.sum() == 0  # the sphere, and no background
+    sky = r.render_linear(ViewState(view="object"), (64, 48), spp=4)
+    np.testing.assert_array_equal(sky[24, 32], obj[24, 32])  # the background never covers the object
+    assert (sky[1, 1] > 0).all() and (sky[-2, 1] > 0).all()  # the environment behind it
     assert centre[0] > centre[2]  # copper under the varnish: warm
     sl = r.render_linear(ViewState(view="slice"), (32, 32))
     assert np.isfinite(sl).all() and sl.max() > sl.mean() > 0
@@ -64,7 +67,7 @@ def test_progressive_passes_converge(gl_ctx):
 @pytest.mark.parametrize("mesh", ["testmesh"])
 def test_test_mesh_renders(gl_ctx, mesh):
     r = Renderer(gl_ctx, load_material(DEFAULT_MATERIAL), mesh)
-    img = r.render_linear(ViewState(), (48, 48), spp=1)
+    img = r.render_linear(ViewState(background=False), (48, 48), spp=1)
     cover = (img.sum(-1) > 0).mean()
     assert 0.05 < cover < 0.9
 
@@ -72,7 +75,7 @@ def test_test_mesh_renders(gl_ctx, mesh):
 def test_obj_mesh_through_trimesh(gl_ctx, tmp_path):
     (tmp_path / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n")
     r = Renderer(gl_ctx, load_material(DEFAULT_MATERIAL), str(tmp_path / "tri.obj"))
-    assert (r.render_linear(ViewState(), (32, 32), spp=1).sum(-1) > 0).any()
+    assert (r.render_linear(ViewState(background=False), (32, 32), spp=1).sum(-1) > 0).any()
 
 
 def test_image_files_round_trip(tmp_path):

@@ -3,7 +3,9 @@
 // BRDF's lobe (sample_lobe / pdf_lobe of the BRDF snippet: the learned proxy pdf
 // for neural materials, GGX visible normals for closed-form ones) and the cosine
 // lobe -- combined by the balance heuristic; passes are averaged (progressive).
-// No shadowing: one object under a distant environment.
+// No shadowing: one object under a distant environment. A tangent-space normal
+// map (OpenGL convention, +y = green up) bends the shading normal; a textured
+// neural material (NB_TEXTURED) fetches its texel's latent share once per pixel.
 //@INCLUDE common.glsl
 //@INCLUDE brdf
 //@INCLUDE sampling.glsl
@@ -20,6 +22,8 @@ uniform vec3 u_light_radiance;
 uniform float u_env_intensity;
 uniform int u_env_on;           // 0: the light alone (benchmarks, quick previews)
 uniform uint u_pass;
+uniform sampler2D u_normal_map;
+uniform int u_has_normal_map;
 
 out vec4 frag;
 
@@ -30,6 +34,18 @@ void main() {
     vec3 n = normalize(v_normal);
     vec3 view = normalize(u_eye - v_world);
     if (dot(n, view) < 0.0) n = -n;  // two-sided
+    if (u_has_normal_map != 0) {
+        vec3 t = v_tangent.xyz - n * dot(n, v_tangent.xyz);
+        t = dot(t, t) > 1e-12 ? normalize(t) : frame_from_normal(n)[0];
+        vec3 b = cross(n, t) * (v_tangent.w < 0.0 ? -1.0 : 1.0);
+        vec3 m = texture(u_normal_map, v_uv).xyz * 2.0 - 1.0;
+        n = normalize(t * m.x + b * m.y + n * max(m.z, 1e-3));
+        float nv = dot(n, view);  // a bent normal facing away: pull it back to the silhouette
+        if (nv < 1e-3) n = normalize(n + view * (1e-3 - nv));
+    }
+#ifdef NB_TEXTURED
+    nb_load_share(v_uv);
+#endif
     mat3 tbn = frame_from_normal(n);
     mat3 to_local = transpose(tbn);
     vec3 wo = to_local * view;
