@@ -1,7 +1,11 @@
-"""The ``nbrdf-view`` window: glfw + moderngl, the same Renderer as offscreen.
+"""The ``nbrdf-view`` window: glfw + moderngl + imgui-bundle around a ``LookDev``.
 
 imgui_bundle is imported before glfw so that both use the one GLFW library
-bundled with imgui_bundle (its panels come with the look-development app).
+bundled with imgui_bundle; its own GLFW / OpenGL 3 backend draws the panels.
+Mouse: left-drag orbits, right-drag pans, the wheel zooms (when the pointer
+is not over a panel). Keys: F frames the object, T toggles the turntable,
+H hides the panels, Esc quits. While the user drags, frames render at half
+resolution with one pass; when still, passes accumulate (progressive).
 """
 from __future__ import annotations
 
@@ -10,16 +14,17 @@ import time
 import numpy as np
 
 try:  # share imgui_bundle's GLFW when it is there
-    import imgui_bundle  # noqa: F401
-except Exception:  # noqa: BLE001 - the window works without it
-    pass
+    from imgui_bundle import imgui, implot
+except Exception as e:  # noqa: BLE001
+    imgui = None
+    _IMGUI_ERROR = e
 import glfw
 import moderngl
 
+from neural.errors import NbrdfError
 from neural.material import load_material
 from viewer.gl import check_version
 from viewer.renderer import ViewState
-from viewer.view_cli import make_renderer
 
 
 class WindowUnavailable(RuntimeError):
@@ -27,11 +32,14 @@ class WindowUnavailable(RuntimeError):
 
 
 class App:
-    """A window showing one view; orbit with the left mouse button, zoom with
-    the wheel, Esc quits. Progressive: each frame adds passes while the view
-    is still, and starts over when it changes."""
+    """The previewer window. ``lookdev`` is the session (its methods are the
+    app's API: the panels and the tests call them); ``step`` runs one frame."""
 
     def __init__(self, opts, size: tuple[int, int] | None = None, visible: bool = True):
+        from viewer.lookdev import LookDev
+
+        if imgui is None:
+            raise WindowUnavailable(f"imgui-bundle is not usable ({_IMGUI_ERROR})")
         self.opts = opts
         if not glfw.init():
             raise WindowUnavailable("glfw could not initialise")
@@ -50,72 +58,147 @@ class App:
         self.ctx = moderngl.create_context()
         check_version(self.ctx)
         self.screen = self.ctx.detect_framebuffer()  # the window's default framebuffer, bound now
-        self.renderer = make_renderer(self.ctx, load_material(opts.material), opts)
-        self.state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap)
-        self.passes = 0
-        self.frame_ms = 0.0
-        self._drag: tuple[float, float] | None = None
-        glfw.set_scroll_callback(self.window, self._on_scroll)
+        state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap,
+                          env_rotation=opts.env_rotation, env_intensity=opts.env_intensity,
+                          background=opts.background)
+        self.lookdev = LookDev(self.ctx, load_material(opts.material), opts.mesh, opts.env, state)
+        from imgui_bundle.python_backends.glfw_backend import GlfwRenderer
+
+        from viewer.ui.panels import Panels
+
+        imgui.create_context()
+        implot.create_context()
+        imgui.get_io().set_ini_filename("")  # no imgui.ini beside the user's files
+        self.gui = GlfwRenderer(self.window)
+        self.panels = Panels(self.lookdev)
+        if getattr(opts, "session", None) and not self.lookdev.open_session(opts.session):
+            self.close()
+            raise NbrdfError(self.lookdev.error or f"{opts.session}: cannot open the session")
+        self._drag: tuple[int, float, float] | None = None
+        self.dragging = False
+        self.scale = 1.0             # render resolution / window resolution (adaptive)
+        self._last_ms: float | None = None
+        self._frames = 0
         glfw.set_key_callback(self.window, self._on_key)
 
     # --- input -----------------------------------------------------------------------
-    def _on_scroll(self, _w, _dx, dy) -> None:
-        self.state.camera.zoom(0.9 ** dy)
-        self.passes = 0
-
-    def _on_key(self, window, key, _sc, action, _mods) -> None:
-        if key == glfw.KEY_ESCAPE and action == glfw.PRESS:
+    def _on_key(self, window, key, scancode, action, mods) -> None:
+        self.gui.keyboard_callback(window, key, scancode, action, mods)
+        if action != glfw.PRESS or imgui.get_io().want_capture_keyboard:
+            return
+        cam = self.lookdev.state.camera
+        if key == glfw.KEY_ESCAPE:
             glfw.set_window_should_close(window, True)
+        elif key == glfw.KEY_F:
+            cam.frame()
+            self.lookdev.invalidate()
+        elif key == glfw.KEY_T:
+            self.panels.turntable = not self.panels.turntable
+        elif key == glfw.KEY_H:
+            self.panels.visible = not self.panels.visible
 
     def _mouse(self) -> None:
-        if glfw.get_mouse_button(self.window, glfw.MOUSE_BUTTON_LEFT) == glfw.PRESS:
-            x, y = glfw.get_cursor_pos(self.window)
-            if self._drag is not None:
-                self.state.camera.orbit(-(x - self._drag[0]) * 0.3, (y - self._drag[1]) * 0.3)
-                if (x, y) != self._drag:
-                    self.passes = 0
-            self._drag = (x, y)
+        io = imgui.get_io()
+        ld, cam = self.lookdev, self.lookdev.state.camera
+        x, y = glfw.get_cursor_pos(self.window)
+        button = next((b for b in (glfw.MOUSE_BUTTON_LEFT, glfw.MOUSE_BUTTON_RIGHT)
+                       if glfw.get_mouse_button(self.window, b) == glfw.PRESS), None)
+        if button is not None and (self._drag is not None or not io.want_capture_mouse):
+            if self._drag is not None and self._drag[0] == button and (x, y) != self._drag[1:]:
+                dx, dy = x - self._drag[1], y - self._drag[2]
+                if button == glfw.MOUSE_BUTTON_LEFT:
+                    cam.orbit(-dx * 0.3, dy * 0.3)
+                else:
+                    h = max(self.framebuffer_size()[1], 1)
+                    cam.pan(dx / h, dy / h)
+                ld.invalidate()
+            self._drag = (button, x, y)
         else:
             self._drag = None
+        self.dragging = self._drag is not None
+        if io.mouse_wheel and not io.want_capture_mouse:
+            cam.zoom(0.9 ** io.mouse_wheel)
+            ld.invalidate()
+        if self.panels.turntable:
+            cam.orbit(0.5, 0.0)
+            ld.invalidate()
 
     # --- frames ----------------------------------------------------------------------
     def framebuffer_size(self) -> tuple[int, int]:
         return glfw.get_framebuffer_size(self.window)
 
     def step(self, passes_per_frame: int = 1) -> None:
-        """Processes input, adds passes to the accumulation, presents the frame."""
+        """Processes input, renders the view and the panels, presents the frame."""
         t0 = time.perf_counter()
         glfw.poll_events()
-        self._mouse()
+        self.gui.process_inputs()
+        imgui.new_frame()
         w, h = self.framebuffer_size()
         w, h = max(w, 1), max(h, 1)
-        view_w, view_h = (64, 64) if self.state.view == "lobe" else (w, h)
-        if self.state.view == "object":
-            tex = self.renderer.accumulate(self.state, view_w, view_h, self.passes, passes_per_frame)
-            self.passes += passes_per_frame
-        else:
-            tex = self.renderer.accumulate(self.state, view_w, view_h, 0, 1)
-            self.passes = 1
+        self.panels.draw((w, h))
+        self._mouse()
+        self.screen.use()
         self.screen.viewport = (0, 0, w, h)
-        self.renderer.tonemap_to(self.screen, tex, self.passes, self.state)
+        scale = self._adapt_scale(w, h)
+        passes = 1 if self.dragging else passes_per_frame
+        self.lookdev.render(self.screen, (w, h), passes, scale=scale)
+        self.screen.use()
+        self.screen.viewport = (0, 0, w, h)
+        imgui.render()
+        _ = self.ctx.error  # PyOpenGL (the panels' backend) raises on any error flag left behind
+        self.gui.render(imgui.get_draw_data())
         glfw.swap_buffers(self.window)
-        self.frame_ms = (time.perf_counter() - t0) * 1000.0
+        self.ctx.finish()
+        self.lookdev.frame_done()
+        self._measure((time.perf_counter() - t0) * 1000.0)
+
+    #: Frame-time budgets (ms): while dragging, and while refining when still.
+    BUDGET_DRAG_MS, BUDGET_STILL_MS = 60.0, 200.0
+
+    def _adapt_scale(self, w: int, h: int) -> float:
+        """The render scale that keeps a whole frame (view, panels, present) within
+        budget on this GPU: software OpenGL renders the neural shader at a fraction
+        of the window, a GPU at full size. Steps of 1/8 between 1/8 and 1, so
+        the accumulation restarts rarely."""
+        if self._last_ms is None or self.lookdev.state.view == "lobe":
+            return self.scale
+        budget = self.BUDGET_DRAG_MS if self.dragging else self.BUDGET_STILL_MS
+        step = 0.125
+        want = self.scale
+        if self._last_ms > 1.5 * budget:
+            ratio = (budget / self._last_ms) ** 0.5
+            want = max(step, np.floor(self.scale * ratio / step) * step)
+        elif self._last_ms < 0.4 * budget and self.scale < 1.0:
+            want = min(1.0, self.scale + step)
+        if want != self.scale:
+            self.scale = float(want)
+            self.lookdev.invalidate()
+        return self.scale
+
+    def _measure(self, ms: float) -> None:
+        self._frames += 1
+        if self._frames > 2:  # the first frames build shaders
+            self._last_ms = ms
 
     def read_pixels(self) -> np.ndarray:
         """The presented frame as uint8 (H, W, 3), row 0 at the top."""
         w, h = self.framebuffer_size()
+        self.screen.use()
         data = self.screen.read(viewport=(0, 0, w, h), components=3)
         return np.frombuffer(data, dtype=np.uint8).reshape(h, w, 3)[::-1].copy()
 
     def run(self) -> None:
         while not glfw.window_should_close(self.window):
             self.step()
-            if self.passes >= 4096:
+            if self.lookdev.passes >= 1024 and not self.dragging:
                 time.sleep(0.01)
         self.close()
 
     def close(self) -> None:
         if self.window:
+            self.lookdev.close()
+            _ = self.ctx.error
+            self.gui.shutdown()
             glfw.destroy_window(self.window)
             self.window = None
         glfw.terminate()

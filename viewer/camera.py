@@ -52,3 +52,16 @@ class OrbitCamera:
 
     def zoom(self, factor: float) -> None:
         self.distance = float(np.clip(self.distance * factor, 0.3, 50.0))
+
+    def pan(self, dx: float, dy: float) -> None:
+        """Moves the target in the image plane by fractions of the distance."""
+        v = self.view()
+        right, up = v[0, :3], v[1, :3]
+        t = np.asarray(self.target, dtype=np.float64) + (-dx * right + dy * up) * self.distance
+        self.target = (float(t[0]), float(t[1]), float(t[2]))
+
+    def frame(self, radius: float = 1.0) -> None:
+        """Centres a normalised object (radius 1 about the origin) in the view."""
+        self.target = (0.0, 0.0, 0.0)
+        self.distance = radius / math.sin(math.radians(self.fov) / 2) * 1.05
+

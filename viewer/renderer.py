@@ -116,6 +116,8 @@ class Renderer:
         m = named_mesh(mesh) if isinstance(mesh, str) else mesh
         self.mesh = m
         self._mesh_buffers = (self.ctx.buffer(m.interleaved().tobytes()), self.ctx.buffer(m.indices.astype("u4").tobytes()))
+        if hasattr(self, "_gbuffer_prog"):
+            del self._gbuffer_prog  # its vertex array holds the old mesh
         self._obj_programs = {k: (p, None) for k, (p, _) in self._obj_programs.items()}
 
     @property
@@ -213,6 +215,10 @@ class Renderer:
             self._fbo[key] = (self.ctx.framebuffer([tex], depth), tex)
         return self._fbo[key]
 
+    def frame_texture(self, view: str, w: int, h: int) -> moderngl.Texture:
+        """The accumulation target of ``view`` at (w, h) as the last ``accumulate`` left it."""
+        return self._target(*((LOBE_SIZE, LOBE_SIZE) if view == "lobe" else (w, h)))[1]
+
     def accumulate(self, state: ViewState, w: int, h: int, first_pass: int, passes: int) -> moderngl.Texture:
         """Adds ``passes`` passes of the view into the (w, h) float target; returns it."""
         fbo, tex = self._target(w, h)
@@ -294,6 +300,46 @@ class Renderer:
         if state.view == "lobe":
             return img.copy()
         return np.ascontiguousarray(img[::-1])
+
+    def gbuffer(self, state: ViewState, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per pixel of the object view (row 0 at the top): the light direction
+        and the view direction in the shading frame, (H, W, 3) each, and the
+        (H, W) mask of pixels on the object -- what a Monte Carlo reference of
+        the directional-light image needs."""
+        w, h = size
+        if not hasattr(self, "_gbuffer_prog"):
+            self._gbuffer_prog = self.ctx.program(vertex_shader=shaders.source("object.vert"),
+                                                  fragment_shader=shaders.source("gbuffer.frag"))
+            vbo, ibo = self._mesh_buffers
+            self._gbuffer_vao = self.ctx.vertex_array(
+                self._gbuffer_prog, [(vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")], ibo,
+                skip_errors=True)
+        p, cam = self._gbuffer_prog, state.camera
+        targets = [self.ctx.texture((w, h), 4, dtype="f4") for _ in range(2)]
+        depth = self.ctx.depth_renderbuffer((w, h))
+        fbo = self.ctx.framebuffer(targets, depth)
+        try:
+            fbo.use()
+            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            self.ctx.enable(moderngl.DEPTH_TEST)
+            self.ctx.disable(moderngl.BLEND)
+            self.ctx.depth_func = "<"
+            p["u_view_proj"].write((cam.projection(w / h) @ cam.view()).T.astype("f4").tobytes())
+            p["u_model"].write(np.eye(4, dtype="f4").tobytes())
+            p["u_eye"].value = tuple(cam.eye())
+            ld = np.asarray(state.light_dir, dtype=np.float64)
+            p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
+            if "u_has_normal_map" in p:
+                p["u_has_normal_map"].value = int(self.normal_map is not None)
+            if self.normal_map is not None:
+                self.normal_map.use(NORMAL_UNIT)
+                p["u_normal_map"].value = NORMAL_UNIT
+            self._gbuffer_vao.render(moderngl.TRIANGLES)
+            wi, wo = (np.frombuffer(t.read(), np.float32).reshape(h, w, 4)[::-1] for t in targets)
+            return np.ascontiguousarray(wi[..., :3]), np.ascontiguousarray(wo[..., :3]), wi[..., 3] > 0.5
+        finally:
+            for r in (fbo, depth, *targets):
+                r.release()
 
     def tonemap_to(self, target: moderngl.Framebuffer, tex: moderngl.Texture, passes: int, state: ViewState) -> None:
         """Draws the accumulation ``tex`` (sum of ``passes``) to ``target`` as sRGB."""

@@ -38,6 +38,7 @@ class ViewOptions:
     env_rotation: float = 0.0
     env_intensity: float = 0.6
     background: bool = True
+    session: str | None = None
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -57,6 +58,8 @@ def parse_args(argv: Sequence[str] | None) -> ViewOptions:
     p.add_argument("--env", default=None, help="equirectangular .hdr/.exr environment (default: the built-in sky)")
     p.add_argument("--env-rotation", type=float, default=0.0, help="environment rotation about the up axis, degrees")
     p.add_argument("--env-intensity", type=float, default=0.6, help="environment radiance scale")
+    p.add_argument("--session", default=None,
+                   help="a look-development session file (material, camera, lights, environment, view) to open")
     p.add_argument("--no-background", dest="background", action="store_false",
                    help="black behind the object instead of the environment")
     p.add_argument("--view", default="object", choices=("object", "lobe", "slice"))
@@ -83,7 +86,7 @@ def parse_args(argv: Sequence[str] | None) -> ViewOptions:
     return ViewOptions(material=Path(a.material), mesh=a.mesh, env=a.env, view=a.view, theta_i=a.theta_i,
                        offscreen=a.offscreen, out=a.out, size=_size(a.size), spp=a.spp, exposure=a.exposure,
                        tonemap=a.tonemap, brdf=a.brdf, env_rotation=a.env_rotation, env_intensity=a.env_intensity,
-                       background=a.background)
+                       background=a.background, session=a.session)
 
 
 def has_display() -> bool:
@@ -113,6 +116,16 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
                 opts.size, opts.spp = size, spp
                 note = f" (software OpenGL: a {size[0]}x{size[1]}, {spp}-pass preview)"
         print(f"{PROG}: {fallback}; rendering offscreen to {out} instead{note}", file=sys.stderr)
+    if opts.session:
+        from viewer.lookdev import LookDev
+
+        ld = LookDev(ctx, material, opts.mesh, opts.env)
+        try:
+            if not ld.open_session(opts.session) or not ld.screenshot(out, opts.size, opts.spp):
+                raise NbrdfError(ld.error or f"{opts.session}: cannot render the session")
+        finally:
+            ld.close()
+        return out
     r = make_renderer(ctx, material, opts)
     state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap,
                       env_rotation=opts.env_rotation, env_intensity=opts.env_intensity, background=opts.background)

@@ -136,3 +136,25 @@ def test_headless_fallback(tmp_path):
     assert r.returncode == 0, r.stderr
     assert r.stderr.strip().splitlines() == ["nbrdf-view: no display found; rendering offscreen to nbrdf-view.png instead"]
     assert (tmp_path / "nbrdf-view.png").stat().st_size > 100
+
+
+def test_cli_renders_a_session_file(gl_ctx, tmp_path, capsys):
+    import imageio.v3 as iio
+
+    from viewer.lookdev import LookDev
+
+    ld = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
+    try:
+        ld.state.view = "slice"
+        ld.set_param(2, "roughness", 0.6)
+        assert ld.save_session(tmp_path / "s.json")
+        assert ld.screenshot(tmp_path / "direct.png", (24, 16), 1)
+    finally:
+        ld.close()
+    assert main(["--offscreen", "--session", str(tmp_path / "s.json"), "--size", "24x16", "--spp", "1",
+                 "--out", str(tmp_path / "cli.png")]) == 0
+    np.testing.assert_array_equal(iio.imread(tmp_path / "cli.png"), iio.imread(tmp_path / "direct.png"))
+    (tmp_path / "bad.json").write_text('{"format": "nbrdf-session/1"}')
+    assert main(["--offscreen", "--session", str(tmp_path / "bad.json"), "--out", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "malformed session" in err[0]

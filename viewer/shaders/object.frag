@@ -10,20 +10,13 @@
 //@INCLUDE brdf
 //@INCLUDE sampling.glsl
 //@INCLUDE environment.glsl
+//@INCLUDE shading_frame.glsl
 
-in vec3 v_world;
-in vec3 v_normal;
-in vec4 v_tangent;
-in vec2 v_uv;
-
-uniform vec3 u_eye;
 uniform vec3 u_light_dir;       // toward the light, world space
 uniform vec3 u_light_radiance;
 uniform float u_env_intensity;
 uniform int u_env_on;           // 0: the light alone (benchmarks, quick previews)
 uniform uint u_pass;
-uniform sampler2D u_normal_map;
-uniform int u_has_normal_map;
 
 out vec4 frag;
 
@@ -31,22 +24,11 @@ uniform int u_strategies;  // 4: the light and three environment strategies (a u
                            // is not unrolled: one call site of the BRDF keeps the shader small)
 
 void main() {
-    vec3 n = normalize(v_normal);
-    vec3 view = normalize(u_eye - v_world);
-    if (dot(n, view) < 0.0) n = -n;  // two-sided
-    if (u_has_normal_map != 0) {
-        vec3 t = v_tangent.xyz - n * dot(n, v_tangent.xyz);
-        t = dot(t, t) > 1e-12 ? normalize(t) : frame_from_normal(n)[0];
-        vec3 b = cross(n, t) * (v_tangent.w < 0.0 ? -1.0 : 1.0);
-        vec3 m = texture(u_normal_map, v_uv).xyz * 2.0 - 1.0;
-        n = normalize(t * m.x + b * m.y + n * max(m.z, 1e-3));
-        float nv = dot(n, view);  // a bent normal facing away: pull it back to the silhouette
-        if (nv < 1e-3) n = normalize(n + view * (1e-3 - nv));
-    }
+    vec3 view;
+    mat3 tbn = shading_frame(view);
 #ifdef NB_TEXTURED
     nb_load_share(v_uv);
 #endif
-    mat3 tbn = frame_from_normal(n);
     mat3 to_local = transpose(tbn);
     vec3 wo = to_local * view;
     uvec2 px = uvec2(gl_FragCoord.xy);

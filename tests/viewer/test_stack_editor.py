@@ -1,0 +1,48 @@
+"""The material panel's stack edits: valid edits apply, invalid ones change nothing."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from neural.errors import NbrdfError
+from neural.material import Dielectric, Medium
+from viewer.ui.stack_editor import StackEditor
+from viewer.view_cli import DEFAULT_MATERIAL
+
+
+@pytest.fixture
+def editor() -> StackEditor:
+    return StackEditor(json.loads(DEFAULT_MATERIAL.read_text()), DEFAULT_MATERIAL.parent)
+
+
+def test_set_param_validates(editor):
+    assert editor.set_param(2, "roughness", 0.4).base.roughness == 0.4
+    before = json.dumps(editor.doc)
+    with pytest.raises(NbrdfError, match=r"layers\[2\].roughness"):
+        editor.set_param(2, "roughness", 2.0)
+    with pytest.raises(NbrdfError, match="no such layer"):
+        editor.set_param(9, "roughness", 0.1)
+    assert json.dumps(editor.doc) == before
+
+
+def test_add_remove_move_and_media(editor):
+    m = editor.add_coat()
+    assert len(m.interfaces) == 2 and isinstance(m.layers[0], Dielectric) and isinstance(m.layers[1], Medium)
+    editor.set_param(0, "roughness", 0.3)
+    m = editor.move(0, 1)  # the new coat (with its medium) goes below the old one
+    assert m.layers[2].roughness == 0.3 and isinstance(m.layers[3], Medium)
+    m = editor.toggle_medium(0)  # the old coat loses its medium
+    assert [layer.type for layer in m.layers] == ["dielectric", "dielectric", "medium", "conductor"]
+    m = editor.remove(1)  # an interface goes with its medium
+    assert [layer.type for layer in m.layers] == ["dielectric", "conductor"]
+    with pytest.raises(NbrdfError, match="base cannot be removed"):
+        editor.remove(1)
+    with pytest.raises(NbrdfError, match="cannot move further"):
+        editor.move(0, -1)
+
+
+def test_change_base_type(editor):
+    assert editor.set_base_type("diffuse").base.type == "diffuse"
+    with pytest.raises(NbrdfError, match="base type"):
+        editor.set_base_type("medium")

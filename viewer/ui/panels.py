@@ -1,0 +1,306 @@
+"""The previewer's panels (imgui-bundle): every widget calls a ``LookDev``
+method, so what a panel does is exactly what the tests drive.
+
+Panels: Material (the layer stack, presets, files), Scene (mesh, environment,
+light, camera, exposure), View (view, incidence, compare, interpolation,
+mip-mapping, the plane-of-incidence plot), and a performance overlay.
+"""
+from __future__ import annotations
+
+import numpy as np
+from imgui_bundle import imgui, implot
+
+from viewer.lookdev import COMPARE_MODES, LookDev, presets
+from viewer.ui.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
+
+VIEWS = ("object", "lobe", "slice")
+TONEMAPS = ("aces", "linear")
+MESHES = ("sphere", "testmesh")
+RED = imgui.ImVec4(1.0, 0.35, 0.3, 1.0)
+DIM = imgui.ImVec4(0.7, 0.7, 0.7, 1.0)
+
+
+class Panels:
+    """Draws the panels each frame; text fields keep their contents between frames."""
+
+    def __init__(self, lookdev: LookDev):
+        self.ld = lookdev
+        self.material_path = ""
+        self.session_path = "session.nbrdf.json"
+        self.shot_path = "nbrdf-shot.png"
+        self.mesh_path = ""
+        self.env_path = lookdev.env_path or ""
+        self.turntable = False
+        self.visible = True
+
+    def draw(self, size: tuple[int, int]) -> None:
+        if not self.visible:
+            return
+        self._overlay(size)
+        imgui.set_next_window_pos(imgui.ImVec2(8, 8), imgui.Cond_.first_use_ever)
+        imgui.set_next_window_size(imgui.ImVec2(300, 440), imgui.Cond_.first_use_ever)
+        if imgui.begin("Material")[0]:
+            self._material()
+        imgui.end()
+        imgui.set_next_window_pos(imgui.ImVec2(size[0] - 308, 8), imgui.Cond_.first_use_ever)
+        imgui.set_next_window_size(imgui.ImVec2(300, 440), imgui.Cond_.first_use_ever)
+        if imgui.begin("Scene and view")[0]:
+            self._view()
+            self._scene()
+            self._files()
+        imgui.end()
+
+    # --- material ---------------------------------------------------------------------------
+    def _material(self) -> None:
+        ld = self.ld
+        names = list(presets())
+        if imgui.begin_combo("preset", "choose..."):
+            for n in names:
+                if imgui.selectable(n, False)[0]:
+                    ld.load_preset(n)
+            imgui.end_combo()
+        progress = ld.svbrdf_progress()
+        if progress is not None:
+            imgui.progress_bar(progress, None, "latent texture")
+        imgui.text(ld.material.name)
+        layers = ld.editor.layers
+        for i, layer in enumerate(list(layers)):
+            imgui.push_id(f"layer{i}")
+            base = i == len(layers) - 1
+            kind = layer["type"]
+            imgui.separator()
+            imgui.text(f"{i}: {kind}{' (base)' if base else ''}")
+            if kind == "dielectric" and not base:
+                imgui.same_line()
+                if imgui.small_button("up"):
+                    ld.edit("move", i, -1)
+                imgui.same_line()
+                if imgui.small_button("down"):
+                    ld.edit("move", i, 1)
+                imgui.same_line()
+                if imgui.small_button("medium"):
+                    ld.edit("toggle_medium", i)
+                imgui.same_line()
+                if imgui.small_button("remove"):
+                    ld.edit("remove", i)
+            if base:
+                cur = BASE_TYPES.index(kind) if kind in BASE_TYPES else -1
+                if cur >= 0:
+                    changed, k = imgui.combo("base type", cur, list(BASE_TYPES))
+                    if changed and k != cur:
+                        ld.edit("set_base_type", BASE_TYPES[k])
+            for key, value in layer.items():
+                if key in ("type", "path"):
+                    if key == "path":
+                        imgui.text_colored(DIM, f"file: {value}")
+                    continue
+                self._param(i, key, value)
+            imgui.pop_id()
+        imgui.separator()
+        if imgui.button("add clear coat"):
+            ld.edit("add_coat")
+        imgui.same_line()
+        if imgui.button("save curve"):
+            ld.save_curve()
+        changed, self.material_path = imgui.input_text("material file", self.material_path)
+        if imgui.button("open material"):
+            ld.open_material(self.material_path)
+        imgui.same_line()
+        if imgui.button("save material"):
+            ld.save_material(self.material_path)
+
+    def _param(self, i: int, key: str, value) -> None:
+        ld = self.ld
+        lo, hi = RANGES.get(key, (0.0, 1.0))
+        if isinstance(value, dict):  # a texture reference
+            imgui.text_colored(DIM, f"{key}: {value.get('texture')} [{value.get('channel')}]")
+            changed, rng = imgui.drag_float2(f"{key} range", list(value.get("range", [lo, hi])), 0.005, lo, hi)
+            if changed:
+                ld.set_param(i, key, {**value, "range": [float(rng[0]), float(rng[1])]})
+            return
+        if key in COLOUR_KEYS:
+            if isinstance(value, list) and any(isinstance(x, dict) for x in value):
+                imgui.text_colored(DIM, f"{key}: per-channel textures")
+                return
+            rgb = list(value) if isinstance(value, list) else [float(value)] * 3
+            changed, new = imgui.color_edit3(key, rgb)
+            if changed:
+                ld.set_param(i, key, [float(x) for x in new])
+            return
+        changed, v = imgui.slider_float(key, float(value), lo, hi,
+                                        "%.3f", imgui.SliderFlags_.logarithmic if key == "roughness" else 0)
+        if changed:
+            ld.set_param(i, key, float(v))
+
+    # --- view ---------------------------------------------------------------------------------
+    def _view(self) -> None:
+        ld, s = self.ld, self.ld.state
+        if not imgui.collapsing_header("View", imgui.TreeNodeFlags_.default_open):
+            return
+        for v in VIEWS:
+            if imgui.radio_button(v, s.view == v):
+                s.view = v
+                ld.invalidate()
+            imgui.same_line()
+        imgui.new_line()
+        changed, s.theta_i = imgui.slider_float("incidence (deg)", s.theta_i, 0.0, 89.0)
+        if changed:
+            ld.invalidate()
+        cur = COMPARE_MODES.index(ld.compare)
+        changed, k = imgui.combo("compare", cur, ["off", "side by side", "A/B wipe", "error"])
+        if changed:
+            ld.set_compare(COMPARE_MODES[k])
+        if ld.compare != "off":
+            imgui.text_colored(DIM, ld.reference_status())
+            if ld.compare == "wipe":
+                _, ld.wipe = imgui.slider_float("wipe", ld.wipe, 0.0, 1.0)
+            if ld.compare == "error":
+                _, ld.err_scale = imgui.slider_float("error scale", ld.err_scale, 0.01, 1.0, "%.2f",
+                                                     imgui.SliderFlags_.logarithmic)
+                self._error_bar()
+        if ld.material.is_textured:
+            changed, on = imgui.checkbox("latent mip-mapping", ld.mipmapping)
+            if changed:
+                ld.set_mipmapping(on)
+        self._interpolation()
+        if s.view == "lobe":
+            self._polar_plot()
+
+    def _error_bar(self) -> None:
+        """The false-colour scale: relative error 0 ... error scale."""
+        dl = imgui.get_window_draw_list()
+        p = imgui.get_cursor_screen_pos()
+        w, h = imgui.get_content_region_avail().x, 12.0
+        stops = [(0.0, (0, 0.35, 1)), (0.3, (0, 0.8, 1)), (0.5, (0.2, 1, 0.3)), (0.7, (1, 1, 0)), (1.0, (1, 0, 0))]
+        for (t0, c0), (t1, c1) in zip(stops, stops[1:]):
+            a, b = imgui.ImVec2(p.x + w * t0, p.y), imgui.ImVec2(p.x + w * t1, p.y + h)
+            col0 = imgui.get_color_u32(imgui.ImVec4(*c0, 1.0))
+            col1 = imgui.get_color_u32(imgui.ImVec4(*c1, 1.0))
+            dl.add_rect_filled_multi_color(a, b, col0, col1, col1, col0)
+        imgui.dummy(imgui.ImVec2(w, h))
+        imgui.text(f"0 %{'':>30}{self.ld.err_scale * 100:.0f} % relative error")
+
+    def _interpolation(self) -> None:
+        ld = self.ld
+        if not imgui.collapsing_header("Interpolation"):
+            return
+        names = list(presets())
+        other = ld.interp.other["name"] if ld.interp.other else "off"
+        if imgui.begin_combo("blend with", other):
+            for n in names:
+                if imgui.selectable(n, False)[0]:
+                    ld.set_interpolation(n)
+            imgui.end_combo()
+        if ld.interp.other is not None:
+            changed, t = imgui.slider_float("weight", ld.interp.t, 0.0, 1.0)
+            if changed:
+                ld.set_interpolation(t=t)
+            if imgui.radio_button("latent blend", ld.interp.mode == "latent"):
+                ld.set_interpolation(mode="latent")
+            imgui.same_line()
+            if imgui.radio_button("BRDF blend", ld.interp.mode == "brdf"):
+                ld.set_interpolation(mode="brdf")
+            if imgui.button("stop blending"):
+                ld.clear_interpolation()
+
+    def _polar_plot(self) -> None:
+        curves = self.ld.plane_curves()
+        if not curves:
+            return
+        if implot.begin_plot("plane of incidence, f cos / (1 + f cos)", imgui.ImVec2(-1, 220), implot.Flags_.equal):
+            implot.setup_axes("", "", 0, 0)
+            for name, (th, val) in curves.items():
+                t = np.radians(th)
+                r = np.maximum(val, 0.0)
+                r = r / (1.0 + r)  # the lobe metric's compression: peaks and tails both visible
+                implot.plot_line(name, np.ascontiguousarray(r * np.sin(t)), np.ascontiguousarray(r * np.cos(t)))
+            implot.end_plot()
+
+    # --- scene -------------------------------------------------------------------------------
+    def _scene(self) -> None:
+        ld, s = self.ld, self.ld.state
+        if not imgui.collapsing_header("Scene and lighting"):
+            return
+        cur = MESHES.index(ld.mesh) if ld.mesh in MESHES else -1
+        changed, k = imgui.combo("mesh", max(cur, 0), list(MESHES))
+        if changed:
+            ld.set_mesh(MESHES[k])
+        _, self.mesh_path = imgui.input_text("mesh file", self.mesh_path)
+        imgui.same_line()
+        if imgui.small_button("load##mesh"):
+            ld.set_mesh(self.mesh_path)
+        _, self.env_path = imgui.input_text("environment", self.env_path)
+        if imgui.small_button("load##env"):
+            ld.set_environment(self.env_path or None)
+        imgui.same_line()
+        if imgui.small_button("built-in sky"):
+            self.env_path = ""
+            ld.set_environment(None)
+        edits = [
+            imgui.checkbox("environment light", s.env_on),
+            imgui.checkbox("background", s.background),
+            imgui.slider_float("env rotation", s.env_rotation, -180.0, 180.0),
+            imgui.slider_float("env intensity", s.env_intensity, 0.0, 4.0),
+        ]
+        (c0, s.env_on), (c1, s.background), (c2, s.env_rotation), (c3, s.env_intensity) = edits
+        az, el = _angles(s.light_dir)
+        c4, az = imgui.slider_float("light azimuth", az, -180.0, 180.0)
+        c5, el = imgui.slider_float("light elevation", el, -10.0, 90.0)
+        if c4 or c5:
+            s.light_dir = _direction(az, el)
+        c6, s.light_radiance = imgui.slider_float("light intensity", s.light_radiance, 0.0, 20.0)
+        c7, s.exposure = imgui.slider_float("exposure (stops)", s.exposure, -6.0, 6.0)
+        cur = TONEMAPS.index(s.tonemap)
+        c8, k = imgui.combo("tone mapping", cur, ["ACES filmic", "linear"])
+        s.tonemap = TONEMAPS[k]
+        _, self.turntable = imgui.checkbox("turntable", self.turntable)
+        imgui.same_line()
+        if imgui.button("frame"):
+            s.camera.frame()
+            ld.invalidate()
+        if c0 or c1 or c2 or c3 or c4 or c5 or c6:
+            ld.invalidate()
+
+    def _files(self) -> None:
+        ld = self.ld
+        if not imgui.collapsing_header("Files"):
+            return
+        _, self.session_path = imgui.input_text("session", self.session_path)
+        if imgui.button("open session"):
+            ld.open_session(self.session_path)
+        imgui.same_line()
+        if imgui.button("save session"):
+            ld.save_session(self.session_path)
+        _, self.shot_path = imgui.input_text("screenshot", self.shot_path)
+        if imgui.button("screenshot (.png/.exr)"):
+            w, h = (int(x) for x in imgui.get_io().display_size)
+            if ld.screenshot(self.shot_path, (max(w, 1), max(h, 1)), 16):
+                ld.notice = f"wrote {self.shot_path}"
+
+    # --- overlay -----------------------------------------------------------------------------
+    def _overlay(self, size: tuple[int, int]) -> None:
+        ld, t = self.ld, self.ld.timings
+        imgui.set_next_window_pos(imgui.ImVec2(316, 8), imgui.Cond_.always)
+        imgui.set_next_window_bg_alpha(0.55)
+        flags = (imgui.WindowFlags_.no_decoration | imgui.WindowFlags_.always_auto_resize
+                 | imgui.WindowFlags_.no_inputs | imgui.WindowFlags_.no_focus_on_appearing | imgui.WindowFlags_.no_nav)
+        if imgui.begin("performance", None, flags)[0]:
+            imgui.text(f"{t.fps:5.1f} fps   frame {t.frame_ms:6.1f} ms   passes {ld.passes}")
+            imgui.text(f"latent update {t.latent_ms:5.2f} ms   edit -> frame {t.edit_to_frame_ms:6.1f} ms")
+            if ld.notice:
+                imgui.text_colored(DIM, ld.notice)
+            if ld.error:
+                imgui.text_colored(RED, ld.error)
+        imgui.end()
+
+
+def _angles(d) -> tuple[float, float]:
+    x, y, z = (float(v) for v in d)
+    r = max((x * x + y * y + z * z) ** 0.5, 1e-9)
+    return float(np.degrees(np.arctan2(y, x))), float(np.degrees(np.arcsin(z / r)))
+
+
+def _direction(az: float, el: float) -> tuple[float, float, float]:
+    a, e = np.radians(az), np.radians(el)
+    return (float(np.cos(e) * np.cos(a)), float(np.cos(e) * np.sin(a)), float(np.sin(e)))
+

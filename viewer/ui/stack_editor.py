@@ -1,0 +1,128 @@
+"""The layer stack as an editable list (SPEC section 4), without any GUI.
+
+Edits act on the material's JSON document; every edit is validated by the
+material parser, and an edit that would make an invalid stack is refused with
+the parser's one-line reason, leaving the document as it was. The GUI panels
+and the tests drive the same methods.
+"""
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+from neural.errors import NbrdfError
+from neural.material import Material, parse_material
+
+#: Defaults of a new layer of each type.
+NEW_LAYER = {
+    "conductor": {"type": "conductor", "roughness": 0.2, "r0": [0.95, 0.64, 0.54]},
+    "diffuse": {"type": "diffuse", "albedo": [0.5, 0.5, 0.5]},
+    "dielectric": {"type": "dielectric", "roughness": 0.05, "ior": 1.5},
+    "medium": {"type": "medium", "albedo": [0.9, 0.9, 0.9], "sigma_t": 0.5},
+}
+BASE_TYPES = ("conductor", "diffuse", "dielectric")
+#: Slider ranges per parameter (SPEC section 3 legal ranges).
+RANGES = {"roughness": (0.01, 1.0), "ior": (1.05, 2.0), "sigma_t": (0.0, 5.0), "r0": (0.0, 1.0),
+          "albedo": (0.0, 1.0)}
+COLOUR_KEYS = ("r0", "albedo")
+
+
+class StackEditor:
+    """A material document and the edits of the material panel."""
+
+    def __init__(self, doc: dict, base_dir: Path | str = "."):
+        self.base_dir = Path(base_dir)
+        self.material = parse_material(doc, self.base_dir)
+        self.doc = copy.deepcopy(doc)
+
+    @classmethod
+    def from_material(cls, m: Material) -> "StackEditor":
+        from neural.material import material_to_dict
+
+        return cls(material_to_dict(m), m.base_dir)
+
+    @property
+    def layers(self) -> list[dict]:
+        return self.doc["layers"]
+
+    def _apply(self, doc: dict) -> Material:
+        """Validates ``doc`` and makes it current (or raises, changing nothing)."""
+        m = parse_material(doc, self.base_dir)
+        self.doc, self.material = doc, m
+        return m
+
+    def set_param(self, index: int, key: str, value) -> Material:
+        doc = copy.deepcopy(self.doc)
+        self._layer(doc, index)[key] = value
+        return self._apply(doc)
+
+    def set_name(self, name: str) -> Material:
+        return self._apply({**copy.deepcopy(self.doc), "name": name})
+
+    def add_coat(self, medium: bool = True) -> Material:
+        """A clear coat on top: a dielectric interface (and a medium below it)."""
+        doc = copy.deepcopy(self.doc)
+        new = [copy.deepcopy(NEW_LAYER["dielectric"])] + ([copy.deepcopy(NEW_LAYER["medium"])] if medium else [])
+        doc["layers"] = new + doc["layers"]
+        return self._apply(doc)
+
+    def toggle_medium(self, interface: int) -> Material:
+        """Adds a medium under the interface at ``interface``, or removes it."""
+        doc = copy.deepcopy(self.doc)
+        layers = doc["layers"]
+        if self._layer(doc, interface)["type"] != "dielectric" or interface == len(layers) - 1:
+            raise NbrdfError(f"layers[{interface}]: only an interface above the base carries a medium")
+        if layers[interface + 1]["type"] == "medium":
+            del layers[interface + 1]
+        else:
+            layers.insert(interface + 1, copy.deepcopy(NEW_LAYER["medium"]))
+        return self._apply(doc)
+
+    def remove(self, index: int) -> Material:
+        """Removes a layer; an interface goes with the medium below it."""
+        doc = copy.deepcopy(self.doc)
+        layers = doc["layers"]
+        kind = self._layer(doc, index)["type"]
+        if index == len(layers) - 1:
+            raise NbrdfError(f"layers[{index}]: the base cannot be removed (change its type instead)")
+        count = 2 if kind == "dielectric" and layers[index + 1]["type"] == "medium" else 1
+        del layers[index:index + count]
+        return self._apply(doc)
+
+    def move(self, index: int, delta: int) -> Material:
+        """Moves an interface (with its medium) up (-1) or down (+1) among the interfaces."""
+        groups = self._groups()
+        g = next((k for k, grp in enumerate(groups) if grp[0] == index), None)
+        if g is None or groups[g][0] == len(self.layers) - 1:
+            raise NbrdfError(f"layers[{index}]: only interfaces move (the base stays at the bottom)")
+        t = g + delta
+        if not 0 <= t < len(groups) - 1:
+            raise NbrdfError(f"layers[{index}]: cannot move further")
+        order = list(range(len(groups)))
+        order[g], order[t] = order[t], order[g]
+        doc = copy.deepcopy(self.doc)
+        doc["layers"] = [copy.deepcopy(self.layers[i]) for k in order for i in groups[k]]
+        return self._apply(doc)
+
+    def set_base_type(self, kind: str) -> Material:
+        if kind not in BASE_TYPES:
+            raise NbrdfError(f"base type {kind!r}: expected one of {', '.join(BASE_TYPES)}")
+        doc = copy.deepcopy(self.doc)
+        doc["layers"][-1] = copy.deepcopy(NEW_LAYER[kind])
+        return self._apply(doc)
+
+    def _groups(self) -> list[list[int]]:
+        """Layer indices grouped as interface (+ medium) ... base."""
+        groups: list[list[int]] = []
+        for i, layer in enumerate(self.layers):
+            if layer["type"] == "medium" and groups:
+                groups[-1].append(i)
+            else:
+                groups.append([i])
+        return groups
+
+    @staticmethod
+    def _layer(doc: dict, index: int) -> dict:
+        if not 0 <= index < len(doc["layers"]):
+            raise NbrdfError(f"layers[{index}]: no such layer (the stack has {len(doc['layers'])})")
+        return doc["layers"][index]
