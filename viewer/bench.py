@@ -105,3 +105,42 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
         "torch_threads": torch.get_num_threads(),
         "glsl_over_torch": round(glsl_rate / torch_rate, 3),
     }
+
+
+def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int = 6) -> dict:
+    """The look-development window (needs a display; Xvfb will do): frame time
+    and the latency from a slider edit (a base roughness change, through leaf
+    encoders and layering) to the end of the first frame that shows it, with
+    the window's adaptive resolution as a user gets it."""
+    import statistics
+
+    from viewer.app import App
+    from viewer.view_cli import DEFAULT_MATERIAL, ViewOptions
+
+    app = App(ViewOptions(material=DEFAULT_MATERIAL, size=size), size=size)
+    ld = app.lookdev
+    try:
+        for _ in range(warmup):
+            app.step()
+        frames, latency, latent = [], [], []
+        base = len(ld.editor.layers) - 1
+        for k in range(edits):
+            for _ in range(2):
+                t0 = time.perf_counter()
+                app.step()
+                frames.append((time.perf_counter() - t0) * 1000.0)
+            ld.set_param(base, "roughness", 0.2 + 0.05 * (k % 4))
+            app.step()
+            latency.append(ld.timings.edit_to_frame_ms)
+            latent.append(ld.timings.latent_ms)
+        return {
+            "renderer": app.ctx.info.get("GL_RENDERER", "?"),
+            "window": f"{size[0]}x{size[1]}",
+            "render_scale": app.scale,
+            "frame_ms_median": round(statistics.median(frames), 1),
+            "edit_to_frame_ms_median": round(statistics.median(latency), 1),
+            "edit_to_frame_ms_max": round(max(latency), 1),
+            "latent_update_ms_median": round(statistics.median(latent), 2),
+        }
+    finally:
+        app.close()

@@ -380,6 +380,18 @@ def cmd_bench_operations(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_app(a: argparse.Namespace) -> int:
+    from viewer.bench import bench_app
+    from viewer.view_cli import has_display
+
+    if not has_display():
+        raise NbrdfError("bench app: no display (run it under xvfb-run on a headless machine)")
+    if a.edits < 1:
+        raise NbrdfError(f"--edits: {a.edits} must be at least 1")
+    print(json.dumps(bench_app(_size(a.size), a.edits), indent=2))
+    return 0
+
+
 def cmd_bench_render(a: argparse.Namespace) -> int:
     from viewer.bench import bench_render
     from viewer.view_cli import _size
@@ -508,6 +520,10 @@ def build_parser() -> argparse.ArgumentParser:
     bd.add_argument("--size", default="1920x1080", help="WxH of the timed frames")
     bd.add_argument("--repeats", type=int, default=3)
     bd.set_defaults(fn=cmd_bench_render)
+    ba = bsub.add_parser("app", help="the window's frame time and slider-to-frame latency (needs a display)")
+    ba.add_argument("--size", default="1000x620", help="WxH of the window")
+    ba.add_argument("--edits", type=int, default=8)
+    ba.set_defaults(fn=cmd_bench_app)
     bo = bsub.add_parser("operations", help="CPU latency of leaf encoders and layering (what a slider runs)")
     bo.add_argument("--model", help="bundle (default: the shipped weights)")
     bo.add_argument("--repeats", type=int, default=1000)

@@ -66,7 +66,7 @@ SCRIPT = textwrap.dedent("""
         out["shots"] = [ld.screenshot(tmp / "shot.png", (64, 48), 2), ld.screenshot(tmp / "shot.exr", (32, 24), 2),
                         ld.screenshot(tmp / "shot.bmp", (8, 8), 1), ld.error]
         # Every panel and mode draws: compare modes, views, interpolation, a textured preset.
-        app.panels.visible = True
+        app.panels.visible = app.panels.expand_all = True
         for view, mode in (("lobe", "side"), ("slice", "error"), ("object", "wipe")):
             ld.state.view = view
             ld.set_compare(mode)

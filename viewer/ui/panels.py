@@ -32,6 +32,12 @@ class Panels:
         self.env_path = lookdev.env_path or ""
         self.turntable = False
         self.visible = True
+        self.expand_all = False  # opens every section (tests draw every widget)
+
+    def _header(self, label: str, default_open: bool = False) -> bool:
+        if self.expand_all:
+            imgui.set_next_item_open(True)
+        return imgui.collapsing_header(label, imgui.TreeNodeFlags_.default_open if default_open else 0)
 
     def draw(self, size: tuple[int, int]) -> None:
         if not self.visible:
@@ -135,7 +141,7 @@ class Panels:
     # --- view ---------------------------------------------------------------------------------
     def _view(self) -> None:
         ld, s = self.ld, self.ld.state
-        if not imgui.collapsing_header("View", imgui.TreeNodeFlags_.default_open):
+        if not self._header("View", True):
             return
         for v in VIEWS:
             if imgui.radio_button(v, s.view == v):
@@ -182,7 +188,7 @@ class Panels:
 
     def _interpolation(self) -> None:
         ld = self.ld
-        if not imgui.collapsing_header("Interpolation"):
+        if not self._header("Interpolation"):
             return
         names = list(presets())
         other = ld.interp.other["name"] if ld.interp.other else "off"
@@ -219,7 +225,7 @@ class Panels:
     # --- scene -------------------------------------------------------------------------------
     def _scene(self) -> None:
         ld, s = self.ld, self.ld.state
-        if not imgui.collapsing_header("Scene and lighting"):
+        if not self._header("Scene and lighting"):
             return
         cur = MESHES.index(ld.mesh) if ld.mesh in MESHES else -1
         changed, k = imgui.combo("mesh", max(cur, 0), list(MESHES))
@@ -263,7 +269,7 @@ class Panels:
 
     def _files(self) -> None:
         ld = self.ld
-        if not imgui.collapsing_header("Files"):
+        if not self._header("Files"):
             return
         _, self.session_path = imgui.input_text("session", self.session_path)
         if imgui.button("open session"):
