@@ -30,11 +30,11 @@ def main(size=(1000, 620)) -> int:
     app.BUDGET_STILL_MS = app.BUDGET_DRAG_MS = 1e9  # full resolution for the picture
     ld = app.lookdev
     try:
-        ld.state.camera.distance = 2.9
+        ld.state.camera.distance = 3.6
+        ld.invalidate()
         settle(app, 6)
         iio.imwrite(OUT / "main_window.png", app.read_pixels())
         ld.set_compare("side")
-        ld.state.camera.distance = 3.4
         settle(app, 1)
         t0 = time.monotonic()
         while "..." in ld.reference_status() and time.monotonic() - t0 < 240:

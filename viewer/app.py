@@ -60,7 +60,8 @@ class App:
         self.screen = self.ctx.detect_framebuffer()  # the window's default framebuffer, bound now
         state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap,
                           env_rotation=opts.env_rotation, env_intensity=opts.env_intensity,
-                          background=opts.background)
+                          background=opts.background, point_light=opts.point_light,
+                          point_intensity=opts.point_intensity)
         self.lookdev = LookDev(self.ctx, load_material(opts.material), opts.mesh, opts.env, state)
         from imgui_bundle.python_backends.glfw_backend import GlfwRenderer
 

@@ -397,7 +397,7 @@ class LookDev:
             return "no reference for texture-mapped materials"
         if analytic_capable(m):
             return "reference: closed form on the GPU"
-        key = self._ref_job_key(self.state.view, self.state.theta_i, None)
+        key = getattr(self, "_worker_job", None)
         r = self.worker.result(key) if key else None
         if r is not None and r.error:
             return f"reference failed: {r.error}"
@@ -534,7 +534,8 @@ class LookDev:
             "mesh": self.mesh,
             "environment": self.env_path,
             "camera": asdict(s.camera),
-            "light": {"direction": list(s.light_dir), "radiance": s.light_radiance},
+            "light": {"direction": list(s.light_dir), "radiance": s.light_radiance,
+                      "point": list(s.point_light) if s.point_light else None, "point_intensity": s.point_intensity},
             "lighting": {"env_intensity": s.env_intensity, "env_rotation": s.env_rotation, "env_on": s.env_on,
                          "background": s.background},
             "view": {"view": s.view, "theta_i": s.theta_i, "exposure": s.exposure, "tonemap": s.tonemap,
@@ -550,6 +551,8 @@ class LookDev:
 
     def open_session(self, path: str | Path) -> bool:
         def go():
+            if not Path(path).is_file():
+                raise NbrdfError(f"{path}: no such file")
             try:
                 data = json.loads(Path(path).read_text())
             except json.JSONDecodeError as e:
@@ -569,7 +572,9 @@ class LookDev:
             v, lt, li = data["view"], data["lighting"], data["light"]
             state = ViewState(view=v["view"], theta_i=float(v["theta_i"]), camera=cam,
                               light_dir=tuple(float(x) for x in li["direction"]),
-                              light_radiance=float(li["radiance"]), env_intensity=float(lt["env_intensity"]),
+                              light_radiance=float(li["radiance"]),
+                              point_light=tuple(float(x) for x in li["point"]) if li.get("point") else None,
+                              point_intensity=float(li.get("point_intensity", 20.0)), env_intensity=float(lt["env_intensity"]),
                               env_rotation=float(lt["env_rotation"]), env_on=bool(lt["env_on"]),
                               background=bool(lt["background"]), exposure=float(v["exposure"]),
                               tonemap=v["tonemap"])

@@ -42,6 +42,8 @@ class ViewState:
     camera: OrbitCamera = field(default_factory=OrbitCamera)
     light_dir: tuple[float, float, float] = (0.4, -0.6, 0.7)   # toward the light, world
     light_radiance: float = 3.0
+    point_light: tuple[float, float, float] | None = None   # world position (None: off)
+    point_intensity: float = 20.0
     env_intensity: float = 0.6
     env_rotation: float = 0.0                  # degrees about world z
     env_on: bool = True                        # False: the directional light alone
@@ -255,6 +257,9 @@ class Renderer:
         ld = np.asarray(state.light_dir, dtype=np.float64)
         p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
         p["u_light_radiance"].value = (state.light_radiance,) * 3
+        p["u_point_on"].value = int(state.point_light is not None)
+        p["u_point_pos"].value = tuple(state.point_light or (0.0, 0.0, 0.0))
+        p["u_point_intensity"].value = (state.point_intensity,) * 3
         p["u_env_intensity"].value = state.env_intensity
         p["u_env_on"].value = int(state.env_on)
         p["u_strategies"].value = 4

@@ -39,6 +39,8 @@ class ViewOptions:
     env_intensity: float = 0.6
     background: bool = True
     session: str | None = None
+    point_light: tuple[float, float, float] | None = None
+    point_intensity: float = 20.0
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -58,6 +60,8 @@ def parse_args(argv: Sequence[str] | None) -> ViewOptions:
     p.add_argument("--env", default=None, help="equirectangular .hdr/.exr environment (default: the built-in sky)")
     p.add_argument("--env-rotation", type=float, default=0.0, help="environment rotation about the up axis, degrees")
     p.add_argument("--env-intensity", type=float, default=0.6, help="environment radiance scale")
+    p.add_argument("--point-light", default=None, help="X,Y,Z: a point light at this world position (z up)")
+    p.add_argument("--point-intensity", type=float, default=20.0, help="the point light's radiant intensity")
     p.add_argument("--session", default=None,
                    help="a look-development session file (material, camera, lights, environment, view) to open")
     p.add_argument("--no-background", dest="background", action="store_false",
@@ -81,12 +85,23 @@ def parse_args(argv: Sequence[str] | None) -> ViewOptions:
         raise NbrdfError(f"--theta-i: {a.theta_i} is outside [0, 90)")
     if not (math.isfinite(a.env_intensity) and a.env_intensity >= 0) or not math.isfinite(a.env_rotation):
         raise NbrdfError("--env-intensity must be finite and >= 0, --env-rotation finite")
+    point = None
+    if a.point_light is not None:
+        try:
+            point = tuple(float(x) for x in a.point_light.split(","))
+        except ValueError:
+            point = ()
+        if len(point) != 3 or not all(math.isfinite(x) for x in point):
+            raise NbrdfError(f"--point-light: expected X,Y,Z such as 2,-2,3, got {a.point_light!r}")
+    if not (math.isfinite(a.point_intensity) and a.point_intensity >= 0):
+        raise NbrdfError("--point-intensity must be finite and >= 0")
     if a.offscreen and not a.out:
         raise NbrdfError("--offscreen needs --out IMG")
     return ViewOptions(material=Path(a.material), mesh=a.mesh, env=a.env, view=a.view, theta_i=a.theta_i,
                        offscreen=a.offscreen, out=a.out, size=_size(a.size), spp=a.spp, exposure=a.exposure,
                        tonemap=a.tonemap, brdf=a.brdf, env_rotation=a.env_rotation, env_intensity=a.env_intensity,
-                       background=a.background, session=a.session)
+                       background=a.background, session=a.session, point_light=point,
+                       point_intensity=a.point_intensity)
 
 
 def has_display() -> bool:
@@ -128,7 +143,8 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
         return out
     r = make_renderer(ctx, material, opts)
     state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap,
-                      env_rotation=opts.env_rotation, env_intensity=opts.env_intensity, background=opts.background)
+                      env_rotation=opts.env_rotation, env_intensity=opts.env_intensity, background=opts.background,
+                      point_light=opts.point_light, point_intensity=opts.point_intensity)
     img = r.render_linear(state, opts.size, opts.spp)
     if opts.view == "lobe" and out.suffix.lower() == ".png":
         img = img[::-1]  # a picture shows +y up

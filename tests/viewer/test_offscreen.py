@@ -109,6 +109,8 @@ def test_cli_offscreen_outputs(tmp_path, capsys):
     (["--offscreen", "--out", "x.png", "--env", "/nonexistent.hdr"], "no such file"),
     (["/nonexistent.json", "--offscreen", "--out", "x.png"], "no such file"),
     (["--offscreen"], "--out"),
+    (["--offscreen", "--out", "x.png", "--point-light", "1,2"], "--point-light"),
+    (["--offscreen", "--out", "x.png", "--session", "/nonexistent.json"], "no such file"),
 ])
 def test_cli_bad_input_one_line(tmp_path, capsys, monkeypatch, argv, needle):
     monkeypatch.chdir(tmp_path)
@@ -158,3 +160,28 @@ def test_cli_renders_a_session_file(gl_ctx, tmp_path, capsys):
     assert main(["--offscreen", "--session", str(tmp_path / "bad.json"), "--out", str(tmp_path / "x.png")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "malformed session" in err[0]
+
+
+def test_a_distant_point_light_equals_the_directional_light(gl_ctx):
+    from neural.material import parse_material
+
+    m = parse_material({"format": "nbrdf-material/1", "name": "g",
+                        "layers": [{"type": "conductor", "roughness": 0.3, "r0": [1.0, 0.78, 0.34]}]})
+    r = Renderer(gl_ctx, m)
+    sun = ViewState(env_on=False, background=False)
+    d = np.asarray(sun.light_dir) / np.linalg.norm(sun.light_dir)
+    far = 1.0e3
+    point = ViewState(env_on=False, background=False, light_radiance=0.0, point_light=tuple(d * far),
+                      point_intensity=sun.light_radiance * far * far)
+    a = r.render_linear(sun, (32, 32), spp=1)
+    b = r.render_linear(point, (32, 32), spp=1)
+    assert a.max() > 0.1
+    np.testing.assert_allclose(b, a, rtol=5e-3, atol=1e-3)
+    near = r.render_linear(replace_point(point, tuple(d * 2.0), sun.light_radiance * 4.0), (32, 32), spp=1)
+    assert np.abs(near - a).mean() > 0.01  # a near light falls off across the sphere
+
+
+def replace_point(state, pos, intensity):
+    from dataclasses import replace
+
+    return replace(state, point_light=pos, point_intensity=intensity)

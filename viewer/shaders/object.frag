@@ -1,4 +1,4 @@
-// Lit object: a directional light plus an HDR environment. Per pass and pixel,
+// Lit object: a directional light, an optional point light and an HDR environment. Per pass and pixel,
 // one sample each of three strategies -- the environment's luminance CDF, the
 // BRDF's lobe (sample_lobe / pdf_lobe of the BRDF snippet: the learned proxy pdf
 // for neural materials, GGX visible normals for closed-form ones) and the cosine
@@ -14,6 +14,9 @@
 
 uniform vec3 u_light_dir;       // toward the light, world space
 uniform vec3 u_light_radiance;
+uniform int u_point_on;         // 1: a point light too
+uniform vec3 u_point_pos;       // world space
+uniform vec3 u_point_intensity; // radiant intensity: irradiance I cos / d^2
 uniform float u_env_intensity;
 uniform int u_env_on;           // 0: the light alone (benchmarks, quick previews)
 uniform uint u_pass;
@@ -34,16 +37,20 @@ void main() {
     uvec2 px = uvec2(gl_FragCoord.xy);
     vec3 color = vec3(0.0);
     int count = u_env_on == 0 ? 1 : u_strategies;
-    for (int k = 0; k < count; ++k) {
+    for (int k = u_point_on != 0 ? -1 : 0; k < count; ++k) {
         vec3 l;
         float unused;
-        if (k == 0) l = to_local * normalize(u_light_dir);
+        vec3 to_point = u_point_pos - v_world;
+        if (k == -1) l = to_local * normalize(to_point);
+        else if (k == 0) l = to_local * normalize(u_light_dir);
         else if (k == 1) l = to_local * sample_env(rand2(px, u_pass, 0u), unused);
         else if (k == 2) l = sample_lobe(wo, vec3(rand2(px, u_pass, 1u), rand2(px, u_pass, 2u).x));
         else l = sample_cosine(rand2(px, u_pass, 3u), unused);
         if (l.z <= 0.0) continue;
         vec3 weight;  // radiance over (MIS-weighted) pdf
-        if (k == 0) {
+        if (k == -1) {
+            weight = u_point_intensity / max(dot(to_point, to_point), 1e-8);
+        } else if (k == 0) {
             weight = u_light_radiance;
         } else {
             vec3 lw = tbn * l;

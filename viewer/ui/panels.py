@@ -255,6 +255,14 @@ class Panels:
         if c4 or c5:
             s.light_dir = _direction(az, el)
         c6, s.light_radiance = imgui.slider_float("light intensity", s.light_radiance, 0.0, 20.0)
+        c9, on = imgui.checkbox("point light", s.point_light is not None)
+        if c9:
+            s.point_light = (2.0, -2.0, 2.5) if on else None
+        if s.point_light is not None:
+            c10, pos = imgui.drag_float3("point position", list(s.point_light), 0.05, -20.0, 20.0)
+            s.point_light = tuple(float(x) for x in pos)
+            c11, s.point_intensity = imgui.slider_float("point intensity", s.point_intensity, 0.0, 200.0)
+            c9 = c9 or c10 or c11
         c7, s.exposure = imgui.slider_float("exposure (stops)", s.exposure, -6.0, 6.0)
         cur = TONEMAPS.index(s.tonemap)
         c8, k = imgui.combo("tone mapping", cur, ["ACES filmic", "linear"])
@@ -264,7 +272,7 @@ class Panels:
         if imgui.button("frame"):
             s.camera.frame()
             ld.invalidate()
-        if c0 or c1 or c2 or c3 or c4 or c5 or c6:
+        if c0 or c1 or c2 or c3 or c4 or c5 or c6 or c9:
             ld.invalidate()
 
     def _files(self) -> None:
