@@ -382,7 +382,7 @@ def cmd_bench_operations(a: argparse.Namespace) -> int:
 
 def cmd_bench_app(a: argparse.Namespace) -> int:
     from viewer.bench import bench_app
-    from viewer.view_cli import has_display
+    from viewer.view_cli import _size, has_display
 
     if not has_display():
         raise NbrdfError("bench app: no display (run it under xvfb-run on a headless machine)")
