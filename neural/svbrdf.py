@@ -94,7 +94,7 @@ class TextureValues:
     def count(self) -> int:
         return self.size[0] * self.size[1]
 
-    def _texels(self, ref: TextureRef) -> Tensor:
+    def _texels(self, ref: TextureRef, sl: slice) -> Tensor:
         key = (str(ref.resolved), ref.channel)
         if key not in self._cache:
             m = torch.from_numpy(self._maps[key])
@@ -102,16 +102,17 @@ class TextureValues:
                 m = F.interpolate(m[None, None], size=self.size, mode="bilinear", align_corners=False)[0, 0]
             self._cache[key] = m.reshape(-1)
         lo, hi = ref.range
-        return lo + self._cache[key] * (hi - lo)
+        return lo + self._cache[key][sl] * (hi - lo)
 
-    def __call__(self, v, place: str) -> Tensor:
+    def __call__(self, v, place: str, sl: slice = slice(None)) -> Tensor:
+        """(P, 3) values of the texels ``sl`` (a uniform value stays (1, 3))."""
         if isinstance(v, TextureRef):
-            return self._texels(v)[:, None].expand(-1, 3)
-        if isinstance(v, tuple):
-            cols = [self._texels(x) if isinstance(x, TextureRef) else torch.full((self.count,), float(x))
-                    for x in v]
+            return self._texels(v, sl)[:, None].expand(-1, 3)
+        if isinstance(v, tuple) and any(isinstance(x, TextureRef) for x in v):
+            n = len(range(*sl.indices(self.count)))
+            cols = [self._texels(x, sl) if isinstance(x, TextureRef) else torch.full((n,), float(x)) for x in v]
             return torch.stack(cols, -1)
-        return torch.full((1, 3), float(v))
+        return torch.tensor([Material.rgb(v)], dtype=torch.float32)
 
 
 def latent_texture(model, material: Material, size: tuple[int, int] | None = None, chunk: int = 16384,
@@ -124,18 +125,7 @@ def latent_texture(model, material: Material, size: tuple[int, int] | None = Non
     out = torch.empty(values.count, 3, 32)
     for start in range(0, values.count, chunk):
         sl = slice(start, min(start + chunk, values.count))
-        out[sl] = model.stack_latents(material, _Slice(values, sl))
+        out[sl] = model.stack_latents(material, lambda v, place: values(v, place, sl))
         if progress is not None:
             progress(sl.stop, values.count)
     return LatentTexture(out.reshape(h, w, 3, 32))
-
-
-class _Slice:
-    """The texels ``sl`` of a TextureValues (uniform values stay (1, 3))."""
-
-    def __init__(self, values: TextureValues, sl: slice):
-        self.values, self.sl = values, sl
-
-    def __call__(self, v, place: str) -> Tensor:
-        x = self.values(v, place)
-        return x if x.shape[0] == 1 else x[self.sl]

@@ -4,8 +4,10 @@ imgui_bundle is imported before glfw so that both use the one GLFW library
 bundled with imgui_bundle; its own GLFW / OpenGL 3 backend draws the panels.
 Mouse: left-drag orbits, right-drag pans, the wheel zooms (when the pointer
 is not over a panel). Keys: F frames the object, T toggles the turntable,
-H hides the panels, Esc quits. While the user drags, frames render at half
-resolution with one pass; when still, passes accumulate (progressive).
+H hides the panels, Esc quits. The view renders at the fraction of the
+window that keeps a frame within budget (60 ms while the user drags, 200 ms
+when still; software OpenGL ends at 1/8), one pass per frame while dragging,
+and passes accumulate when still (progressive).
 """
 from __future__ import annotations
 

@@ -29,7 +29,7 @@ from neural.latent_texture import LatentTexture, blend
 from neural.material import Material, load_material, material_to_dict, save_material
 from viewer import shaders
 from viewer.camera import OrbitCamera
-from viewer.reference import ReferenceWorker, lobe_job, object_job, slice_job
+from viewer.reference import ReferenceJob, ReferenceWorker, lobe_job, object_job, slice_job
 from viewer.renderer import Renderer, ViewState
 from viewer.ui.stack_editor import StackEditor
 
@@ -101,9 +101,10 @@ class LookDev:
         self._latent_textures: dict[str, LatentTexture] = {}
         self._ref_tex: moderngl.Texture | None = None
         self._ref_key: tuple | None = None
-        env_img = self._read_env(env) if env else None
-        self.renderer = Renderer(ctx, material, mesh, neural=self.gdec, latent=self._uniform_or_mean(material),
-                                 environment=env_img)
+        self._worker_job: str | None = None
+        self._env_img = self._read_env(env) if env else None
+        self.renderer = Renderer(ctx, material, mesh, neural=self.gdec, latent=self._initial_latent(material),
+                                 environment=self._env_img)
         self.ref_renderer: Renderer | None = None
         self.other_renderer: Renderer | None = None
         self.compositor = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
@@ -169,7 +170,7 @@ class LookDev:
             img = self._read_env(path) if path else None
             for r in self._renderers():
                 r.set_environment(img)
-            self.env_path = path
+            self.env_path, self._env_img = path, img
             self.invalidate()
         return self._guard(go)
 
@@ -216,7 +217,8 @@ class LookDev:
         self.passes = 0
 
     # --- material -> latents -> GPU -------------------------------------------------------
-    def _uniform_or_mean(self, m: Material) -> torch.Tensor:
+    def _initial_latent(self, m: Material) -> torch.Tensor:
+        """A latent to build the renderer with (a textured material's texture arrives from its worker)."""
         return torch.zeros(3, 32) if m.is_textured else self.model.material_latent(m)
 
     def _other_material(self) -> Material | None:
@@ -266,11 +268,10 @@ class LookDev:
 
     def _twin(self, neural: bool, material: Material, latent=None) -> Renderer:
         """Another renderer over the same mesh and environment."""
-        env = self._read_env(self.env_path) if self.env_path else None
         if neural:
             return Renderer(self.ctx, material, self.mesh, neural=self.gdec, latent=latent,
-                            proxy=self._proxy(latent), environment=env)
-        return Renderer(self.ctx, material, self.mesh, environment=env)
+                            proxy=self._proxy(latent), environment=self._env_img)
+        return Renderer(self.ctx, material, self.mesh, environment=self._env_img)
 
     def _renderers(self) -> list[Renderer]:
         return [r for r in (self.renderer, self.ref_renderer, self.other_renderer) if r is not None]
@@ -351,7 +352,9 @@ class LookDev:
             a = self.renderer.accumulate(state, vw, h, first, n)
         else:
             a = self.renderer.frame_texture(view, vw, h)
-        b, passes_b, mode = a, 1.0, 0
+        self.passes = first + n if view == "object" else 1
+        pa = float(self.passes)
+        b, passes_b, mode = a, pa, 0
         if comparing:
             b, passes_b = self._reference(state, vw, h, first, n)
             mode = {"side": 1, "wipe": 2, "error": 3}[self.compare]
@@ -360,10 +363,8 @@ class LookDev:
                 b = self.other_renderer.accumulate(state, vw, h, first, n)
             else:
                 b = self.other_renderer.frame_texture(view, vw, h)
-            passes_b, mode = None, 4
-        self.passes = first + n if view == "object" else 1
-        pa = float(self.passes)
-        self._composite(target, a, pa, b, pa if passes_b is None else passes_b, mode)
+            mode = 4
+        self._composite(target, a, pa, b, passes_b, mode)
         self.timings.frame_ms = (time.perf_counter() - t0) * 1000.0
         self.timings.fps = 0.9 * self.timings.fps + 0.1 * (1000.0 / max(self.timings.frame_ms, 1e-3))
 
@@ -397,7 +398,7 @@ class LookDev:
             return "no reference for texture-mapped materials"
         if analytic_capable(m):
             return "reference: closed form on the GPU"
-        key = getattr(self, "_worker_job", None)
+        key = self._worker_job
         r = self.worker.result(key) if key else None
         if r is not None and r.error:
             return f"reference failed: {r.error}"
@@ -423,29 +424,28 @@ class LookDev:
             return self.ref_renderer.frame_texture(view, w, h), float(max(self.passes, 1) if view == "object" else 1)
         if m.is_textured:
             return self._upload_ref(None, np.zeros((1, 1, 3), np.float32)), 1.0
-        if view == "lobe":
-            key = self._ref_job_key("lobe", state.theta_i, None)
-            if self.worker.result(key) is None:
-                self.worker.request(lobe_job(m, key, state.theta_i))
-        else:
-            s = min(1.0, OBJECT_REF_SIZE / max(w, h)) if view == "object" else min(1.0, 96 / max(w, h))
-            size = (max(1, round(w * s)), max(1, round(h * s)))
-            key = self._ref_job_key(view, state.theta_i, size)
-            if self.worker.result(key) is None and not self._worker_on(key):
-                if view == "slice":
-                    job = slice_job(m, key, size)
-                else:
-                    wi, wo, mask = self.renderer.gbuffer(state, size)
-                    job = object_job(m, key, wi, wo, mask, state.light_radiance)
-                self._worker_job = key
-                self.worker.request(job)
+        s = min(1.0, (OBJECT_REF_SIZE if view == "object" else 96) / max(w, h))
+        size = (max(1, round(w * s)), max(1, round(h * s)))
+        key = self._ref_job_key(view, state.theta_i, None if view == "lobe" else size)
+        if self.worker.result(key) is None and not self._worker_on(key):
+            self.worker.request(self._reference_job(state, key, size))
         self._worker_job = key
         r = self.worker.result(key)
         img = r.image if r is not None else np.zeros((1, 1, 3), np.float32)
         return self._upload_ref((key, r.spp if r else 0), img, flip=view != "lobe"), 1.0
 
+    def _reference_job(self, state: ViewState, key: str, size: tuple[int, int]) -> ReferenceJob:
+        """The Monte Carlo job of a stack's view (the lit object from a G-buffer at ``size``)."""
+        m = self.material
+        if state.view == "lobe":
+            return lobe_job(m, key, state.theta_i)
+        if state.view == "slice":
+            return slice_job(m, key, size)
+        wi, wo, mask = self.renderer.gbuffer(state, size)
+        return object_job(m, key, wi, wo, mask, state.light_radiance)
+
     def _worker_on(self, key: str) -> bool:
-        return getattr(self, "_worker_job", None) == key and self.worker.busy()
+        return self._worker_job == key and self.worker.busy()
 
     def _upload_ref(self, key, img: np.ndarray, flip: bool = True) -> moderngl.Texture:
         if key is None or key != self._ref_key or self._ref_tex is None:
@@ -467,16 +467,8 @@ class LookDev:
             return self.ref_renderer.render_linear(state, size, spp)
         if m.is_textured:
             raise NbrdfError("no reference for texture-mapped materials")
-        if state.view == "lobe":
-            key = self._ref_job_key("lobe", state.theta_i, None)
-            job = lobe_job(m, key, state.theta_i)
-        elif state.view == "slice":
-            key = self._ref_job_key("slice", state.theta_i, size)
-            job = slice_job(m, key, size)
-        else:
-            key = self._ref_job_key("object", state.theta_i, size)
-            wi, wo, mask = self.renderer.gbuffer(state, size)
-            job = object_job(m, key, wi, wo, mask, state.light_radiance)
+        key = self._ref_job_key(state.view, state.theta_i, None if state.view == "lobe" else size)
+        job = self._reference_job(state, key, size)
         job.max_spp = spp
         self.worker.request(job)
         r = self.worker.wait(key, spp, timeout)
@@ -510,8 +502,6 @@ class LookDev:
 
                 out["reference"] = (th, ((single_layer_eval(m.base, wi, wo) @ lum) * cos).numpy())
             else:
-                from viewer.reference import ReferenceJob
-
                 key = hashlib.sha1(f"{json.dumps(material_to_dict(m), sort_keys=True)}|plane|{self.state.theta_i}"
                                    .encode()).hexdigest()
                 r = self.worker.result(key)

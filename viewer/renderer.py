@@ -67,13 +67,10 @@ class Renderer:
         self.ctx = ctx
         self.neural = neural
         self._obj_programs: dict[bool, tuple[moderngl.Program, moderngl.VertexArray | None]] = {}
-        try:
-            self.lobe = self._program("fullscreen.vert", "lobe.frag")
-            self.slice = self._program("fullscreen.vert", "slice.frag")
-            self.tone = self._program("fullscreen.vert", "tonemap.frag", plain=True)
-            self.background_prog = self._program("fullscreen.vert", "background.frag", plain=True)
-        except moderngl.Error as e:
-            raise NbrdfError(f"shader build failed on {ctx.info.get('GL_RENDERER', '?')}: {str(e).splitlines()[0]}") from None
+        self.lobe = self._program("fullscreen.vert", "lobe.frag")
+        self.slice = self._program("fullscreen.vert", "slice.frag")
+        self.tone = self._program("fullscreen.vert", "tonemap.frag", plain=True)
+        self.background_prog = self._program("fullscreen.vert", "background.frag", plain=True)
         self.obj = self._object_program(False)
         self.empty_vao = ctx.vertex_array(self.lobe, [])
         self.empty_slice = ctx.vertex_array(self.slice, [])
@@ -83,7 +80,8 @@ class Renderer:
         self._dummy = ctx.texture((1, 1), 4, dtype="f4")
         self.latent_tex: "GpuLatentTexture | None" = None
         self.normal_map: moderngl.Texture | None = None
-        self.mesh_source = mesh
+        self._mesh_buffers: tuple[moderngl.Buffer, moderngl.Buffer] | None = None
+        self._gbuffer: tuple[moderngl.Program, moderngl.VertexArray | None] | None = None
         self.set_mesh(mesh)
         self.env: GpuEnvironment | None = None
         self.set_environment(environment)
@@ -93,34 +91,46 @@ class Renderer:
         """A program whose ``//@INCLUDE brdf`` is this renderer's BRDF (closed
         form, the decoder at a uniform latent, or at a latent texture)."""
         if plain:
-            return self.ctx.program(vertex_shader=shaders.source(vert), fragment_shader=shaders.source(frag))
-        if self.neural is None:
+            fs = shaders.source(frag)
+        elif self.neural is None:
             fs = shaders.source(frag, {"brdf": shaders.read("analytic_brdf.glsl")})
         else:
             brdf = shaders.read("neural_brdf.glsl")
             if textured:
                 brdf = shaders.read("latent_texture.glsl") + "\n" + brdf
             fs = self.neural.source(frag, {"brdf": brdf})
-        return self.ctx.program(vertex_shader=shaders.source(vert), fragment_shader=fs)
+        try:
+            return self.ctx.program(vertex_shader=shaders.source(vert), fragment_shader=fs)
+        except moderngl.Error as e:
+            raise NbrdfError(f"shader build failed on {self.ctx.info.get('GL_RENDERER', '?')}: "
+                             f"{str(e).splitlines()[0]}") from None
 
     def _object_program(self, textured: bool) -> moderngl.Program:
         """The lit-object program (built once per kind: uniform or latent texture)."""
         if textured not in self._obj_programs:
-            try:
-                self._obj_programs[textured] = (self._program("object.vert", "object.frag", textured=textured), None)
-            except moderngl.Error as e:
-                raise NbrdfError(f"shader build failed on {self.ctx.info.get('GL_RENDERER', '?')}: "
-                                 f"{str(e).splitlines()[0]}") from None
+            self._obj_programs[textured] = (self._program("object.vert", "object.frag", textured=textured), None)
         return self._obj_programs[textured][0]
 
     # --- scene -------------------------------------------------------------------
     def set_mesh(self, mesh: str | Mesh) -> None:
         m = named_mesh(mesh) if isinstance(mesh, str) else mesh
         self.mesh = m
+        old = self._mesh_buffers
         self._mesh_buffers = (self.ctx.buffer(m.interleaved().tobytes()), self.ctx.buffer(m.indices.astype("u4").tobytes()))
-        if hasattr(self, "_gbuffer_prog"):
-            del self._gbuffer_prog  # its vertex array holds the old mesh
+        # Vertex arrays hold the old buffers: drop them, they are rebuilt on first use.
+        for _, vao in list(self._obj_programs.values()) + ([self._gbuffer] if self._gbuffer else []):
+            if vao is not None:
+                vao.release()
         self._obj_programs = {k: (p, None) for k, (p, _) in self._obj_programs.items()}
+        if self._gbuffer is not None:
+            self._gbuffer = (self._gbuffer[0], None)
+        for b in old or ():
+            b.release()
+
+    def _mesh_vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
+        vbo, ibo = self._mesh_buffers
+        return self.ctx.vertex_array(prog, [(vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
+                                     ibo, skip_errors=True)
 
     @property
     def obj_vao(self) -> moderngl.VertexArray:
@@ -128,9 +138,7 @@ class Renderer:
         textured = self.obj is not self._obj_programs[False][0]
         prog, vao = self._obj_programs[textured]
         if vao is None:
-            vbo, ibo = self._mesh_buffers
-            vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
-                                        ibo, skip_errors=True)
+            vao = self._mesh_vao(prog)
             self._obj_programs[textured] = (prog, vao)
         return vao
 
@@ -199,14 +207,25 @@ class Renderer:
     def _bind(self, prog: moderngl.Program) -> None:
         if self.neural is not None:
             self.neural.bind(prog)
-        if prog is self.obj:
-            if self.latent_tex is not None:
-                self.latent_tex.bind(prog)
-            if "u_has_normal_map" in prog:
-                prog["u_has_normal_map"].value = int(self.normal_map is not None)
-            if self.normal_map is not None:
-                self.normal_map.use(NORMAL_UNIT)
-                prog["u_normal_map"].value = NORMAL_UNIT
+        if prog is self.obj and self.latent_tex is not None:
+            self.latent_tex.bind(prog)
+
+    def _surface_uniforms(self, p: moderngl.Program, state: ViewState, w: int, h: int) -> np.ndarray:
+        """Camera, light direction and normal map of a program over the mesh
+        (shading_frame.glsl); returns the view-projection matrix."""
+        cam = state.camera
+        vp = cam.projection(w / h) @ cam.view()
+        p["u_view_proj"].write(vp.T.astype("f4").tobytes())
+        p["u_model"].write(np.eye(4, dtype="f4").tobytes())
+        p["u_eye"].value = tuple(cam.eye())
+        ld = np.asarray(state.light_dir, dtype=np.float64)
+        p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
+        if "u_has_normal_map" in p:
+            p["u_has_normal_map"].value = int(self.normal_map is not None)
+        if self.normal_map is not None:
+            self.normal_map.use(NORMAL_UNIT)
+            p["u_normal_map"].value = NORMAL_UNIT
+        return vp
 
     # --- frames -------------------------------------------------------------------
     def _target(self, w: int, h: int):
@@ -248,14 +267,9 @@ class Renderer:
 
     def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int) -> None:
         cam = state.camera
-        vp = cam.projection(w / h) @ cam.view()
         p = self.obj
         self._bind(p)
-        p["u_view_proj"].write(vp.T.astype("f4").tobytes())
-        p["u_model"].write(np.eye(4, dtype="f4").tobytes())
-        p["u_eye"].value = tuple(cam.eye())
-        ld = np.asarray(state.light_dir, dtype=np.float64)
-        p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
+        vp = self._surface_uniforms(p, state, w, h)
         p["u_light_radiance"].value = (state.light_radiance,) * 3
         p["u_point_on"].value = int(state.point_light is not None)
         p["u_point_pos"].value = tuple(state.point_light or (0.0, 0.0, 0.0))
@@ -312,14 +326,12 @@ class Renderer:
         (H, W) mask of pixels on the object -- what a Monte Carlo reference of
         the directional-light image needs."""
         w, h = size
-        if not hasattr(self, "_gbuffer_prog"):
-            self._gbuffer_prog = self.ctx.program(vertex_shader=shaders.source("object.vert"),
-                                                  fragment_shader=shaders.source("gbuffer.frag"))
-            vbo, ibo = self._mesh_buffers
-            self._gbuffer_vao = self.ctx.vertex_array(
-                self._gbuffer_prog, [(vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")], ibo,
-                skip_errors=True)
-        p, cam = self._gbuffer_prog, state.camera
+        if self._gbuffer is None:
+            self._gbuffer = (self._program("object.vert", "gbuffer.frag", plain=True), None)
+        p, vao = self._gbuffer
+        if vao is None:
+            vao = self._mesh_vao(p)
+            self._gbuffer = (p, vao)
         targets = [self.ctx.texture((w, h), 4, dtype="f4") for _ in range(2)]
         depth = self.ctx.depth_renderbuffer((w, h))
         fbo = self.ctx.framebuffer(targets, depth)
@@ -329,17 +341,8 @@ class Renderer:
             self.ctx.enable(moderngl.DEPTH_TEST)
             self.ctx.disable(moderngl.BLEND)
             self.ctx.depth_func = "<"
-            p["u_view_proj"].write((cam.projection(w / h) @ cam.view()).T.astype("f4").tobytes())
-            p["u_model"].write(np.eye(4, dtype="f4").tobytes())
-            p["u_eye"].value = tuple(cam.eye())
-            ld = np.asarray(state.light_dir, dtype=np.float64)
-            p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
-            if "u_has_normal_map" in p:
-                p["u_has_normal_map"].value = int(self.normal_map is not None)
-            if self.normal_map is not None:
-                self.normal_map.use(NORMAL_UNIT)
-                p["u_normal_map"].value = NORMAL_UNIT
-            self._gbuffer_vao.render(moderngl.TRIANGLES)
+            self._surface_uniforms(p, state, w, h)
+            vao.render(moderngl.TRIANGLES)
             wi, wo = (np.frombuffer(t.read(), np.float32).reshape(h, w, 4)[::-1] for t in targets)
             return np.ascontiguousarray(wi[..., :3]), np.ascontiguousarray(wo[..., :3]), wi[..., 3] > 0.5
         finally:
