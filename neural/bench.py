@@ -8,7 +8,7 @@ import time
 import numpy as np
 import torch
 
-from neural.material import parse_material
+from nbrdf.neural.material import parse_material
 
 THREE_LAYER = {"format": "nbrdf-material/1", "name": "bench three-layer", "layers": [
     {"type": "dielectric", "roughness": 0.05, "ior": 1.5}, {"type": "medium", "albedo": [0.9, 0.6, 0.3], "sigma_t": 0.5},

@@ -22,8 +22,8 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from neural.errors import NbrdfError
-from neural.nets import load_state
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.nets import load_state
 
 Tensor = torch.Tensor
 

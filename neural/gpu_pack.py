@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from neural.decoder import Decoder, DecoderSpec
-from neural.errors import NbrdfError
+from nbrdf.neural.decoder import Decoder, DecoderSpec
+from nbrdf.neural.errors import NbrdfError
 
 TEXTURE_WIDTH = 256  # texels per row of the weight texture
 

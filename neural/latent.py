@@ -12,7 +12,7 @@ from pathlib import Path
 
 import torch
 
-from neural.errors import NbrdfError
+from nbrdf.neural.errors import NbrdfError
 
 FORMAT = "nbrdf-latent/1"
 

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 import torch
 
-from neural.errors import NbrdfError
+from nbrdf.neural.errors import NbrdfError
 
 Tensor = torch.Tensor
 

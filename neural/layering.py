@@ -12,8 +12,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from neural.errors import NbrdfError
-from neural.nets import MLP, MLPSpec
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.nets import MLP, MLPSpec
 
 Tensor = torch.Tensor
 LATENT = 32

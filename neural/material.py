@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Union
 
-from neural.errors import NbrdfError
+from nbrdf.neural.errors import NbrdfError
 
 FORMAT = "nbrdf-material/1"
 

@@ -8,7 +8,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from neural.geometry import incidence, lobe_grid
+from nbrdf.neural.geometry import incidence, lobe_grid
 
 #: Standard incidence angles (degrees), phi_i = 0.
 THETAS = (0.0, 30.0, 60.0, 75.0)

@@ -16,13 +16,13 @@ from pathlib import Path
 
 import torch
 
-from neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bundle, save_decoder
-from neural.errors import NbrdfError
-from neural.layering import LayeringNet
-from neural.leaf import LEAF_PARAMS, LeafEncoders
-from neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured
-from neural.nets import MLPSpec, load_state, prefixed
-from neural.sampling import SamplerNet
+from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bundle, save_decoder
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layering import LayeringNet
+from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
+from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured
+from nbrdf.neural.nets import MLPSpec, load_state, prefixed
+from nbrdf.neural.sampling import SamplerNet
 
 Tensor = torch.Tensor
 OPS_FORMAT = "nbrdf-operations/1"
@@ -64,7 +64,7 @@ class NeuralModel:
         (P, 3) tensors (P = 1 for a uniform layer, texels for a textured one)."""
         values = values or uniform_values
         if isinstance(layer, LatentBase):
-            from neural.latent import load_latent
+            from nbrdf.neural.latent import load_latent
 
             return load_latent(layer.resolved, self.decoder_id).z[None]
         if isinstance(layer, Measured):
@@ -126,7 +126,7 @@ def uniform_values(v, place: str) -> Tensor:
         return torch.tensor([Material.rgb(v)], dtype=torch.float32)
     except NbrdfError:
         raise NbrdfError(f"{place}: texture-mapped; evaluate it through a latent texture "
-                         "(neural.svbrdf.latent_texture)") from None
+                         "(nbrdf.neural.svbrdf.latent_texture)") from None
 
 
 def _broadcast_texels(*xs: Tensor) -> list[Tensor]:

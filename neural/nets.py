@@ -7,7 +7,7 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
-from neural.errors import NbrdfError
+from nbrdf.neural.errors import NbrdfError
 
 Tensor = torch.Tensor
 

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import torch
 
-from neural.brdf import Sample
-from neural.decoder import Decoder
-from neural.sampling import proxy_pdf, proxy_sample
+from nbrdf.neural.brdf import Sample
+from nbrdf.neural.decoder import Decoder
+from nbrdf.neural.sampling import proxy_pdf, proxy_sample
 
 Tensor = torch.Tensor
 
@@ -39,7 +39,7 @@ class NeuralBRDF:
 
 def material_brdfs(material, model=None) -> list[NeuralBRDF]:
     """The three channel BRDFs of a material through the full neural path."""
-    from neural.model import default_model
+    from nbrdf.neural.model import default_model
 
     model = model or default_model()
     z = model.material_latent(material)

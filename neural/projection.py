@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import torch
 
-from neural.decoder import Decoder, encode, loss_target, predicted_target
-from neural.errors import NbrdfError
+from nbrdf.neural.decoder import Decoder, encode, loss_target, predicted_target
+from nbrdf.neural.errors import NbrdfError
 
 Tensor = torch.Tensor
 

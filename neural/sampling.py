@@ -19,8 +19,8 @@ import math
 import torch
 from torch import nn
 
-from neural.geometry import cosine_hemisphere
-from neural.nets import MLP, MLPSpec
+from nbrdf.neural.geometry import cosine_hemisphere
+from nbrdf.neural.nets import MLP, MLPSpec
 
 Tensor = torch.Tensor
 SIGMA_RANGE = (0.003, 2.0)

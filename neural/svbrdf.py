@@ -17,9 +17,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from neural.errors import NbrdfError
-from neural.latent_texture import LatentTexture
-from neural.material import Material, TextureRef
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.latent_texture import LatentTexture
+from nbrdf.neural.material import Material, TextureRef
 
 Tensor = torch.Tensor
 MAX_SIZE = 2048

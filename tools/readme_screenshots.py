@@ -13,8 +13,8 @@ from pathlib import Path
 
 import imageio.v3 as iio
 
-from viewer.app import App
-from viewer.view_cli import DEFAULT_MATERIAL, ViewOptions
+from nbrdf.viewer.app import App
+from nbrdf.viewer.view_cli import DEFAULT_MATERIAL, ViewOptions
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "figures" / "viewer"
 

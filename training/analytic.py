@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import torch
 
-from neural.brdf import Sample
-from neural.geometry import cosine_hemisphere
-from training.microfacet import (
+from nbrdf.neural.brdf import Sample
+from nbrdf.neural.geometry import cosine_hemisphere
+from nbrdf.training.microfacet import (
     fresnel_dielectric,
     fresnel_schlick,
     ggx_d,

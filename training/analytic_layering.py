@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import torch
 
-from neural.errors import NbrdfError
-from neural.material import Material
-from training.analytic import GGXDielectric
-from training.microfacet import fresnel_dielectric
-from training.reference import single_layer_eval
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import Material
+from nbrdf.training.analytic import GGXDielectric
+from nbrdf.training.microfacet import fresnel_dielectric
+from nbrdf.training.reference import single_layer_eval
 
 Tensor = torch.Tensor
 

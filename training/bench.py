@@ -8,10 +8,10 @@ import time
 
 import torch
 
-from neural.material import parse_material
-from neural.metrics import noise_psnr
-from training.layered import SimStats, simulate
-from training.reference import converged_lobe, stack_params
+from nbrdf.neural.material import parse_material
+from nbrdf.neural.metrics import noise_psnr
+from nbrdf.training.layered import SimStats, simulate
+from nbrdf.training.reference import converged_lobe, stack_params
 
 #: The standard stack of the benchmark (issue: ground truth).
 STANDARD_STACK = {

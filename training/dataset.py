@@ -26,9 +26,9 @@ from typing import Iterator
 import numpy as np
 import torch
 
-from neural.errors import NbrdfError
-from neural.geometry import cosine_hemisphere
-from neural.material import FORMAT as FORMAT_MATERIAL
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.geometry import cosine_hemisphere
+from nbrdf.neural.material import FORMAT as FORMAT_MATERIAL
 
 Tensor = torch.Tensor
 
@@ -119,7 +119,7 @@ def sample_params(cls: str, n: int, g: torch.Generator) -> Tensor:
 
 def params_to_material(p: Tensor | np.ndarray, name: str = "sample") -> "Material":
     """The material (scalar colours) that a single-channel parameter vector describes."""
-    from neural.material import parse_material
+    from nbrdf.neural.material import parse_material
 
     p = [float(x) for x in p]
     cls = CLASSES[int(round(p[0]))]
@@ -178,7 +178,7 @@ def sample_pairs(n: int, g: torch.Generator, peak_fraction: float = 0.5) -> tupl
 def _stack_params(params: Tensor, pairs: int):
     """Simulator parameters for K single-channel stacks of one class, each
     repeated over its pairs (K * pairs rows)."""
-    from training.layered import StackParams
+    from nbrdf.training.layered import StackParams
 
     cls = CLASSES[int(params[0, 0])]
     rep = lambda c: params[:, P[c]].repeat_interleave(pairs)
@@ -194,8 +194,8 @@ def _stack_params(params: Tensor, pairs: int):
 
 def tabulate(params: Tensor, wi: Tensor, wo: Tensor, spp: int, seed: int) -> tuple[Tensor, Tensor]:
     """Values and standard errors (K, n) of K BRDFs of one class at their pairs (K, n, 3)."""
-    from training.analytic import GGXConductor, GGXDielectric
-    from training.layered import simulate
+    from nbrdf.training.analytic import GGXConductor, GGXDielectric
+    from nbrdf.training.layered import simulate
 
     K, n = wi.shape[:2]
     cls = CLASSES[int(params[0, 0])]
@@ -208,7 +208,7 @@ def tabulate(params: Tensor, wi: Tensor, wo: Tensor, spp: int, seed: int) -> tup
         rep = lambda c: params[:, P[c]].repeat_interleave(n)
         f = GGXDielectric(rep("top_roughness"), rep("top_ior")).eval(fi, fo)
         return f.reshape(K, n), torch.zeros(K, n, dtype=f.dtype)
-    from training.reference import MAX_LANES
+    from nbrdf.training.reference import MAX_LANES
 
     per_call = max(1, MAX_LANES // (n * spp))
     means, errs = [], []

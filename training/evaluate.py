@@ -18,8 +18,8 @@ from typing import Callable
 import numpy as np
 import torch
 
-from neural.material import FORMAT as MATERIAL_FORMAT, Material, parse_material
-from neural.metrics import THETAS, albedo_error, directional_albedo, is_converged, lobe_psnr
+from nbrdf.neural.material import FORMAT as MATERIAL_FORMAT, Material, parse_material
+from nbrdf.neural.metrics import THETAS, albedo_error, directional_albedo, is_converged, lobe_psnr
 
 Tensor = torch.Tensor
 HELDOUT_SEED = 20_221_122  # never a training seed
@@ -72,8 +72,8 @@ class Reference:
 def make_reference(material: Material, noise_target: float = 48.0, max_spp: int = 256, seed: int = 0) -> Reference:
     """Lobes are refined until their noise PSNR reaches ``noise_target`` (10 dB
     above the strictest target, 38 dB) or ``max_spp`` paths per pixel."""
-    from training.project import material_samples
-    from training.reference import converged_lobe, reference_eval
+    from nbrdf.training.project import material_samples
+    from nbrdf.training.reference import converged_lobe, reference_eval
 
     lobes, ses, albs = [], [], []
     for k, th in enumerate(THETAS):
@@ -122,7 +122,7 @@ def score(refs: list[tuple[str, Material, Reference]], method: Method, progress:
     rows = []
     for cls, m, r in tqdm(refs, desc="scoring", unit="material", file=sys.stderr, disable=not progress or None):
         fn = method(m, r)
-        from neural.metrics import lobe_image
+        from nbrdf.neural.metrics import lobe_image
 
         psnrs, errs, conv = [], [], []
         for k, th in enumerate(THETAS):
@@ -154,7 +154,7 @@ def summarise(rows: list[dict]) -> dict:
 
 def projected_method(dec) -> Method:
     """The decoder at latents fitted to the cached projection samples."""
-    from training.project import Samples, fit
+    from nbrdf.training.project import Samples, fit
 
     def make(m: Material, r: Reference):
         z = fit(dec, Samples(torch.from_numpy(r.wi), torch.from_numpy(r.wo), torch.from_numpy(r.f)))
@@ -172,8 +172,8 @@ def report_figures(refs: list[tuple[str, Material, Reference]], method: Method, 
                    per_class: int = 2) -> None:
     """Reference vs neural lobes (theta_i 30) with difference maps, a few per
     class, and PSNR histograms per class."""
-    from neural.metrics import lobe_image
-    from training.plots import _plt, save_lobe_comparison
+    from nbrdf.neural.metrics import lobe_image
+    from nbrdf.training.plots import _plt, save_lobe_comparison
 
     rows = []
     for cls in CLASS_COUNTS:
@@ -202,14 +202,14 @@ def report_figures(refs: list[tuple[str, Material, Reference]], method: Method, 
 def neural_method(model) -> Method:
     """Leaf encoders -> recursive layering -> decoder (nothing fitted)."""
 
-    from neural.model import neural_evaluator
+    from nbrdf.neural.model import neural_evaluator
 
     return lambda m, r: neural_evaluator(m, model)
 
 
 def analytic_method() -> Method:
     """The analytic layering baseline (``training.analytic_layering``)."""
-    from training.analytic_layering import analytic_layered_eval
+    from nbrdf.training.analytic_layering import analytic_layered_eval
 
     def make(m: Material, r: Reference):
         return lambda wi, wo: analytic_layered_eval(m, wi.double(), wo.double()).float()
@@ -244,9 +244,9 @@ def sampling_variance(model, material: Material, n: int = 8192, seed: int = 0) -
     """Variance of the directional-albedo estimator f cos / pdf of the neural
     BRDF (channel mean), averaged over the standard incidences, for the
     learned proxy, cosine sampling, and sampling the top interface's GGX lobe."""
-    from neural.geometry import cosine_hemisphere, incidence
-    from neural.sampling import proxy_sample
-    from training.analytic import GGXConductor
+    from nbrdf.neural.geometry import cosine_hemisphere, incidence
+    from nbrdf.neural.sampling import proxy_sample
+    from nbrdf.training.analytic import GGXConductor
 
     z = model.material_latent(material)
     sigma, w = model.proxy(z)
@@ -275,9 +275,9 @@ def interpolation_figure(model, smooth: Material, rough: Material, path: Path, s
     + t z_b against the linear blend of the two BRDFs' values, for t from 0 to 1.
     Returns the lobe peak values per row (a latent blend moves the highlight's
     width; a value blend stacks two highlights)."""
-    from neural.latent_texture import blend
-    from neural.metrics import lobe_image
-    from training.plots import save_lobe_grid
+    from nbrdf.neural.latent_texture import blend
+    from nbrdf.neural.metrics import lobe_image
+    from nbrdf.training.plots import save_lobe_grid
 
     za, zb = model.material_latent(smooth), model.material_latent(rough)
     dec = model.decoder

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-from training.analytic import GGXConductor, GGXDielectric, Lambertian
-from training.microfacet import fresnel_dielectric, refract, sample_vndf, smith_g1, vndf_pdf
+from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
+from nbrdf.training.microfacet import fresnel_dielectric, refract, sample_vndf, smith_g1, vndf_pdf
 
 Tensor = torch.Tensor
 

@@ -16,8 +16,8 @@ from typing import Callable
 import numpy as np
 import torch
 
-from neural.errors import NbrdfError
-from neural.geometry import half_diff
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.geometry import half_diff
 
 Tensor = torch.Tensor
 

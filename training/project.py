@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from neural.decoder import Decoder, default_decoder, encode, loss_target, predicted_target
-from neural.errors import NbrdfError
-from neural.latent import MaterialLatent
-from neural.material import Material, Measured
-from neural.projection import ProjectionConfig, project
+from nbrdf.neural.decoder import Decoder, default_decoder, encode, loss_target, predicted_target
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.latent import MaterialLatent
+from nbrdf.neural.material import Material, Measured
+from nbrdf.neural.projection import ProjectionConfig, project
 
 Tensor = torch.Tensor
 
@@ -42,8 +42,8 @@ class Samples:
 
 def material_samples(material: Material, n: int = 2048, spp: int = 64, seed: int = 0) -> Samples:
     """Reference values of a material at n pairs drawn like the training data."""
-    from training.dataset import sample_pairs
-    from training.reference import reference_eval
+    from nbrdf.training.dataset import sample_pairs
+    from nbrdf.training.reference import reference_eval
 
     t0 = time.perf_counter()
     if isinstance(material.base, Measured) and not material.interfaces:
@@ -55,7 +55,7 @@ def material_samples(material: Material, n: int = 2048, spp: int = 64, seed: int
 
 
 def merl_samples(path: str | Path, n: int = 8192, seed: int = 0) -> Samples:
-    from training.merl import MerlBRDF
+    from nbrdf.training.merl import MerlBRDF
 
     t0 = time.perf_counter()
     wi, wo, f = MerlBRDF.load(path).samples(n, seed)

@@ -9,10 +9,10 @@ from typing import Callable
 
 import torch
 
-from neural.errors import NbrdfError
-from neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured, Medium
-from training.analytic import GGXConductor, GGXDielectric, Lambertian
-from training.layered import SimStats, StackParams, simulate
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured, Medium
+from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
+from nbrdf.training.layered import SimStats, StackParams, simulate
 
 Tensor = torch.Tensor
 
@@ -92,7 +92,7 @@ def reference_eval(material: Material, wi: Tensor, wo: Tensor, spp: int = 256, s
         raise NbrdfError("a medium cannot be the base")
     if not material.interfaces:
         if isinstance(base, Measured):
-            from training.merl import MerlBRDF
+            from nbrdf.training.merl import MerlBRDF
 
             f = MerlBRDF.load(base.resolved).eval(wi, wo)
         elif isinstance(base, LatentBase):
@@ -124,8 +124,8 @@ def converged_lobe(material: Material, theta_i_deg: float, target_noise_psnr: fl
     and are pooled by their path counts."""
     import numpy as np
 
-    from neural.geometry import incidence, lobe_grid
-    from neural.metrics import noise_psnr
+    from nbrdf.neural.geometry import incidence, lobe_grid
+    from nbrdf.neural.metrics import noise_psnr
 
     wo, mask = lobe_grid()
     d = wo[mask]

@@ -28,15 +28,15 @@ from typing import Callable
 
 import torch
 
-from neural.decoder import encode, loss_target, predicted_target
-from neural.geometry import cosine_hemisphere
-from neural.errors import NbrdfError
-from neural.layering import LayeringNet, layering_spec
-from neural.leaf import LEAF_PARAMS, LeafEncoders
-from neural.model import NeuralModel, load_model, save_model
-from neural.sampling import SamplerNet, lambert_pdf, proxy_pdf, proxy_sample
-from training.analytic import GGXConductor, GGXDielectric, Lambertian
-from training.dataset import CLASSES, DIFFUSE_BASED, THREE_LAYERED, P, load_manifest, load_split, sample_pairs, sample_params
+from nbrdf.neural.decoder import encode, loss_target, predicted_target
+from nbrdf.neural.geometry import cosine_hemisphere
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layering import LayeringNet, layering_spec
+from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
+from nbrdf.neural.model import NeuralModel, load_model, save_model
+from nbrdf.neural.sampling import SamplerNet, lambert_pdf, proxy_pdf, proxy_sample
+from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
+from nbrdf.training.dataset import CLASSES, DIFFUSE_BASED, THREE_LAYERED, P, load_manifest, load_split, sample_pairs, sample_params
 
 Tensor = torch.Tensor
 
@@ -121,7 +121,7 @@ def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], to
 
 
 def _finish(name: str, cfg: OpsConfig, model: NeuralModel, history: dict, extra: dict) -> Path:
-    from training.plots import save_curves
+    from nbrdf.training.plots import save_curves
 
     out = Path(cfg.out)
     save_curves({"train": history["train"]}, out / f"{name}_curves.png", xlabel="step / 50")

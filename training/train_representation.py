@@ -21,10 +21,10 @@ from pathlib import Path
 
 import torch
 
-from neural.decoder import Decoder, DecoderSpec, encode, loss_target, predicted_target, save_decoder
-from neural.errors import NbrdfError
-from neural.projection import ProjectionConfig, project
-from training.dataset import CLASSES, BRDFSet, load_manifest, load_split
+from nbrdf.neural.decoder import Decoder, DecoderSpec, encode, loss_target, predicted_target, save_decoder
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.projection import ProjectionConfig, project
+from nbrdf.training.dataset import CLASSES, BRDFSet, load_manifest, load_split
 
 Tensor = torch.Tensor
 
@@ -186,7 +186,7 @@ def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None
 
 
 def _save_val_curves(history: dict, path: Path) -> None:
-    from training.plots import _plt
+    from nbrdf.training.plots import _plt
 
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 4), dpi=100)

@@ -23,10 +23,10 @@ except Exception as e:  # noqa: BLE001
 import glfw
 import moderngl
 
-from neural.errors import NbrdfError
-from neural.material import load_material
-from viewer.gl import check_version
-from viewer.renderer import ViewState
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import load_material
+from nbrdf.viewer.gl import check_version
+from nbrdf.viewer.renderer import ViewState
 
 
 class WindowUnavailable(RuntimeError):
@@ -38,7 +38,7 @@ class App:
     app's API: the panels and the tests call them); ``step`` runs one frame."""
 
     def __init__(self, opts, size: tuple[int, int] | None = None, visible: bool = True):
-        from viewer.lookdev import LookDev
+        from nbrdf.viewer.lookdev import LookDev
 
         if imgui is None:
             raise WindowUnavailable(f"imgui-bundle is not usable ({_IMGUI_ERROR})")
@@ -67,7 +67,7 @@ class App:
         self.lookdev = LookDev(self.ctx, load_material(opts.material), opts.mesh, opts.env, state)
         from imgui_bundle.python_backends.glfw_backend import GlfwRenderer
 
-        from viewer.ui.panels import Panels
+        from nbrdf.viewer.ui.panels import Panels
 
         imgui.create_context()
         implot.create_context()

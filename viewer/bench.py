@@ -8,7 +8,7 @@ import time
 import numpy as np
 import torch
 
-from neural.decoder import DEFAULT_WEIGHTS, Decoder, DecoderSpec, load_decoder
+from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, DecoderSpec, load_decoder
 
 
 def _time(fn, repeats: int) -> float:
@@ -25,12 +25,12 @@ def _time(fn, repeats: int) -> float:
 def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_pairs: int = 1 << 18) -> dict:
     import moderngl
 
-    from neural.material import load_material
-    from viewer import shaders
-    from viewer.gl import describe, offscreen_context
-    from viewer.neural_gpu import GpuDecoder
-    from viewer.renderer import Renderer, ViewState
-    from viewer.view_cli import DEFAULT_MATERIAL
+    from nbrdf.neural.material import load_material
+    from nbrdf.viewer import shaders
+    from nbrdf.viewer.gl import describe, offscreen_context
+    from nbrdf.viewer.neural_gpu import GpuDecoder
+    from nbrdf.viewer.renderer import Renderer, ViewState
+    from nbrdf.viewer.view_cli import DEFAULT_MATERIAL
 
     dec = load_decoder(DEFAULT_WEIGHTS) if DEFAULT_WEIGHTS.is_file() else Decoder(DecoderSpec()).eval()
     torch.manual_seed(0)
@@ -114,8 +114,8 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
     the window's adaptive resolution as a user gets it."""
     import statistics
 
-    from viewer.app import App
-    from viewer.view_cli import DEFAULT_MATERIAL, ViewOptions
+    from nbrdf.viewer.app import App
+    from nbrdf.viewer.view_cli import DEFAULT_MATERIAL, ViewOptions
 
     app = App(ViewOptions(material=DEFAULT_MATERIAL, size=size), size=size)
     ld = app.lookdev

@@ -17,7 +17,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from neural.errors import NbrdfError
+from nbrdf.neural.errors import NbrdfError
 
 PROG = "nbrdf"
 METHODS = ("reference", "neural", "projected")
@@ -100,7 +100,7 @@ def make_evaluator(material, method: str, spp: int, seed: int, want_stderr: bool
     import torch
 
     if method == "reference":
-        from training.reference import reference_eval
+        from nbrdf.training.reference import reference_eval
 
         def ref(wi: torch.Tensor, wo: torch.Tensor):
             with _progress(wi.shape[0], "reference") as bar:
@@ -108,12 +108,12 @@ def make_evaluator(material, method: str, spp: int, seed: int, want_stderr: bool
 
         return ref
     if method == "neural":
-        from neural.model import neural_evaluator
+        from nbrdf.neural.model import neural_evaluator
 
         fn = neural_evaluator(material)
         return lambda wi, wo: (fn(wi, wo), None)
     if method == "projected":
-        from training.project import projected_evaluator
+        from nbrdf.training.project import projected_evaluator
 
         fn = projected_evaluator(material, seed=seed)
         return lambda wi, wo: (fn(wi, wo), None)
@@ -122,13 +122,13 @@ def make_evaluator(material, method: str, spp: int, seed: int, want_stderr: bool
 
 def _model(a: argparse.Namespace):
     """The bundle of ``--model``, or the shipped one."""
-    from neural.model import default_model, load_model
+    from nbrdf.neural.model import default_model, load_model
 
     return load_model(a.model) if a.model else default_model()
 
 
 def _load_material(path: str):
-    from neural.material import load_material
+    from nbrdf.neural.material import load_material
 
     return load_material(path)
 
@@ -151,7 +151,7 @@ def cmd_eval(a: argparse.Namespace) -> int:
 def cmd_lobe(a: argparse.Namespace) -> int:
     import torch
 
-    from neural.metrics import lobe_image
+    from nbrdf.neural.metrics import lobe_image
 
     material = _load_material(a.material)
     out = out_path(a.out, (".npy", ".png"))
@@ -172,7 +172,7 @@ def cmd_lobe(a: argparse.Namespace) -> int:
         se_img = lobe_image(lambda wi, wo: errs[0] / wo[:, 2:3].clamp_min(1e-12), a.theta_i)
         np.save(stderr_path(npy), se_img)
     if out.suffix.lower() == ".png":
-        from training.plots import save_lobe_png
+        from nbrdf.training.plots import save_lobe_png
 
         save_lobe_png(img, out, title=f"{material.name}  theta_i={a.theta_i:g}  ({a.method})")
     return 0
@@ -190,7 +190,7 @@ def _guard_method(material, method: str, spp: int, seed: int):
 
 
 def cmd_bench_reference(a: argparse.Namespace) -> int:
-    from training.bench import bench_reference
+    from nbrdf.training.bench import bench_reference
 
     print(json.dumps(bench_reference(quick=a.quick), indent=2))
     return 0
@@ -199,7 +199,7 @@ def cmd_bench_reference(a: argparse.Namespace) -> int:
 def cmd_data(a: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from training.dataset import PRESETS, generate
+    from nbrdf.training.dataset import PRESETS, generate
 
     if a.preset not in PRESETS:
         raise NbrdfError(f"--preset: {a.preset!r} is not one of {', '.join(PRESETS)}")
@@ -212,8 +212,8 @@ def cmd_data(a: argparse.Namespace) -> int:
 
 
 def cmd_train_representation(a: argparse.Namespace) -> int:
-    from neural.decoder import DecoderSpec
-    from training.train_representation import TrainConfig, train
+    from nbrdf.neural.decoder import DecoderSpec
+    from nbrdf.training.train_representation import TrainConfig, train
 
     spec = DecoderSpec(width=a.width, depth=a.depth, activation=a.activation, loss_scale=a.loss_scale)
     for name in ("epochs", "batch"):
@@ -229,8 +229,8 @@ def cmd_train_representation(a: argparse.Namespace) -> int:
 
 
 def cmd_train_operation(a: argparse.Namespace) -> int:
-    from neural.decoder import DEFAULT_WEIGHTS
-    from training import train_operations as to
+    from nbrdf.neural.decoder import DEFAULT_WEIGHTS
+    from nbrdf.training import train_operations as to
 
     for name in ("steps", "batch", "pairs"):
         if getattr(a, name) < 1:
@@ -244,10 +244,10 @@ def cmd_train_operation(a: argparse.Namespace) -> int:
 
 
 def cmd_project(a: argparse.Namespace) -> int:
-    from neural.decoder import default_decoder, load_decoder, save_decoder
-    from neural.latent import save_latent
-    from neural.projection import ProjectionConfig
-    from training import project as pj
+    from nbrdf.neural.decoder import default_decoder, load_decoder, save_decoder
+    from nbrdf.neural.latent import save_latent
+    from nbrdf.neural.projection import ProjectionConfig
+    from nbrdf.training import project as pj
 
     out = out_path(a.out, (".safetensors",))
     given = [x for x in (a.material, a.samples, a.merl) if x]
@@ -286,8 +286,8 @@ def cmd_project(a: argparse.Namespace) -> int:
 
 
 def cmd_report_representation(a: argparse.Namespace) -> int:
-    from neural.decoder import default_decoder, load_decoder
-    from training.evaluate import build_references, projected_method, report_figures, score
+    from nbrdf.neural.decoder import default_decoder, load_decoder
+    from nbrdf.training.evaluate import build_references, projected_method, report_figures, score
 
     dec = load_decoder(a.decoder) if a.decoder else default_decoder()
     refs = build_references(a.refs, limit=a.limit)
@@ -298,7 +298,7 @@ def cmd_report_representation(a: argparse.Namespace) -> int:
     (out / "representation.json").write_text(json.dumps(result, indent=1))
     report_figures(refs, projected_method(dec), result, out)
     if a.record:
-        from neural.decoder import DEFAULT_WEIGHTS, record_accuracy
+        from nbrdf.neural.decoder import DEFAULT_WEIGHTS, record_accuracy
 
         record_accuracy(a.decoder or DEFAULT_WEIGHTS, {"heldout_projected": result["summary"]})
     print(json.dumps(result["summary"], indent=1))
@@ -306,8 +306,8 @@ def cmd_report_representation(a: argparse.Namespace) -> int:
 
 
 def cmd_report_operations(a: argparse.Namespace) -> int:
-    from training import evaluate as ev
-    from training.plots import save_lobe_grid
+    from nbrdf.training import evaluate as ev
+    from nbrdf.training.plots import save_lobe_grid
 
     model = _model(a)
     refs = ev.build_references(a.refs, limit=a.limit)
@@ -326,7 +326,7 @@ def cmd_report_operations(a: argparse.Namespace) -> int:
               "rows": {k: r["rows"] for k, r in results.items()}}
     (out / "operations.json").write_text(json.dumps(report, indent=1))
     (out / "operations.md").write_text(ev.comparison_table(results) + "\n")
-    from neural.metrics import lobe_image
+    from nbrdf.neural.metrics import lobe_image
 
     shown = [(c, m, r) for c, m, r in refs if c in ("two_layer", "three_layer")][:: max(1, a.every)][:6]
     rows = []
@@ -341,7 +341,7 @@ def cmd_report_operations(a: argparse.Namespace) -> int:
 
 
 def cmd_report_interpolation(a: argparse.Namespace) -> int:
-    from training.evaluate import interpolation_figure
+    from nbrdf.training.evaluate import interpolation_figure
 
     model = _model(a)
     out = Path(a.out)
@@ -354,8 +354,8 @@ def cmd_report_interpolation(a: argparse.Namespace) -> int:
 def cmd_sample(a: argparse.Namespace) -> int:
     import torch
 
-    from neural.geometry import incidence
-    from neural.sampling import proxy_sample
+    from nbrdf.neural.geometry import incidence
+    from nbrdf.neural.sampling import proxy_sample
 
     if a.n < 1:
         raise NbrdfError(f"--n: {a.n} must be at least 1")
@@ -374,15 +374,15 @@ def cmd_sample(a: argparse.Namespace) -> int:
 
 
 def cmd_bench_operations(a: argparse.Namespace) -> int:
-    from neural.bench import bench_operations
+    from nbrdf.neural.bench import bench_operations
 
     print(json.dumps(bench_operations(_model(a), a.repeats), indent=2))
     return 0
 
 
 def cmd_bench_app(a: argparse.Namespace) -> int:
-    from viewer.bench import bench_app
-    from viewer.view_cli import _size, has_display
+    from nbrdf.viewer.bench import bench_app
+    from nbrdf.viewer.view_cli import _size, has_display
 
     if not has_display():
         raise NbrdfError("bench app: no display (run it under xvfb-run on a headless machine)")
@@ -393,8 +393,8 @@ def cmd_bench_app(a: argparse.Namespace) -> int:
 
 
 def cmd_bench_render(a: argparse.Namespace) -> int:
-    from viewer.bench import bench_render
-    from viewer.view_cli import _size
+    from nbrdf.viewer.bench import bench_render
+    from nbrdf.viewer.view_cli import _size
 
     print(json.dumps(bench_render(_size(a.size), repeats=a.repeats), indent=2))
     return 0

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from neural.errors import NbrdfError
+from nbrdf.neural.errors import NbrdfError
 
 LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)
 ENV_UNITS = (4, 5, 6)  # texture units: radiance, marginal CDF, conditional CDFs

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import moderngl
 
-from neural.errors import NbrdfError
+from nbrdf.neural.errors import NbrdfError
 
 MIN_VERSION = 330  # OpenGL 3.3 core: float textures, texelFetch, fragment shaders
 

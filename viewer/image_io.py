@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from neural.errors import NbrdfError
+from nbrdf.neural.errors import NbrdfError
 
 OUTPUT_SUFFIXES = (".png", ".exr", ".npy")
 
@@ -49,7 +49,7 @@ def write_image(path: str | Path, img: np.ndarray, exposure: float = 0.0, mode: 
 def read_normal_map(path: str | Path) -> np.ndarray:
     """A tangent-space normal map (OpenGL convention: +y green up) as float32
     (H, W, 3) in [0, 1], row 0 = v 0."""
-    from neural.svbrdf import read_texels
+    from nbrdf.neural.svbrdf import read_texels
 
     x = read_texels(path)
     if x.shape[2] < 3:

@@ -24,14 +24,14 @@ import moderngl
 import numpy as np
 import torch
 
-from neural.errors import NbrdfError
-from neural.latent_texture import LatentTexture, blend
-from neural.material import Material, load_material, material_to_dict, save_material
-from viewer import shaders
-from viewer.camera import OrbitCamera
-from viewer.reference import ReferenceJob, ReferenceWorker, lobe_job, object_job, slice_job
-from viewer.renderer import Renderer, ViewState
-from viewer.ui.stack_editor import StackEditor
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.latent_texture import LatentTexture, blend
+from nbrdf.neural.material import Material, load_material, material_to_dict, save_material
+from nbrdf.viewer import shaders
+from nbrdf.viewer.camera import OrbitCamera
+from nbrdf.viewer.reference import ReferenceJob, ReferenceWorker, lobe_job, object_job, slice_job
+from nbrdf.viewer.renderer import Renderer, ViewState
+from nbrdf.viewer.ui.stack_editor import StackEditor
 
 COMPARE_MODES = ("off", "side", "wipe", "error")
 PRESETS_DIR = Path(__file__).parent / "assets" / "materials"
@@ -78,8 +78,8 @@ class SvbrdfBuild:
 class LookDev:
     def __init__(self, ctx: moderngl.Context, material: Material, mesh: str = "sphere", env: str | None = None,
                  state: ViewState | None = None):
-        from neural.model import default_model
-        from viewer.neural_gpu import GpuDecoder
+        from nbrdf.neural.model import default_model
+        from nbrdf.viewer.neural_gpu import GpuDecoder
 
         self.ctx = ctx
         self.model = default_model()
@@ -156,7 +156,7 @@ class LookDev:
 
     def set_mesh(self, mesh: str) -> bool:
         def go():
-            from viewer.mesh import named_mesh
+            from nbrdf.viewer.mesh import named_mesh
 
             m = named_mesh(mesh)
             for r in self._renderers():
@@ -224,7 +224,7 @@ class LookDev:
     def _other_material(self) -> Material | None:
         if self.interp.other is None:
             return None
-        from neural.material import parse_material
+        from nbrdf.neural.material import parse_material
 
         return parse_material(self.interp.other, self.interp.other_dir)
 
@@ -295,7 +295,7 @@ class LookDev:
         self._svbrdf = job
 
         def build():
-            from neural.svbrdf import latent_texture
+            from nbrdf.neural.svbrdf import latent_texture
 
             try:
                 job.result = latent_texture(self.model, m, progress=lambda d, n: setattr(job, "progress", d / n))
@@ -498,7 +498,7 @@ class LookDev:
             with torch.no_grad():
                 out["neural"] = (th, ((self.model.decoder.eval_rgb(self.latent(), wi, wo) @ lum) * cos).numpy())
             if analytic_capable(m):
-                from training.reference import single_layer_eval
+                from nbrdf.training.reference import single_layer_eval
 
                 out["reference"] = (th, ((single_layer_eval(m.base, wi, wo) @ lum) * cos).numpy())
             else:
@@ -552,7 +552,7 @@ class LookDev:
 
     def apply_session(self, data: dict, source: str = "session") -> None:
         """Restores a session dict; validates everything before changing anything."""
-        from neural.material import parse_material
+        from nbrdf.neural.material import parse_material
 
         if not isinstance(data, dict) or data.get("format") != SESSION_FORMAT:
             raise NbrdfError(f"{source}: not an {SESSION_FORMAT} file")
@@ -597,7 +597,7 @@ class LookDev:
         """.png: the displayed composite (tone-mapped, compare included); .exr/.npy:
         the linear neural image of the current view."""
         def go():
-            from viewer.image_io import write_image
+            from nbrdf.viewer.image_io import write_image
 
             p = Path(path)
             suffix = p.suffix.lower()
@@ -624,7 +624,7 @@ class LookDev:
 
     @staticmethod
     def _read_env(path: str) -> np.ndarray:
-        from viewer.image_io import read_environment
+        from nbrdf.viewer.image_io import read_environment
 
         return read_environment(path)
 

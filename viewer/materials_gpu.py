@@ -3,8 +3,8 @@
 analytic layering approximation."""
 from __future__ import annotations
 
-from neural.errors import NbrdfError
-from neural.material import Conductor, Dielectric, Diffuse, Material
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import Conductor, Dielectric, Diffuse, Material
 
 MAX_INTERFACES = 2
 

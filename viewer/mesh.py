@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from neural.errors import NbrdfError
+from nbrdf.neural.errors import NbrdfError
 
 
 @dataclass

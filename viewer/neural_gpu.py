@@ -12,12 +12,12 @@ import moderngl
 import numpy as np
 import torch
 
-from neural.decoder import Decoder
-from neural.errors import NbrdfError
-from neural.gpu_pack import PackedDecoder, latent_share, pack
-from neural.latent_texture import LatentTexture
-from viewer import shaders
-from viewer.gl import check_version
+from nbrdf.neural.decoder import Decoder
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.gpu_pack import PackedDecoder, latent_share, pack
+from nbrdf.neural.latent_texture import LatentTexture
+from nbrdf.viewer import shaders
+from nbrdf.viewer.gl import check_version
 
 WEIGHT_UNIT = 7  # texture unit of the weight texture
 SHARE_UNIT = 8   # texture unit of a latent texture's per-texel share

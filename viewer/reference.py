@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from neural.geometry import incidence, lobe_grid
-from neural.material import Material
+from nbrdf.neural.geometry import incidence, lobe_grid
+from nbrdf.neural.material import Material
 
 
 @dataclass
@@ -127,7 +127,7 @@ class ReferenceWorker:
             return self._state.job is job and not self._stop
 
     def _run(self) -> None:
-        from training.reference import reference_eval
+        from nbrdf.training.reference import reference_eval
 
         while not self._stop:
             self._wake.wait()

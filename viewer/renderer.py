@@ -14,19 +14,19 @@ from typing import TYPE_CHECKING
 import moderngl
 import numpy as np
 
-from neural.errors import NbrdfError
-from neural.material import Material
-from viewer import shaders
-from viewer.camera import OrbitCamera
-from viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
-from viewer.materials_gpu import analytic_uniforms, proxy_hint
-from viewer.mesh import Mesh, named_mesh
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import Material
+from nbrdf.viewer import shaders
+from nbrdf.viewer.camera import OrbitCamera
+from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
+from nbrdf.viewer.materials_gpu import analytic_uniforms, proxy_hint
+from nbrdf.viewer.mesh import Mesh, named_mesh
 
 if TYPE_CHECKING:
     import torch
 
-    from neural.latent_texture import LatentTexture
-    from viewer.neural_gpu import GpuDecoder, GpuLatentTexture
+    from nbrdf.neural.latent_texture import LatentTexture
+    from nbrdf.viewer.neural_gpu import GpuDecoder, GpuLatentTexture
 
 VIEWS = ("object", "lobe", "slice")
 LOBE_SIZE = 64
@@ -165,14 +165,14 @@ class Renderer:
             self.obj = self._object_program(False)
         else:
             if latent_texture is not None:
-                from viewer.neural_gpu import GpuLatentTexture
+                from nbrdf.viewer.neural_gpu import GpuLatentTexture
 
                 self.latent_tex = (latent_texture if isinstance(latent_texture, GpuLatentTexture)
                                    else GpuLatentTexture(self.ctx, self.neural, latent_texture))
                 latent = self.latent_tex.mean_latent if latent is None else latent
             elif material.is_textured:
                 raise NbrdfError(f"{material.name}: a texture-mapped material needs its latent texture "
-                                 "(neural.svbrdf.latent_texture)")
+                                 "(nbrdf.neural.svbrdf.latent_texture)")
             if latent is None:
                 raise NbrdfError("the neural renderer needs the material's latent")
             self.obj = self._object_program(self.latent_tex is not None)
@@ -191,7 +191,7 @@ class Renderer:
             self.normal_map.release()
             self.normal_map = None
         if material.normal_map is not None:
-            from viewer.image_io import read_normal_map
+            from nbrdf.viewer.image_io import read_normal_map
 
             img = read_normal_map(material.base_dir / material.normal_map)
             self.normal_map = self.ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), dtype="f4")

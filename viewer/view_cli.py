@@ -12,8 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-from neural.errors import NbrdfError
-from viewer.cli import _Parser, run_guarded
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.cli import _Parser, run_guarded
 
 PROG = "nbrdf-view"
 DEFAULT_MATERIAL = Path(__file__).parent / "assets" / "materials" / "default.json"
@@ -113,10 +113,10 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     for a window (``fallback`` = why there is none, said in one line), it is a
     preview: on software OpenGL at most 256 x 256 and 8 passes, because the
     neural shader costs minutes there at full size."""
-    from neural.material import load_material
-    from viewer.gl import offscreen_context
-    from viewer.image_io import write_image
-    from viewer.renderer import ViewState
+    from nbrdf.neural.material import load_material
+    from nbrdf.viewer.gl import offscreen_context
+    from nbrdf.viewer.image_io import write_image
+    from nbrdf.viewer.renderer import ViewState
 
     out = Path(opts.out or HEADLESS_OUT)
     material = load_material(opts.material)
@@ -132,7 +132,7 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
                 note = f" (software OpenGL: a {size[0]}x{size[1]}, {spp}-pass preview)"
         print(f"{PROG}: {fallback}; rendering offscreen to {out} instead{note}", file=sys.stderr)
     if opts.session:
-        from viewer.lookdev import LookDev
+        from nbrdf.viewer.lookdev import LookDev
 
         ld = LookDev(ctx, material, opts.mesh, opts.env)
         try:
@@ -154,11 +154,11 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
 
 def make_renderer(ctx, material, opts: ViewOptions):
     """The renderer of ``opts.brdf``: closed form, or the decoder in GLSL."""
-    from viewer.renderer import Renderer
+    from nbrdf.viewer.renderer import Renderer
 
     env = None
     if opts.env is not None:
-        from viewer.image_io import read_environment
+        from nbrdf.viewer.image_io import read_environment
 
         env = read_environment(opts.env)
     mode = opts.brdf
@@ -167,15 +167,15 @@ def make_renderer(ctx, material, opts: ViewOptions):
         mode = "analytic" if single and not material.is_textured else "neural"
     if mode == "analytic":
         return Renderer(ctx, material, opts.mesh, environment=env)
-    from neural.model import default_model
-    from viewer.neural_gpu import GpuDecoder
+    from nbrdf.neural.model import default_model
+    from nbrdf.viewer.neural_gpu import GpuDecoder
 
     model = default_model()
     if material.is_textured:
         if mode == "projected":
             raise NbrdfError("--brdf projected: a texture-mapped material is shaded through its latent texture "
                              "(use --brdf neural)")
-        from neural.svbrdf import latent_texture
+        from nbrdf.neural.svbrdf import latent_texture
 
         tex = latent_texture(model, material)
         z = tex.levels[-1][0, 0]
@@ -185,7 +185,7 @@ def make_renderer(ctx, material, opts: ViewOptions):
     if mode == "neural":
         z = model.material_latent(material)
     else:
-        from training.project import fit, material_samples
+        from nbrdf.training.project import fit, material_samples
 
         z = fit(model.decoder, material_samples(material))
     proxy = model.proxy(z) if model.sampler is not None else None
@@ -202,7 +202,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not has_display():
             render_offscreen(opts, fallback="no display found")
             return 0
-        from viewer.app import App, WindowUnavailable
+        from nbrdf.viewer.app import App, WindowUnavailable
 
         try:
             app = App(opts)

@@ -8,9 +8,9 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from neural.decoder import (Decoder, DecoderSpec, encode, load_decoder, read_bundle, save_decoder)
-from neural.errors import NbrdfError
-from training.merl import angles
+from nbrdf.neural.decoder import (Decoder, DecoderSpec, encode, load_decoder, read_bundle, save_decoder)
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.training.merl import angles
 
 
 def rand_dirs(n: int, seed: int) -> torch.Tensor:
@@ -90,7 +90,7 @@ def test_weight_file_round_trip_and_id(tmp_path):
 def _tamper(path, **changes):
     from safetensors.torch import load_file, save_file
 
-    from neural.decoder import read_bundle as rb
+    from nbrdf.neural.decoder import read_bundle as rb
 
     tensors, meta = rb(path)
     for k, v in changes.items():

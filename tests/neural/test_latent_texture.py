@@ -4,8 +4,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from neural.errors import NbrdfError
-from neural.latent_texture import LatentTexture, blend
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.latent_texture import LatentTexture, blend
 
 
 def test_blend_is_a_normalised_weighted_sum():

@@ -4,10 +4,10 @@ from __future__ import annotations
 import pytest
 import torch
 
-from neural.decoder import Decoder, DecoderSpec, encode
-from neural.errors import NbrdfError
-from neural.latent import MaterialLatent, load_latent, save_latent
-from neural.projection import ProjectionConfig, project
+from nbrdf.neural.decoder import Decoder, DecoderSpec, encode
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.latent import MaterialLatent, load_latent, save_latent
+from nbrdf.neural.projection import ProjectionConfig, project
 from test_decoder import rand_dirs
 
 

@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from neural.sampling import SamplerNet, gndf, proxy_pdf, proxy_sample
+from nbrdf.neural.sampling import SamplerNet, gndf, proxy_pdf, proxy_sample
 from stattools import chi2_sphere
 
 ALPHA = 1e-3
@@ -47,7 +47,7 @@ def test_sampler_net_keeps_parameters_in_range():
 
 
 def test_gndf_of_a_narrow_lobe_concentrates_at_the_pole():
-    from training.analytic import GGXConductor
+    from nbrdf.training.analytic import GGXConductor
 
     b = GGXConductor(0.05, 1.0)
     img = gndf(lambda wi, wo: b.eval(wi, wo), n=32, n_wi=16)

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from neural.errors import NbrdfError
-from neural.material import load_material, parse_material
-from neural.model import default_model
-from neural.svbrdf import TextureValues, latent_texture, read_map
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import load_material, parse_material
+from nbrdf.neural.model import default_model
+from nbrdf.neural.svbrdf import TextureValues, latent_texture, read_map
 
 
 def write_material(tmp_path, rough: np.ndarray, color: np.ndarray, sigma: float | dict = 0.8):

@@ -13,7 +13,7 @@ import math
 
 import torch
 
-from training.analytic import GGXConductor, GGXDielectric, Lambertian
+from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
 
 
 def analog_bins(layers: list[tuple[float, float, float, float]], base: tuple, wi: torch.Tensor,

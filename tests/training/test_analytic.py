@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from stattools import chi2_sphere
-from training.analytic import GGXConductor, GGXDielectric, Lambertian
+from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
 
 ALPHA = 1e-3  # significance level of each chi-square test (fixed seeds: deterministic)
 

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import torch
 
-from neural.material import parse_material
-from training.analytic import GGXDielectric
-from training.analytic_layering import analytic_layered_eval
-from training.dataset import sample_pairs
+from nbrdf.neural.material import parse_material
+from nbrdf.training.analytic import GGXDielectric
+from nbrdf.training.analytic_layering import analytic_layered_eval
+from nbrdf.training.dataset import sample_pairs
 
 
 def _stack(r0, sigma, albedo=0.5, base=None):

@@ -10,11 +10,11 @@ import pytest
 import torch
 from safetensors.numpy import load_file
 
-from neural.errors import NbrdfError
+from nbrdf.neural.errors import NbrdfError
 from stattools import z_threshold
-from training.dataset import (CLASSES, P, PRESETS, DataConfig, generate, load_split, make_shard, params_to_material,
+from nbrdf.training.dataset import (CLASSES, P, PRESETS, DataConfig, generate, load_split, make_shard, params_to_material,
                               plan, sample_pairs, sample_params)
-from training.reference import reference_eval
+from nbrdf.training.reference import reference_eval
 
 SMALL = DataConfig(counts=dict(conductor=2, dielectric=2, two_layer=3, three_layer=1, diffuse_base=1),
                    val_counts=dict(two_layer=1), pairs=64, spp=8, shard_size=2)

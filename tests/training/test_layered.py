@@ -11,8 +11,8 @@ import torch
 
 from analog_walk import analog_bins, uniform_in_bins
 from stattools import z_threshold
-from training.analytic import GGXDielectric
-from training.layered import StackParams, simulate
+from nbrdf.training.analytic import GGXDielectric
+from nbrdf.training.layered import StackParams, simulate
 
 N_THETA, N_PHI, K = 4, 6, 800
 CORNERS = list(itertools.product((0.05, 0.6), (1.1, 1.9), (0.2, 0.98), (0.2, 4.0)))

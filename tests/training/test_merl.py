@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import torch
 
-from neural.errors import NbrdfError
-from training.analytic import GGXConductor
-from training.merl import RES, SCALE, MerlBRDF, angles, cell_centres, directions, indices
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.training.analytic import GGXConductor
+from nbrdf.training.merl import RES, SCALE, MerlBRDF, angles, cell_centres, directions, indices
 
 
 def conductor_rgb(a=0.2, r0=(0.9, 0.5, 0.2)):

@@ -9,13 +9,13 @@ import torch
 from safetensors import safe_open
 from safetensors.torch import save_file
 
-from neural.decoder import DEFAULT_WEIGHTS
-from neural.errors import NbrdfError
-from neural.material import parse_material
-from neural.model import load_model
-from neural.neural_brdf import material_brdfs
-from training.dataset import DataConfig, generate
-from training.train_operations import OpsConfig, train_layering, train_leaf, train_sampler
+from nbrdf.neural.decoder import DEFAULT_WEIGHTS
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import parse_material
+from nbrdf.neural.model import load_model
+from nbrdf.neural.neural_brdf import material_brdfs
+from nbrdf.training.dataset import DataConfig, generate
+from nbrdf.training.train_operations import OpsConfig, train_layering, train_leaf, train_sampler
 
 STACKS = DataConfig(counts=dict(conductor=0, dielectric=0, two_layer=6, three_layer=3, diffuse_base=3),
                     val_counts=dict(conductor=0, dielectric=0, two_layer=2, three_layer=1, diffuse_base=1),

@@ -7,10 +7,10 @@ from dataclasses import replace
 import pytest
 import torch
 
-from neural.decoder import DecoderSpec, load_decoder
-from neural.errors import NbrdfError
-from training.dataset import DataConfig, generate
-from training.train_representation import TrainConfig, train
+from nbrdf.neural.decoder import DecoderSpec, load_decoder
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.training.dataset import DataConfig, generate
+from nbrdf.training.train_representation import TrainConfig, train
 
 TINY = DataConfig(counts=dict(conductor=4, dielectric=4, two_layer=4, three_layer=1, diffuse_base=1),
                   val_counts=dict(conductor=1, dielectric=1, two_layer=1), pairs=128, spp=8, shard_size=4)

@@ -12,7 +12,7 @@ import pytest
 
 @pytest.fixture(scope="session")
 def gl_ctx():
-    from viewer.gl import offscreen_context
+    from nbrdf.viewer.gl import offscreen_context
 
     return offscreen_context()
 

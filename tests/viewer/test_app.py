@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 import torch
 
-from neural.material import parse_material
-from neural.model import default_model
-from viewer.image_io import tonemap
-from viewer.view_cli import DEFAULT_MATERIAL
+from nbrdf.neural.material import parse_material
+from nbrdf.neural.model import default_model
+from nbrdf.viewer.image_io import tonemap
+from nbrdf.viewer.view_cli import DEFAULT_MATERIAL
 
 pytestmark = pytest.mark.gl
 
@@ -26,8 +26,8 @@ SCRIPT = textwrap.dedent("""
     import json, sys
     from pathlib import Path
     import numpy as np
-    from viewer.app import App
-    from viewer.view_cli import ViewOptions
+    from nbrdf.viewer.app import App
+    from nbrdf.viewer.view_cli import ViewOptions
     tmp = Path(sys.argv[2])
     app = App(ViewOptions(material=sys.argv[1], size=(64, 48)), size=(64, 48))
     app.BUDGET_STILL_MS = app.BUDGET_DRAG_MS = 1e9   # full resolution: compared pixel for pixel
@@ -102,8 +102,8 @@ def session_run(xvfb_display, tmp_path_factory):
 
 
 def test_slider_changes_latents_and_pixels_as_offscreen(session_run, gl_ctx):
-    from viewer.neural_gpu import GpuDecoder
-    from viewer.renderer import Renderer, ViewState
+    from nbrdf.viewer.neural_gpu import GpuDecoder
+    from nbrdf.viewer.renderer import Renderer, ViewState
 
     _, out, f = session_run
     assert out["edit_ok"]
@@ -139,7 +139,7 @@ def test_bad_files_show_an_error_and_change_nothing(session_run):
 def test_screenshots(session_run):
     import imageio.v3 as iio
 
-    from viewer.image_io import read_exr
+    from nbrdf.viewer.image_io import read_exr
 
     tmp, out, _ = session_run
     assert out["shots"][:2] == [True, True] and out["shots"][2] is False and ".png" in out["shots"][3]
@@ -149,9 +149,9 @@ def test_screenshots(session_run):
 
 
 def test_interpolation_and_svbrdf_in_the_app(session_run):
-    from neural.latent_texture import blend
-    from neural.material import load_material
-    from viewer.lookdev import presets
+    from nbrdf.neural.latent_texture import blend
+    from nbrdf.neural.material import load_material
+    from nbrdf.viewer.lookdev import presets
 
     _, out, f = session_run
     assert out["interp"] == [True, None]

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from neural.model import default_model
-from neural.sampling import proxy_pdf
+from nbrdf.neural.model import default_model
+from nbrdf.neural.sampling import proxy_pdf
 from test_cli import DEFAULT, assert_one_line_error, random_pairs, run, write_material
 
 THREE = [{"type": "dielectric", "roughness": 0.1, "ior": 1.5}, {"type": "medium", "albedo": 0.5, "sigma_t": 0.2},

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from neural.decoder import Decoder, DecoderSpec, save_decoder
-from neural.latent import load_latent
+from nbrdf.neural.decoder import Decoder, DecoderSpec, save_decoder
+from nbrdf.neural.latent import load_latent
 from test_cli import DEFAULT, assert_one_line_error, random_pairs, run, write_material
-from training.analytic import GGXConductor
-from training.merl import MerlBRDF
+from nbrdf.training.analytic import GGXConductor
+from nbrdf.training.merl import MerlBRDF
 
 
 @pytest.fixture(scope="module")
@@ -73,7 +73,7 @@ def test_project_samples_and_merl(tmp_path, capsys, decoder_file):
     assert tuned.exists()
     # the latent belongs to the fine-tuned copy, not to the shared decoder
     with pytest.raises(Exception, match="belongs to decoder"):
-        from neural.decoder import load_decoder
+        from nbrdf.neural.decoder import load_decoder
 
         load_latent(tmp_path / "m.safetensors", load_decoder(decoder_file).weights_id())
     load_latent(tmp_path / "m.safetensors", load_decoder(tuned).weights_id())
@@ -106,7 +106,7 @@ def test_eval_projected_with_the_shipped_weights(tmp_path, capsys):
 
 
 def test_view_offscreen_with_the_neural_shader(tmp_path, capsys):
-    from viewer.view_cli import main
+    from nbrdf.viewer.view_cli import main
 
     out = tmp_path / "lobe.npy"
     mat = write_material(tmp_path / "m.json", [{"type": "conductor", "roughness": 0.3, "r0": 0.9}])

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import torch
 
-from neural.errors import NbrdfError
-from neural.material import parse_material
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import parse_material
 from stattools import chi2_sphere
-from viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
+from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
 
 pytestmark = pytest.mark.gl
 
@@ -43,8 +43,8 @@ def test_bright_texels_are_sampled_more():
 
 
 def test_glsl_sampling_matches_numpy(gl_ctx):
-    from viewer import shaders
-    from viewer.neural_gpu import probe_pass
+    from nbrdf.viewer import shaders
+    from nbrdf.viewer.neural_gpu import probe_pass
 
     env = _env()
     genv = GpuEnvironment(gl_ctx, env)
@@ -65,7 +65,7 @@ def test_glsl_sampling_matches_numpy(gl_ctx):
 
 def test_white_furnace(gl_ctx):
     """Albedo-1 Lambertian, uniform radiance 1, no light: every pixel is 1."""
-    from viewer.renderer import Renderer, ViewState
+    from nbrdf.viewer.renderer import Renderer, ViewState
 
     m = parse_material({"format": "nbrdf-material/1", "name": "white", "layers": [{"type": "diffuse", "albedo": 1.0}]})
     r = Renderer(gl_ctx, m, environment=np.ones((16, 32, 3), np.float32))

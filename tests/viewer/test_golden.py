@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from neural.material import load_material
-from viewer.renderer import ViewState
-from viewer.view_cli import DEFAULT_MATERIAL, ViewOptions, make_renderer
+from nbrdf.neural.material import load_material
+from nbrdf.viewer.renderer import ViewState
+from nbrdf.viewer.view_cli import DEFAULT_MATERIAL, ViewOptions, make_renderer
 
 GOLDEN = Path(__file__).parent / "golden"
 MATERIALS = DEFAULT_MATERIAL.parent

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import torch
 
-from neural.decoder import DEFAULT_WEIGHTS, Decoder, DecoderSpec, load_decoder
-from neural.errors import NbrdfError
-from neural.gpu_pack import latent_share, pack
-from viewer.neural_gpu import GpuDecoder, probe_compute, probe_fragment
+from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, DecoderSpec, load_decoder
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.gpu_pack import latent_share, pack
+from nbrdf.viewer.neural_gpu import GpuDecoder, probe_compute, probe_fragment
 
 
 def pairs(n: int, seed: int):
@@ -97,10 +97,10 @@ def test_packing_layout_and_share():
 def test_lobe_view_matches_the_torch_lobe_image(gl_ctx):
     """The GLSL lobe view of a neural material is the SPEC section 9 array of
     the torch decoder at the same latents, within 1e-3."""
-    from neural.material import load_material
-    from neural.metrics import lobe_image
-    from viewer.renderer import Renderer, ViewState
-    from viewer.view_cli import DEFAULT_MATERIAL
+    from nbrdf.neural.material import load_material
+    from nbrdf.neural.metrics import lobe_image
+    from nbrdf.viewer.renderer import Renderer, ViewState
+    from nbrdf.viewer.view_cli import DEFAULT_MATERIAL
 
     torch.manual_seed(6)
     dec = Decoder(DecoderSpec()).eval()
@@ -115,7 +115,7 @@ def test_lobe_view_matches_the_torch_lobe_image(gl_ctx):
 
 
 def test_bench_render_reports_both_paths():
-    from viewer.bench import bench_render
+    from nbrdf.viewer.bench import bench_render
 
     r = bench_render((48, 32), repeats=1, torch_pairs=4096)
     assert r["size"] == "48x32" and r["decoder_only_ms"] > 0 and r["full_shading_one_light_ms"] > 0
@@ -124,8 +124,8 @@ def test_bench_render_reports_both_paths():
 
 def test_glsl_proxy_sampling_matches_torch_for_the_same_random_numbers(gl_ctx):
     """sample_proxy / pdf_proxy in GLSL against neural/sampling.py, both lobes."""
-    from neural.sampling import proxy_sample
-    from viewer.neural_gpu import probe_proxy_sampling
+    from nbrdf.neural.sampling import proxy_sample
+    from nbrdf.viewer.neural_gpu import probe_proxy_sampling
 
     g = torch.Generator().manual_seed(11)
     n = 2048

@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from neural.material import load_material, parse_material
-from neural.metrics import lobe_image
-from training.reference import single_layer_eval
-from viewer.image_io import read_exr, write_image
-from viewer.renderer import Renderer, ViewState
-from viewer.view_cli import DEFAULT_MATERIAL, main
+from nbrdf.neural.material import load_material, parse_material
+from nbrdf.neural.metrics import lobe_image
+from nbrdf.training.reference import single_layer_eval
+from nbrdf.viewer.image_io import read_exr, write_image
+from nbrdf.viewer.renderer import Renderer, ViewState
+from nbrdf.viewer.view_cli import DEFAULT_MATERIAL, main
 
 pytestmark = pytest.mark.gl
 
@@ -143,7 +143,7 @@ def test_headless_fallback(tmp_path):
 def test_cli_renders_a_session_file(gl_ctx, tmp_path, capsys):
     import imageio.v3 as iio
 
-    from viewer.lookdev import LookDev
+    from nbrdf.viewer.lookdev import LookDev
 
     ld = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
     try:
@@ -163,7 +163,7 @@ def test_cli_renders_a_session_file(gl_ctx, tmp_path, capsys):
 
 
 def test_a_distant_point_light_equals_the_directional_light(gl_ctx):
-    from neural.material import parse_material
+    from nbrdf.neural.material import parse_material
 
     m = parse_material({"format": "nbrdf-material/1", "name": "g",
                         "layers": [{"type": "conductor", "roughness": 0.3, "r0": [1.0, 0.78, 0.34]}]})

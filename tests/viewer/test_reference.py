@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from neural.material import load_material, parse_material
-from neural.model import default_model
-from training.reference import reference_eval, single_layer_eval
-from viewer.reference import ReferenceWorker, lobe_job, slice_job
-from viewer.renderer import Renderer, ViewState
-from viewer.view_cli import DEFAULT_MATERIAL
+from nbrdf.neural.material import load_material, parse_material
+from nbrdf.neural.model import default_model
+from nbrdf.training.reference import reference_eval, single_layer_eval
+from nbrdf.viewer.reference import ReferenceWorker, lobe_job, slice_job
+from nbrdf.viewer.renderer import Renderer, ViewState
+from nbrdf.viewer.view_cli import DEFAULT_MATERIAL
 
 GOLD = {"format": "nbrdf-material/1", "name": "g", "layers": [{"type": "conductor", "roughness": 0.3,
                                                              "r0": [1.0, 0.78, 0.34]}]}
@@ -67,7 +67,7 @@ def test_slice_job_matches_the_glsl_slice(gl_ctx):
 def test_gbuffer_directions_reproduce_the_light_only_render(gl_ctx):
     """The object reference evaluates f at the G-buffer's (wi, wo): with the
     neural BRDF in place of the simulation it must give the rendered pixels."""
-    from viewer.neural_gpu import GpuDecoder
+    from nbrdf.viewer.neural_gpu import GpuDecoder
 
     model = default_model()
     m = parse_material(GOLD)

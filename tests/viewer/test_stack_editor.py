@@ -5,10 +5,10 @@ import json
 
 import pytest
 
-from neural.errors import NbrdfError
-from neural.material import Dielectric, Medium
-from viewer.ui.stack_editor import StackEditor
-from viewer.view_cli import DEFAULT_MATERIAL
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import Dielectric, Medium
+from nbrdf.viewer.ui.stack_editor import StackEditor
+from nbrdf.viewer.view_cli import DEFAULT_MATERIAL
 
 
 @pytest.fixture

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 import torch
 
-from neural.latent_texture import LatentTexture
-from neural.material import load_material, parse_material
-from neural.model import default_model
-from viewer.neural_gpu import GpuDecoder, GpuLatentTexture, probe_fragment
-from viewer.renderer import Renderer, ViewState
-from viewer.view_cli import DEFAULT_MATERIAL
+from nbrdf.neural.latent_texture import LatentTexture
+from nbrdf.neural.material import load_material, parse_material
+from nbrdf.neural.model import default_model
+from nbrdf.viewer.neural_gpu import GpuDecoder, GpuLatentTexture, probe_fragment
+from nbrdf.viewer.renderer import Renderer, ViewState
+from nbrdf.viewer.view_cli import DEFAULT_MATERIAL
 
 ROUGH_GOLD = {"format": "nbrdf-material/1", "name": "rough gold",
               "layers": [{"type": "conductor", "roughness": 0.4, "r0": [1.0, 0.78, 0.34]}]}

@@ -1,6 +1,6 @@
 """The bundled texture-mapped material, made by the project (no downloaded art).
 
-``python -m viewer.assets.procedural`` writes ``materials/worn_tiles.json`` and
+``python -m nbrdf.viewer.assets.procedural`` writes ``materials/worn_tiles.json`` and
 its maps: silver and copper tiles under a varnish whose thickness and roughness
 vary, with wear along scratches and a tangent-space normal map of bevelled
 tile edges. Deterministic (fixed seed), so the committed files can be rebuilt.

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 from imgui_bundle import imgui, implot
 
-from viewer.lookdev import COMPARE_MODES, LookDev, presets
-from viewer.ui.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
+from nbrdf.viewer.lookdev import COMPARE_MODES, LookDev, presets
+from nbrdf.viewer.ui.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
 
 VIEWS = ("object", "lobe", "slice")
 TONEMAPS = ("aces", "linear")

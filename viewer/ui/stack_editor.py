@@ -10,8 +10,8 @@ from __future__ import annotations
 import copy
 from pathlib import Path
 
-from neural.errors import NbrdfError
-from neural.material import Material, parse_material
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import Material, parse_material
 
 #: Defaults of a new layer of each type.
 NEW_LAYER = {
@@ -37,7 +37,7 @@ class StackEditor:
 
     @classmethod
     def from_material(cls, m: Material) -> "StackEditor":
-        from neural.material import material_to_dict
+        from nbrdf.neural.material import material_to_dict
 
         return cls(material_to_dict(m), m.base_dir)
 

@@ -1,0 +1,84 @@
+"""The previewer's modes as enums: one definition for the command line, the
+panels, sessions and the shaders.
+
+Each enum's value is the word used on the command line and in session files;
+``glsl_defines`` emits the integer constants the shaders compare against, so
+a shader never hard-codes a mode number.
+"""
+from __future__ import annotations
+
+from enum import Enum
+
+
+class _Mode(str, Enum):
+    """A mode whose value is its command-line word and whose position is its
+    shader constant."""
+
+    @property
+    def code(self) -> int:
+        """The integer the shaders receive for this mode (its position)."""
+        return list(type(self)).index(self)
+
+    @classmethod
+    def words(cls) -> tuple[str, ...]:
+        """The command-line words, in order."""
+        return tuple(m.value for m in cls)
+
+    @classmethod
+    def parse(cls, word: "str | _Mode", place: str = "mode"):
+        """The member named by ``word``; a clear one-line error otherwise."""
+        if isinstance(word, cls):
+            return word
+        try:
+            return cls(str(word))
+        except ValueError:
+            raise ValueError(f"{place}: {word!r} is not one of {', '.join(cls.words())}") from None
+
+    def __str__(self) -> str:  # argparse prints choices with str()
+        return self.value
+
+
+class View(_Mode):
+    """What the viewport shows."""
+    OBJECT = "object"   #: the lit object (sphere or mesh)
+    LOBE = "lobe"       #: the standard lobe image of SPEC section 9
+    SLICE = "slice"     #: the (theta_h, theta_d) image slice
+
+
+class CompareMode(_Mode):
+    """How the reference is shown beside the neural image."""
+    OFF = "off"         #: the neural image alone
+    SIDE = "side"       #: side by side, neural left
+    WIPE = "wipe"       #: an A/B wipe at a movable split
+    ERROR = "error"     #: false-colour relative error with a scale bar
+
+
+class ToneMap(_Mode):
+    """The display transform from linear radiance."""
+    LINEAR = "linear"   #: clamp, then sRGB
+    ACES = "aces"       #: fitted ACES filmic curve, then sRGB
+
+
+class BrdfMode(_Mode):
+    """Which BRDF the previewer shades with."""
+    AUTO = "auto"           #: neural for stacks, closed form for single interfaces
+    ANALYTIC = "analytic"   #: closed form (single interfaces; analytic layering for stacks)
+    NEURAL = "neural"       #: leaf encoders -> layering -> decoder
+    PROJECTED = "projected" #: a latent fitted to the reference
+
+
+class Method(_Mode):
+    """How ``nbrdf eval`` / ``nbrdf lobe`` evaluate a material (SPEC section 8)."""
+    REFERENCE = "reference"  #: ground truth: closed form or Monte Carlo
+    NEURAL = "neural"        #: the full neural path the viewer uses
+    PROJECTED = "projected"  #: the decoder at a latent fitted to the reference
+
+
+def glsl_defines(*enums: type[_Mode]) -> str:
+    """``#define`` lines for the given enums, e.g. ``#define VIEW_LOBE 1``."""
+    lines = []
+    for enum in enums:
+        prefix = {"View": "VIEW", "CompareMode": "COMPARE", "ToneMap": "TONEMAP",
+                  "BrdfMode": "BRDF", "Method": "METHOD"}.get(enum.__name__, enum.__name__.upper())
+        lines += [f"#define {prefix}_{m.name} {m.code}" for m in enum]
+    return "\n".join(lines) + "\n"
