@@ -57,6 +57,8 @@ class ToneMap(_Mode):
     """The display transform from linear radiance."""
     LINEAR = "linear"   #: clamp, then sRGB
     ACES = "aces"       #: fitted ACES filmic curve, then sRGB
+    AGX = "agx"         #: AgX base (Blender 4), then sRGB
+    NEUTRAL = "neutral" #: Khronos PBR Neutral, then sRGB
 
 
 class BrdfMode(_Mode):
