@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from nbrdf.neural.errors import NbrdfError
 
@@ -118,9 +119,16 @@ def _box_entry(d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarra
     return np.where(hit, t_near, np.inf), face
 
 
-def _supersampled(fn, width: int, height: int, samples: int) -> np.ndarray:
-    d = texel_directions(width, height, samples).reshape(-1, 3)
-    return fn(d).reshape(height, width, samples * samples, 3).mean(2)
+def _supersampled(fn, width: int, height: int, samples: int, what: str = "environment") -> np.ndarray:
+    """The mean of ``fn`` (directions (N, 3) -> radiance (N, 3)) over an s x s
+    grid in every texel, in bands of rows (bounded memory, a progress bar)."""
+    d = texel_directions(width, height, samples)
+    out = np.empty((height, width, 3))
+    band = max(1, 65536 // (width * samples * samples))
+    for j in tqdm(range(0, height, band), desc=f"making the {what}", unit="band", leave=False, disable=None):
+        rows = d[j:j + band]
+        out[j:j + band] = fn(rows.reshape(-1, 3)).reshape(*rows.shape[:3], 3).mean(2)
+    return out
 
 
 # ---------------------------------------------------------------- studio
@@ -256,7 +264,8 @@ def sun_rgb(turbidity: float = TURBIDITY) -> np.ndarray:
 def _sky(width: int, height: int, samples: int) -> np.ndarray:
     s = sun_direction()
 
-    img = _supersampled(lambda d: np.where((d[:, 2] >= 0)[:, None], preetham_sky_rgb(d), 0.0), width, height, samples)
+    img = _supersampled(lambda d: np.where((d[:, 2] >= 0)[:, None], preetham_sky_rgb(d), 0.0), width, height,
+                        samples, "sky environment")
     # Sun: the disc's coverage of each nearby texel on a fine grid, so its power is right at any size.
     cos_r = math.cos(SUN_DIAMETER / 2)
     dirs = texel_directions(width, height, 1)[:, :, 0]
@@ -330,11 +339,11 @@ def key_white(img: np.ndarray, n_normals: int = 64) -> float:
 def _generate(name: str, width: int, height: int) -> np.ndarray:
     samples = 2
     if name == "studio":
-        img = _supersampled(_studio_radiance, width, height, samples)
+        img = _supersampled(_studio_radiance, width, height, samples, "studio environment")
     elif name == "sky":
         img = _sky(width, height, samples)
     else:
-        img = _supersampled(_softbox_radiance, width, height, samples)
+        img = _supersampled(_softbox_radiance, width, height, samples, "softbox environment")
     img = img * (KEY_WHITE / key_white(img))
     return np.ascontiguousarray(np.maximum(img, 1e-6), dtype=np.float32)
 
