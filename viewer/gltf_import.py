@@ -340,7 +340,10 @@ class _MaterialWriter:
                 for k, c in enumerate("rgb")]
 
 
-def _convert_material(gltf: _Gltf, index: int | None, out_dir: Path, used_names: set[str]) -> tuple[Material, list[str]]:
+def _convert_material(gltf: _Gltf, index: int | None, out_dir: Path,
+                      used_names: set[str]) -> tuple[Material, list[str]]:
+    """glTF material ``index`` (None: the default material) as a validated
+    Material, its JSON and maps written to ``out_dir``, and its notes."""
     notes: list[str] = []
     m = gltf.item("materials", index) if index is not None else {}
     raw_name = str(m.get("name") or (f"material {index}" if index is not None else "default"))
@@ -538,7 +541,10 @@ def import_gltf(path: str | Path, out_dir: str | Path | None = None) -> list[Imp
         raise NbrdfError(f"{path}: not a valid glTF file ({e})") from None
     except (KeyError, IndexError, TypeError, ValueError, AttributeError, struct.error, UnicodeDecodeError,
             OverflowError) as e:
-        reason = f"missing key {e}" if isinstance(e, KeyError) else (str(e).splitlines()[0] if str(e) else type(e).__name__)
+        if isinstance(e, KeyError):
+            reason = f"missing key {e}"
+        else:
+            reason = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise NbrdfError(f"{path}: not a valid glTF file ({reason})") from None
     except OSError as e:
         raise NbrdfError(f"{path}: cannot be read or written ({e.strerror or type(e).__name__})") from None

@@ -28,6 +28,14 @@ import numpy as np
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.modes import ToneMap
 
+#: The previewer's default display transform: PBR Neutral keeps base colours
+#: (an albedo-0.8 card under the presets' unit key reads ~0.8) and hues, which
+#: is what a material artist judges; AgX and ACES trade that for a filmic roll-off.
+DEFAULT_TONEMAP = ToneMap.NEUTRAL
+#: The default exposure, stops: the generated environments are normalised so
+#: a white card facing the key reads 1.0, so no offset is needed.
+DEFAULT_EXPOSURE_EV = 0.0
+
 #: AgX inset matrix, rows as GLSL ``mat3`` columns (out = v @ AGX_INSET).
 AGX_INSET = np.array([[0.842479062253094, 0.0423282422610123, 0.0423756549057051],
                       [0.0784335999999992, 0.878468636469772, 0.0784336],
@@ -93,7 +101,7 @@ def pbr_neutral(x: np.ndarray) -> np.ndarray:
 _OPERATORS = {ToneMap.LINEAR: linear, ToneMap.ACES: aces_fitted, ToneMap.AGX: agx, ToneMap.NEUTRAL: pbr_neutral}
 
 
-def tonemap(radiance: np.ndarray, op: ToneMap | str = ToneMap.NEUTRAL, ev: float = 0.0) -> np.ndarray:
+def tonemap(radiance: np.ndarray, op: ToneMap | str = DEFAULT_TONEMAP, ev: float = DEFAULT_EXPOSURE_EV) -> np.ndarray:
     """Linear radiance (..., 3) -> display-linear [0, 1] after an exposure of
     ``ev`` stops; float32."""
     try:
@@ -114,6 +122,6 @@ def srgb_encode(c: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
 
 
-def to_display8(radiance: np.ndarray, op: ToneMap | str = ToneMap.NEUTRAL, ev: float = 0.0) -> np.ndarray:
+def to_display8(radiance: np.ndarray, op: ToneMap | str = DEFAULT_TONEMAP, ev: float = DEFAULT_EXPOSURE_EV) -> np.ndarray:
     """Radiance -> 8-bit sRGB (..., 3), for previews and captures."""
     return np.round(srgb_encode(tonemap(radiance, op, ev)) * 255).astype(np.uint8)
