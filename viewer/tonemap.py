@@ -29,7 +29,7 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.modes import ToneMap
 
 #: The previewer's default display transform: PBR Neutral keeps base colours
-#: (an albedo-0.8 card under the presets' unit key reads ~0.8) and hues, which
+#: (an albedo-0.8 card facing a preset's key reads 0.76: 0.8 less its 0.04 offset) and hues, which
 #: is what a material artist judges; AgX and ACES trade that for a filmic roll-off.
 DEFAULT_TONEMAP = ToneMap.NEUTRAL
 #: The default exposure, stops: the generated environments are normalised so
