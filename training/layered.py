@@ -19,8 +19,10 @@ the eta^2 factors of the two refractions cancel, so the estimate is the
 stack's reciprocal BRDF. Sampling decisions do not depend on the colour
 channel, so the channels share paths and only the weights differ.
 
-Lanes are (pair, sample) paths; dead lanes are dropped every bounce so the
-cost follows the live paths.
+The walk itself is compiled per lane by Numba (``training.walk``), with the
+v2 estimator changes described there and in docs/RESULTS.md ("Ground truth
+v2"); this module keeps the parameter types, the input checks and the
+statistics.
 """
 from __future__ import annotations
 
@@ -124,18 +126,18 @@ def _check(p: StackParams, wi: Tensor, wo: Tensor, spp: int) -> None:
 def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: int = 0, *,
              dtype: torch.dtype = torch.float32, rr_depth: int = 4, max_depth: int = 100_000,
              include_top_reflection: bool = True, compile: bool | None = None,
-             stats: SimStats | None = None, error: str = "batch", forced_top_reflection: bool = True,
+             stats: SimStats | None = None, error: str = "paths", forced_top_reflection: bool = True,
              ) -> tuple[Tensor, Tensor]:
     """Mean and standard error of the stack's BRDF f(wi, wo) per pair.
 
     ``wi``, ``wo``: (N, 3) upper-hemisphere unit vectors; ``spp`` paths per
     pair; ``include_top_reflection=False`` leaves out the closed-form single
-    reflection off the top (to test the walk alone). ``error``: "batch"
-    (default) computes the standard error from independent batch means over
-    blocks of paths (``training.walk.BLOCK`` paths each, pooled with the
-    per-path spread where a pair has fewer than 8 blocks: see
-    docs/RESULTS.md, "Ground truth v2"); "paths" uses the per-path spread
-    alone. ``forced_top_reflection=False`` restores v1's sampled exit at the
+    reflection off the top (to test the walk alone). ``error``: "paths"
+    (default) takes the standard error from the per-path spread; "batch"
+    from independent batch means over blocks of ``training.walk.BLOCK``
+    paths (at least 8 blocks, else the per-path spread). Paths are
+    independent, so both estimate the same quantity; neither can see a tail
+    the paths missed (docs/RESULTS.md, "Ground truth v2"). ``forced_top_reflection=False`` restores v1's sampled exit at the
     top (kept for the analysis and its test only). ``compile`` is accepted for
     compatibility and ignored (the walk is compiled by Numba). Returns
     tensors (N, C) (or (N,) for single-channel input without a channel dim)
@@ -188,8 +190,8 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
 
 
 def _batch_error(blocks, spp: int, se_paths):
-    """Standard error from batch means of the path blocks; with fewer than 8
-    full blocks the larger of that and the per-path error."""
+    """Standard error from the batch means of the full path blocks; the
+    per-path error where there are fewer than 8 of them."""
     import numpy as np
 
     from nbrdf.training.walk import BLOCK
@@ -198,5 +200,4 @@ def _batch_error(blocks, spp: int, se_paths):
     if nb < 8:
         return se_paths
     full = blocks[:, :nb] / BLOCK
-    se_b = full.std(1, ddof=1) / np.sqrt(nb)
-    return np.maximum(se_b, se_paths)
+    return full.std(1, ddof=1) / np.sqrt(nb)

@@ -365,9 +365,9 @@ def _nee(z, ox, oy, oz, a0, e0, tau0, u0, u1):
 
 @njit(**_JIT)
 def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, b_alb,
-          rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, out):
-    """One path; adds its contribution per channel to ``out`` and returns the
-    number of vertices."""
+          rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, out, beta):
+    """One path; writes its contribution per channel to ``out`` and returns
+    the number of vertices (``beta``: scratch of C weights)."""
     C = out.shape[0]
     L = rough.shape[1]
     key = _lane_key(seed, q * spp + s)
@@ -383,7 +383,6 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
         out[c] = 0.0
     if w_entry <= 0.0:
         return 0
-    beta = np.empty(C)
     for c in range(C):
         beta[c] = w_entry
     depth = 0.0
@@ -558,9 +557,10 @@ def _run(wi, wo, spp, seed, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, 
         q = it // nb
         b = it - q * nb
         out = np.empty(C)
+        beta = np.empty(C)
         for s in range(b * block, min(spp, (b + 1) * block)):
             verts[it] += _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, b_alb,
-                               rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, out)
+                               rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, out, beta)
             finite = True
             for c in range(C):
                 if not math.isfinite(out[c]):
