@@ -17,7 +17,6 @@ this process (a test, a notebook) that instance is used as it is.
 """
 from __future__ import annotations
 
-import os
 import socket
 from typing import Callable
 
@@ -97,7 +96,11 @@ def run_shards(cfg, shards: list, address: str, write: Callable[[object, dict], 
 
 
 def _make_shard_task(cfg, shard):
-    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+    """One shard in a Ray worker: the walk on the one CPU Ray granted (the
+    result does not depend on it)."""
+    import numba
+
     from nbrdf.training.dataset import make_shard
 
+    numba.set_num_threads(1)
     return make_shard(cfg, shard)
