@@ -264,8 +264,10 @@ def _config_dict(cfg: DataConfig) -> dict:
 
 
 def generate(out: str | Path, cfg: DataConfig, preset: str = "custom", overwrite: bool = False,
-             progress: bool = True) -> Path:
-    """Creates (or resumes) a data set in ``out``; returns the manifest path."""
+             progress: bool = True, ray: str | None = None) -> Path:
+    """Creates (or resumes) a data set in ``out``; returns the manifest path.
+    ``ray``: None computes the shards here; "auto", "local" or a cluster
+    address runs them as Ray tasks (``training.distributed``), same shards."""
     from safetensors.numpy import save_file
     from tqdm import tqdm
 
@@ -290,12 +292,19 @@ def generate(out: str | Path, cfg: DataConfig, preset: str = "custom", overwrite
     total = sum(s.count for s in shards)
     with tqdm(total=total, initial=total - sum(s.count for s in todo), desc="BRDFs", unit="brdf",
               disable=not progress or None, file=sys.stderr) as bar:
-        for s in todo:
-            arrays = make_shard(cfg, s)
+        def write(s: Shard, arrays: dict[str, np.ndarray]) -> None:
             tmp = out / (s.file + ".tmp")
             save_file(arrays, str(tmp), metadata={"class": s.cls, "split": s.split})
             os.replace(tmp, out / s.file)
             bar.update(s.count)
+
+        if ray is not None:
+            from nbrdf.training.distributed import run_shards
+
+            run_shards(cfg, todo, ray, write)
+        else:
+            for s in todo:
+                write(s, make_shard(cfg, s))
     return man_path
 
 

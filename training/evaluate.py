@@ -88,9 +88,11 @@ def make_reference(material: Material, noise_target: float = 48.0, max_spp: int 
                      s.f.numpy())
 
 
-def build_references(folder: str | Path, progress: bool = True, limit: int = 0) -> list[tuple[str, Material, Reference]]:
+def build_references(folder: str | Path, progress: bool = True, limit: int = 0, noise_target: float = 48.0,
+                     max_spp: int = 256) -> list[tuple[str, Material, Reference]]:
     """Makes (or resumes) the cached references of the held-out set in ``folder``
-    (the first ``limit`` materials only, when given)."""
+    (the first ``limit`` materials only, when given); ``noise_target`` and
+    ``max_spp`` go to ``make_reference`` (60 dB needs a larger ``max_spp``)."""
     from safetensors.numpy import load_file, save_file
     from tqdm import tqdm
 
@@ -102,7 +104,7 @@ def build_references(folder: str | Path, progress: bool = True, limit: int = 0) 
                                       disable=not progress or None)):
         path = folder / f"{m.name}.safetensors"
         if not path.exists():
-            r = make_reference(m, seed=1000 * i)
+            r = make_reference(m, noise_target=noise_target, max_spp=max_spp, seed=1000 * i)
             tmp = path.with_suffix(".tmp")
             save_file({k: np.ascontiguousarray(v, dtype=np.float32) for k, v in r.__dict__.items()}, str(tmp))
             tmp.replace(path)

@@ -19,8 +19,10 @@ the eta^2 factors of the two refractions cancel, so the estimate is the
 stack's reciprocal BRDF. Sampling decisions do not depend on the colour
 channel, so the channels share paths and only the weights differ.
 
-Lanes are (pair, sample) paths; dead lanes are dropped every bounce so the
-cost follows the live paths.
+The walk itself is compiled per lane by Numba (``training.walk``), with the
+v2 estimator changes described there and in docs/RESULTS.md ("Ground truth
+v2"); this module keeps the parameter types, the input checks and the
+statistics.
 """
 from __future__ import annotations
 
@@ -29,8 +31,6 @@ from dataclasses import dataclass, field
 
 import torch
 
-from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
-from nbrdf.training.microfacet import fresnel_dielectric, refract, sample_vndf, smith_g1, vndf_pdf
 
 Tensor = torch.Tensor
 
@@ -96,334 +96,108 @@ class SimStats:
     dropped: int = 0  # contributions lost to float round-off (non-finite), about one in 10^8 paths
 
 
-def _forced_transmission_pdf(a: Tensor, eta_rel: Tensor, w: Tensor, wt: Tensor) -> Tensor:
-    """Density of drawing wt by refracting w through a VNDF-sampled facet
-    (no Fresnel choice); eta_rel = index on wt's side / index on w's side."""
-    h = -(w + eta_rel[..., None] * wt)
-    h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-30)
-    h = torch.where(h[..., 2:3] < 0, -h, h)
-    wh, th = (w * h).sum(-1), (wt * h).sum(-1)
-    denom = wh + eta_rel * th
-    ok = (wh * th < 0) & (w[..., 2] * wt[..., 2] < 0) & (denom.abs() > 1e-12)
-    p = vndf_pdf(w, h, a) * eta_rel * eta_rel * th.abs() / torch.where(ok, denom * denom, torch.ones_like(denom))
-    return torch.where(ok, p, torch.zeros_like(p))
+def _check(p: StackParams, wi: Tensor, wo: Tensor, spp: int) -> None:
+    """One clear line (``NbrdfError``) for a stack or pair set that cannot be simulated."""
+    from nbrdf.neural.errors import NbrdfError
 
-
-def _forced_transmission_sample(a: Tensor, eta_rel: Tensor, w: Tensor, u: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-    """Refracts w through a VNDF-sampled facet. Returns (wt, weight, pdf):
-    weight = f_t |cos wt| / pdf = (1 - F) G1(wt); 0 under TIR or a bad side."""
-    m = sample_vndf(w, a, u[..., 0], u[..., 1])
-    wt, ok = refract(w, m, 1.0 / eta_rel)
-    F = fresnel_dielectric((w * m).sum(-1), eta_rel)
-    ok = ok & (w[..., 2] * wt[..., 2] < 0)
-    weight = (1.0 - F) * smith_g1(wt, m, a)
-    weight = torch.where(ok, weight, torch.zeros_like(weight))
-    pdf = torch.where(ok, _forced_transmission_pdf(a, eta_rel, w, wt), torch.zeros_like(weight))
-    return wt, weight, pdf
-
-
-def _conductor_rgb(a: Tensor, r0: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
-    """GGX conductor values (n, C) for per-channel r0 (n, C): Schlick is
-    linear in r0, so one geometric evaluation serves every channel."""
-    geo = GGXConductor(a, 1.0).eval(wi, wo)  # F = 1
-    h = wi + wo
-    h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-30)
-    x = (1.0 - (wi * h).sum(-1).abs().clamp(max=1.0)) ** 5
-    return geo[:, None] * (x[:, None] + r0 * (1.0 - x[:, None]))
-
-
-def _compile(fn):
-    """torch.compile(dynamic=True) on request (``NBRDF_COMPILE=1`` or
-    ``simulate(..., compile=True)``): the kernels below are pure elementwise
-    functions, which inductor fuses into one loop each."""
-    state = {"compiled": None}
-
-    def call(*args, compiled: bool = False):
-        if not compiled:
-            return fn(*args)
-        if state["compiled"] is None:
-            state["compiled"] = torch.compile(fn, dynamic=True)
-        return state["compiled"](*args)
-
-    call.__wrapped__ = fn
-    call.__doc__ = fn.__doc__
-    return call
-
-
-def _isotropic(u: Tensor) -> Tensor:
-    z = 1.0 - 2.0 * u[:, 0]
-    r = torch.sqrt((1.0 - z * z).clamp_min(0.0))
-    ph = 2.0 * math.pi * u[:, 1]
-    return torch.stack([r * torch.cos(ph), r * torch.sin(ph), z], -1)
-
-
-def _nee_to_top(z: Tensor, wo: Tensor, a0: Tensor, e0: Tensor, tau0: Tensor, u: Tensor):
-    """Samples the top interface from wo (forced transmission). Returns the
-    direction v leaving the vertex toward the top, the factor
-    Tr * f_top(-v, wo) / pdf (0 when the sample failed) and that pdf."""
-    wt, _, pdf_nee = _forced_transmission_sample(a0, e0, wo, u)
-    v = -wt
-    ok = pdf_nee > 0
-    tr = torch.exp(-tau0 * z / v[:, 2].clamp_min(1e-12))
-    f_t = GGXDielectric(a0, e0).eval(wt, wo)
-    scale = torch.where(ok, tr * f_t / torch.where(ok, pdf_nee, torch.ones_like(pdf_nee)), torch.zeros_like(tr))
-    return v, scale, pdf_nee
-
-
-@_compile
-def _k_flight(depth: Tensor, uz: Tensor, slab_top: Tensor, tau: Tensor, u: Tensor):
-    """Free flight in the current slab: (scatters, new depth)."""
-    down = uz < 0
-    dist_b = torch.where(down, (slab_top + 1.0 - depth) / (-uz).clamp_min(1e-12), (depth - slab_top) / uz.clamp_min(1e-12))
-    t = -torch.log1p(-u) / tau.clamp_min(1e-30)
-    scatter = (tau > 0) & (t < dist_b)
-    new_depth = torch.where(scatter, depth - t * uz, torch.where(down, slab_top + 1.0, slab_top))
-    return scatter, new_depth
-
-
-@_compile
-def _k_medium(beta: Tensor, depth: Tensor, alb: Tensor, nee_on: Tensor, wo: Tensor, a0: Tensor, e0: Tensor,
-              tau0: Tensor, u: Tensor):
-    """Scattering in a medium: NEE (in the top slab) and phase sampling."""
-    v, scale, pdf_nee = _nee_to_top(depth, wo, a0, e0, tau0, u[:, 0:2])
-    mis = pdf_nee / (pdf_nee + INV_4PI)
-    contrib = beta * alb * (INV_4PI * scale * mis * nee_on)[:, None]
-    return contrib, beta * alb, _isotropic(u[:, 2:4])
-
-
-@_compile
-def _k_top(beta: Tensor, pdir: Tensor, pdf_last: Tensor, wo: Tensor, a0: Tensor, e0: Tensor, u: Tensor):
-    """The walk reaches the top from below: evaluate the exit toward wo (MIS
-    against NEE with the consistent pdf), then sample the interface."""
-    top = GGXDielectric(a0, e0)
-    w_in = -pdir
-    f_t = top.eval(w_in, wo)
-    pdf_nee = _forced_transmission_pdf(a0, e0, wo, w_in)
-    mis = pdf_last / (pdf_last + pdf_nee)
-    contrib = beta * (f_t * mis)[:, None]
-    s = top.sample(w_in, u)
-    stays = (s.pdf > 0) & (s.w[:, 2] < 0)
-    return contrib, beta * s.weight[:, None], s.w, s.pdf, stays
-
-
-@_compile
-def _k_interface(beta: Tensor, pdir: Tensor, a: Tensor, e: Tensor, nee_on: Tensor, wo: Tensor, a0: Tensor,
-                 e0: Tensor, tau0: Tensor, u: Tensor):
-    """An internal interface hit from either side; NEE when it bounds the top slab."""
-    itf = GGXDielectric(a, e)
-    w_in = -pdir
-    v, scale, pdf_nee = _nee_to_top(torch.ones_like(a), wo, a0, e0, tau0, u[:, 0:2])
-    kern = itf.eval(w_in, v) * v[:, 2].abs()
-    mis = pdf_nee / (pdf_nee + itf.pdf(w_in, v))
-    contrib = beta * (kern * scale * mis * nee_on)[:, None]
-    s = itf.sample(w_in, u[:, 2:5])
-    ok = s.pdf > 0
-    crossed = ok & (w_in[:, 2] * s.w[:, 2] < 0)
-    return contrib, beta * s.weight[:, None], s.w, s.pdf, ok, crossed
-
-
-@_compile
-def _k_base_conductor(beta: Tensor, pdir: Tensor, a: Tensor, r0: Tensor, nee_on: Tensor, wo: Tensor, a0: Tensor,
-                      e0: Tensor, tau0: Tensor, u: Tensor):
-    geo = GGXConductor(a, 1.0)  # directions do not depend on r0
-    w_in = -pdir
-    v, scale, pdf_nee = _nee_to_top(torch.ones_like(a), wo, a0, e0, tau0, u[:, 0:2])
-    kern = _conductor_rgb(a, r0, w_in, v) * v[:, 2:3].abs()
-    mis = pdf_nee / (pdf_nee + geo.pdf(w_in, v))
-    contrib = beta * kern * (scale * mis * nee_on)[:, None]
-    s = geo.sample(w_in, u[:, 2:5])
-    ok = s.pdf > 0
-    h = w_in + s.w
-    h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-30)
-    x = (1.0 - (w_in * h).sum(-1).abs().clamp(max=1.0)) ** 5
-    fres = x[:, None] + r0 * (1.0 - x[:, None])
-    return contrib, beta * s.weight[:, None] * fres, s.w, s.pdf, ok
-
-
-@_compile
-def _k_base_diffuse(beta: Tensor, pdir: Tensor, alb: Tensor, nee_on: Tensor, wo: Tensor, a0: Tensor, e0: Tensor,
-                    tau0: Tensor, u: Tensor):
-    lam = Lambertian(1.0)
-    w_in = -pdir
-    v, scale, pdf_nee = _nee_to_top(torch.ones_like(a0), wo, a0, e0, tau0, u[:, 0:2])
-    pdf_x = lam.pdf(w_in, v)
-    mis = pdf_nee / (pdf_nee + pdf_x)
-    contrib = beta * alb * (v[:, 2].clamp_min(0.0) / math.pi * scale * mis * nee_on)[:, None]
-    s = lam.sample(w_in, u[:, 2:5])
-    ok = s.pdf > 0
-    return contrib, beta * alb, s.w, s.pdf, ok
-
-
-@_compile
-def _k_base_dielectric(beta: Tensor, pdir: Tensor, a: Tensor, e: Tensor, nee_on: Tensor, wo: Tensor, a0: Tensor,
-                       e0: Tensor, tau0: Tensor, u: Tensor):
-    d = GGXDielectric(a, e)
-    w_in = -pdir
-    v, scale, pdf_nee = _nee_to_top(torch.ones_like(a), wo, a0, e0, tau0, u[:, 0:2])
-    kern = d.eval(w_in, v) * v[:, 2].abs()
-    mis = pdf_nee / (pdf_nee + d.pdf(w_in, v))
-    contrib = beta * (kern * scale * mis * nee_on)[:, None]
-    s = d.sample(w_in, u[:, 2:5])
-    ok = (s.pdf > 0) & (s.w[:, 2] > 0)  # what is transmitted leaves the stack
-    return contrib, beta * torch.where(ok, s.weight, torch.zeros_like(s.weight))[:, None], s.w, s.pdf, ok
-
-
-class _Tables:
-    """Per-lane parameter lookup: a gather by pair index, or a broadcast of
-    the one row when every stack shares the parameter."""
-
-    def __init__(self, p: StackParams):
-        self.p = p
-        names = ("roughness", "ior", "sigma_t", "albedo", "base_roughness", "base_r0", "base_ior", "base_albedo")
-        self.shared = {k: bool((getattr(p, k) == getattr(p, k)[:1]).all()) for k in names}
-
-    def layer(self, name: str, q: Tensor, k: Tensor) -> Tensor:
-        t = getattr(self.p, name)
-        return t[0][k] if self.shared[name] else t[q, k]
-
-    def top(self, name: str, q: Tensor) -> Tensor:
-        t = getattr(self.p, name)[:, 0]
-        return t[:1].expand(q.shape[0]) if self.shared[name] else t[q]
-
-    def base(self, name: str, q: Tensor) -> Tensor:
-        t = getattr(self.p, name)
-        return t[:1].expand(q.shape[0], *t.shape[1:]) if self.shared[name] else t[q]
+    if int(spp) < 1:
+        raise NbrdfError(f"spp must be at least 1 (got {spp})")
+    n = p.roughness.shape[0]
+    if wi.dim() != 2 or wi.shape != wo.shape or wi.shape != (n, 3):
+        raise NbrdfError(f"wi and wo must be ({n}, 3) like the stack (got {tuple(wi.shape)} and {tuple(wo.shape)})")
+    for name in ("roughness", "ior", "albedo", "sigma_t", "base_roughness", "base_r0", "base_ior", "base_albedo"):
+        t = getattr(p, name)
+        if not bool(torch.isfinite(t).all()):
+            raise NbrdfError(f"stack parameter {name} holds NaN or infinite values")
+    if not (bool(torch.isfinite(wi).all()) and bool(torch.isfinite(wo).all())):
+        raise NbrdfError("a direction holds NaN or infinite values")
+    if bool((wi[:, 2] < 0).any()) or bool((wo[:, 2] < 0).any()):
+        raise NbrdfError("a direction lies below the horizon (z < 0); the stack's BRDF is 0 there")
+    if bool((p.ior <= 0).any()) or bool((p.base_ior <= 0).any()):
+        raise NbrdfError("an index of refraction is not positive")
+    if bool((p.roughness <= 0).any()) or (p.base != "diffuse" and bool((p.base_roughness <= 0).any())):
+        raise NbrdfError("a roughness is not positive")
+    if bool((p.sigma_t < 0).any()):
+        raise NbrdfError("sigma_t is negative")
+    if bool((p.albedo < 0).any()) or bool((p.albedo > 1).any()) or bool((p.base_albedo < 0).any()):
+        raise NbrdfError("an albedo lies outside [0, 1]")
 
 
 def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: int = 0, *,
              dtype: torch.dtype = torch.float32, rr_depth: int = 4, max_depth: int = 100_000,
              include_top_reflection: bool = True, compile: bool | None = None,
-             stats: SimStats | None = None) -> tuple[Tensor, Tensor]:
+             stats: SimStats | None = None, error: str = "paths", forced_top_reflection: bool = True,
+             ) -> tuple[Tensor, Tensor]:
     """Mean and standard error of the stack's BRDF f(wi, wo) per pair.
 
     ``wi``, ``wo``: (N, 3) upper-hemisphere unit vectors; ``spp`` paths per
     pair; ``include_top_reflection=False`` leaves out the closed-form single
-    reflection off the top (to test the walk alone); ``compile`` fuses the
-    kernels with torch.compile (default: env ``NBRDF_COMPILE=1``). Returns
+    reflection off the top (to test the walk alone). ``error``: "paths"
+    (default) takes the standard error from the per-path spread; "batch"
+    from independent batch means over blocks of ``training.walk.BLOCK``
+    paths (at least 8 blocks, else the per-path spread). Paths are
+    independent, so both estimate the same quantity; neither can see a tail
+    the paths missed (docs/RESULTS.md, "Ground truth v2"). ``forced_top_reflection=False`` restores v1's sampled exit at the
+    top (kept for the analysis and its test only). ``compile`` is accepted for
+    compatibility and ignored (the walk is compiled by Numba). Returns
     tensors (N, C) (or (N,) for single-channel input without a channel dim)
-    in ``dtype``. Deterministic for a given seed, batch and ``compile``."""
-    import os
+    in ``dtype``, computed in float64. Deterministic for a given seed and
+    batch, whatever the number of threads. Raises ``NbrdfError`` (one line)
+    on input that cannot be simulated."""
     import time
 
+    import numpy as np
+
+    from nbrdf.training.walk import run_walk
+
+    del compile
     t0 = time.perf_counter()
-    if compile is None:
-        compile = os.environ.get("NBRDF_COMPILE", "0") == "1"
-    kw = {"compiled": bool(compile)}
-    p, squeeze = stack.normalized(dtype)
-    wi = wi.to(dtype)
-    wo = wo.to(dtype)
+    p, squeeze = stack.normalized(torch.float64)
+    wi = torch.as_tensor(wi).to(torch.float64)
+    wo = torch.as_tensor(wo).to(torch.float64)
+    _check(p, wi, wo, spp)
     N, L = p.roughness.shape
     C = p.albedo.shape[-1]
-    gen = torch.Generator().manual_seed(int(seed))
-
-    def rand(n: int, k: int) -> Tensor:
-        return torch.rand(n, k, generator=gen, dtype=dtype)
-
-    # Closed-form single reflection off the top interface.
-    f_top_refl = (GGXDielectric(p.roughness[:, 0], p.ior[:, 0]).eval(wi, wo) if include_top_reflection
-                  else torch.zeros(N, dtype=dtype))
-
-    # Lanes: spp paths per pair, laid out pair-major.
-    n_lanes = N * spp
-    pid = torch.arange(N).repeat_interleave(spp)
-    acc = torch.zeros(n_lanes, C, dtype=dtype)
-    lane = torch.arange(n_lanes)
-
-    # Entry: forced refraction of wi through the top interface, stratified over spp.
-    u = rand(n_lanes, 2)
+    npy = lambda t: t.detach().cpu().numpy()
+    s1, s2, blocks, verts, dropped = run_walk(
+        npy(wi), npy(wo), spp, seed, npy(p.roughness), npy(p.ior), npy(p.sigma_t), npy(p.albedo), p.base,
+        npy(p.base_roughness), npy(p.base_r0), npy(p.base_ior), npy(p.base_albedo), rr_depth=rr_depth,
+        max_depth=max_depth, forced=forced_top_reflection)
+    mean = s1 / spp
     if spp > 1:
-        u[:, 0] = (torch.arange(n_lanes) % spp + u[:, 0]) / spp
-    d_in, w_entry, _ = _forced_transmission_sample(p.roughness[pid, 0], p.ior[pid, 0], wi[pid], u)
-    beta = w_entry[:, None].expand(n_lanes, C).clone()
-    pdir = d_in  # photon travel direction
-    depth = torch.zeros(n_lanes, dtype=dtype)
-    slab = torch.zeros(n_lanes, dtype=torch.long)
-    pdf_last = torch.zeros(n_lanes, dtype=dtype)  # density of pdir at the vertex that chose it
-    keep = w_entry > 0
-    pid, lane, beta, pdir, depth, slab, pdf_last = (t[keep] for t in (pid, lane, beta, pdir, depth, slab, pdf_last))
-    # Parameters shared by every stack (one material's lobe, say) are
-    # broadcast instead of gathered per lane.
-    tab = _Tables(p)
-    bounces = vertices = 0
+        var_paths = np.maximum(s2 / spp - mean * mean, 0.0) * spp / (spp - 1)
+        se = np.sqrt(var_paths / spp)
+        if error == "batch":
+            se = _batch_error(blocks, spp, se)
+        elif error != "paths":
+            raise ValueError(f"unknown error mode {error!r}")
+    else:
+        se = np.full_like(mean, np.inf)
+    if include_top_reflection:
+        from nbrdf.training.analytic import GGXDielectric
 
-    while pid.numel() > 0 and bounces < max_depth:
-        n = pid.numel()
-        vertices += n
-        bounces += 1
-        u = rand(n, 7)
-        scatter, depth = _k_flight(depth, pdir[:, 2], slab.to(dtype), tab.layer("sigma_t", pid, slab), u[:, 0], **kw)
-        going_down = pdir[:, 2] < 0
-        k_if = torch.where(going_down, slab + 1, slab)  # the interface reached (L = base)
-        alive = torch.ones(n, dtype=torch.bool)
-        new_dir, new_pdf = pdir.clone(), pdf_last.clone()
-
-        def common(idx: Tensor):
-            q = pid[idx]
-            return wo[q], tab.top("roughness", q), tab.top("ior", q), tab.top("sigma_t", q)
-
-        def absorb(idx: Tensor, contrib: Tensor, b: Tensor, d: Tensor, pdf: Tensor, ok: Tensor) -> None:
-            finite = torch.isfinite(contrib)
-            if not bool(finite.all()):  # a degenerate float32 configuration: drop it, never poison the mean
-                contrib = torch.where(finite, contrib, torch.zeros_like(contrib))
-                if stats is not None:
-                    stats.dropped += int((~finite).any(-1).sum())
-            acc.index_add_(0, lane[idx], contrib)
-            beta[idx], new_dir[idx], new_pdf[idx] = b, d, pdf
-            alive[idx] = ok
-
-        idx = scatter.nonzero().squeeze(-1)
-        if idx.numel():
-            q, s_ = pid[idx], slab[idx]
-            contrib, b, d = _k_medium(beta[idx], depth[idx], tab.layer("albedo", q, s_), (s_ == 0).to(dtype), *common(idx),
-                                      torch.cat([u[idx, 1:3], u[idx, 3:5]], 1), **kw)
-            absorb(idx, contrib, b, d, torch.full_like(depth[idx], INV_4PI), torch.ones_like(s_, dtype=torch.bool))
-
-        idx = (~scatter & (k_if == 0)).nonzero().squeeze(-1)
-        if idx.numel():
-            w_o, a0, e0, _ = common(idx)
-            absorb(idx, *_k_top(beta[idx], pdir[idx], pdf_last[idx], w_o, a0, e0, u[idx, 3:6], **kw))
-
-        idx = (~scatter & (k_if >= 1) & (k_if < L)).nonzero().squeeze(-1)
-        if idx.numel():
-            q, k = pid[idx], k_if[idx]
-            contrib, b, d, pdf, ok, crossed = _k_interface(
-                beta[idx], pdir[idx], tab.layer("roughness", q, k), tab.layer("ior", q, k), (k == 1).to(dtype), *common(idx),
-                u[idx, 1:6], **kw)
-            absorb(idx, contrib, b, d, pdf, ok)
-            # Crossing downward enters slab k, upward slab k - 1.
-            slab[idx] = torch.where(crossed, torch.where(pdir[idx, 2] < 0, k, k - 1), slab[idx])
-
-        idx = (~scatter & (k_if == L)).nonzero().squeeze(-1)
-        if idx.numel():
-            q = pid[idx]
-            nee_on = torch.full((idx.numel(),), 1.0 if L == 1 else 0.0, dtype=dtype)
-            args = (beta[idx], pdir[idx])
-            if p.base == "conductor":
-                out = _k_base_conductor(*args, tab.base("base_roughness", q), tab.base("base_r0", q), nee_on, *common(idx),
-                                        u[idx, 1:6], **kw)
-            elif p.base == "diffuse":
-                out = _k_base_diffuse(*args, tab.base("base_albedo", q), nee_on, *common(idx), u[idx, 1:6], **kw)
-            else:
-                out = _k_base_dielectric(*args, tab.base("base_roughness", q), tab.base("base_ior", q), nee_on,
-                                         *common(idx), u[idx, 1:6], **kw)
-            absorb(idx, *out)
-
-        pdir, pdf_last = new_dir, new_pdf
-        if bounces >= rr_depth:  # Russian roulette on the largest channel weight
-            q_s = beta.amax(-1).clamp(max=0.95)
-            survive = u[:, 6] < q_s
-            beta = beta / torch.where(survive, q_s, torch.ones_like(q_s))[:, None]
-            alive &= survive
-        alive &= beta.amax(-1) > 0
-        pid, lane, beta, pdir, depth, slab, pdf_last = (t[alive] for t in (pid, lane, beta, pdir, depth, slab, pdf_last))
-
-    per = acc.view(N, spp, C)
-    mean = per.mean(1) + f_top_refl[:, None]
-    stderr = per.std(1) / math.sqrt(spp) if spp > 1 else torch.full_like(mean, float("inf"))
+        mean = mean + GGXDielectric(p.roughness[:, 0], p.ior[:, 0]).eval(wi, wo).numpy()[:, None]
     if stats is not None:
-        stats.paths += n_lanes
-        stats.vertices += vertices
+        stats.paths += N * spp
+        stats.vertices += verts
+        stats.dropped += dropped
         stats.seconds += time.perf_counter() - t0
+    mean_t = torch.from_numpy(mean).to(dtype)
+    se_t = torch.from_numpy(se).to(dtype)
     if squeeze:
-        return mean[:, 0], stderr[:, 0]
-    return mean, stderr
+        return mean_t[:, 0], se_t[:, 0]
+    return mean_t, se_t
+
+
+def _batch_error(blocks, spp: int, se_paths):
+    """Standard error from the batch means of the full path blocks; the
+    per-path error where there are fewer than 8 of them."""
+    import numpy as np
+
+    from nbrdf.training.walk import BLOCK
+
+    nb = spp // BLOCK
+    if nb < 8:
+        return se_paths
+    full = blocks[:, :nb] / BLOCK
+    return full.std(1, ddof=1) / np.sqrt(nb)

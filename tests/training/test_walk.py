@@ -1,0 +1,121 @@
+"""Ground truth v2 (issue 14): the compiled walk is thread-independent, rejects
+input it cannot simulate in one line, agrees with the v1 estimator (exit
+sampled at the top) while wasting less work on the total-internal-reflection
+stack, and its 64-path standard errors hold (z-scores against long runs are
+standard normal by a Kolmogorov-Smirnov test) on the standard stack."""
+from __future__ import annotations
+
+import math
+
+import numba
+import pytest
+import torch
+from scipy import stats
+
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.training.layered import SimStats, StackParams, simulate
+from stattools import z_threshold
+
+D = torch.float64
+
+
+def trap_stack(n: int) -> StackParams:
+    """The issue's stack: a rough coat (0.15, ior 1.5) over an empty slab
+    over a near-mirror conductor (0.02) with r0 (1, 0.7, 0.4)."""
+    t = lambda v: torch.full((n, 1), v, dtype=D)
+    return StackParams(roughness=t(0.15), ior=t(1.5), albedo=torch.zeros(n, 1, 3, dtype=D), sigma_t=t(0.0),
+                       base="conductor", base_roughness=torch.full((n,), 0.02, dtype=D),
+                       base_r0=torch.tensor([[1.0, 0.7, 0.4]], dtype=D).expand(n, 3))
+
+
+def standard_stack(n: int) -> StackParams:
+    """``nbrdf bench reference``'s stack."""
+    t = lambda v: torch.full((n, 1), v, dtype=D)
+    return StackParams(roughness=t(0.1), ior=t(1.5), albedo=torch.full((n, 1, 3), 0.9, dtype=D), sigma_t=t(1.0),
+                       base="conductor", base_roughness=torch.full((n,), 0.3, dtype=D),
+                       base_r0=torch.full((n, 3), 0.9, dtype=D))
+
+
+def _dirs(n: int, seed: int, theta_lo: float = 0.0, theta_hi: float = 80.0, off_plane: bool = False):
+    g = torch.Generator().manual_seed(seed)
+    u = torch.rand(n, 2, generator=g, dtype=D)
+    lo, hi = math.cos(math.radians(theta_hi)), math.cos(math.radians(theta_lo))
+    ct = hi - u[:, 0] * (hi - lo)
+    ph = (0.25 + 0.5 * u[:, 1] + (u[:, 1] > 0.5) * 0.5) * math.pi if off_plane else 2 * math.pi * u[:, 1]
+    st = torch.sqrt(1 - ct * ct)
+    return torch.stack([st * torch.cos(ph), st * torch.sin(ph), ct], -1)
+
+
+def _wi(n: int, deg: float = 20.0):
+    return torch.tensor([math.sin(math.radians(deg)), 0.0, math.cos(math.radians(deg))], dtype=D).expand(n, 3)
+
+
+def test_results_do_not_depend_on_the_thread_count():
+    wo = _dirs(40, 1)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        a = simulate(standard_stack(40), _wi(40), wo, spp=96, seed=3, dtype=D)
+        numba.set_num_threads(max(2, before))
+        b = simulate(standard_stack(40), _wi(40), wo, spp=96, seed=3, dtype=D)
+    finally:
+        numba.set_num_threads(before)
+    assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
+    c = simulate(standard_stack(40), _wi(40), wo, spp=96, seed=4, dtype=D)
+    assert not torch.equal(a[0], c[0])
+
+
+@pytest.mark.parametrize("what", ["nan_direction", "below_horizon", "zero_paths", "nan_sigma", "negative_ior"])
+def test_input_that_cannot_be_simulated_is_one_line(what):
+    n = 4
+    st, wi, wo, spp = standard_stack(n), _wi(n).clone(), _dirs(n, 2), 8
+    if what == "nan_direction":
+        wo[1, 0] = float("nan")
+    elif what == "below_horizon":
+        wi[2, 2] = -0.3
+    elif what == "zero_paths":
+        spp = 0
+    elif what == "nan_sigma":
+        st.sigma_t[0, 0] = float("nan")
+    else:
+        st.ior[3, 0] = -1.0
+    with pytest.raises(NbrdfError) as e:
+        simulate(st, wi, wo, spp=spp)
+    assert "\n" not in str(e.value)
+
+
+def test_v2_agrees_with_v1_and_costs_less_on_the_trapping_stack():
+    """Same expectation as the v1 estimator (long runs, z-scores with
+    Bonferroni); variance x vertices at least 1.5x lower where the trapped
+    light leaves (55-65 degrees, off the plane of incidence)."""
+    n = 16
+    wo = _dirs(n, 5, 55.0, 65.0, off_plane=True)
+    s1, s2 = SimStats(), SimStats()
+    m1, e1 = simulate(trap_stack(n), _wi(n), wo, spp=40_000, seed=11, dtype=D, error="paths",
+                      forced_top_reflection=False, include_top_reflection=False, stats=s1)
+    m2, e2 = simulate(trap_stack(n), _wi(n), wo, spp=40_000, seed=12, dtype=D, error="paths",
+                      include_top_reflection=False, stats=s2)
+    z = (m1 - m2) / (e1 ** 2 + e2 ** 2).sqrt()
+    assert z.abs().max() < z_threshold(1e-3, z.numel()), z
+    cost1 = ((e1[:, 0] / m1[:, 0]) ** 2).mean() * s1.vertices
+    cost2 = ((e2[:, 0] / m2[:, 0]) ** 2).mean() * s2.vertices
+    assert cost1 > 1.5 * cost2, (float(cost1), float(cost2))
+
+
+def _z_scores(stack_fn, n: int, seed: int):
+    wo = _dirs(n, seed)
+    long_m, long_e = simulate(stack_fn(n), _wi(n), wo, spp=8192, seed=seed + 1, dtype=D)
+    m, e = simulate(stack_fn(n), _wi(n), wo, spp=64, seed=seed + 2, dtype=D)
+    return ((m - long_m) / (e ** 2 + long_e ** 2).sqrt())[:, 0].numpy()  # red: channels share paths
+
+
+def test_64_path_errors_hold_on_the_standard_stack():
+    z = _z_scores(standard_stack, 160, 21)
+    assert stats.kstest(z, "norm").pvalue > 1e-3, (z.mean(), z.std())
+
+
+@pytest.mark.xfail(strict=True, reason="issue 14 open: at 64 paths the trapped light is still heavy-tailed "
+                                       "(docs/RESULTS.md, Ground truth v2)")
+def test_64_path_errors_hold_on_the_trapping_stack():
+    z = _z_scores(trap_stack, 160, 31)
+    assert stats.kstest(z, "norm").pvalue > 1e-3, (z.mean(), z.std())
