@@ -21,6 +21,8 @@ import torch
 from nbrdf.neural.material import FORMAT as MATERIAL_FORMAT, Material, parse_material
 from nbrdf.neural.metrics import THETAS, albedo_error, directional_albedo, is_converged, lobe_psnr
 
+from nbrdf.training import distributions as D
+
 Tensor = torch.Tensor
 HELDOUT_SEED = 20_221_122  # never a training seed
 CLASS_COUNTS = {"conductor": 20, "dielectric": 20, "two_layer": 50, "three_layer": 20, "three_layer_diffuse": 10}
@@ -32,11 +34,12 @@ def _u(g: np.random.Generator, n: int | None = None):
 
 def heldout_material(cls: str, g: np.random.Generator, name: str) -> Material:
     """An RGB material of a class: colours drawn per channel, shared parameters once."""
-    rough = lambda: float(round((0.216 + 0.784 * _u(g)) ** 3, 6))
-    ior = lambda: float(round(1.05 + 0.95 * _u(g), 6))
-    alb = lambda: [float(round(1 - x * x, 6)) for x in _u(g, 3)]
-    sig = lambda: float(round(5 * _u(g), 6))
-    colour = lambda: [float(round(x, 6)) for x in _u(g, 3)]
+    r6 = lambda x: float(round(x, 6))
+    rough = lambda: r6(D.roughness(_u(g)))
+    ior = lambda: r6(D.ior(_u(g)))
+    alb = lambda: [r6(D.medium_albedo(x)) for x in _u(g, 3)]
+    sig = lambda: r6(D.sigma_t(_u(g)))
+    colour = lambda: [r6(D.colour(x)) for x in _u(g, 3)]
     diel = lambda: {"type": "dielectric", "roughness": rough(), "ior": ior()}
     med = lambda: {"type": "medium", "albedo": alb(), "sigma_t": sig()}
     cond = lambda: {"type": "conductor", "roughness": rough(), "r0": colour()}
