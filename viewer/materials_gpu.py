@@ -30,7 +30,6 @@ def analytic_uniforms(m: Material) -> dict:
         "u_num_interfaces": L,
         "u_if_roughness": pad([float(x) for x in s.roughness[0]], 0.5),
         "u_if_ior": pad([float(x) for x in s.ior[0]], 1.5),
-        "u_med_albedo": pad([rgb(a) for a in s.albedo[0]], (0.0, 0.0, 0.0)),
         "u_med_sigma_t": pad([float(x) for x in s.sigma_t[0]], 0.0),
         "u_base_type": GLSL_BASES.index(s.base),
         "u_base_roughness": float(s.base_roughness[0]),
