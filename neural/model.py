@@ -196,12 +196,8 @@ def default_model() -> NeuralModel:
 
 
 def neural_evaluator(material: Material, model: NeuralModel | None = None):
-    """fn(wi, wo) -> RGB values (N, 3) of a material through the full neural path."""
-    model = model or default_model()
-    z = model.material_latent(material)
+    """fn(wi, wo) -> RGB values (N, 3) through the full neural path; kept for
+    callers not yet on ``neural.neural_brdf.neural_brdf(material, model).eval``."""
+    from nbrdf.neural.neural_brdf import neural_brdf
 
-    def fn(wi: Tensor, wo: Tensor) -> Tensor:
-        with torch.no_grad():
-            return model.decoder.eval_rgb(z, wi.float(), wo.float())
-
-    return fn
+    return neural_brdf(material, model).eval

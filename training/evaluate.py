@@ -114,6 +114,8 @@ def build_references(folder: str | Path, progress: bool = True, limit: int = 0) 
     return out
 
 
+#: A method makes a material's value function from the material and its cached
+#: reference: the ``eval`` of an ``RGBBRDF`` (``training.brdfs.brdf_for``).
 Method = Callable[[Material, Reference], Callable[[Tensor, Tensor], Tensor]]
 
 
@@ -157,16 +159,12 @@ def summarise(rows: list[dict]) -> dict:
 
 def projected_method(dec) -> Method:
     """The decoder at latents fitted to the cached projection samples."""
+    from nbrdf.neural.neural_brdf import latent_brdf
     from nbrdf.training.project import Samples, fit
 
     def make(m: Material, r: Reference):
         z = fit(dec, Samples(torch.from_numpy(r.wi), torch.from_numpy(r.wo), torch.from_numpy(r.f)))
-
-        def fn(wi: Tensor, wo: Tensor) -> Tensor:
-            with torch.no_grad():
-                return dec.eval_rgb(z, wi.float(), wo.float())
-
-        return fn
+        return latent_brdf(dec, z, m).eval
 
     return make
 
@@ -204,20 +202,16 @@ def report_figures(refs: list[tuple[str, Material, Reference]], method: Method, 
 # --- the operations: the full neural path against its baselines ---------------------------
 def neural_method(model) -> Method:
     """Leaf encoders -> recursive layering -> decoder (nothing fitted)."""
+    from nbrdf.training.brdfs import brdf_for
 
-    from nbrdf.neural.model import neural_evaluator
-
-    return lambda m, r: neural_evaluator(m, model)
+    return lambda m, r: brdf_for(m, "neural", model=model).eval
 
 
 def analytic_method() -> Method:
     """The analytic layering baseline (``training.analytic_layering``)."""
-    from nbrdf.training.analytic_layering import analytic_layered_eval
+    from nbrdf.training.brdfs import brdf_for
 
-    def make(m: Material, r: Reference):
-        return lambda wi, wo: analytic_layered_eval(m, wi.double(), wo.double()).float()
-
-    return make
+    return lambda m, r: brdf_for(m, "analytic").eval
 
 
 def comparison_table(results: dict[str, dict]) -> str:

@@ -4,7 +4,8 @@ analytic layering approximation."""
 from __future__ import annotations
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import Diffuse, Material
+from nbrdf.neural.material import Material
+from nbrdf.neural.neural_brdf import proxy_hint  # noqa: F401 (the renderer's import)
 from nbrdf.neural.stack import material_stack
 
 MAX_INTERFACES = 2
@@ -36,15 +37,3 @@ def analytic_uniforms(m: Material) -> dict:
         "u_base_ior": float(s.base_ior[0]) if s.base_ior is not None else 1.5,
         "u_base_color": rgb(colour[0]) if colour is not None else (0.0, 0.0, 0.0),
     }
-
-
-def proxy_hint(m: Material) -> tuple[float, float]:
-    """A proxy pdf (sigma, w) guessed from the top layer when no sampler
-    network is at hand: the half-vector spread of its GGX lobe (about
-    roughness / sqrt 2), half of the samples cosine-distributed."""
-    top = m.layers[0]
-    r = getattr(top, "roughness", None)
-    if isinstance(top, Diffuse):
-        return 1.0, 0.9
-    r = float(r) if isinstance(r, (int, float)) else 0.3  # texture-mapped: a middle value
-    return max(0.01, 0.71 * r), 0.5
