@@ -29,8 +29,7 @@ class NeuralBRDF:
             return self.decoder(self.z.expand(wi.shape[0], -1), wi.float(), wo.float()).to(wi.dtype)
 
     def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
-        p = proxy_pdf(w, w_other, torch.tensor(self.sigma, dtype=w.dtype), torch.tensor(self.w, dtype=w.dtype))
-        return torch.where((w[:, 2] > 0) & (w_other[:, 2] > 0), p, torch.zeros_like(p))
+        return _proxy_pdf(w, w_other, self.sigma, self.w)
 
     def sample(self, w: Tensor, u: Tensor) -> Sample:
         wo, pdf = proxy_sample(w, u, self.sigma, self.w)

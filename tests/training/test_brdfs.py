@@ -67,6 +67,13 @@ def test_neural_sampler():
     check_sampler("neural", brdf_for(STACK, "neural"), 35.0, alpha=ALPHA, n_samples=200_000, dtype=torch.float32)
 
 
+def test_single_channel_neural_sampler():
+    from nbrdf.neural.neural_brdf import material_brdfs
+
+    check_sampler("neural, one channel", material_brdfs(STACK)[1], 60.0, alpha=ALPHA, n_samples=200_000,
+                  dtype=torch.float32)
+
+
 def _pairs(n=256, seed=0):
     wi, wo = sample_pairs(n, torch.Generator().manual_seed(seed))
     return wi.float(), wo.float()
