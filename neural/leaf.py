@@ -13,11 +13,9 @@ import torch
 from torch import nn
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import RANGES
 from nbrdf.neural.nets import MLP, MLPSpec
 
 Tensor = torch.Tensor
-IOR_LO, IOR_SPAN = RANGES["ior"][0], 0.95  # the ior feature: (ior - 1.05) / (2 - 1.05), in [0, 1]
 
 #: Leaf type -> parameter names, in input order.
 LEAF_PARAMS: dict[str, tuple[str, ...]] = {
@@ -32,7 +30,7 @@ def leaf_features(kind: str, params: Tensor) -> Tensor:
     if kind == "conductor":
         return torch.stack([params[:, 0].clamp(1e-4, 1).pow(1 / 3), params[:, 1]], -1)
     if kind == "dielectric":
-        return torch.stack([params[:, 0].clamp(1e-4, 1).pow(1 / 3), (params[:, 1] - IOR_LO) / IOR_SPAN], -1)
+        return torch.stack([params[:, 0].clamp(1e-4, 1).pow(1 / 3), (params[:, 1] - 1.05) / 0.95], -1)
     if kind == "diffuse":
         return torch.stack([params[:, 0], params[:, 0].clamp_min(0).sqrt()], -1)
     raise NbrdfError(f"no leaf encoder for {kind!r} (one of {', '.join(LEAF_PARAMS)})")

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import functools
 import json
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -23,7 +22,7 @@ from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
 from nbrdf.neural.material import Material, Measured
 from nbrdf.neural.nets import MLPSpec, load_state, prefixed
 from nbrdf.neural.sampling import SamplerNet
-from nbrdf.neural.stack import Stack, material_stack
+from nbrdf.neural.stack import ParamValues, Stack, material_stack
 
 Tensor = torch.Tensor
 OPS_FORMAT = "nbrdf-operations/1"
@@ -60,7 +59,7 @@ class NeuralModel:
         """(3, 32) latents of a uniform material of any number of layers."""
         return self.stack_latents(material)[0]
 
-    def stack_latents(self, material: Material, values: "ParamValues | None" = None) -> Tensor:
+    def stack_latents(self, material: Material, values: ParamValues | None = None) -> Tensor:
         """(P, 3, 32) latents of a material whose parameters ``values`` turns
         into (P, 3) tensors (P = 1 for a uniform material, texels for a
         textured one): ``layered_latents`` of its stack."""
@@ -108,8 +107,6 @@ def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, sta
         z = layering(z_top, z, stack.albedo[:, j].expand(n, C).reshape(-1), chan(stack.sigma_t[:, j]))
     return z.reshape(n, C, -1)
 
-
-ParamValues = Callable[[object, str], Tensor]
 
 
 def uniform_values(v, place: str) -> Tensor:
