@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import functools
 import json
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -20,9 +19,10 @@ from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bu
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layering import LayeringNet
 from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
-from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured
+from nbrdf.neural.material import Material, Measured
 from nbrdf.neural.nets import MLPSpec, load_state, prefixed
 from nbrdf.neural.sampling import SamplerNet
+from nbrdf.neural.stack import ParamValues, Stack, material_stack
 
 Tensor = torch.Tensor
 OPS_FORMAT = "nbrdf-operations/1"
@@ -51,64 +51,31 @@ class NeuralModel:
         return self.decoder.weights_id()
 
     # -- the full path ---------------------------------------------------------------------
-    def leaf_latent(self, layer, place: str = "layer") -> Tensor:
+    def leaf_latent(self, layer) -> Tensor:
         """(3, 32) latents of a single uniform layer, one per colour channel."""
-        return self.leaf_latents(layer, place)[0]
+        return self.stack_latents(Material(name="layer", layers=(layer,)))[0]
 
     def material_latent(self, material: Material) -> Tensor:
         """(3, 32) latents of a uniform material of any number of layers."""
         return self.stack_latents(material)[0]
 
-    def leaf_latents(self, layer, place: str = "layer", values: "ParamValues | None" = None) -> Tensor:
-        """(P, 3, 32) latents of a layer whose parameters ``values`` turns into
-        (P, 3) tensors (P = 1 for a uniform layer, texels for a textured one)."""
-        values = values or uniform_values
-        if isinstance(layer, LatentBase):
+    def stack_latents(self, material: Material, values: ParamValues | None = None) -> Tensor:
+        """(P, 3, 32) latents of a material whose parameters ``values`` turns
+        into (P, 3) tensors (P = 1 for a uniform material, texels for a
+        textured one): ``layered_latents`` of its stack."""
+        if isinstance(material.base, Measured):
+            raise NbrdfError(f"layers[{len(material.layers) - 1}]: a measured base has no leaf encoder; project it "
+                             "first (`nbrdf project --merl FILE --out Z.safetensors`) and use it as a latent base")
+        stack = material_stack(material, values or uniform_values, dtype=torch.float32)
+        z_base = None
+        if stack.base == "latent":
             from nbrdf.neural.latent import load_latent
 
-            return load_latent(layer.resolved, self.decoder_id).z[None]
-        if isinstance(layer, Measured):
-            raise NbrdfError(f"{place}: a measured base has no leaf encoder; project it first "
-                             "(`nbrdf project --merl FILE --out Z.safetensors`) and use it as a latent base")
-        leaf = self.require("leaf")
+            z_base = load_latent(stack.base_path, self.decoder_id).z[None]
+        leaf = self.require("leaf") if z_base is None or stack.layers else None
+        layering = self.require("layering") if stack.layers else None
         with torch.no_grad():
-            if isinstance(layer, Conductor):
-                r, r0 = torch.broadcast_tensors(values(layer.roughness, f"{place}.roughness"),
-                                                values(layer.r0, f"{place}.r0"))
-                return leaf.conductor(r.reshape(-1), r0.reshape(-1)).reshape(r.shape[0], 3, -1)
-            if isinstance(layer, Dielectric):
-                r, ior = torch.broadcast_tensors(values(layer.roughness, f"{place}.roughness"),
-                                                 values(layer.ior, f"{place}.ior"))
-                z = leaf.dielectric(r[:, 0], ior[:, 0])  # achromatic: one latent for all channels
-                return z[:, None].expand(-1, 3, -1)
-            if isinstance(layer, Diffuse):
-                a = values(layer.albedo, f"{place}.albedo")
-                return leaf.diffuse(a.reshape(-1)).reshape(a.shape[0], 3, -1)
-        raise NbrdfError(f"{place}: a {layer.type} layer has no leaf encoder")
-
-    def stack_latents(self, material: Material, values: "ParamValues | None" = None) -> Tensor:
-        """(P, 3, 32) latents of a stack: leaf encoders, then the layering
-        network over each interface and its medium from the bottom up."""
-        n = len(material.layers)
-        z = self.leaf_latents(material.base, f"layers[{n - 1}]", values)
-        if not material.interfaces:
-            return z
-        values = values or uniform_values
-        net = self.require("layering")
-        places = [i for i, layer in enumerate(material.layers) if isinstance(layer, Dielectric)][: len(material.interfaces)]
-        with torch.no_grad():
-            for (iface, med), i in reversed(list(zip(material.interfaces, places))):
-                z_top = self.leaf_latents(iface, f"layers[{i}]", values)
-                if med is not None:
-                    alb = values(med.albedo, f"layers[{i + 1}].albedo")
-                    sig = values(med.sigma_t, f"layers[{i + 1}].sigma_t")
-                else:
-                    alb = sig = torch.zeros(1, 3)
-                z_top, z, alb, sig = _broadcast_texels(z_top, z, alb, sig)
-                p = z.shape[0]
-                z = net(z_top.reshape(p * 3, -1), z.reshape(p * 3, -1), alb.reshape(-1),
-                        sig.reshape(-1)).reshape(p, 3, -1)
-        return z
+            return layered_latents(leaf, layering, stack, z_base)
 
     def proxy(self, z: Tensor) -> tuple[float, float]:
         """(sigma, w) of the proxy pdf of a material latent (3, 32)."""
@@ -117,7 +84,29 @@ class NeuralModel:
         return float(s), float(w)
 
 
-ParamValues = Callable[[object, str], Tensor]
+def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, stack: Stack,
+                    z_base: Tensor | None = None) -> Tensor:
+    """Latents (N, C, 32) of N stacks of C channels: the leaf encoder of the
+    base (or the given base latents ``z_base`` (N or 1, C, 32)), then the
+    layering network over each interface and its medium, bottom up.
+    Differentiable in both networks; the one place leaves meet layering."""
+    n, C = stack.n, stack.channels
+    chan = lambda t: t[:, None].expand(n, C).reshape(-1)  # shared parameter, per channel
+    if z_base is not None:
+        z = z_base.expand(n, C, -1).reshape(n * C, -1)
+    elif stack.base == "conductor":
+        z = leaf.conductor(chan(stack.base_roughness), stack.base_r0.expand(n, C).reshape(-1))
+    elif stack.base == "dielectric":  # achromatic: one latent for all channels
+        z = leaf.dielectric(stack.base_roughness, stack.base_ior)[:, None].expand(n, C, -1).reshape(n * C, -1)
+    elif stack.base == "diffuse":
+        z = leaf.diffuse(stack.base_albedo.expand(n, C).reshape(-1))
+    else:
+        raise NbrdfError(f"a {stack.base} base has no leaf encoder")
+    for j in reversed(range(stack.layers)):
+        z_top = leaf.dielectric(stack.roughness[:, j], stack.ior[:, j])[:, None].expand(n, C, -1).reshape(n * C, -1)
+        z = layering(z_top, z, stack.albedo[:, j].expand(n, C).reshape(-1), chan(stack.sigma_t[:, j]))
+    return z.reshape(n, C, -1)
+
 
 
 def uniform_values(v, place: str) -> Tensor:
@@ -127,12 +116,6 @@ def uniform_values(v, place: str) -> Tensor:
     except NbrdfError:
         raise NbrdfError(f"{place}: texture-mapped; evaluate it through a latent texture "
                          "(nbrdf.neural.svbrdf.latent_texture)") from None
-
-
-def _broadcast_texels(*xs: Tensor) -> list[Tensor]:
-    """Expands (1, ...) tensors to the texel count P of the others."""
-    p = max(x.shape[0] for x in xs)
-    return [x.expand(p, *x.shape[1:]) for x in xs]
 
 
 # --- files -------------------------------------------------------------------------------
@@ -210,12 +193,8 @@ def default_model() -> NeuralModel:
 
 
 def neural_evaluator(material: Material, model: NeuralModel | None = None):
-    """fn(wi, wo) -> RGB values (N, 3) of a material through the full neural path."""
-    model = model or default_model()
-    z = model.material_latent(material)
+    """fn(wi, wo) -> RGB values (N, 3) through the full neural path; kept for
+    callers not yet on ``neural.neural_brdf.neural_brdf(material, model).eval``."""
+    from nbrdf.neural.neural_brdf import neural_brdf
 
-    def fn(wi: Tensor, wo: Tensor) -> Tensor:
-        with torch.no_grad():
-            return model.decoder.eval_rgb(z, wi.float(), wo.float())
-
-    return fn
+    return neural_brdf(material, model).eval

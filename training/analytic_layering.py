@@ -45,12 +45,18 @@ def _stack_eval(interfaces, base, wi: Tensor, wo: Tensor) -> Tensor:
     return top + (ti * to * atten / (eta * eta))[:, None] * below
 
 
-def analytic_layered_eval(material: Material, wi: Tensor, wo: Tensor) -> Tensor:
-    """RGB values (N, 3) of the analytic layering model; 0 below the horizon."""
+def check_analytic(material: Material) -> None:
+    """Raises unless the model covers the material (uniform layers over a
+    conductor, diffuse or dielectric base)."""
     if material.is_textured:
         raise NbrdfError(f"{material.textures()[0][0]}: texture-mapped; the analytic model needs uniform layers")
     if material.base.type not in ("conductor", "diffuse", "dielectric"):
         raise NbrdfError(f"a {material.base.type} base has no analytic layering model")
+
+
+def analytic_layered_eval(material: Material, wi: Tensor, wo: Tensor) -> Tensor:
+    """RGB values (N, 3) of the analytic layering model; 0 below the horizon."""
+    check_analytic(material)
     up = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
     f = _stack_eval(material.interfaces, material.base, wi, wo)
     return torch.where(up, f, torch.zeros_like(f))

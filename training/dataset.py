@@ -28,22 +28,15 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
-from nbrdf.neural.material import FORMAT as FORMAT_MATERIAL
+# The stack classes and the on-disk parameter vector belong to the stack translation
+# (neural.stack), the paper's distributions to training.distributions; re-exported here.
+from nbrdf.neural.stack import (CLASSES, DIFFUSE_BASED, PARAM_NAMES, THREE_LAYERED, P,  # noqa: F401
+                                params_to_material, params_to_stack)
+from nbrdf.training.distributions import sample_params  # noqa: F401
 
 Tensor = torch.Tensor
 
 FORMAT = "nbrdf-dataset/1"
-CLASSES = ("conductor", "dielectric", "two_layer", "three_layer", "diffuse_base", "three_layer_diffuse")
-#: Classes whose base is a Lambertian (base_value = its albedo); the others end in a conductor.
-DIFFUSE_BASED = ("diffuse_base", "three_layer_diffuse")
-THREE_LAYERED = ("three_layer", "three_layer_diffuse")
-
-#: Parameter vector columns (single channel); unused columns hold 0.
-PARAM_NAMES = ("class", "top_roughness", "top_ior", "albedo_1", "sigma_t_1", "mid_roughness", "mid_ior",
-               "albedo_2", "sigma_t_2", "base_roughness", "base_value")
-P = {n: i for i, n in enumerate(PARAM_NAMES)}
-
-
 @dataclass(frozen=True)
 class DataConfig:
     """What a data set holds; the manifest records it, and resuming requires it unchanged."""
@@ -75,68 +68,6 @@ PRESETS: dict[str, DataConfig] = {
                         val_counts=dict(conductor=32, dielectric=32, two_layer=128, three_layer=64, diffuse_base=32),
                         pairs=4096, spp=128),
 }
-
-
-# --- parameter distributions -------------------------------------------------------------
-def _roughness(g: torch.Generator, n: int) -> Tensor:
-    return (0.216 + 0.784 * torch.rand(n, generator=g, dtype=torch.float64)) ** 3
-
-
-def _ior(g: torch.Generator, n: int) -> Tensor:
-    return 1.05 + 0.95 * torch.rand(n, generator=g, dtype=torch.float64)
-
-
-def _albedo(g: torch.Generator, n: int) -> Tensor:
-    return 1.0 - torch.rand(n, generator=g, dtype=torch.float64) ** 2
-
-
-def _unit(g: torch.Generator, n: int, scale: float = 1.0) -> Tensor:
-    return scale * torch.rand(n, generator=g, dtype=torch.float64)
-
-
-def sample_params(cls: str, n: int, g: torch.Generator) -> Tensor:
-    """n single-channel parameter vectors (n, len(PARAM_NAMES)) of a class."""
-    if cls not in CLASSES:
-        raise NbrdfError(f"unknown BRDF class {cls!r} (one of {', '.join(CLASSES)})")
-    p = torch.zeros(n, len(PARAM_NAMES), dtype=torch.float64)
-    p[:, P["class"]] = CLASSES.index(cls)
-    if cls == "conductor":
-        p[:, P["base_roughness"]], p[:, P["base_value"]] = _roughness(g, n), _unit(g, n)
-    elif cls == "dielectric":
-        p[:, P["top_roughness"]], p[:, P["top_ior"]] = _roughness(g, n), _ior(g, n)
-    else:
-        p[:, P["top_roughness"]], p[:, P["top_ior"]] = _roughness(g, n), _ior(g, n)
-        p[:, P["albedo_1"]], p[:, P["sigma_t_1"]] = _albedo(g, n), _unit(g, n, 5.0)
-        if cls in THREE_LAYERED:
-            p[:, P["mid_roughness"]], p[:, P["mid_ior"]] = _roughness(g, n), _ior(g, n)
-            p[:, P["albedo_2"]], p[:, P["sigma_t_2"]] = _albedo(g, n), _unit(g, n, 5.0)
-        if cls in DIFFUSE_BASED:
-            p[:, P["base_value"]] = _unit(g, n)
-        else:
-            p[:, P["base_roughness"]], p[:, P["base_value"]] = _roughness(g, n), _unit(g, n)
-    return p
-
-
-def params_to_material(p: Tensor | np.ndarray, name: str = "sample") -> "Material":
-    """The material (scalar colours) that a single-channel parameter vector describes."""
-    from nbrdf.neural.material import parse_material
-
-    p = [float(x) for x in p]
-    cls = CLASSES[int(round(p[0]))]
-    diel = lambda r, i: {"type": "dielectric", "roughness": p[P[r]], "ior": p[P[i]]}
-    med = lambda a, s: {"type": "medium", "albedo": p[P[a]], "sigma_t": p[P[s]]}
-    cond = {"type": "conductor", "roughness": p[P["base_roughness"]], "r0": p[P["base_value"]]}
-    layers: list[dict] = []
-    if cls == "conductor":
-        layers = [cond]
-    elif cls == "dielectric":
-        layers = [diel("top_roughness", "top_ior")]
-    else:
-        layers = [diel("top_roughness", "top_ior"), med("albedo_1", "sigma_t_1")]
-        if cls in THREE_LAYERED:
-            layers += [diel("mid_roughness", "mid_ior"), med("albedo_2", "sigma_t_2")]
-        layers.append({"type": "diffuse", "albedo": p[P["base_value"]]} if cls in DIFFUSE_BASED else cond)
-    return parse_material({"format": FORMAT_MATERIAL, "name": name, "layers": layers})
 
 
 # --- directions ----------------------------------------------------------------------
@@ -178,18 +109,9 @@ def sample_pairs(n: int, g: torch.Generator, peak_fraction: float = 0.5) -> tupl
 def _stack_params(params: Tensor, pairs: int):
     """Simulator parameters for K single-channel stacks of one class, each
     repeated over its pairs (K * pairs rows)."""
-    from nbrdf.training.layered import StackParams
+    from nbrdf.training.reference import simulator_params
 
-    cls = CLASSES[int(params[0, 0])]
-    rep = lambda c: params[:, P[c]].repeat_interleave(pairs)
-    cols = [("top_roughness", "top_ior", "albedo_1", "sigma_t_1")]
-    if cls in THREE_LAYERED:
-        cols.append(("mid_roughness", "mid_ior", "albedo_2", "sigma_t_2"))
-    st = lambda j: torch.stack([rep(c[j]) for c in cols], -1)
-    kw = dict(roughness=st(0), ior=st(1), albedo=st(2), sigma_t=st(3), base_roughness=rep("base_roughness"))
-    if cls in DIFFUSE_BASED:
-        return StackParams(base="diffuse", base_albedo=rep("base_value"), **kw)
-    return StackParams(base="conductor", base_r0=rep("base_value"), **kw)
+    return simulator_params(params_to_stack(params).repeat_interleave(pairs))
 
 
 def tabulate(params: Tensor, wi: Tensor, wo: Tensor, spp: int, seed: int) -> tuple[Tensor, Tensor]:
@@ -200,13 +122,10 @@ def tabulate(params: Tensor, wi: Tensor, wo: Tensor, spp: int, seed: int) -> tup
     K, n = wi.shape[:2]
     cls = CLASSES[int(params[0, 0])]
     fi, fo = wi.reshape(-1, 3), wo.reshape(-1, 3)
-    if cls == "conductor":
-        rep = lambda c: params[:, P[c]].repeat_interleave(n)
-        f = GGXConductor(rep("base_roughness"), rep("base_value")).eval(fi, fo)
-        return f.reshape(K, n), torch.zeros(K, n, dtype=f.dtype)
-    if cls == "dielectric":
-        rep = lambda c: params[:, P[c]].repeat_interleave(n)
-        f = GGXDielectric(rep("top_roughness"), rep("top_ior")).eval(fi, fo)
+    if cls in ("conductor", "dielectric"):
+        st = params_to_stack(params).repeat_interleave(n)
+        f = (GGXConductor(st.base_roughness, st.base_r0[:, 0]) if cls == "conductor"
+             else GGXDielectric(st.base_roughness, st.base_ior)).eval(fi, fo)
         return f.reshape(K, n), torch.zeros(K, n, dtype=f.dtype)
     from nbrdf.training.reference import MAX_LANES
 

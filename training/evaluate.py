@@ -21,6 +21,8 @@ import torch
 from nbrdf.neural.material import FORMAT as MATERIAL_FORMAT, Material, parse_material
 from nbrdf.neural.metrics import THETAS, albedo_error, directional_albedo, is_converged, lobe_psnr
 
+from nbrdf.training import distributions as D
+
 Tensor = torch.Tensor
 HELDOUT_SEED = 20_221_122  # never a training seed
 CLASS_COUNTS = {"conductor": 20, "dielectric": 20, "two_layer": 50, "three_layer": 20, "three_layer_diffuse": 10}
@@ -32,11 +34,12 @@ def _u(g: np.random.Generator, n: int | None = None):
 
 def heldout_material(cls: str, g: np.random.Generator, name: str) -> Material:
     """An RGB material of a class: colours drawn per channel, shared parameters once."""
-    rough = lambda: float(round((0.216 + 0.784 * _u(g)) ** 3, 6))
-    ior = lambda: float(round(1.05 + 0.95 * _u(g), 6))
-    alb = lambda: [float(round(1 - x * x, 6)) for x in _u(g, 3)]
-    sig = lambda: float(round(5 * _u(g), 6))
-    colour = lambda: [float(round(x, 6)) for x in _u(g, 3)]
+    r6 = lambda x: float(round(x, 6))
+    rough = lambda: r6(D.roughness(_u(g)))
+    ior = lambda: r6(D.ior(_u(g)))
+    alb = lambda: [r6(D.medium_albedo(x)) for x in _u(g, 3)]
+    sig = lambda: r6(D.sigma_t(_u(g)))
+    colour = lambda: [r6(D.colour(x)) for x in _u(g, 3)]
     diel = lambda: {"type": "dielectric", "roughness": rough(), "ior": ior()}
     med = lambda: {"type": "medium", "albedo": alb(), "sigma_t": sig()}
     cond = lambda: {"type": "conductor", "roughness": rough(), "r0": colour()}
@@ -113,6 +116,8 @@ def build_references(folder: str | Path, progress: bool = True, limit: int = 0, 
     return out
 
 
+#: A method makes a material's value function from the material and its cached
+#: reference: the ``eval`` of an ``RGBBRDF`` (``training.brdfs.brdf_for``).
 Method = Callable[[Material, Reference], Callable[[Tensor, Tensor], Tensor]]
 
 
@@ -156,16 +161,12 @@ def summarise(rows: list[dict]) -> dict:
 
 def projected_method(dec) -> Method:
     """The decoder at latents fitted to the cached projection samples."""
+    from nbrdf.neural.neural_brdf import latent_brdf
     from nbrdf.training.project import Samples, fit
 
     def make(m: Material, r: Reference):
         z = fit(dec, Samples(torch.from_numpy(r.wi), torch.from_numpy(r.wo), torch.from_numpy(r.f)))
-
-        def fn(wi: Tensor, wo: Tensor) -> Tensor:
-            with torch.no_grad():
-                return dec.eval_rgb(z, wi.float(), wo.float())
-
-        return fn
+        return latent_brdf(dec, z, m).eval
 
     return make
 
@@ -203,20 +204,16 @@ def report_figures(refs: list[tuple[str, Material, Reference]], method: Method, 
 # --- the operations: the full neural path against its baselines ---------------------------
 def neural_method(model) -> Method:
     """Leaf encoders -> recursive layering -> decoder (nothing fitted)."""
+    from nbrdf.training.brdfs import brdf_for
 
-    from nbrdf.neural.model import neural_evaluator
-
-    return lambda m, r: neural_evaluator(m, model)
+    return lambda m, r: brdf_for(m, "neural", model=model).eval
 
 
 def analytic_method() -> Method:
     """The analytic layering baseline (``training.analytic_layering``)."""
-    from nbrdf.training.analytic_layering import analytic_layered_eval
+    from nbrdf.training.brdfs import brdf_for
 
-    def make(m: Material, r: Reference):
-        return lambda wi, wo: analytic_layered_eval(m, wi.double(), wo.double()).float()
-
-    return make
+    return lambda m, r: brdf_for(m, "analytic").eval
 
 
 def comparison_table(results: dict[str, dict]) -> str:

@@ -11,6 +11,7 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured, Medium
+from nbrdf.neural.stack import Stack, material_stack
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
 from nbrdf.training.layered import SimStats, StackParams, simulate
 
@@ -31,35 +32,27 @@ def _check_uniform(material: Material) -> None:
                          "evaluate a uniform material (or one texel of it)")
 
 
+def simulator_params(stack: Stack) -> StackParams:
+    """A batched stack (``neural.stack``) as the simulator's parameters."""
+    if stack.layers == 0:
+        raise NbrdfError("a single-layer material needs no simulation")
+    if stack.base not in ("conductor", "diffuse", "dielectric"):
+        raise NbrdfError(f"a {stack.base} base has no Monte Carlo reference under other layers")
+    kw = {k: v for k, v in stack.tensors().items() if k.startswith("base_")}
+    return StackParams(roughness=stack.roughness, ior=stack.ior, albedo=stack.albedo, sigma_t=stack.sigma_t,
+                       base=stack.base, **kw)
+
+
 def stack_params(material: Material, n: int = 1) -> StackParams:
     """The material's layer stack as simulator parameters, 3 channels, n copies."""
     _check_uniform(material)
-    interfaces = material.interfaces
-    base = material.base
-    if not interfaces:
+    if not material.interfaces:
         raise NbrdfError("a single-layer material needs no simulation")
-    rough = torch.tensor([[i.roughness for i, _ in interfaces]], dtype=torch.float64)
-    ior = torch.tensor([[i.ior for i, _ in interfaces]], dtype=torch.float64)
-    tau = torch.tensor([[m.sigma_t if m is not None else 0.0 for _, m in interfaces]], dtype=torch.float64)
-    alb = torch.stack([_rgb(m.albedo) if m is not None else torch.zeros(3, dtype=torch.float64)
-                       for _, m in interfaces])[None]
-    kw = dict(base_roughness=torch.tensor([0.5], dtype=torch.float64))
-    if isinstance(base, Conductor):
-        kind = "conductor"
-        kw = dict(base_roughness=torch.tensor([base.roughness], dtype=torch.float64), base_r0=_rgb(base.r0)[None])
-    elif isinstance(base, Diffuse):
-        kind = "diffuse"
-        kw["base_albedo"] = _rgb(base.albedo)[None]
-    elif isinstance(base, Dielectric):
-        kind = "dielectric"
-        kw = dict(base_roughness=torch.tensor([base.roughness], dtype=torch.float64),
-                  base_ior=torch.tensor([base.ior], dtype=torch.float64))
-    else:
+    base = material.base
+    if isinstance(base, (LatentBase, Measured)):
         raise NbrdfError(f"layers[{len(material.layers) - 1}]: a {type(base).__name__.lower()} base "
                          "has no Monte Carlo reference under other layers")
-    rep = lambda t: t.expand(n, *t.shape[1:]).contiguous()
-    return StackParams(roughness=rep(rough), ior=rep(ior), albedo=rep(alb), sigma_t=rep(tau), base=kind,
-                       **{k: rep(v) for k, v in kw.items()})
+    return simulator_params(material_stack(material).expand(n))
 
 
 def single_layer_eval(layer, wi: Tensor, wo: Tensor) -> Tensor:

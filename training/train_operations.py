@@ -33,10 +33,12 @@ from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layering import LayeringNet, layering_spec
 from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
-from nbrdf.neural.model import NeuralModel, load_model, save_model
+from nbrdf.neural.model import NeuralModel, layered_latents, load_model, save_model
 from nbrdf.neural.sampling import SamplerNet, lambert_pdf, proxy_pdf, proxy_sample
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
-from nbrdf.training.dataset import CLASSES, DIFFUSE_BASED, THREE_LAYERED, P, load_manifest, load_split, sample_pairs, sample_params
+from nbrdf.neural.stack import CLASSES, THREE_LAYERED, P, params_to_stack
+from nbrdf.training.dataset import load_manifest, load_split, sample_pairs
+from nbrdf.training.distributions import mixed_params, random_leaf_params  # noqa: F401 (random_leaf_params re-exported)
 
 Tensor = torch.Tensor
 
@@ -139,17 +141,6 @@ def _decoder_loss(model: NeuralModel, z: Tensor, feats: Tensor, cos_o: Tensor, t
 
 
 # --- leaf encoders --------------------------------------------------------------------------
-def random_leaf_params(kind: str, n: int, g: torch.Generator) -> Tensor:
-    """Leaf parameters over their legal ranges, roughness as in SPEC section 9."""
-    u = torch.rand(n, 2, generator=g)
-    rough = (0.216 + 0.784 * u[:, 0]) ** 3
-    if kind == "conductor":
-        return torch.stack([rough, u[:, 1]], -1)
-    if kind == "dielectric":
-        return torch.stack([rough, 1.05 + 0.95 * u[:, 1]], -1)
-    return u[:, :1]
-
-
 def leaf_values(kind: str, params: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
     """Closed-form values (B, P) of B leaves at pairs (B, P, 3)."""
     if kind == "conductor":
@@ -210,31 +201,17 @@ def train_leaf(cfg: OpsConfig, progress: bool = True) -> Path:
 
 # --- layering -------------------------------------------------------------------------------
 def stack_latents(model: NeuralModel, params: Tensor, layering: LayeringNet | None = None) -> Tensor:
-    """Latents (K, 32) of single-channel data-set BRDFs (``training.dataset``
-    parameter vectors) through leaf encoders and recursive layering;
-    differentiable in the layering network."""
+    """Latents (K, 32) of single-channel data-set BRDFs (``neural.stack``
+    parameter vectors) through ``neural.model.layered_latents``, class by
+    class; differentiable in the layering network."""
     leaf = model.require("leaf")
     net = layering if layering is not None else model.require("layering")
     cls = params[:, P["class"]].round().long()
-    col = lambda n: params[:, P[n]].float()
     out = torch.zeros(params.shape[0], 32)
-    for c, name in enumerate(CLASSES):
+    for c in range(len(CLASSES)):
         sel = (cls == c).nonzero().squeeze(-1)
-        if sel.numel() == 0:
-            continue
-        pick = lambda n: col(n)[sel]
-        if name == "dielectric":
-            out[sel] = leaf.dielectric(pick("top_roughness"), pick("top_ior"))
-            continue
-        if name in DIFFUSE_BASED:
-            z = leaf.diffuse(pick("base_value"))
-        else:
-            z = leaf.conductor(pick("base_roughness"), pick("base_value"))
-        if name in THREE_LAYERED:
-            z = net(leaf.dielectric(pick("mid_roughness"), pick("mid_ior")), z, pick("albedo_2"), pick("sigma_t_2"))
-        if name != "conductor":
-            z = net(leaf.dielectric(pick("top_roughness"), pick("top_ior")), z, pick("albedo_1"), pick("sigma_t_1"))
-        out = out.index_put((sel,), z)
+        if sel.numel():
+            out = out.index_put((sel,), layered_latents(leaf, net, params_to_stack(params[sel].float()))[:, 0])
     return out
 
 
@@ -331,9 +308,7 @@ def _proposal(wi: Tensor, g: torch.Generator) -> tuple[Tensor, Tensor]:
 
 def random_material_params(n: int, g: torch.Generator) -> Tensor:
     """Data-set parameter vectors over every class, as the paper's distributions."""
-    per = [n // len(CLASSES)] * len(CLASSES)
-    per[2] += n - sum(per)
-    return torch.cat([sample_params(c, k, g) for c, k in zip(CLASSES, per)]).float()
+    return mixed_params(n, g).float()
 
 
 def sampler_targets(model: NeuralModel, z: Tensor, n_wi: int, n_wo: int, g: torch.Generator):

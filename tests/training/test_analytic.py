@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from stattools import chi2_sphere
+from brdf_adapter import check_sampler
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
 
 ALPHA = 1e-3  # significance level of each chi-square test (fixed seeds: deterministic)
@@ -156,16 +156,4 @@ SAMPLERS = [
 
 @pytest.mark.parametrize("name,bsdf,theta_deg", SAMPLERS, ids=[s[0] for s in SAMPLERS])
 def test_sampler_chi2(name, bsdf, theta_deg):
-    t = math.radians(theta_deg)
-    w = torch.tensor([math.sin(t), 0.0, math.cos(t)], dtype=torch.float64)
-    g = torch.Generator().manual_seed(1234)
-
-    def sample_fn(n):
-        s = bsdf.sample(w.expand(n, 3), torch.rand(n, 3, generator=g, dtype=torch.float64))
-        return s.w, s.pdf
-
-    res = chi2_sphere(sample_fn, lambda d: bsdf.pdf(w.expand(d.shape[0], 3), d))
-    assert res.p_value > ALPHA, f"{name}: {res}"
-    # The pdf integrates to the fraction of samples the sampler returned.
-    se = math.sqrt(res.valid_fraction * (1 - res.valid_fraction) / res.n_samples)
-    assert abs(res.pdf_integral - res.valid_fraction) < 4 * se + 2e-3, f"{name}: {res}"
+    check_sampler(name, bsdf, theta_deg, alpha=ALPHA)

@@ -1,9 +1,11 @@
-// Closed-form BRDFs (SPEC section 5) and, for layered stacks, a simple analytic
-// layering approximation in the style of Weidlich & Wilkie 2007: the top
-// interface's reflection plus the layers below seen through the Fresnel
-// transmission of the interface in both directions and the medium's
-// attenuation along the refracted directions, with a single-scattering term
-// for the medium. It is a baseline for comparison, not the ground truth.
+// Closed-form BRDFs (SPEC section 5) and, for layered stacks, the analytic
+// layering approximation of training/analytic_layering.py (the same model,
+// tested against it in tests/viewer/test_analytic_glsl.py): each interface's
+// rough reflection plus what lies below seen along the smoothly refracted
+// directions, scaled by the Fresnel transmittances in and out, the 1 / eta^2
+// of the solid-angle compression and the slab's extinction along both
+// refracted paths. Scattering in the media and inter-reflections are ignored.
+// It is a baseline for comparison, not the ground truth.
 //
 // Directions are in the local frame (z = normal); wi to the light, wo to the
 // viewer; the value excludes every cosine.
@@ -12,7 +14,6 @@ const int MAX_INTERFACES = 2;
 uniform int u_num_interfaces;                 // interfaces above the base
 uniform float u_if_roughness[MAX_INTERFACES];
 uniform float u_if_ior[MAX_INTERFACES];      // relative IOR (below / above)
-uniform vec3 u_med_albedo[MAX_INTERFACES];
 uniform float u_med_sigma_t[MAX_INTERFACES];
 uniform int u_base_type;                      // 0 conductor, 1 diffuse, 2 dielectric (reflection only)
 uniform float u_base_roughness;
@@ -64,8 +65,8 @@ vec3 base_brdf(vec3 wi, vec3 wo) {
 
 // Direction refracted into the layer below a smooth interface (pointing away, upward).
 vec3 refract_up(vec3 w, float eta) {
-    float s = 1.0 / eta;
-    return normalize(vec3(w.xy * s, sqrt(max(1.0 - s * s * dot(w.xy, w.xy), 1e-8))));
+    vec2 xy = w.xy / eta;
+    return vec3(xy, sqrt(max(1.0 - dot(xy, xy), 1e-12)));
 }
 
 vec3 brdf(vec3 wi, vec3 wo) {
@@ -88,13 +89,11 @@ vec3 brdf(vec3 wi, vec3 wo) {
         vec3 a = di[k + 1], b = dout[k + 1];
         float tau = u_med_sigma_t[k];
         float path = 1.0 / a.z + 1.0 / b.z;
-        vec3 below = f * exp(-tau * path);
-        // Single scattering in the slab (isotropic phase), thickness 1.
-        vec3 ss = u_med_albedo[k] / (4.0 * PI) * (1.0 - exp(-tau * path)) / (a.z + b.z);
         float eta = u_if_ior[k];
         float ti = 1.0 - fresnel_dielectric(di[k].z, eta);
         float to = 1.0 - fresnel_dielectric(dout[k].z, eta);
-        f = vec3(dielectric_reflection(di[k], dout[k], u_if_roughness[k], eta)) + ti * to * (below + ss);
+        f = vec3(dielectric_reflection(di[k], dout[k], u_if_roughness[k], eta))
+            + (ti * to * exp(-tau * path) / (eta * eta)) * f;
     }
     return f;
 }

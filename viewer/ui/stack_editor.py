@@ -11,7 +11,7 @@ import copy
 from pathlib import Path
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import Material, parse_material
+from nbrdf.neural.material import RANGES as MATERIAL_RANGES, Material, parse_material
 
 #: Defaults of a new layer of each type.
 NEW_LAYER = {
@@ -21,9 +21,8 @@ NEW_LAYER = {
     "medium": {"type": "medium", "albedo": [0.9, 0.9, 0.9], "sigma_t": 0.5},
 }
 BASE_TYPES = ("conductor", "diffuse", "dielectric")
-#: Slider ranges per parameter (SPEC section 3 legal ranges).
-RANGES = {"roughness": (0.01, 1.0), "ior": (1.05, 2.0), "sigma_t": (0.0, 5.0), "r0": (0.0, 1.0),
-          "albedo": (0.0, 1.0)}
+#: Slider ranges per parameter: the material's own legal ranges (SPEC section 3).
+RANGES = MATERIAL_RANGES
 COLOUR_KEYS = ("r0", "albedo")
 
 

@@ -1,0 +1,254 @@
+"""Materials as batched layer stacks: the one translation of ``Material``.
+
+A ``Stack`` holds N stacks of the same shape -- L interfaces top to bottom,
+each a rough dielectric over a medium slab (sigma_t 0 and albedo 0: no
+medium), then one base -- as tensors with C colour channels. Every consumer
+reads it: the Monte Carlo simulator (``training.reference.simulator_params``),
+the leaf encoders and layering network (``neural.model.layered_latents``) and
+the closed-form GLSL (``viewer.materials_gpu.analytic_uniforms``).
+
+The data sets store single-channel stacks as one flat parameter vector per
+BRDF (``PARAM_NAMES``); ``params_to_stack`` / ``stack_to_params`` are its
+decode / encode pair and ``params_to_material`` the material it describes.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+from typing import Callable
+
+import torch
+
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import (FORMAT as FORMAT_MATERIAL, Conductor, Dielectric, Diffuse, LatentBase,
+                                   Material, Measured, Medium, parse_material)
+
+Tensor = torch.Tensor
+
+#: Base kinds a stack can end in; the first three have parameters.
+BASES = ("conductor", "diffuse", "dielectric", "latent", "measured")
+
+#: The data sets' stack classes (SPEC section 9), in the order of their class index.
+CLASSES = ("conductor", "dielectric", "two_layer", "three_layer", "diffuse_base", "three_layer_diffuse")
+#: Classes whose base is a Lambertian (base_value = its albedo); the others end in a conductor.
+DIFFUSE_BASED = ("diffuse_base", "three_layer_diffuse")
+THREE_LAYERED = ("three_layer", "three_layer_diffuse")
+
+#: The flat single-channel parameter vector of the data sets' files; unused columns hold 0.
+PARAM_NAMES = ("class", "top_roughness", "top_ior", "albedo_1", "sigma_t_1", "mid_roughness", "mid_ior",
+               "albedo_2", "sigma_t_2", "base_roughness", "base_value")
+P = {n: i for i, n in enumerate(PARAM_NAMES)}
+_INTERFACE_COLUMNS = (("top_roughness", "top_ior", "albedo_1", "sigma_t_1"),
+                      ("mid_roughness", "mid_ior", "albedo_2", "sigma_t_2"))
+
+#: values(parameter, place) -> (P, 3) tensor: how a parameter becomes numbers
+#: (one row for a uniform parameter, one per texel for a texture-mapped one).
+ParamValues = Callable[[object, str], Tensor]
+
+
+@dataclass
+class Stack:
+    """N stacks of one shape with C colour channels (the simulator's and the
+    networks' input). Shapes: ``roughness``, ``ior``, ``sigma_t`` (N, L);
+    ``albedo`` (N, L, C); ``base_roughness`` (N,); ``base_r0`` and
+    ``base_albedo`` (N, C); ``base_ior`` (N,). Base parameters a base kind
+    does not have are None; a latent or measured base keeps its file in
+    ``base_path``."""
+
+    roughness: Tensor
+    ior: Tensor
+    albedo: Tensor
+    sigma_t: Tensor
+    base: str
+    base_roughness: Tensor | None = None
+    base_r0: Tensor | None = None
+    base_ior: Tensor | None = None
+    base_albedo: Tensor | None = None
+    base_path: Path | None = None
+
+    @property
+    def n(self) -> int:
+        """Number of stacks."""
+        return self.roughness.shape[0]
+
+    @property
+    def layers(self) -> int:
+        """Interfaces above the base (L)."""
+        return self.roughness.shape[1]
+
+    @property
+    def channels(self) -> int:
+        """Colour channels (C)."""
+        return self.albedo.shape[2]
+
+    def tensors(self) -> dict[str, Tensor]:
+        """The tensor fields that are set, by name."""
+        return {f.name: getattr(self, f.name) for f in fields(self)
+                if isinstance(getattr(self, f.name), Tensor)}
+
+    def map(self, fn: Callable[[Tensor], Tensor]) -> "Stack":
+        """A copy with ``fn`` applied to every tensor (all have N leading)."""
+        return replace(self, **{k: fn(v) for k, v in self.tensors().items()})
+
+    def repeat_interleave(self, k: int) -> "Stack":
+        """Every stack repeated k times in place (N k stacks)."""
+        return self.map(lambda t: t.repeat_interleave(k, dim=0))
+
+    def expand(self, n: int) -> "Stack":
+        """n copies of a single stack (N = 1)."""
+        if self.n != 1:
+            raise ValueError(f"expand needs one stack, got {self.n}")
+        return self.map(lambda t: t.expand(n, *t.shape[1:]).contiguous())
+
+    def per_channel(self) -> "Stack":
+        """The same stacks as N C single-channel stacks (channel fastest)."""
+        C = self.channels
+        out = {}
+        for k, v in self.tensors().items():
+            if k == "albedo":
+                out[k] = v.permute(0, 2, 1).reshape(self.n * C, self.layers, 1)
+            elif k in ("base_r0", "base_albedo"):
+                out[k] = v.reshape(-1, 1)
+            else:
+                out[k] = v.repeat_interleave(C, dim=0)
+        return replace(self, **out)
+
+
+# --- materials -> stacks -------------------------------------------------------------------
+def _uniform(v, place: str) -> Tensor:
+    try:
+        return torch.tensor([Material.rgb(v)], dtype=torch.float64)
+    except NbrdfError:
+        raise NbrdfError(f"{place}: a texture-mapped parameter has no single value; "
+                         "evaluate a uniform material (or one texel of it)") from None
+
+
+def material_stack(material: Material, values: ParamValues | None = None,
+                   dtype: torch.dtype = torch.float64) -> Stack:
+    """A material's stack with three channels. Uniform parameters give one
+    stack (N = 1); with ``values`` a texture-mapped material gives one per
+    texel. Shared parameters (roughness, ior, sigma_t) take channel 0."""
+    values = values or _uniform
+    # the base first, then the interfaces bottom up: a bad parameter is named in that order
+    base, place = material.base, f"layers[{len(material.layers) - 1}]"
+    kw: dict[str, object] = {}
+    if isinstance(base, Conductor):
+        kind = "conductor"
+        kw = dict(base_roughness=values(base.roughness, f"{place}.roughness")[:, 0].to(dtype),
+                  base_r0=values(base.r0, f"{place}.r0").to(dtype))
+    elif isinstance(base, Diffuse):
+        kind = "diffuse"
+        kw = dict(base_roughness=torch.full((1,), 0.5, dtype=dtype),
+                  base_albedo=values(base.albedo, f"{place}.albedo").to(dtype))
+    elif isinstance(base, Dielectric):
+        kind = "dielectric"
+        kw = dict(base_roughness=values(base.roughness, f"{place}.roughness")[:, 0].to(dtype),
+                  base_ior=values(base.ior, f"{place}.ior")[:, 0].to(dtype))
+    elif isinstance(base, (LatentBase, Measured)):
+        kind, kw = base.type, dict(base_path=base.resolved)
+    elif isinstance(base, Medium):  # the parser forbids it; guard all the same
+        raise NbrdfError("a medium cannot be the base")
+    else:
+        raise NbrdfError(f"{place}: unknown base {type(base).__name__}")
+    interfaces = material.interfaces
+    places = [i for i, layer in enumerate(material.layers) if isinstance(layer, Dielectric)][: len(interfaces)]
+    cols: dict[str, list[Tensor]] = {"roughness": [], "ior": [], "albedo": [], "sigma_t": []}
+    zero = torch.zeros(1, 3, dtype=dtype)
+    for (iface, med), i in reversed(list(zip(interfaces, places))):
+        cols["roughness"].append(values(iface.roughness, f"layers[{i}].roughness")[:, 0].to(dtype))
+        cols["ior"].append(values(iface.ior, f"layers[{i}].ior")[:, 0].to(dtype))
+        if med is not None:
+            cols["albedo"].append(values(med.albedo, f"layers[{i + 1}].albedo").to(dtype))
+            cols["sigma_t"].append(values(med.sigma_t, f"layers[{i + 1}].sigma_t")[:, 0].to(dtype))
+        else:
+            cols["albedo"].append(zero)
+            cols["sigma_t"].append(zero[:, 0])
+    cols = {k: v[::-1] for k, v in cols.items()}  # top down
+    tensors = [t for c in cols.values() for t in c] + [v for v in kw.values() if isinstance(v, Tensor)]
+    n = max([t.shape[0] for t in tensors], default=1)
+    grow = lambda t: t.expand(n, *t.shape[1:])
+    L = len(interfaces)
+    return Stack(
+        roughness=torch.stack([grow(t) for t in cols["roughness"]], 1) if L else torch.zeros(n, 0, dtype=dtype),
+        ior=torch.stack([grow(t) for t in cols["ior"]], 1) if L else torch.zeros(n, 0, dtype=dtype),
+        albedo=torch.stack([grow(t) for t in cols["albedo"]], 1) if L else torch.zeros(n, 0, 3, dtype=dtype),
+        sigma_t=torch.stack([grow(t) for t in cols["sigma_t"]], 1) if L else torch.zeros(n, 0, dtype=dtype),
+        base=kind, **{k: grow(v) if isinstance(v, Tensor) else v for k, v in kw.items()})
+
+
+# --- the data sets' flat vectors -----------------------------------------------------------
+def params_to_stack(params: Tensor) -> Stack:
+    """Decodes K single-channel parameter vectors (K, 11) of ONE class into
+    a stack (C = 1), float64."""
+    params = torch.as_tensor(params).double()
+    if params.dim() != 2 or params.shape[1] != len(PARAM_NAMES):
+        raise NbrdfError(f"stack parameters must be (K, {len(PARAM_NAMES)}), got {tuple(params.shape)}")
+    codes = params[:, P["class"]].round().long().unique()
+    if codes.numel() != 1 or not 0 <= int(codes[0]) < len(CLASSES):
+        raise NbrdfError(f"stack parameters: expected one class of {', '.join(CLASSES)}, got codes {codes.tolist()}")
+    cls = CLASSES[int(codes[0])]
+    col = lambda c: params[:, P[c]]
+    k = params.shape[0]
+    empty = dict(roughness=params.new_zeros(k, 0), ior=params.new_zeros(k, 0), albedo=params.new_zeros(k, 0, 1),
+                 sigma_t=params.new_zeros(k, 0))
+    if cls == "conductor":
+        return Stack(**empty, base="conductor", base_roughness=col("base_roughness"),
+                     base_r0=col("base_value")[:, None])
+    if cls == "dielectric":
+        return Stack(**empty, base="dielectric", base_roughness=col("top_roughness"), base_ior=col("top_ior"))
+    used = _INTERFACE_COLUMNS[: 2 if cls in THREE_LAYERED else 1]
+    st = lambda j: torch.stack([col(c[j]) for c in used], -1)
+    kw = dict(roughness=st(0), ior=st(1), albedo=st(2)[..., None], sigma_t=st(3),
+              base_roughness=col("base_roughness"))
+    if cls in DIFFUSE_BASED:
+        return Stack(**kw, base="diffuse", base_albedo=col("base_value")[:, None])
+    return Stack(**kw, base="conductor", base_r0=col("base_value")[:, None])
+
+
+def stack_class(stack: Stack) -> str:
+    """The data-set class of a stack's shape."""
+    L = stack.layers
+    if L == 0 and stack.base in ("conductor", "dielectric"):
+        return stack.base
+    if stack.base == "conductor" and L in (1, 2):
+        return ("two_layer", "three_layer")[L - 1]
+    if stack.base == "diffuse" and L in (1, 2):
+        return ("diffuse_base", "three_layer_diffuse")[L - 1]
+    raise NbrdfError(f"a stack of {L} interface(s) over a {stack.base} base is none of the data-set classes")
+
+
+def stack_to_params(stack: Stack) -> Tensor:
+    """Encodes single-channel stacks (C = 1) as parameter vectors (N, 11), float64."""
+    if stack.channels != 1:
+        raise NbrdfError(f"the parameter vector holds one colour channel; the stack has {stack.channels}")
+    cls = stack_class(stack)
+    p = torch.zeros(stack.n, len(PARAM_NAMES), dtype=torch.float64)
+    p[:, P["class"]] = CLASSES.index(cls)
+    if cls == "dielectric":
+        p[:, P["top_roughness"]], p[:, P["top_ior"]] = stack.base_roughness, stack.base_ior
+        return p
+    for j, names in enumerate(_INTERFACE_COLUMNS[: stack.layers]):
+        for name, t in zip(names, (stack.roughness[:, j], stack.ior[:, j], stack.albedo[:, j, 0], stack.sigma_t[:, j])):
+            p[:, P[name]] = t
+    if stack.base == "conductor":
+        p[:, P["base_roughness"]], p[:, P["base_value"]] = stack.base_roughness, stack.base_r0[:, 0]
+    else:
+        p[:, P["base_value"]] = stack.base_albedo[:, 0]
+    return p
+
+
+def params_to_material(p: Tensor, name: str = "sample") -> Material:
+    """The material (scalar colours) that one single-channel parameter vector describes."""
+    s = params_to_stack(torch.as_tensor(p).reshape(1, -1))
+    f = lambda t: float(t.reshape(-1)[0])
+    layers: list[dict] = []
+    for j in range(s.layers):
+        layers += [{"type": "dielectric", "roughness": f(s.roughness[:, j]), "ior": f(s.ior[:, j])},
+                   {"type": "medium", "albedo": f(s.albedo[:, j]), "sigma_t": f(s.sigma_t[:, j])}]
+    if s.base == "conductor":
+        layers.append({"type": "conductor", "roughness": f(s.base_roughness), "r0": f(s.base_r0)})
+    elif s.base == "diffuse":
+        layers.append({"type": "diffuse", "albedo": f(s.base_albedo)})
+    else:
+        layers.append({"type": "dielectric", "roughness": f(s.base_roughness), "ior": f(s.base_ior)})
+    return parse_material({"format": FORMAT_MATERIAL, "name": name, "layers": layers})

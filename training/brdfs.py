@@ -1,0 +1,195 @@
+"""Every evaluation method of a material behind one RGB BRDF interface.
+
+``brdf_for(material, method)`` is the one factory (``neural.brdf.RGBBRDF``):
+
+- ``reference``: the ground truth of SPEC section 8 -- closed form for a
+  single layer, a MERL table for a measured base, the Monte Carlo simulator
+  for a stack (``eval_with_error`` gives its standard error; exact values
+  give 0 there, as ``nbrdf eval`` writes them);
+- ``analytic``: closed form for a single layer, the analytic layering
+  baseline (``training.analytic_layering``) for a stack;
+- ``neural``: the full neural path (leaf encoders, layering, decoder);
+- ``projected``: the decoder at latents fitted to the reference.
+
+Closed forms sample their own lobes; the others sample a defensive mixture
+of a cosine lobe and the GGX reflection lobe of the top layer's roughness
+(neural BRDFs: their proxy pdf), so every method can drive a path tracer.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import torch
+
+from nbrdf.neural.brdf import ExactRGB, RGBBRDF, Sample
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.geometry import cosine_hemisphere
+from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured
+from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
+
+Tensor = torch.Tensor
+METHODS = ("reference", "analytic", "neural", "projected")
+
+
+def _rgb(v) -> Tensor:
+    return torch.tensor(Material.rgb(v), dtype=torch.float64)
+
+
+class ClosedFormBRDF(ExactRGB):
+    """A lone conductor, dielectric (its reflection: the material is seen
+    from above) or diffuse layer; samples its own lobe."""
+
+    def __init__(self, layer: Conductor | Dielectric | Diffuse):
+        if not isinstance(layer, (Conductor, Dielectric, Diffuse)):
+            raise NbrdfError(f"a {layer.type} layer has no closed form")
+        self.layer = layer
+        # the direction sampler (one channel; the colour does not steer it)
+        self.lobe = (GGXConductor(float(layer.roughness), 1.0) if isinstance(layer, Conductor)
+                     else GGXDielectric(float(layer.roughness), float(layer.ior)) if isinstance(layer, Dielectric)
+                     else Lambertian(1.0))
+
+    def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
+        from nbrdf.training.reference import single_layer_eval
+
+        return single_layer_eval(self.layer, wi, wo)
+
+    def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
+        return self.lobe.pdf(w, w_other)
+
+    def sample(self, w: Tensor, u: Tensor) -> Sample:
+        s = self.lobe.sample(w, u)
+        f = torch.where((s.pdf > 0)[:, None], self.eval(w, s.w), torch.zeros(1, dtype=w.dtype))
+        return Sample(s.w, f, s.pdf)
+
+
+class DefensiveSampler:
+    """Half cosine lobe, half GGX reflection lobe of ``roughness`` (upper
+    hemisphere): a sampler for BRDFs that have none of their own."""
+
+    def __init__(self, roughness: float):
+        self.ggx = GGXConductor(roughness, 1.0)
+
+    def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
+        cos = torch.where(w[:, 2] > 0, w_other[:, 2].clamp_min(0) / math.pi, torch.zeros_like(w[:, 2]))
+        return 0.5 * cos + 0.5 * self.ggx.pdf(w, w_other)
+
+    def sample(self, w: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:
+        """(direction, pdf); u[:, 2] picks the lobe."""
+        wc = cosine_hemisphere(u[:, 0], u[:, 1]).to(w.dtype)
+        wg = self.ggx.sample(w, u).w
+        wo = torch.where((u[:, 2] < 0.5)[:, None], wc, wg)
+        pdf = self.pdf(w, wo)
+        return wo, torch.where((wo[:, 2] > 0) & (w[:, 2] > 0), pdf, torch.zeros_like(pdf))
+
+
+def _top_roughness(material: Material) -> float:
+    r = getattr(material.layers[0], "roughness", None)
+    return float(r) if isinstance(r, (int, float)) else 1.0  # diffuse, measured or latent: broad
+
+
+class _DefensivelySampled:
+    """eval_with_error/eval supplied by the subclass; sample and pdf through a
+    ``DefensiveSampler`` of the material's top roughness."""
+
+    sampler: DefensiveSampler
+
+    def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
+        return self.sampler.pdf(w, w_other)
+
+    def sample(self, w: Tensor, u: Tensor) -> Sample:
+        wo, pdf = self.sampler.sample(w, u)
+        ok = pdf > 0
+        f = self.eval(w, torch.where(ok[:, None], wo, w))  # type: ignore[attr-defined]
+        return Sample(wo, torch.where(ok[:, None], f.to(pdf.dtype), torch.zeros(1, dtype=pdf.dtype)), pdf)
+
+
+class ReferenceBRDF(_DefensivelySampled):
+    """The material's ground truth (``training.reference.reference_eval``),
+    ``spp`` paths per pair with ``seed``; every call draws the same paths."""
+
+    def __init__(self, material: Material, spp: int = 256, seed: int = 0, dtype: torch.dtype = torch.float32):
+        from nbrdf.training.reference import _check_uniform
+
+        _check_uniform(material)
+        if isinstance(material.base, LatentBase) and not material.interfaces:
+            raise NbrdfError("layers[0]: a latent base has no reference; use --method neural")
+        self.material, self.spp, self.seed, self.dtype = material, spp, seed, dtype
+        self.sampler = DefensiveSampler(_top_roughness(material))
+
+    def eval_with_error(self, wi: Tensor, wo: Tensor,
+                        progress: Callable[[int], None] | None = None) -> tuple[Tensor, Tensor]:
+        """(f, standard error), both (N, 3); ``progress`` is told of finished pairs."""
+        from nbrdf.training.reference import reference_eval
+
+        return reference_eval(self.material, wi, wo, spp=self.spp, seed=self.seed, dtype=self.dtype,
+                              progress=progress)
+
+    def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
+        return self.eval_with_error(wi, wo)[0]
+
+
+class MeasuredBRDF(ExactRGB, _DefensivelySampled):
+    """A MERL table (nearest cell), cosine and broad-GGX sampled."""
+
+    def __init__(self, path):
+        from nbrdf.training.merl import MerlBRDF
+
+        self.table = MerlBRDF.load(path)
+        self.sampler = DefensiveSampler(1.0)
+
+    def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
+        return self.table.eval(wi, wo)
+
+
+class AnalyticLayeredBRDF(ExactRGB, _DefensivelySampled):
+    """The analytic layering baseline of a stack (float64 inside, float32 out)."""
+
+    def __init__(self, material: Material):
+        from nbrdf.training.analytic_layering import check_analytic
+
+        check_analytic(material)
+        self.material = material
+        self.sampler = DefensiveSampler(_top_roughness(material))
+
+    def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
+        from nbrdf.training.analytic_layering import analytic_layered_eval
+
+        return analytic_layered_eval(self.material, wi.double(), wo.double()).float()
+
+
+def brdf_for(material: Material, method: str, spp: int = 256, seed: int = 0, model=None) -> RGBBRDF:
+    """The material's BRDF by ``method`` (one of METHODS). ``spp`` and ``seed``
+    drive the Monte Carlo reference; ``seed`` also the projection's samples
+    (which use their own 64 paths each); ``model`` is the neural bundle
+    (default: the shipped one)."""
+    if method not in METHODS:
+        raise NbrdfError(f"unknown method {method!r} (one of {', '.join(METHODS)})")
+    if spp < 1:
+        raise NbrdfError(f"spp: {spp} must be at least 1")
+    if method == "reference":
+        return ReferenceBRDF(material, spp=spp, seed=seed)
+    if method == "neural":
+        from nbrdf.neural.neural_brdf import neural_brdf
+
+        return neural_brdf(material, model)
+    if method == "projected":
+        from nbrdf.neural.neural_brdf import latent_brdf
+        from nbrdf.training.project import fit, material_samples
+
+        dec = model.decoder if model is not None else None
+        if dec is None:
+            from nbrdf.neural.decoder import default_decoder
+
+            dec = default_decoder()
+        return latent_brdf(dec, fit(dec, material_samples(material, spp=64, seed=seed)), material)
+    # analytic
+    if material.is_textured:
+        raise NbrdfError(f"{material.textures()[0][0]}: texture-mapped; the analytic model needs uniform layers")
+    if not material.interfaces:
+        if isinstance(material.base, Measured):
+            return MeasuredBRDF(material.base.resolved)
+        if isinstance(material.base, LatentBase):
+            raise NbrdfError("layers[0]: a latent base has no closed form; use --method neural")
+        return ClosedFormBRDF(material.base)
+    return AnalyticLayeredBRDF(material)

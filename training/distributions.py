@@ -1,0 +1,111 @@
+"""The paper's parameter distributions (SPEC section 9), written once.
+
+Each parameter is a fixed transform of a uniform number u in [0, 1):
+
+- roughness ~ U(0.216, 1)^3 (the cube root is uniform: dense at glossy values),
+- ior ~ U(1.05, 2),
+- r0 ~ U(0, 1) (conductor colour) and a diffuse base's albedo ~ U(0, 1),
+- a medium's albedo ~ 1 - U(0, 1)^2 (mostly bright, as real coatings),
+- sigma_t ~ U(0, 5).
+
+Every transform maps [0, 1] into the legal range of ``neural.material.RANGES``
+(tests check it). The data sets (``sample_params``), the held-out set
+(``training.evaluate``) and the operation training (``random_leaf_params``)
+draw their uniforms from their own seeded generators and turn them into
+parameters here, so each keeps its own deterministic stream.
+"""
+from __future__ import annotations
+
+from typing import Callable, TypeVar
+
+import torch
+
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.stack import CLASSES, DIFFUSE_BASED, PARAM_NAMES, THREE_LAYERED, P
+
+Tensor = torch.Tensor
+U = TypeVar("U")  # a float, a numpy array or a torch tensor of uniforms
+
+
+def roughness(u: U) -> U:
+    """GGX roughness from a uniform: U(0.216, 1)^3, in [0.0101, 1]."""
+    return (0.216 + 0.784 * u) ** 3
+
+
+def ior(u: U) -> U:
+    """Relative index of refraction: U(1.05, 2)."""
+    return 1.05 + 0.95 * u
+
+
+def colour(u: U) -> U:
+    """A conductor's r0 or a diffuse base's albedo: U(0, 1)."""
+    return u
+
+
+def medium_albedo(u: U) -> U:
+    """A medium's single-scattering albedo: 1 - U(0, 1)^2."""
+    return 1.0 - u * u
+
+
+def sigma_t(u: U) -> U:
+    """A slab's extinction (thickness 1): U(0, 5)."""
+    return 5.0 * u
+
+
+#: parameter -> (legal-range key in ``neural.material.RANGES``, transform).
+DISTRIBUTIONS: dict[str, tuple[str, Callable]] = {
+    "roughness": ("roughness", roughness),
+    "ior": ("ior", ior),
+    "r0": ("r0", colour),
+    "base_albedo": ("albedo", colour),
+    "medium_albedo": ("albedo", medium_albedo),
+    "sigma_t": ("sigma_t", sigma_t),
+}
+
+
+def _u(g: torch.Generator, n: int) -> Tensor:
+    return torch.rand(n, generator=g, dtype=torch.float64)
+
+
+def sample_params(cls: str, n: int, g: torch.Generator) -> Tensor:
+    """n single-channel stacks of a class as data-set parameter vectors
+    (n, len(PARAM_NAMES)), float64 (``neural.stack.params_to_stack`` decodes
+    them). The draw order is fixed: data-set shards depend on it."""
+    if cls not in CLASSES:
+        raise NbrdfError(f"unknown BRDF class {cls!r} (one of {', '.join(CLASSES)})")
+    p = torch.zeros(n, len(PARAM_NAMES), dtype=torch.float64)
+    p[:, P["class"]] = CLASSES.index(cls)
+    if cls == "conductor":
+        p[:, P["base_roughness"]], p[:, P["base_value"]] = roughness(_u(g, n)), colour(_u(g, n))
+    elif cls == "dielectric":
+        p[:, P["top_roughness"]], p[:, P["top_ior"]] = roughness(_u(g, n)), ior(_u(g, n))
+    else:
+        p[:, P["top_roughness"]], p[:, P["top_ior"]] = roughness(_u(g, n)), ior(_u(g, n))
+        p[:, P["albedo_1"]], p[:, P["sigma_t_1"]] = medium_albedo(_u(g, n)), sigma_t(_u(g, n))
+        if cls in THREE_LAYERED:
+            p[:, P["mid_roughness"]], p[:, P["mid_ior"]] = roughness(_u(g, n)), ior(_u(g, n))
+            p[:, P["albedo_2"]], p[:, P["sigma_t_2"]] = medium_albedo(_u(g, n)), sigma_t(_u(g, n))
+        if cls in DIFFUSE_BASED:
+            p[:, P["base_value"]] = colour(_u(g, n))
+        else:
+            p[:, P["base_roughness"]], p[:, P["base_value"]] = roughness(_u(g, n)), colour(_u(g, n))
+    return p
+
+
+def mixed_params(n: int, g: torch.Generator) -> Tensor:
+    """n parameter vectors over every class (even shares, the rest two-layer)."""
+    per = [n // len(CLASSES)] * len(CLASSES)
+    per[CLASSES.index("two_layer")] += n - sum(per)
+    return torch.cat([sample_params(c, k, g) for c, k in zip(CLASSES, per)])
+
+
+def random_leaf_params(kind: str, n: int, g: torch.Generator) -> Tensor:
+    """n single-channel leaf parameters (float32) in ``neural.leaf.LEAF_PARAMS``
+    order: conductor (roughness, r0), dielectric (roughness, ior), diffuse (albedo)."""
+    u = torch.rand(n, 2, generator=g)
+    rough = roughness(u[:, 0])
+    if kind == "conductor":
+        return torch.stack([rough, colour(u[:, 1])], -1)
+    if kind == "dielectric":
+        return torch.stack([rough, ior(u[:, 1])], -1)
+    return colour(u[:, :1])
