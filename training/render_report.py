@@ -62,9 +62,9 @@ class RenderReportConfig:
     paths to material JSON files or folders of them."""
     out: Path = Path("render-report")
     """Folder for render.json and the figures (one PNG per set)."""
-    size: int = 128
+    size: int = 96
     """Sphere image size in pixels (square)."""
-    spp: int = 256
+    spp: int = 384
     """Monte Carlo paths per pixel of a stack's reference (split over two halves)."""
     cache: Path | None = None
     """Folder of cached reference renders (default: ``out / "references"``)."""
@@ -72,7 +72,7 @@ class RenderReportConfig:
     """Neural bundle (.safetensors); None = the shipped weights."""
     methods: tuple[str, ...] = ("neural", "projected")
     """Methods scored, from ``METHODS``."""
-    heldout_per_class: int = 4
+    heldout_per_class: int = 3
     """Held-out materials per class in the ``heldout`` set."""
     projection_pairs: int = 4096
     """Reference samples a projection fits to (drawn like the training data)."""
@@ -402,7 +402,31 @@ def run_render_report(config: RenderReportConfig) -> dict:
             entry["figure"] = str(fig)
         result["sets"][label] = entry
     (out / "render.json").write_text(json.dumps(result, indent=1, default=_json_default) + "\n")
+    (out / "render.md").write_text(markdown_tables(result))
     return result
+
+
+def markdown_tables(result: dict) -> str:
+    """Per set: one row per class (and all), median / worst FLIP and PSNR per method."""
+    lines = []
+    for label, entry in result["sets"].items():
+        summ = entry["summary"]
+        meths = [m for m in METHODS if any(m in v for v in summ.values())]
+        lines += [f"**{label}**", "",
+                  "| class | n | " + " | ".join(f"{m} FLIP median / worst | {m} PSNR median / worst (dB)"
+                                                 for m in meths) + " | reference noise (half-FLIP, worst) |",
+                  "|---|---|" + "---|---|" * len(meths) + "---|"]
+        for cls, v in summ.items():
+            cells = []
+            for m in meths:
+                s = v.get(m)
+                cells += ([f"{s['flip_median']:.3f} / {s['flip_worst']:.3f}",
+                           f"{s['psnr_median']:.1f} / {s['psnr_worst']:.1f}"] if s else ["—", "—"])
+            name = f"**{cls}**" if cls == "all" else cls
+            lines.append(f"| {name} | {v['materials']} | " + " | ".join(cells)
+                         + f" | {v['reference_half_flip_worst']:.3f} |")
+        lines.append("")
+    return "\n".join(lines)
 
 
 def _json_default(x):
