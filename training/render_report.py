@@ -78,6 +78,11 @@ class RenderReportConfig:
     """Reference samples a projection fits to (drawn like the training data)."""
     projection_spp: int = 64
     """Monte Carlo paths per projection sample of a stack."""
+    noise_target: float = 0.0
+    """Refine a stack's reference (doubling its paths) while the FLIP between
+    its two independent halves exceeds this (0 = a single round of ``spp``)."""
+    max_spp: int = 1536
+    """Most paths per pixel the refinement may reach."""
     seed: int = 0
     """Seed of the references and the projection samples."""
     figure: bool = True
@@ -189,7 +194,7 @@ def material_class(m: Material) -> str:
     return "car_paint" if n == 2 else f"{n + 1}_layer"
 
 
-def load_set(spec: str, heldout_per_class: int = 4) -> list[tuple[str, Material]]:
+def load_set(spec: str, heldout_per_class: int = 3) -> list[tuple[str, Material]]:
     """(class, material) pairs of a set name or a path (file or folder of JSONs)."""
     if spec == "heldout":
         from nbrdf.training.evaluate import heldout_set
@@ -243,50 +248,84 @@ def _cache_key(m: Material, size: int, spp: int, seed: int) -> str:
 
 
 def reference_render(m: Material, geo: SphereGeometry, spp: int, seed: int = 0, cache: Path | None = None,
-                     progress: bool = True) -> ReferenceRender:
+                     progress: bool = True, noise_target: float = 0.0, max_spp: int = 0) -> ReferenceRender:
     """The ground-truth sphere; stacks by Monte Carlo in two independent halves
-    of spp/2 paths, cached in ``cache`` (resumable per material)."""
+    of spp/2 paths each. While the halves' FLIP against each other exceeds
+    ``noise_target`` (0 = off) the paths are doubled, up to ``max_spp``. Every
+    round is cached in ``cache`` (resumable per material and round)."""
+    size = geo.mask.shape[0]
+    if not m.interfaces:
+        return _cached(cache, m, size, 0, seed, lambda prev: _closed_round(m, geo))[0]
+    per, prev = max(1, spp // 2), None
+    while True:
+        ref, prev = _cached(cache, m, size, 2 * per, seed,
+                            lambda p: _mc_round(m, geo, per if p is None else per // 2, seed, p, progress), prev)
+        if noise_target <= 0 or ref.half_flip <= noise_target or 4 * per > max(max_spp, 2 * per):
+            return ref
+        per *= 2
+
+
+def _closed_round(m: Material, geo: SphereGeometry) -> tuple[ReferenceRender, dict]:
+    from nbrdf.training.reference import reference_eval
+
+    t0 = time.perf_counter()
+    f, _ = reference_eval(m, geo.wi.float(), geo.wo.float())
+    img = to_image(f.double() * geo.wi[:, 2:3].clamp_min(0), geo)
+    return ReferenceRender(img, np.zeros_like(img), 0.0, 0, time.perf_counter() - t0), {}
+
+
+def _mc_round(m: Material, geo: SphereGeometry, n: int, seed: int, prev: dict | None,
+              progress: bool) -> tuple[ReferenceRender, dict]:
+    """Adds n paths per pixel to each half (pooled with ``prev``'s halves by path count)."""
     from tqdm import tqdm
 
     from nbrdf.training.reference import reference_eval
 
-    size = geo.mask.shape[0]
-    closed = not m.interfaces
-    path = None
-    if cache is not None:
-        cache.mkdir(parents=True, exist_ok=True)
-        path = cache / f"{_slug(m.name)}-{_cache_key(m, size, 0 if closed else spp, seed)}.npz"
-        if path.is_file():
-            z = np.load(path)
-            return ReferenceRender(z["image"], z["stderr"], float(z["half_flip"]), int(z["spp"]),
-                                   float(z["seconds"]))
     t0 = time.perf_counter()
     wi, wo = geo.wi.float(), geo.wo.float()
     cos_i = geo.wi[:, 2:3].clamp_min(0)
-    if closed:
-        f, _ = reference_eval(m, wi, wo)
-        img = to_image(f.double() * cos_i, geo)
-        r = ReferenceRender(img, np.zeros_like(img), 0.0, 0, time.perf_counter() - t0)
-    else:
-        half = max(1, spp // 2)
-        up = int(((geo.wi[:, 2] > 0) & (geo.wo[:, 2] > 0)).sum())
-        halves, errs = [], []
-        with tqdm(total=2 * up, desc=f"reference {m.name}", unit="px", file=sys.stderr, leave=False,
-                  disable=not progress or None) as bar:
-            for k in range(2):
-                f, e = reference_eval(m, wi, wo, spp=half, seed=seed * 2 + k + 1, progress=bar.update)
-                halves.append(to_image(f.double() * cos_i, geo))
-                errs.append(to_image(e.double() * cos_i, geo))
-        img = 0.5 * (halves[0] + halves[1])
-        se = 0.5 * np.sqrt(errs[0] ** 2 + errs[1] ** 2)
-        r = ReferenceRender(img, se.astype(np.float32), flip(halves[0], halves[1])[0], 2 * half,
-                            time.perf_counter() - t0)
+    n_prev = int(prev["n_half"]) if prev is not None else 0
+    rnd = 0 if prev is None else int(prev["round"]) + 1
+    up = int(((geo.wi[:, 2] > 0) & (geo.wo[:, 2] > 0)).sum())
+    halves = {}
+    with tqdm(total=2 * up, desc=f"reference {m.name} ({2 * (n_prev + n)} spp)", unit="px", file=sys.stderr,
+              leave=False, disable=not progress or None) as bar:
+        for k in "ab":
+            sd = seed * 2 + (k == "b") + 1 + 7919 * rnd
+            f, e = reference_eval(m, wi, wo, spp=n, seed=sd, progress=bar.update)
+            img, se = to_image(f.double() * cos_i, geo), to_image(e.double() * cos_i, geo)
+            if prev is not None:
+                w = n_prev + n
+                img = (prev[f"half_{k}"] * n_prev + img * n) / w
+                se = np.sqrt((prev[f"se_{k}"] * n_prev) ** 2 + (se * n) ** 2) / w
+            halves[f"half_{k}"], halves[f"se_{k}"] = img.astype(np.float32), se.astype(np.float32)
+    image = 0.5 * (halves["half_a"] + halves["half_b"])
+    stderr = 0.5 * np.sqrt(halves["se_a"] ** 2 + halves["se_b"] ** 2)
+    secs = time.perf_counter() - t0 + (float(prev["total_seconds"]) if prev is not None else 0.0)
+    ref = ReferenceRender(image, stderr.astype(np.float32), flip(halves["half_a"], halves["half_b"])[0],
+                          2 * (n_prev + n), secs)
+    return ref, {**halves, "n_half": n_prev + n, "round": rnd, "total_seconds": secs}
+
+
+def _cached(cache: Path | None, m: Material, size: int, spp: int, seed: int, make, prev: dict | None = None
+            ) -> tuple[ReferenceRender, dict | None]:
+    """A cached round, or ``make(prev)`` saved under the key of its total spp."""
+    path = None
+    if cache is not None:
+        cache.mkdir(parents=True, exist_ok=True)
+        path = cache / f"{_slug(m.name)}-{_cache_key(m, size, spp, seed)}.npz"
+        if path.is_file():
+            z = dict(np.load(path))
+            ref = ReferenceRender(z["image"], z["stderr"], float(z["half_flip"]), int(z["spp"]), float(z["seconds"]))
+            if spp == 0 or "half_a" in z or prev is None:
+                return ref, (z if "half_a" in z else None)
+    ref, extra = make(prev)
     if path is not None:
         tmp = path.with_suffix(".tmp.npz")
-        np.savez_compressed(tmp, image=r.image, stderr=r.stderr, half_flip=r.half_flip, spp=r.spp,
-                            seconds=r.seconds)
+        np.savez_compressed(tmp, image=ref.image, stderr=ref.stderr, half_flip=ref.half_flip, spp=ref.spp,
+                            seconds=ref.seconds, **extra)
         tmp.replace(path)
-    return r
+    return ref, extra
 
 
 def _slug(name: str) -> str:
@@ -378,7 +417,8 @@ def run_render_report(config: RenderReportConfig) -> dict:
         rows, images = [], []
         for cls, m in tqdm(items, desc=f"render {label}", unit="material", file=sys.stderr,
                            disable=not config.progress or None):
-            ref = reference_render(m, geo, config.spp, config.seed, cache, config.progress)
+            ref = reference_render(m, geo, config.spp, config.seed, cache, config.progress, config.noise_target,
+                                   config.max_spp)
             row = {"name": m.name, "class": cls, "layers": len(m.layers),
                    "reference": {"spp": ref.spp, "noise_psnr": noise_psnr(ref.image, ref.stderr, mask),
                                  "half_flip": ref.half_flip, "seconds": round(ref.seconds, 2)}}

@@ -18,6 +18,7 @@ from nbrdf.training.render_report import (
     flip,
     light_direction,
     load_set,
+    reference_render,
     render_psnr,
     run_render_report,
     shade,
@@ -138,3 +139,15 @@ def test_report_on_a_tiny_set_writes_json_and_figure(tmp_path: Path):
     assert len(list((tmp_path / "out" / "references").glob("*.npz"))) == 2
     res2 = run_render_report(cfg)
     assert res2["sets"]["set"]["rows"][1]["neural"] == res["sets"]["set"]["rows"][1]["neural"]
+
+
+def test_reference_refinement_doubles_paths_and_pools_halves(tmp_path: Path):
+    m = load_material(SETS_DIR / "lookdev" / "coated-gold.json")
+    geo = sphere_geometry(12)
+    one = reference_render(m, geo, 4, cache=tmp_path, progress=False)
+    ref = reference_render(m, geo, 4, cache=tmp_path, progress=False, noise_target=1e-9, max_spp=16)
+    assert one.spp == 4 and ref.spp == 16
+    assert ref.half_flip < one.half_flip
+    assert len(list(tmp_path.glob("*.npz"))) == 3  # one file per round: 4, 8, 16 spp
+    again = reference_render(m, geo, 4, cache=tmp_path, progress=False, noise_target=1e-9, max_spp=16)
+    assert np.array_equal(again.image, ref.image)
