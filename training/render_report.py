@@ -78,7 +78,7 @@ class RenderReportConfig:
     """Reference samples a projection fits to (drawn like the training data)."""
     projection_spp: int = 64
     """Monte Carlo paths per projection sample of a stack."""
-    noise_target: float = 0.0
+    noise_target: float = 0.1
     """Refine a stack's reference (doubling its paths) while the FLIP between
     its two independent halves exceeds this (0 = a single round of ``spp``)."""
     max_spp: int = 1536

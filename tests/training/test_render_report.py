@@ -124,8 +124,8 @@ def test_report_on_a_tiny_set_writes_json_and_figure(tmp_path: Path):
     folder.mkdir()
     for name in ("coated-gold", "coated-black-plastic"):
         (folder / f"{name}.json").write_text((SETS_DIR / "lookdev" / f"{name}.json").read_text())
-    cfg = RenderReportConfig(sets=(str(folder),), out=tmp_path / "out", size=24, spp=4, methods=("neural",),
-                             progress=False, figure_dpi=30)
+    cfg = RenderReportConfig(sets=(str(folder),), out=tmp_path / "out", size=24, spp=4, noise_target=0.0,
+                             methods=("neural",), progress=False, figure_dpi=30)
     res = run_render_report(cfg)
     data = json.loads((tmp_path / "out" / "render.json").read_text())
     rows = data["sets"]["set"]["rows"]
