@@ -1,0 +1,525 @@
+"""Render-space accuracy (SPEC section 9, ``nbrdf report render``).
+
+Lobe PSNR averages over the whole hemisphere and hides what a viewer shows:
+a sharp coat's highlight over a coloured body. This module renders what the
+viewer renders -- a sphere under an orthographic camera along +z, lit by one
+directional light, per pixel f(wi, wo) cos(theta_i) with unit irradiance --
+with the ground truth and with the neural paths, and scores the linear images
+with HDR-FLIP (NVIDIA's ``flip-evaluator``, default settings) and PSNR on
+x / (1 + x).
+
+Methods scored against the reference:
+
+- ``neural``: the full neural path (leaf encoders + layering + decoder);
+- ``projected``: the decoder at latents fitted to the reference (its capacity
+  alone, no operation networks);
+- ``coat_split`` (an experiment, ``RenderReportConfig.coat_split``): the top
+  interface's single reflection in closed form plus the decoder at latents
+  fitted to the rest (the light that entered the stack), for stacks.
+
+References are closed form for single interfaces and Monte Carlo for stacks,
+rendered as two independent halves (their mean is the reference; their FLIP
+against each other bounds the reference's own noise) and cached on disk keyed
+by material and settings, so an interrupted report resumes.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import Conductor, Material, load_material, material_to_dict
+
+Tensor = torch.Tensor
+EvalFn = Callable[[Tensor, Tensor], Tensor]  # (wi (N, 3), wo (N, 3)) local -> f (N, 3)
+
+#: The light direction of SPEC section 9 (view space, before normalisation).
+LIGHT = (-0.45, 0.55, 0.70)
+#: The package folder of the material sets.
+SETS_DIR = Path(__file__).resolve().parent / "sets"
+#: Bumped when a change makes cached reference renders stale.
+CACHE_VERSION = 1
+METHODS = ("neural", "projected", "coat_split")
+
+
+@dataclass
+class RenderReportConfig:
+    """Settings of one render-space report."""
+
+    sets: tuple[str, ...] = ("lookdev", "heldout")
+    """Material sets: ``lookdev`` (the package's look-development set),
+    ``heldout`` (the first ``heldout_per_class`` of each held-out class), or
+    paths to material JSON files or folders of them."""
+    out: Path = Path("render-report")
+    """Folder for render.json and the figures (one PNG per set)."""
+    size: int = 96
+    """Sphere image size in pixels (square)."""
+    spp: int = 384
+    """Monte Carlo paths per pixel of a stack's reference (split over two halves)."""
+    cache: Path | None = None
+    """Folder of cached reference renders (default: ``out / "references"``)."""
+    model: str | None = None
+    """Neural bundle (.safetensors); None = the shipped weights."""
+    methods: tuple[str, ...] = ("neural", "projected")
+    """Methods scored, from ``METHODS``."""
+    heldout_per_class: int = 3
+    """Held-out materials per class in the ``heldout`` set."""
+    projection_pairs: int = 4096
+    """Reference samples a projection fits to (drawn like the training data)."""
+    projection_spp: int = 64
+    """Monte Carlo paths per projection sample of a stack."""
+    noise_target: float = 0.1
+    """Refine a stack's reference (doubling its paths) while the FLIP between
+    its two independent halves exceeds this (0 = a single round of ``spp``)."""
+    max_spp: int = 1536
+    """Most paths per pixel the refinement may reach."""
+    seed: int = 0
+    """Seed of the references and the projection samples."""
+    figure: bool = True
+    """Write the side-by-side figure of every set."""
+    figure_dpi: int = 60
+    """Resolution of the figures (keeps the PNGs small)."""
+    progress: bool = True
+    """tqdm progress bars on stderr."""
+
+
+# --- geometry ----------------------------------------------------------------------------
+@dataclass
+class SphereGeometry:
+    """Pixels of the lit sphere: the disk mask and per-pixel local directions."""
+
+    mask: Tensor
+    """(H, W) bool, True inside the disk; row 0 is the top of the image (+y)."""
+    frame: Tensor
+    """(P, 3, 3) per disk pixel, rows x, y, z (= the normal) of the local frame, view space."""
+    wi: Tensor
+    """(P, 3) the light direction in the local frames."""
+    wo: Tensor
+    """(P, 3) the view direction (+z) in the local frames."""
+
+
+def light_direction(dtype: torch.dtype = torch.float64) -> Tensor:
+    v = torch.tensor(LIGHT, dtype=dtype)
+    return v / v.norm()
+
+
+def sphere_geometry(size: int) -> SphereGeometry:
+    """Pixel centres of an orthographic view of the unit sphere, SPEC section 9:
+    z = n, x = normalize(cross((0, 1, 0), n)), y = cross(n, x)."""
+    if size < 2:
+        raise NbrdfError(f"size: {size} is too small for a sphere image (at least 2 pixels)")
+    c = (torch.arange(size, dtype=torch.float64) + 0.5) / size * 2 - 1
+    y, x = torch.meshgrid(-c, c, indexing="ij")  # row 0 at the top: y = +1
+    r2 = x * x + y * y
+    mask = r2 < 1.0
+    n = torch.stack([x[mask], y[mask], torch.sqrt(1.0 - r2[mask])], -1)
+    up = torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64).expand_as(n)
+    tx = torch.linalg.cross(up, n)
+    tx = tx / tx.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    ty = torch.linalg.cross(n, tx)
+    frame = torch.stack([tx, ty, n], 1)
+    to_local = lambda v: frame @ v  # (P, 3, 3) @ (3,) -> (P, 3)
+    wi = to_local(light_direction())
+    wo = to_local(torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64))
+    return SphereGeometry(mask, frame, wi, wo)
+
+
+def to_image(values: Tensor, geo: SphereGeometry) -> np.ndarray:
+    """Per-pixel values (P, 3) -> a float32 (H, W, 3) image, zeros outside the disk."""
+    img = torch.zeros(*geo.mask.shape, 3, dtype=torch.float64)
+    img[geo.mask] = values.detach().double()
+    return img.numpy().astype(np.float32)
+
+
+def shade(fn: EvalFn, geo: SphereGeometry) -> np.ndarray:
+    """The lit sphere of a BRDF: f(wi, wo) cos(theta_i) with unit irradiance,
+    zero where either direction is below the horizon."""
+    wi, wo = geo.wi.float(), geo.wo.float()
+    up = (geo.wi[:, 2] > 0) & (geo.wo[:, 2] > 0)
+    with torch.no_grad():
+        f = fn(wi, wo).double()
+    v = torch.where(up[:, None], f * geo.wi[:, 2:3], torch.zeros_like(f))
+    return to_image(v, geo)
+
+
+# --- scores -----------------------------------------------------------------------------
+def flip(reference: np.ndarray, test: np.ndarray) -> tuple[float, np.ndarray]:
+    """HDR-FLIP with default settings on linear images: (mean over the image, error map (H, W))."""
+    import flip_evaluator
+
+    ref = np.ascontiguousarray(np.maximum(reference, 0.0), dtype=np.float32)
+    tst = np.ascontiguousarray(np.maximum(test, 0.0), dtype=np.float32)
+    if not np.isfinite(tst).all():
+        raise NbrdfError("test image holds NaN or infinite values")
+    if not ref.any() and not tst.any():  # FLIP's exposure range is undefined for black images
+        return 0.0, np.zeros(ref.shape[:2], dtype=np.float32)
+    err, mean, _ = flip_evaluator.evaluate(ref, tst, "HDR", applyMagma=False)
+    err = np.asarray(err, dtype=np.float32)
+    return float(mean), err.reshape(ref.shape[:2])
+
+
+def render_psnr(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> float:
+    """10 log10(1 / MSE) of x / (1 + x) over the disk pixels and channels."""
+    t = lambda a: np.maximum(a[mask].astype(np.float64), 0.0) / (1.0 + np.maximum(a[mask].astype(np.float64), 0.0))
+    mse = float(np.mean((t(test) - t(reference)) ** 2))
+    return float("inf") if mse == 0 else 10.0 * math.log10(1.0 / mse)
+
+
+def noise_psnr(reference: np.ndarray, stderr: np.ndarray, mask: np.ndarray) -> float:
+    """The PSNR the reference's own noise costs (its standard errors through T'(x) = 1/(1+x)^2)."""
+    d = 1.0 / (1.0 + np.maximum(reference[mask].astype(np.float64), 0.0)) ** 2
+    mse = float(np.mean((d * stderr[mask]) ** 2))
+    return float("inf") if mse == 0 else 10.0 * math.log10(1.0 / mse)
+
+
+# --- materials ----------------------------------------------------------------------------
+def material_class(m: Material) -> str:
+    """A look-development class from the stack's structure."""
+    n = len(m.interfaces)
+    base = type(m.base).__name__.lower()
+    if n == 0:
+        return base
+    if n == 1:
+        return "coated_metal" if isinstance(m.base, Conductor) else f"coated_{base}"
+    return "car_paint" if n == 2 else f"{n + 1}_layer"
+
+
+def load_set(spec: str, heldout_per_class: int = 3) -> list[tuple[str, Material]]:
+    """(class, material) pairs of a set name or a path (file or folder of JSONs)."""
+    if spec == "heldout":
+        from nbrdf.training.evaluate import heldout_set
+
+        out, seen = [], {}
+        for cls, m in heldout_set():
+            if seen.get(cls, 0) < heldout_per_class:
+                seen[cls] = seen.get(cls, 0) + 1
+                out.append((cls, m))
+        return out
+    path = SETS_DIR / spec if spec == "lookdev" else Path(spec)
+    if path.is_dir():
+        files = sorted(path.glob("*.json"))
+        if not files:
+            raise NbrdfError(f"{spec}: no material .json files in this folder")
+    elif path.is_file():
+        files = [path]
+    else:
+        raise NbrdfError(f"{spec}: not a set name (lookdev, heldout), a material file or a folder")
+    out = []
+    for f in files:
+        m = load_material(f)
+        if m.is_textured:
+            raise NbrdfError(f"{f}: texture-mapped materials have no single render-space reference")
+        out.append((material_class(m), m))
+    return out
+
+
+def set_label(spec: str) -> str:
+    return spec if spec in ("lookdev", "heldout") else Path(spec).stem
+
+
+# --- references ---------------------------------------------------------------------------
+@dataclass
+class ReferenceRender:
+    """A reference sphere and its noise."""
+
+    image: np.ndarray  # (H, W, 3), the mean of the two halves
+    stderr: np.ndarray  # (H, W, 3)
+    half_flip: float  # FLIP of one half against the other (0 for closed forms)
+    spp: int  # paths per pixel in all (0 = closed form)
+    seconds: float
+
+
+def _cache_key(m: Material, size: int, spp: int, seed: int) -> str:
+    d = material_to_dict(m)
+    d.pop("name", None)
+    blob = json.dumps({"m": d, "size": size, "spp": spp, "seed": seed, "light": LIGHT, "v": CACHE_VERSION},
+                      sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def reference_render(m: Material, geo: SphereGeometry, spp: int, seed: int = 0, cache: Path | None = None,
+                     progress: bool = True, noise_target: float = 0.0, max_spp: int = 0) -> ReferenceRender:
+    """The ground-truth sphere; stacks by Monte Carlo in two independent halves
+    of spp/2 paths each. While the halves' FLIP against each other exceeds
+    ``noise_target`` (0 = off) the paths are doubled, up to ``max_spp``. Every
+    round is cached in ``cache`` (resumable per material and round)."""
+    size = geo.mask.shape[0]
+    if not m.interfaces:
+        return _cached(cache, m, size, 0, seed, lambda prev: _closed_round(m, geo))[0]
+    per, prev = max(1, spp // 2), None
+    while True:
+        ref, prev = _cached(cache, m, size, 2 * per, seed,
+                            lambda p: _mc_round(m, geo, per if p is None else per // 2, seed, p, progress), prev)
+        if noise_target <= 0 or ref.half_flip <= noise_target or 4 * per > max(max_spp, 2 * per):
+            return ref
+        per *= 2
+
+
+def _closed_round(m: Material, geo: SphereGeometry) -> tuple[ReferenceRender, dict]:
+    from nbrdf.training.reference import reference_eval
+
+    t0 = time.perf_counter()
+    f, _ = reference_eval(m, geo.wi.float(), geo.wo.float())
+    img = to_image(f.double() * geo.wi[:, 2:3].clamp_min(0), geo)
+    return ReferenceRender(img, np.zeros_like(img), 0.0, 0, time.perf_counter() - t0), {}
+
+
+def _mc_round(m: Material, geo: SphereGeometry, n: int, seed: int, prev: dict | None,
+              progress: bool) -> tuple[ReferenceRender, dict]:
+    """Adds n paths per pixel to each half (pooled with ``prev``'s halves by path count)."""
+    from tqdm import tqdm
+
+    from nbrdf.training.reference import reference_eval
+
+    t0 = time.perf_counter()
+    wi, wo = geo.wi.float(), geo.wo.float()
+    cos_i = geo.wi[:, 2:3].clamp_min(0)
+    n_prev = int(prev["n_half"]) if prev is not None else 0
+    rnd = 0 if prev is None else int(prev["round"]) + 1
+    up = int(((geo.wi[:, 2] > 0) & (geo.wo[:, 2] > 0)).sum())
+    halves = {}
+    with tqdm(total=2 * up, desc=f"reference {m.name} ({2 * (n_prev + n)} spp)", unit="px", file=sys.stderr,
+              leave=False, disable=not progress or None) as bar:
+        for k in "ab":
+            sd = seed * 2 + (k == "b") + 1 + 7919 * rnd
+            f, e = reference_eval(m, wi, wo, spp=n, seed=sd, progress=bar.update)
+            img, se = to_image(f.double() * cos_i, geo), to_image(e.double() * cos_i, geo)
+            if prev is not None:
+                w = n_prev + n
+                img = (prev[f"half_{k}"] * n_prev + img * n) / w
+                se = np.sqrt((prev[f"se_{k}"] * n_prev) ** 2 + (se * n) ** 2) / w
+            halves[f"half_{k}"], halves[f"se_{k}"] = img.astype(np.float32), se.astype(np.float32)
+    image = 0.5 * (halves["half_a"] + halves["half_b"])
+    stderr = 0.5 * np.sqrt(halves["se_a"] ** 2 + halves["se_b"] ** 2)
+    secs = time.perf_counter() - t0 + (float(prev["total_seconds"]) if prev is not None else 0.0)
+    ref = ReferenceRender(image, stderr.astype(np.float32), flip(halves["half_a"], halves["half_b"])[0],
+                          2 * (n_prev + n), secs)
+    return ref, {**halves, "n_half": n_prev + n, "round": rnd, "total_seconds": secs}
+
+
+def _cached(cache: Path | None, m: Material, size: int, spp: int, seed: int, make, prev: dict | None = None
+            ) -> tuple[ReferenceRender, dict | None]:
+    """A cached round, or ``make(prev)`` saved under the key of its total spp."""
+    path = None
+    if cache is not None:
+        cache.mkdir(parents=True, exist_ok=True)
+        path = cache / f"{_slug(m.name)}-{_cache_key(m, size, spp, seed)}.npz"
+        if path.is_file():
+            z = dict(np.load(path))
+            ref = ReferenceRender(z["image"], z["stderr"], float(z["half_flip"]), int(z["spp"]), float(z["seconds"]))
+            if spp == 0 or "half_a" in z or prev is None:
+                return ref, (z if "half_a" in z else None)
+    ref, extra = make(prev)
+    if path is not None:
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez_compressed(tmp, image=ref.image, stderr=ref.stderr, half_flip=ref.half_flip, spp=ref.spp,
+                            seconds=ref.seconds, **extra)
+        tmp.replace(path)
+    return ref, extra
+
+
+def _slug(name: str) -> str:
+    return "".join(ch if ch.isalnum() or ch in "-_" else "-" for ch in name.lower()) or "material"
+
+
+# --- methods ------------------------------------------------------------------------------
+def top_reflection(m: Material) -> EvalFn:
+    """The closed-form single reflection (N, 3) off the stack's top interface."""
+    from nbrdf.training.reference import single_layer_eval
+
+    top = m.interfaces[0][0]
+    return lambda wi, wo: single_layer_eval(top, wi, wo)
+
+
+def method_evaluators(m: Material, model, methods: tuple[str, ...], pairs: int, spp: int,
+                      seed: int) -> dict[str, EvalFn]:
+    """fn(wi, wo) of every method for one material. Both projections fit the
+    same reference samples; ``coat_split`` fits what is left once the top
+    interface's single reflection is taken out, and adds it back in closed form."""
+    from nbrdf.training.project import Samples, fit, material_samples
+
+    dec = model.decoder
+    out: dict[str, EvalFn] = {}
+    if "neural" in methods:
+        z_n = model.material_latent(m)
+        out["neural"] = lambda wi, wo, z=z_n: dec.eval_rgb(z, wi, wo)
+    need = [k for k in ("projected", "coat_split") if k in methods]
+    if not need:
+        return out
+    s = material_samples(m, n=pairs, spp=spp, seed=seed + 1)
+    if "projected" in methods:
+        z_p = fit(dec, s)
+        out["projected"] = lambda wi, wo, z=z_p: dec.eval_rgb(z, wi, wo)
+    if "coat_split" in methods and m.interfaces:
+        coat = top_reflection(m)
+        body = (s.f - coat(s.wi, s.wo).to(s.f.dtype)).clamp_min(0.0)
+        z_b = fit(dec, Samples(s.wi, s.wo, body))
+        out["coat_split"] = lambda wi, wo, z=z_b: coat(wi, wo).to(wi.dtype) + dec.eval_rgb(z, wi, wo)
+    return out
+
+
+# --- the report ---------------------------------------------------------------------------
+def summarise(rows: list[dict], methods: tuple[str, ...]) -> dict:
+    """Median and worst FLIP / PSNR per class and over the whole set, per method."""
+    classes = list(dict.fromkeys(r["class"] for r in rows)) + ["all"]
+    out = {}
+    for cls in classes:
+        sel = [r for r in rows if cls == "all" or r["class"] == cls]
+        entry = {"materials": len(sel)}
+        for meth in methods:
+            fl = [r[meth]["flip"] for r in sel if meth in r]
+            ps = [r[meth]["psnr"] for r in sel if meth in r]
+            if fl:
+                entry[meth] = {"flip_median": float(np.median(fl)), "flip_worst": float(np.max(fl)),
+                               "psnr_median": float(np.median(ps)), "psnr_worst": float(np.min(ps)),
+                               "materials": len(fl)}
+        noise = [r["reference"]["half_flip"] for r in sel]
+        entry["reference_half_flip_worst"] = float(np.max(noise))
+        out[cls] = entry
+    return out
+
+
+def run_render_report(config: RenderReportConfig) -> dict:
+    """Renders and scores every set; writes render.json and one figure per set
+    into ``config.out``. Returns the JSON's content."""
+    from tqdm import tqdm
+
+    from nbrdf.neural.model import default_model, load_model
+
+    unknown = [x for x in config.methods if x not in METHODS]
+    if unknown:
+        raise NbrdfError(f"methods: {unknown[0]!r} is not one of {', '.join(METHODS)}")
+    if config.spp < 2:
+        raise NbrdfError(f"spp: {config.spp} is too few (at least 2: two independent halves)")
+    model = load_model(config.model) if config.model else default_model()
+    if "neural" in config.methods:
+        model.require("leaf")
+        model.require("layering")
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cache = Path(config.cache) if config.cache is not None else out / "references"
+    geo = sphere_geometry(config.size)
+    mask = geo.mask.numpy()
+    sets = {set_label(s): load_set(s, config.heldout_per_class) for s in config.sets}
+    result = {"config": {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(config).items()},
+              "light": [float(x) for x in light_direction()], "machine": _machine(), "sets": {}}
+    for label, items in sets.items():
+        rows, images = [], []
+        for cls, m in tqdm(items, desc=f"render {label}", unit="material", file=sys.stderr,
+                           disable=not config.progress or None):
+            ref = reference_render(m, geo, config.spp, config.seed, cache, config.progress, config.noise_target,
+                                   config.max_spp)
+            row = {"name": m.name, "class": cls, "layers": len(m.layers),
+                   "reference": {"spp": ref.spp, "noise_psnr": noise_psnr(ref.image, ref.stderr, mask),
+                                 "half_flip": ref.half_flip, "seconds": round(ref.seconds, 2)}}
+            t0 = time.perf_counter()
+            fns = method_evaluators(m, model, config.methods, config.projection_pairs, config.projection_spp,
+                                    config.seed)
+            imgs = {"reference": ref.image}
+            for meth, fn in fns.items():
+                img = shade(fn, geo)
+                fl, fmap = flip(ref.image, img)
+                row[meth] = {"flip": fl, "flip_disk": float(fmap[mask].mean()),
+                             "psnr": render_psnr(ref.image, img, mask)}
+                imgs[meth], imgs[f"flip_{meth}"] = img, fmap
+            row["method_seconds"] = round(time.perf_counter() - t0, 2)
+            rows.append(row)
+            images.append(imgs)
+        entry = {"rows": rows, "summary": summarise(rows, config.methods)}
+        if config.figure and rows:
+            fig = out / f"render_{label}.png"
+            save_render_figure(rows, images, config.methods, fig, config.figure_dpi)
+            entry["figure"] = str(fig)
+        result["sets"][label] = entry
+    (out / "render.json").write_text(json.dumps(result, indent=1, default=_json_default) + "\n")
+    (out / "render.md").write_text(markdown_tables(result))
+    return result
+
+
+def markdown_tables(result: dict) -> str:
+    """Per set: one row per class (and all), median / worst FLIP and PSNR per method."""
+    lines = []
+    for label, entry in result["sets"].items():
+        summ = entry["summary"]
+        meths = [m for m in METHODS if any(m in v for v in summ.values())]
+        lines += [f"**{label}**", "",
+                  "| class | n | " + " | ".join(f"{m} FLIP median / worst | {m} PSNR median / worst (dB)"
+                                                 for m in meths) + " | reference noise (half-FLIP, worst) |",
+                  "|---|---|" + "---|---|" * len(meths) + "---|"]
+        for cls, v in summ.items():
+            cells = []
+            for m in meths:
+                s = v.get(m)
+                cells += ([f"{s['flip_median']:.3f} / {s['flip_worst']:.3f}",
+                           f"{s['psnr_median']:.1f} / {s['psnr_worst']:.1f}"] if s else ["—", "—"])
+            name = f"**{cls}**" if cls == "all" else cls
+            lines.append(f"| {name} | {v['materials']} | " + " | ".join(cells)
+                         + f" | {v['reference_half_flip_worst']:.3f} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _json_default(x):
+    if isinstance(x, float) and math.isinf(x):
+        return "inf"
+    return str(x)
+
+
+def _machine() -> dict:
+    return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
+            "torch": torch.__version__, "threads": torch.get_num_threads()}
+
+
+# --- figure -------------------------------------------------------------------------------
+def display(img: np.ndarray) -> np.ndarray:
+    """Linear image -> sRGB-ish [0, 1] through x / (1 + x) and gamma 2.2 (display only)."""
+    x = np.maximum(img, 0.0)
+    return np.clip(x / (1.0 + x), 0, 1) ** (1 / 2.2)
+
+
+def save_render_figure(rows: list[dict], images: list[dict], methods: tuple[str, ...], path: Path,
+                       dpi: int = 60) -> None:
+    """Rows: materials; columns: reference, each method, then each method's
+    FLIP error map (magma, 0..1, with a colour bar)."""
+    from nbrdf.training.plots import _plt
+
+    plt = _plt()
+    meths = [m for m in methods if any(m in im for im in images)]
+    cols = ["reference"] + meths + [f"flip_{m}" for m in meths]
+    cell = 1.6
+    fig, axes = plt.subplots(len(rows), len(cols), figsize=(cell * len(cols) + 0.8, cell * len(rows) + 0.4),
+                             dpi=dpi, squeeze=False)
+    mappable = None
+    for i, (row, im) in enumerate(zip(rows, images)):
+        for j, c in enumerate(cols):
+            ax = axes[i, j]
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if c not in im:
+                ax.axis("off")
+                continue
+            if c.startswith("flip_"):
+                mappable = ax.imshow(im[c], cmap="magma", vmin=0, vmax=1, interpolation="nearest")
+                r = row[c[5:]]
+                ax.set_title(f"FLIP {r['flip']:.3f}  {r['psnr']:.1f} dB", fontsize=7)
+            else:
+                ax.imshow(display(im[c]), interpolation="nearest")
+                ax.set_title(c if i == 0 else "", fontsize=8)
+            if j == 0:
+                ax.set_ylabel(row["name"], fontsize=7)
+    fig.tight_layout(rect=(0, 0, 0.93, 1))
+    if mappable is not None:
+        cax = fig.add_axes((0.945, 0.3, 0.015, 0.4))
+        fig.colorbar(mappable, cax=cax).ax.tick_params(labelsize=7)
+    fig.savefig(path)
+    plt.close(fig)
