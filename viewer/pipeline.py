@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass, field
+from enum import Enum
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
@@ -30,7 +31,7 @@ if TYPE_CHECKING:
     from nbrdf.viewer.neural_gpu import GpuDecoder, GpuLatentTexture
 
 
-class BrdfKind:
+class BrdfKind(str, Enum):
     """Which BRDF program family a ``GpuBrdf`` is drawn with."""
     ANALYTIC = "analytic"   #: closed form (analytic_brdf.glsl)
     NEURAL = "neural"       #: the decoder at one latent (neural_brdf.glsl)
@@ -55,7 +56,7 @@ class GpuBrdf:
 
     material: Material
     """The material these resources shade."""
-    kind: str
+    kind: BrdfKind
     """A ``BrdfKind``: which program family draws it."""
     uniforms: dict = field(default_factory=dict)
     """Closed-form uniforms, or the proxy pdf's ``u_proxy_sigma`` / ``u_proxy_w``."""

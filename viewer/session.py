@@ -145,7 +145,7 @@ class SessionDoc:
                               exposure=float(v["exposure"]), tonemap=tonemap)
             interp = Interpolation(**data.get("interpolation", {}))
             try:
-                compare = CompareSettings(v.get("compare", "off"), v.get("wipe", 0.5), v.get("error_scale", 0.25))
+                compare = CompareSettings(v.get("compare", CompareMode.OFF.value), v.get("wipe", 0.5), v.get("error_scale", 0.25))
             except ValueError as e:
                 raise NbrdfError(f"{source}: {e}") from None
         except NbrdfError as e:

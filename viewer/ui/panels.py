@@ -175,7 +175,7 @@ class Panels:
             if changed:
                 ld.set_mipmapping(on)
         self._interpolation()
-        if s.view == "lobe":
+        if s.view == View.LOBE:
             self._polar_plot()
 
     def _error_bar(self) -> None:
