@@ -99,10 +99,10 @@ class Compare:
             return self._upload(None, np.zeros((1, 1, 3), np.float32)), 1.0
         size = self.mc_size(view, w, h)
         key = self.job_key(material, state, None if view == View.LOBE else size, scene)
-        if self.worker.result(key) is None and self.worker.current != key:
-            self.worker.request(self.job(material, state, key, size, brdf))
-        self._job = key
         r = self.worker.result(key)
+        if (r is None or not (r.done or r.error)) and self.worker.current != key:
+            self.worker.request(self.job(material, state, key, size, brdf))  # new, or set aside by another
+        self._job = key
         img = r.image if r is not None else np.zeros((1, 1, 3), np.float32)
         return self._upload((key, r.spp if r else 0), img, flip=view != View.LOBE), 1.0
 
@@ -152,11 +152,9 @@ class Compare:
         key = hashlib.sha1(f"{json.dumps(material_to_dict(material), sort_keys=True)}|plane|{theta_i}"
                            .encode()).hexdigest()
         r = self.worker.result(key)
-        if r is None:
-            if self.worker.current != key:
-                self.worker.request(ReferenceJob(key, material, wi, wo, wo[:, 2:3], np.ones((1, n), bool), 2048))
-            return None
-        return r.image[0]
+        if (r is None or not (r.done or r.error)) and self.worker.current != key:
+            self.worker.request(ReferenceJob(key, material, wi, wo, wo[:, 2:3], np.ones((1, n), bool), 2048))
+        return None if r is None else r.image[0]
 
     # --- the composite ------------------------------------------------------------------------
     def composite(self, target: moderngl.Framebuffer, a: moderngl.Texture, pa: float, b: moderngl.Texture,

@@ -8,7 +8,8 @@ simulation (``nbrdf.training.reference.reference_eval``) that double the
 paths, pools them, and sends the image after each round. It is a process
 (multiprocessing, spawn context) so that the simulation never competes with
 the window's thread for the interpreter: the UI only polls a queue. A new
-request never waits: the process drops the running job at its next round.
+request never waits: the process sets the running job aside at its next
+round (it resumes with its pooled paths if requested again).
 Results are cached by the job's key in the window's process, so returning to
 a material or a view shows its reference at once. The process ends with
 ``close`` (and at interpreter exit).
@@ -118,6 +119,7 @@ def object_job(material: Material, key: str, wi: np.ndarray, wo: np.ndarray, mas
 
 # --- the worker process ------------------------------------------------------------------
 _STOP = "stop"
+PAUSED_JOBS = 16  # interrupted jobs whose pooled paths the worker keeps
 
 
 def _next_request(requests, block: bool):
@@ -143,6 +145,9 @@ def _serve(requests, results, threads: int) -> None:
     from nbrdf.training.reference import reference_eval
 
     job: JobSpec | None = None
+    # Pooled paths of interrupted jobs by key: a job that comes back resumes
+    # where it stopped (two views that alternate both progress).
+    paused: dict[str, tuple] = {}
     while True:
         item = _next_request(requests, block=job is None)
         if item == _STOP:
@@ -155,7 +160,7 @@ def _serve(requests, results, threads: int) -> None:
             material = parse_material(job.material, job.material_dir)
             wi, wo = torch.from_numpy(job.wi), torch.from_numpy(job.wo)
             weight = torch.from_numpy(job.weight).double()
-            total, acc, spp, k = 0, None, job.start_spp, 0
+            total, acc, spp, k = paused.pop(job.key, (0, None, job.start_spp, 0))
             while True:
                 m, _ = reference_eval(material, wi, wo, spp=spp, seed=7919 * k)
                 acc = m.double() * spp if acc is None else acc + m.double() * spp
@@ -173,8 +178,12 @@ def _serve(requests, results, threads: int) -> None:
                 if newer == _STOP:
                     return
                 if newer is not None:
-                    job = newer
-                    break
+                    if newer.key != job.key:
+                        paused[job.key] = (total, acc, spp, k)
+                        while len(paused) > PAUSED_JOBS:
+                            paused.pop(next(iter(paused)))
+                        job = newer
+                        break
         except Exception as e:  # noqa: BLE001 - shown in the UI, the worker keeps serving
             msg = str(e).splitlines()[0] if str(e) else type(e).__name__
             results.put((job.key, np.zeros((*job.mask.shape, 3), np.float32), 0, True, msg))

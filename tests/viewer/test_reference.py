@@ -122,3 +122,24 @@ def test_worker_is_a_process_that_cancels_caches_and_ends():
         w.close()
     assert not proc.is_alive()
     assert w.result("short").done  # the cache outlives the process
+
+
+def test_an_interrupted_job_resumes_with_its_paths():
+    """A, interrupted by B, then requested again, ends as one uninterrupted run of A."""
+    m = load_material(DEFAULT_MATERIAL)
+    a = _subset(lobe_job(m, "a", 35.0), 30, 10 ** 6)
+    w = ReferenceWorker(start_spp=8, round_spp=8, threads=1)
+    try:
+        w.request(a)
+        assert w.wait("a", 8, timeout=120).spp >= 8
+        w.request(_subset(lobe_job(m, "b", 15.0), 30, 8))
+        assert w.wait("b", 8, timeout=120).done
+        got = w.result("a").spp
+        a.max_spp = got + 16
+        w.request(a)
+        r = w.wait("a", got + 16, timeout=120)
+    finally:
+        w.close()
+    assert r.done and r.spp == got + 16
+    rounds = [reference_eval(m, a.wi, a.wo, spp=8, seed=7919 * k)[0] for k in range(r.spp // 8)]
+    np.testing.assert_allclose(r.image[a.mask], (sum(rounds) / len(rounds) * a.weight).numpy(), rtol=1e-5, atol=1e-7)
