@@ -32,14 +32,13 @@ import torch
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent_texture import LatentTexture, blend
 from nbrdf.neural.material import Material, load_material, material_to_dict, save_material
-from nbrdf.viewer.compare import OBJECT_REF_SIZE, Compare, reference_state  # noqa: F401 - re-exported
+from nbrdf.viewer.compare import Compare, reference_state
 from nbrdf.viewer.modes import BrdfMode, CompareMode, ToneMap, View
 from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, gpu_brdf, material_key
 from nbrdf.viewer.renderer import Renderer, ViewState
-from nbrdf.viewer.session import SESSION_FORMAT, CompareSettings, Interpolation, SessionDoc  # noqa: F401
+from nbrdf.viewer.session import CompareSettings, Interpolation, SessionDoc
 from nbrdf.viewer.ui.stack_editor import StackEditor
 
-COMPARE_MODES = CompareMode.words()
 PRESETS_DIR = Path(__file__).parent / "assets" / "materials"
 MAX_PASSES = 1024
 #: View-state fields that change only the display transform (no new accumulation).
@@ -510,6 +509,7 @@ class LookDev:
                 img = self.renderer.render_linear(self.main_state(), size, passes, self.brdf)
                 write_image(p, img, self.state.exposure, ToneMap.parse(self.state.tonemap).value)
                 self.invalidate()
+            self.notice = f"wrote {p}"
         return self._guard(go)
 
     @staticmethod

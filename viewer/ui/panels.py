@@ -298,8 +298,7 @@ class Panels:
         _, self.shot_path = imgui.input_text("screenshot", self.shot_path)
         if imgui.button("screenshot (.png/.exr)"):
             w, h = (int(x) for x in imgui.get_io().display_size)
-            if ld.screenshot(self.shot_path, (max(w, 1), max(h, 1)), 16):
-                ld.notice = f"wrote {self.shot_path}"
+            ld.screenshot(self.shot_path, (max(w, 1), max(h, 1)), 16)
 
     # --- overlay -----------------------------------------------------------------------------
     def _overlay(self, size: tuple[int, int]) -> None:
