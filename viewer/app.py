@@ -26,6 +26,8 @@ import moderngl
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
 from nbrdf.viewer.gl import check_version
+from nbrdf.viewer.lookdev import MAX_PASSES, LookDev
+from nbrdf.viewer.modes import View
 from nbrdf.viewer.renderer import ViewState
 
 
@@ -38,8 +40,6 @@ class App:
     app's API: the panels and the tests call them); ``step`` runs one frame."""
 
     def __init__(self, opts, size: tuple[int, int] | None = None, visible: bool = True):
-        from nbrdf.viewer.lookdev import LookDev
-
         if imgui is None:
             raise WindowUnavailable(f"imgui-bundle is not usable ({_IMGUI_ERROR})")
         self.opts = opts
@@ -89,12 +89,10 @@ class App:
         self.gui.keyboard_callback(window, key, scancode, action, mods)
         if action != glfw.PRESS or imgui.get_io().want_capture_keyboard:
             return
-        cam = self.lookdev.state.camera
         if key == glfw.KEY_ESCAPE:
             glfw.set_window_should_close(window, True)
         elif key == glfw.KEY_F:
-            cam.frame()
-            self.lookdev.invalidate()
+            self.lookdev.frame()
         elif key == glfw.KEY_T:
             self.panels.turntable = not self.panels.turntable
         elif key == glfw.KEY_H:
@@ -102,7 +100,7 @@ class App:
 
     def _mouse(self) -> None:
         io = imgui.get_io()
-        ld, cam = self.lookdev, self.lookdev.state.camera
+        ld = self.lookdev
         x, y = glfw.get_cursor_pos(self.window)
         button = next((b for b in (glfw.MOUSE_BUTTON_LEFT, glfw.MOUSE_BUTTON_RIGHT)
                        if glfw.get_mouse_button(self.window, b) == glfw.PRESS), None)
@@ -110,21 +108,18 @@ class App:
             if self._drag is not None and self._drag[0] == button and (x, y) != self._drag[1:]:
                 dx, dy = x - self._drag[1], y - self._drag[2]
                 if button == glfw.MOUSE_BUTTON_LEFT:
-                    cam.orbit(-dx * 0.3, dy * 0.3)
+                    ld.orbit(-dx * 0.3, dy * 0.3)
                 else:
                     h = max(self.framebuffer_size()[1], 1)
-                    cam.pan(dx / h, dy / h)
-                ld.invalidate()
+                    ld.pan(dx / h, dy / h)
             self._drag = (button, x, y)
         else:
             self._drag = None
         self.dragging = self._drag is not None
         if io.mouse_wheel and not io.want_capture_mouse:
-            cam.zoom(0.9 ** io.mouse_wheel)
-            ld.invalidate()
+            ld.zoom(0.9 ** io.mouse_wheel)
         if self.panels.turntable:
-            cam.orbit(0.5, 0.0)
-            ld.invalidate()
+            ld.orbit(0.5, 0.0)
 
     # --- frames ----------------------------------------------------------------------
     def framebuffer_size(self) -> tuple[int, int]:
@@ -163,7 +158,7 @@ class App:
         budget on this GPU: software OpenGL renders the neural shader at a fraction
         of the window, a GPU at full size. Steps of 1/8 between 1/8 and 1, so
         the accumulation restarts rarely."""
-        if self._last_ms is None or self.lookdev.state.view == "lobe":
+        if self._last_ms is None or self.lookdev.state.view == View.LOBE:
             return self.scale
         budget = self.BUDGET_DRAG_MS if self.dragging else self.BUDGET_STILL_MS
         step = 0.125
@@ -193,7 +188,7 @@ class App:
     def run(self) -> None:
         while not glfw.window_should_close(self.window):
             self.step()
-            if self.lookdev.passes >= 1024 and not self.dragging:
+            if self.lookdev.passes >= MAX_PASSES and not self.dragging:
                 time.sleep(0.01)
         self.close()
 

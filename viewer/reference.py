@@ -1,49 +1,91 @@
 """Ground truth for the compare mode: Monte Carlo references of layered
-stacks, computed progressively in a background thread and cached.
+stacks, computed progressively in a separate process and cached.
 
 A job is a set of (wi, wo) pairs with a weight per pair (cos theta_o for the
 lobe image, 1 for the slice, cos theta_l L for the lit object under the
-directional light); the worker runs rounds of the position-free simulation
-(training/reference.py) that double the paths, pools them, and publishes the
-image after each round. A new request never waits: the worker drops the
-running job at its next round. Results are cached by the job's key, so
-returning to a material or a view shows its reference at once.
+directional light); the worker process runs rounds of the position-free
+simulation (``nbrdf.training.reference.reference_eval``) that double the
+paths, pools them, and sends the image after each round. It is a process
+(multiprocessing, spawn context) so that the simulation never competes with
+the window's thread for the interpreter: the UI only polls a queue. A new
+request never waits: the process sets the running job aside at its next
+round (it resumes with its pooled paths if requested again).
+Results are cached by the job's key in the window's process, so returning to
+a material or a view shows its reference at once. The process ends with
+``close`` (and at interpreter exit).
 """
 from __future__ import annotations
 
-import threading
-from dataclasses import dataclass, field
+import atexit
+import multiprocessing as mp
+import os
+import queue
+import time
+import weakref
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from nbrdf.neural.geometry import incidence, lobe_grid
-from nbrdf.neural.material import Material
+from nbrdf.neural.material import Material, material_to_dict
 
 
 @dataclass
 class ReferenceJob:
+    """What to simulate: one (wi, wo) pair and weight per pixel of ``mask``."""
+
     key: str
+    """The cache key (material, view, camera, lights, size)."""
     material: Material
-    wi: torch.Tensor          # (N, 3) local directions, one pair per valid pixel
+    """The stack to simulate (uniform materials only)."""
+    wi: torch.Tensor
+    """(N, 3) local light directions, one pair per valid pixel."""
     wo: torch.Tensor
-    weight: torch.Tensor      # (N, 1)
-    mask: np.ndarray          # (H, W) pixels the pairs fill, row-major
+    """(N, 3) local view directions."""
+    weight: torch.Tensor
+    """(N, 1) the factor each pixel's BRDF value is shown with."""
+    mask: np.ndarray
+    """(H, W) bool: the pixels the pairs fill, row-major."""
     max_spp: int = 4096
+    """Paths per pair after which the job is done."""
+
+    def spec(self, start_spp: int, round_spp: int) -> "JobSpec":
+        """The small picklable form sent to the worker process."""
+        f32 = lambda t: np.ascontiguousarray(torch.as_tensor(t).detach().cpu().numpy(), dtype=np.float32)
+        return JobSpec(self.key, material_to_dict(self.material), str(self.material.base_dir), f32(self.wi),
+                       f32(self.wo), f32(self.weight), np.asarray(self.mask, bool), int(self.max_spp),
+                       start_spp, round_spp)
+
+
+@dataclass
+class JobSpec:
+    """A job as it crosses the process boundary: the material document and flat arrays."""
+
+    key: str
+    material: dict
+    material_dir: str
+    wi: np.ndarray
+    wo: np.ndarray
+    weight: np.ndarray
+    mask: np.ndarray
+    max_spp: int
+    start_spp: int
+    round_spp: int
 
 
 @dataclass
 class ReferenceImage:
-    image: np.ndarray         # (H, W, 3) linear, the view's convention
+    """A reference as far as it has got."""
+
+    image: np.ndarray
+    """(H, W, 3) linear, the view's convention."""
     spp: int
+    """Paths per pixel pooled so far."""
     done: bool
+    """The job reached its ``max_spp`` (or failed)."""
     error: str | None = None
-
-
-@dataclass
-class _State:
-    job: ReferenceJob | None = None
-    cache: dict[str, ReferenceImage] = field(default_factory=dict)
+    """One line when the simulation failed."""
 
 
 def lobe_job(material: Material, key: str, theta_i: float) -> ReferenceJob:
@@ -75,39 +117,165 @@ def object_job(material: Material, key: str, wi: np.ndarray, wo: np.ndarray, mas
     return ReferenceJob(key, material, a, b, a[:, 2:3].clamp_min(0) * radiance, mask, max_spp=1024)
 
 
-class ReferenceWorker:
-    """One background thread; ``request`` a job, poll ``result``."""
+# --- the worker process ------------------------------------------------------------------
+_STOP = "stop"
+PAUSED_JOBS = 16  # interrupted jobs whose pooled paths the worker keeps
 
-    def __init__(self, start_spp: int = 8, round_spp: int = 64):
+
+def _next_request(requests, block: bool):
+    """The newest request in the queue (older ones are superseded), or None."""
+    item = None
+    try:
+        item = requests.get(block=block, timeout=None if block else 0)
+        while True:
+            item = requests.get_nowait()
+    except queue.Empty:
+        pass
+    return item
+
+
+def _serve(requests, results, threads: int) -> None:
+    """The worker process: runs the newest job in rounds, sends each pooled image."""
+    try:
+        os.nice(5)  # the window's process renders; this one fills idle cores
+    except (AttributeError, OSError):
+        pass
+    torch.set_num_threads(max(1, threads))
+    from nbrdf.neural.material import parse_material
+    from nbrdf.training.reference import reference_eval
+
+    job: JobSpec | None = None
+    # Pooled paths of interrupted jobs by key: a job that comes back resumes
+    # where it stopped (two views that alternate both progress).
+    paused: dict[str, tuple] = {}
+    while True:
+        item = _next_request(requests, block=job is None)
+        if item == _STOP:
+            return
+        if item is not None:
+            job = item
+        if job is None:
+            continue
+        try:
+            material = parse_material(job.material, job.material_dir)
+            wi, wo = torch.from_numpy(job.wi), torch.from_numpy(job.wo)
+            weight = torch.from_numpy(job.weight).double()
+            total, acc, spp, k = paused.pop(job.key, (0, None, job.start_spp, 0))
+            while True:
+                m, _ = reference_eval(material, wi, wo, spp=spp, seed=7919 * k)
+                acc = m.double() * spp if acc is None else acc + m.double() * spp
+                total += spp
+                img = np.zeros((*job.mask.shape, 3), np.float32)
+                img[job.mask] = (acc / total * weight).numpy()
+                done = total >= job.max_spp
+                results.put((job.key, img, total, done, None))
+                if done:
+                    job = None
+                    break
+                # Double, then steady rounds: a new job never waits long.
+                spp, k = min(total, job.round_spp), k + 1
+                newer = _next_request(requests, block=False)
+                if newer == _STOP:
+                    return
+                if newer is not None:
+                    if newer.key != job.key:
+                        paused[job.key] = (total, acc, spp, k)
+                        while len(paused) > PAUSED_JOBS:
+                            paused.pop(next(iter(paused)))
+                        job = newer
+                        break
+        except Exception as e:  # noqa: BLE001 - shown in the UI, the worker keeps serving
+            msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+            results.put((job.key, np.zeros((*job.mask.shape, 3), np.float32), 0, True, msg))
+            job = None
+
+
+def _shutdown(proc, requests) -> None:
+    """Ends the worker process: asks it to stop, then terminates it."""
+    if proc.is_alive():
+        try:
+            requests.put(_STOP)
+        except (ValueError, OSError):
+            pass
+        proc.join(timeout=2)
+    if proc.is_alive():
+        proc.terminate()
+        proc.join(timeout=2)
+
+
+class ReferenceWorker:
+    """One worker process; ``request`` a job, poll ``result``. Neither blocks."""
+
+    def __init__(self, start_spp: int = 8, round_spp: int = 64, threads: int | None = None):
+        """``start_spp`` paths in the first round, then doubling up to ``round_spp``
+        per round; ``threads``: torch threads of the process (default: half the cores)."""
         self.start_spp, self.round_spp = start_spp, round_spp
-        self._state = _State()
-        self._lock = threading.Lock()
-        self._wake = threading.Event()
-        self._stop = False
-        self._thread = threading.Thread(target=self._run, name="nbrdf-reference", daemon=True)
-        self._thread.start()
+        self.threads = threads or max(1, (os.cpu_count() or 2) // 2)
+        self._cache: dict[str, ReferenceImage] = {}
+        self._current: str | None = None
+        self._proc = None
+        self._finalizer = None
+
+    def _ensure(self) -> None:
+        """Starts the process on first use (a window without stacks never pays for it)."""
+        if self._proc is not None and self._proc.is_alive():
+            return
+        ctx = mp.get_context("spawn")
+        self._requests, self._results = ctx.Queue(), ctx.Queue()
+        self._proc = ctx.Process(target=_serve, args=(self._requests, self._results, self.threads),
+                                 name="nbrdf-reference", daemon=True)
+        self._proc.start()
+        self._finalizer = weakref.finalize(self, _shutdown, self._proc, self._requests)
+        atexit.register(self._finalizer)
+
+    @property
+    def process(self):
+        """The worker process (None before the first request)."""
+        return self._proc
 
     def request(self, job: ReferenceJob) -> None:
-        with self._lock:
-            cached = self._state.cache.get(job.key)
-            if cached is not None and (cached.done or cached.error):
-                self._state.job = None
+        """Makes ``job`` the one being computed (a finished or failed key is not redone)."""
+        self._drain()
+        cached = self._cache.get(job.key)
+        if cached is not None and (cached.done or cached.error):
+            self._current = None
+            return
+        if self._current == job.key:
+            return
+        self._ensure()
+        self._current = job.key
+        self._requests.put(job.spec(self.start_spp, self.round_spp))
+
+    def _drain(self) -> None:
+        """Takes every image the process has sent into the cache."""
+        if self._proc is None:
+            return
+        while True:
+            try:
+                key, img, spp, done, err = self._results.get_nowait()
+            except (queue.Empty, OSError, ValueError):
                 return
-            self._state.job = job
-        self._wake.set()
+            self._cache[key] = ReferenceImage(img, spp, done, err)
+            if key == self._current and (done or err):
+                self._current = None
 
     def result(self, key: str) -> ReferenceImage | None:
-        with self._lock:
-            return self._state.cache.get(key)
+        self._drain()
+        return self._cache.get(key)
 
     def busy(self) -> bool:
-        with self._lock:
-            return self._state.job is not None
+        """A job is being computed."""
+        self._drain()
+        return self._current is not None
+
+    @property
+    def current(self) -> str | None:
+        """The key of the job being computed."""
+        self._drain()
+        return self._current
 
     def wait(self, key: str, spp: int, timeout: float = 120.0) -> ReferenceImage | None:
         """Blocks until the result of ``key`` has ``spp`` paths (tests, batch use)."""
-        import time
-
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             r = self.result(key)
@@ -117,47 +285,9 @@ class ReferenceWorker:
         return self.result(key)
 
     def close(self) -> None:
-        self._stop = True
-        self._wake.set()
-        self._thread.join(timeout=5)
-
-    # --- the thread ---------------------------------------------------------------------
-    def _current(self, job: ReferenceJob) -> bool:
-        with self._lock:
-            return self._state.job is job and not self._stop
-
-    def _run(self) -> None:
-        from nbrdf.training.reference import reference_eval
-
-        while not self._stop:
-            self._wake.wait()
-            self._wake.clear()
-            with self._lock:
-                job = self._state.job
-            if job is None:
-                continue
-            total, acc, spp, k = 0, None, self.start_spp, 0
-            while self._current(job):
-                try:
-                    m, _ = reference_eval(job.material, job.wi, job.wo, spp=spp, seed=7919 * k)
-                except Exception as e:  # noqa: BLE001 - shown in the UI, the app keeps running
-                    msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-                    with self._lock:
-                        self._state.cache[job.key] = ReferenceImage(np.zeros((*job.mask.shape, 3), np.float32), 0,
-                                                                    True, msg)
-                        self._state.job = None
-                    break
-                acc = m.double() * spp if acc is None else acc + m.double() * spp
-                total += spp
-                img = np.zeros((*job.mask.shape, 3), np.float32)
-                img[job.mask] = (acc / total * job.weight.double()).numpy()
-                done = total >= job.max_spp
-                with self._lock:
-                    if self._state.job is not job:
-                        break
-                    self._state.cache[job.key] = ReferenceImage(img, total, done)
-                    if done:
-                        self._state.job = None
-                if done:
-                    break
-                spp, k = min(total, self.round_spp), k + 1  # double, then steady rounds: a new job never waits long
+        """Ends the process (the cache stays readable)."""
+        if self._finalizer is not None:
+            self._finalizer()
+            atexit.unregister(self._finalizer)
+            self._finalizer = None
+        self._current = None

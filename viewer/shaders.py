@@ -8,8 +8,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from nbrdf.viewer.modes import BrdfMode, CompareMode, ToneMap, View, glsl_defines
+
 SHADER_DIR = Path(__file__).parent / "shaders"
 VERSION = "#version 330 core"
+MODE_DEFINES = glsl_defines(View, CompareMode, ToneMap, BrdfMode).rstrip("\n")
 
 
 def source(name: str, snippets: dict[str, str] | None = None, version: str = VERSION, defines: dict | None = None) -> str:
@@ -31,7 +34,7 @@ def source(name: str, snippets: dict[str, str] | None = None, version: str = VER
                 out.append(line)
         return "\n".join(out)
 
-    head = [version] + [f"#define {k} {v}" for k, v in (defines or {}).items()]
+    head = [version, MODE_DEFINES] + [f"#define {k} {v}" for k, v in (defines or {}).items()]
     return "\n".join(head) + "\n" + expand((SHADER_DIR / name).read_text()) + "\n"
 
 

@@ -154,6 +154,7 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
 
 def make_renderer(ctx, material, opts: ViewOptions):
     """The renderer of ``opts.brdf``: closed form, or the decoder in GLSL."""
+    from nbrdf.viewer.pipeline import MaterialPipeline
     from nbrdf.viewer.renderer import Renderer
 
     env = None
@@ -161,36 +162,7 @@ def make_renderer(ctx, material, opts: ViewOptions):
         from nbrdf.viewer.image_io import read_environment
 
         env = read_environment(opts.env)
-    mode = opts.brdf
-    single = not material.interfaces and material.base.type in ("conductor", "dielectric", "diffuse")
-    if mode == "auto":
-        mode = "analytic" if single and not material.is_textured else "neural"
-    if mode == "analytic":
-        return Renderer(ctx, material, opts.mesh, environment=env)
-    from nbrdf.neural.model import default_model
-    from nbrdf.viewer.neural_gpu import GpuDecoder
-
-    model = default_model()
-    if material.is_textured:
-        if mode == "projected":
-            raise NbrdfError("--brdf projected: a texture-mapped material is shaded through its latent texture "
-                             "(use --brdf neural)")
-        from nbrdf.neural.svbrdf import latent_texture
-
-        tex = latent_texture(model, material)
-        z = tex.levels[-1][0, 0]
-        proxy = model.proxy(z) if model.sampler is not None else None
-        return Renderer(ctx, material, opts.mesh, neural=GpuDecoder(ctx, model.decoder), proxy=proxy,
-                        environment=env, latent_texture=tex)
-    if mode == "neural":
-        z = model.material_latent(material)
-    else:
-        from nbrdf.training.project import fit, material_samples
-
-        z = fit(model.decoder, material_samples(material))
-    proxy = model.proxy(z) if model.sampler is not None else None
-    return Renderer(ctx, material, opts.mesh, neural=GpuDecoder(ctx, model.decoder), latent=z, proxy=proxy,
-                    environment=env)
+    return Renderer(ctx, mesh=opts.mesh, environment=env, brdf=MaterialPipeline(ctx).build(material, opts.brdf))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

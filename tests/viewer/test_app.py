@@ -23,7 +23,7 @@ from nbrdf.viewer.view_cli import DEFAULT_MATERIAL
 pytestmark = pytest.mark.gl
 
 SCRIPT = textwrap.dedent("""
-    import json, sys
+    import json, os, sys
     from pathlib import Path
     import numpy as np
     from nbrdf.viewer.app import App
@@ -81,13 +81,16 @@ SCRIPT = textwrap.dedent("""
         out["preset"] = ld.load_preset("worn_tiles")
         ld.wait_svbrdf()
         app.step()
-        out["textured"] = ld.renderer.latent_tex is not None
+        out["textured"] = ld.brdf.latent_texture is not None
         ld.set_mipmapping(False)
         app.step()
+        proc = ld.worker.process  # the stack's Monte Carlo reference ran in its own process
+        out["worker_elsewhere"] = proc is not None and proc.pid != os.getpid()
         np.savez(tmp / "frames.npz", a=a, b=b, c=c, za=za, zb=zb, zi=zi)
-        (tmp / "out.json").write_text(json.dumps(out, default=str))
     finally:
         app.close()
+    out["worker_alive_after_close"] = proc.is_alive()
+    (tmp / "out.json").write_text(json.dumps(out, default=str))
 """)
 
 
@@ -160,3 +163,8 @@ def test_interpolation_and_svbrdf_in_the_app(session_run):
     expected = blend([torch.from_numpy(f["zb"]), other], [0.5, 0.5]).numpy()
     np.testing.assert_allclose(f["zi"], expected, atol=1e-5)
     assert out["preset"] and out["textured"]
+
+
+def test_reference_worker_is_a_process_ended_with_the_app(session_run):
+    _, out, _ = session_run
+    assert out["worker_elsewhere"] is True and out["worker_alive_after_close"] is False

@@ -83,3 +83,63 @@ def test_gbuffer_directions_reproduce_the_light_only_render(gl_ctx):
     ref = f * np.clip(wi[mask][:, 2:3], 0, None) * state.light_radiance
     np.testing.assert_allclose(img[mask], ref, rtol=1e-3, atol=1e-4)
     assert np.abs(img[~mask]).max() == 0
+
+
+def _subset(job, n: int, max_spp: int):
+    """The first n pixels of a lobe job (keeps the simulation short)."""
+    job.wi, job.wo, job.weight, job.max_spp = job.wi[:n], job.wo[:n], job.weight[:n], max_spp
+    job.mask = np.zeros_like(job.mask)
+    job.mask.reshape(-1)[np.arange(n)] = True
+    return job
+
+
+def test_worker_is_a_process_that_cancels_caches_and_ends():
+    import os
+    import time
+
+    m = load_material(DEFAULT_MATERIAL)
+    w = ReferenceWorker(start_spp=8, round_spp=8, threads=1)
+    try:
+        endless = lobe_job(m, "endless", 30.0)
+        endless.max_spp = 10 ** 9
+        t0 = time.perf_counter()
+        w.request(endless)  # never waits for the simulation
+        assert time.perf_counter() - t0 < 2.0
+        assert w.process is not None and w.process.pid != os.getpid() and w.process.is_alive()
+        first = w.wait("endless", 8, timeout=120)
+        assert first is not None and first.error is None and not first.done
+        w.request(_subset(lobe_job(m, "short", 20.0), 40, 16))  # cancels the endless job
+        r = w.wait("short", 16, timeout=120)
+        assert r is not None and r.done and r.spp == 16 and not w.busy()
+        time.sleep(0.5)
+        seen = w.result("endless").spp
+        time.sleep(1.0)
+        assert w.result("endless").spp == seen  # no more rounds of the cancelled job
+        w.request(_subset(lobe_job(m, "short", 20.0), 40, 16))  # cached: not run again
+        assert not w.busy()
+        proc = w.process
+    finally:
+        w.close()
+    assert not proc.is_alive()
+    assert w.result("short").done  # the cache outlives the process
+
+
+def test_an_interrupted_job_resumes_with_its_paths():
+    """A, interrupted by B, then requested again, ends as one uninterrupted run of A."""
+    m = load_material(DEFAULT_MATERIAL)
+    a = _subset(lobe_job(m, "a", 35.0), 30, 10 ** 6)
+    w = ReferenceWorker(start_spp=8, round_spp=8, threads=1)
+    try:
+        w.request(a)
+        assert w.wait("a", 8, timeout=120).spp >= 8
+        w.request(_subset(lobe_job(m, "b", 15.0), 30, 8))
+        assert w.wait("b", 8, timeout=120).done
+        got = w.result("a").spp
+        a.max_spp = got + 16
+        w.request(a)
+        r = w.wait("a", got + 16, timeout=120)
+    finally:
+        w.close()
+    assert r.done and r.spp == got + 16
+    rounds = [reference_eval(m, a.wi, a.wo, spp=8, seed=7919 * k)[0] for k in range(r.spp // 8)]
+    np.testing.assert_allclose(r.image[a.mask], (sum(rounds) / len(rounds) * a.weight).numpy(), rtol=1e-5, atol=1e-7)

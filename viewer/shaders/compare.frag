@@ -8,7 +8,8 @@ uniform sampler2D u_a;
 uniform sampler2D u_b;
 uniform float u_passes_a;
 uniform float u_passes_b;
-uniform int u_mode;       // 0 A, 1 side by side, 2 wipe, 3 error, 4 blend (1 - u_wipe) A + u_wipe B
+uniform int u_mode;       // a COMPARE_* constant: A alone, side by side, wipe, error
+uniform int u_blend;      // 1: (1 - u_wipe) A + u_wipe B (with COMPARE_OFF)
 uniform float u_wipe;     // 0..1, x of the wipe line
 uniform float u_err_scale;
 in vec2 v_uv;
@@ -26,15 +27,15 @@ vec3 ramp(float t) {  // dark blue -> cyan -> green -> yellow -> red
 void main() {
     vec3 a = texture(u_a, v_uv).rgb / max(u_passes_a, 1.0);
     vec3 b = texture(u_b, v_uv).rgb / max(u_passes_b, 1.0);
-    if (u_mode == 1) {
+    if (u_mode == COMPARE_SIDE) {
         vec2 uv = vec2(fract(v_uv.x * 2.0), v_uv.y);
         a = v_uv.x < 0.5 ? texture(u_a, uv).rgb / max(u_passes_a, 1.0) : texture(u_b, uv).rgb / max(u_passes_b, 1.0);
-    } else if (u_mode == 2) {
+    } else if (u_mode == COMPARE_WIPE) {
         if (abs(v_uv.x - u_wipe) < 0.002) { frag = vec4(1.0); return; }
         a = v_uv.x < u_wipe ? a : b;
-    } else if (u_mode == 4) {
+    } else if (u_blend == 1) {
         a = mix(a, b, u_wipe);
-    } else if (u_mode == 3) {
+    } else if (u_mode == COMPARE_ERROR) {
         vec3 rel = abs(a - b) / (abs(b) + 0.01);
         frag = vec4(ramp((rel.r + rel.g + rel.b) / 3.0 / max(u_err_scale, 1e-6)), 1.0);
         return;

@@ -1,5 +1,6 @@
 """The previewer's panels (imgui-bundle): every widget calls a ``LookDev``
-method, so what a panel does is exactly what the tests drive.
+method (the panels never change the session's state themselves), so what a
+panel does is exactly what the tests drive.
 
 Panels: Material (the layer stack, presets, files), Scene (mesh, environment,
 light, camera, exposure), View (view, incidence, compare, interpolation,
@@ -10,11 +11,13 @@ from __future__ import annotations
 import numpy as np
 from imgui_bundle import imgui, implot
 
-from nbrdf.viewer.lookdev import COMPARE_MODES, LookDev, presets
+from nbrdf.viewer.lookdev import LookDev, presets
+from nbrdf.viewer.modes import CompareMode, ToneMap, View
 from nbrdf.viewer.ui.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
 
-VIEWS = ("object", "lobe", "slice")
-TONEMAPS = ("aces", "linear")
+COMPARE_LABELS = {CompareMode.OFF: "off", CompareMode.SIDE: "side by side", CompareMode.WIPE: "A/B wipe",
+                  CompareMode.ERROR: "error"}
+TONEMAP_LABELS = {ToneMap.ACES: "ACES filmic", ToneMap.LINEAR: "linear"}
 MESHES = ("sphere", "testmesh")
 RED = imgui.ImVec4(1.0, 0.35, 0.3, 1.0)
 DIM = imgui.ImVec4(0.7, 0.7, 0.7, 1.0)
@@ -143,33 +146,36 @@ class Panels:
         ld, s = self.ld, self.ld.state
         if not self._header("View", True):
             return
-        for v in VIEWS:
-            if imgui.radio_button(v, s.view == v):
-                s.view = v
-                ld.invalidate()
+        for v in View:
+            if imgui.radio_button(v.value, s.view == v) and s.view != v:
+                ld.set_view(v)
             imgui.same_line()
         imgui.new_line()
-        changed, s.theta_i = imgui.slider_float("incidence (deg)", s.theta_i, 0.0, 89.0)
+        changed, theta = imgui.slider_float("incidence (deg)", s.theta_i, 0.0, 89.0)
         if changed:
-            ld.invalidate()
-        cur = COMPARE_MODES.index(ld.compare)
-        changed, k = imgui.combo("compare", cur, ["off", "side by side", "A/B wipe", "error"])
+            ld.update_state(theta_i=theta)
+        modes = list(CompareMode)
+        changed, k = imgui.combo("compare", modes.index(ld.compare), [COMPARE_LABELS[m] for m in modes])
         if changed:
-            ld.set_compare(COMPARE_MODES[k])
-        if ld.compare != "off":
+            ld.set_compare(modes[k])
+        if ld.compare != CompareMode.OFF:
             imgui.text_colored(DIM, ld.reference_status())
-            if ld.compare == "wipe":
-                _, ld.wipe = imgui.slider_float("wipe", ld.wipe, 0.0, 1.0)
-            if ld.compare == "error":
-                _, ld.err_scale = imgui.slider_float("error scale", ld.err_scale, 0.01, 1.0, "%.2f",
-                                                     imgui.SliderFlags_.logarithmic)
+            if ld.compare == CompareMode.WIPE:
+                changed, x = imgui.slider_float("wipe", ld.wipe, 0.0, 1.0)
+                if changed:
+                    ld.set_wipe(x)
+            if ld.compare == CompareMode.ERROR:
+                changed, x = imgui.slider_float("error scale", ld.err_scale, 0.01, 1.0, "%.2f",
+                                                imgui.SliderFlags_.logarithmic)
+                if changed:
+                    ld.set_error_scale(x)
                 self._error_bar()
         if ld.material.is_textured:
             changed, on = imgui.checkbox("latent mip-mapping", ld.mipmapping)
             if changed:
                 ld.set_mipmapping(on)
         self._interpolation()
-        if s.view == "lobe":
+        if s.view == View.LOBE:
             self._polar_plot()
 
     def _error_bar(self) -> None:
@@ -242,38 +248,42 @@ class Panels:
         if imgui.small_button("built-in sky"):
             self.env_path = ""
             ld.set_environment(None)
-        edits = [
-            imgui.checkbox("environment light", s.env_on),
-            imgui.checkbox("background", s.background),
-            imgui.slider_float("env rotation", s.env_rotation, -180.0, 180.0),
-            imgui.slider_float("env intensity", s.env_intensity, 0.0, 4.0),
-        ]
-        (c0, s.env_on), (c1, s.background), (c2, s.env_rotation), (c3, s.env_intensity) = edits
+        changes: dict = {}
+
+        def take(name: str, result) -> None:
+            changed, value = result
+            if changed:
+                changes[name] = value
+
+        take("env_on", imgui.checkbox("environment light", s.env_on))
+        take("background", imgui.checkbox("background", s.background))
+        take("env_rotation", imgui.slider_float("env rotation", s.env_rotation, -180.0, 180.0))
+        take("env_intensity", imgui.slider_float("env intensity", s.env_intensity, 0.0, 4.0))
         az, el = _angles(s.light_dir)
         c4, az = imgui.slider_float("light azimuth", az, -180.0, 180.0)
         c5, el = imgui.slider_float("light elevation", el, -10.0, 90.0)
         if c4 or c5:
-            s.light_dir = _direction(az, el)
-        c6, s.light_radiance = imgui.slider_float("light intensity", s.light_radiance, 0.0, 20.0)
+            changes["light_dir"] = _direction(az, el)
+        take("light_radiance", imgui.slider_float("light intensity", s.light_radiance, 0.0, 20.0))
         c9, on = imgui.checkbox("point light", s.point_light is not None)
         if c9:
-            s.point_light = (2.0, -2.0, 2.5) if on else None
+            changes["point_light"] = (2.0, -2.0, 2.5) if on else None
         if s.point_light is not None:
             c10, pos = imgui.drag_float3("point position", list(s.point_light), 0.05, -20.0, 20.0)
-            s.point_light = tuple(float(x) for x in pos)
-            c11, s.point_intensity = imgui.slider_float("point intensity", s.point_intensity, 0.0, 200.0)
-            c9 = c9 or c10 or c11
-        c7, s.exposure = imgui.slider_float("exposure (stops)", s.exposure, -6.0, 6.0)
-        cur = TONEMAPS.index(s.tonemap)
-        c8, k = imgui.combo("tone mapping", cur, ["ACES filmic", "linear"])
-        s.tonemap = TONEMAPS[k]
+            if c10:
+                changes["point_light"] = tuple(float(x) for x in pos)
+            take("point_intensity", imgui.slider_float("point intensity", s.point_intensity, 0.0, 200.0))
+        take("exposure", imgui.slider_float("exposure (stops)", s.exposure, -6.0, 6.0))
+        tonemaps = list(ToneMap)
+        c8, k = imgui.combo("tone mapping", tonemaps.index(s.tonemap), [TONEMAP_LABELS[t] for t in tonemaps])
+        if c8:
+            changes["tonemap"] = tonemaps[k]
         _, self.turntable = imgui.checkbox("turntable", self.turntable)
         imgui.same_line()
         if imgui.button("frame"):
-            s.camera.frame()
-            ld.invalidate()
-        if c0 or c1 or c2 or c3 or c4 or c5 or c6 or c9:
-            ld.invalidate()
+            ld.frame()
+        if changes:
+            ld.update_state(**changes)
 
     def _files(self) -> None:
         ld = self.ld
@@ -288,8 +298,7 @@ class Panels:
         _, self.shot_path = imgui.input_text("screenshot", self.shot_path)
         if imgui.button("screenshot (.png/.exr)"):
             w, h = (int(x) for x in imgui.get_io().display_size)
-            if ld.screenshot(self.shot_path, (max(w, 1), max(h, 1)), 16):
-                ld.notice = f"wrote {self.shot_path}"
+            ld.screenshot(self.shot_path, (max(w, 1), max(h, 1)), 16)
 
     # --- overlay -----------------------------------------------------------------------------
     def _overlay(self, size: tuple[int, int]) -> None:

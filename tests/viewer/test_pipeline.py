@@ -1,0 +1,98 @@
+"""The material pipeline and the one renderer: an edit computes one latent
+share and reads no file; the offscreen path and the window's share the
+pipeline; one renderer draws any material's GPU resources."""
+from __future__ import annotations
+
+import json
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import load_material, parse_material
+from nbrdf.neural.model import default_model
+from nbrdf.viewer.modes import BrdfMode
+from nbrdf.viewer.pipeline import BrdfKind, MaterialPipeline
+from nbrdf.viewer.renderer import Renderer, ViewState
+from nbrdf.viewer.view_cli import DEFAULT_MATERIAL
+
+ROUGH_GOLD = {"format": "nbrdf-material/1", "name": "rough gold",
+              "layers": [{"type": "conductor", "roughness": 0.4, "r0": [1.0, 0.78, 0.34]}]}
+
+
+def test_modes_resolve_like_the_command_line():
+    stack, gold = load_material(DEFAULT_MATERIAL), parse_material(ROUGH_GOLD)
+    assert MaterialPipeline.resolve(stack, "auto") is BrdfMode.NEURAL
+    assert MaterialPipeline.resolve(gold, "auto") is BrdfMode.ANALYTIC
+    assert MaterialPipeline.resolve(gold, BrdfMode.PROJECTED) is BrdfMode.PROJECTED
+    with pytest.raises(ValueError, match="--brdf"):
+        MaterialPipeline.resolve(gold, "spectral")
+
+
+def test_an_edit_computes_one_latent_share_and_reads_no_file(gl_ctx, tmp_path, monkeypatch):
+    from nbrdf.neural import gpu_pack
+    from nbrdf.viewer import image_io
+    from nbrdf.viewer.lookdev import LookDev
+
+    iio.imwrite(tmp_path / "n.png", np.tile(np.array([150, 128, 240], np.uint8), (4, 4, 1)))
+    doc = {"format": "nbrdf-material/1", "name": "coated", "normal_map": "n.png", "layers": [
+        {"type": "dielectric", "roughness": 0.1, "ior": 1.5}, {"type": "conductor", "roughness": 0.3,
+                                                               "r0": [1.0, 0.78, 0.34]}]}
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    calls = {"share": 0, "normal": 0}
+    share, read = gpu_pack.latent_share, image_io.read_normal_map
+
+    def count_share(*a):
+        calls["share"] += 1
+        return share(*a)
+
+    def count_read(*a):
+        calls["normal"] += 1
+        return read(*a)
+
+    monkeypatch.setattr(gpu_pack, "latent_share", count_share)
+    monkeypatch.setattr(image_io, "read_normal_map", count_read)
+    ld = LookDev(gl_ctx, load_material(tmp_path / "m.json"))
+    try:
+        assert calls == {"share": 1, "normal": 1}
+        for k, r in enumerate((0.2, 0.35, 0.5)):
+            assert ld.set_param(1, "roughness", r), ld.error
+            assert calls == {"share": 2 + k, "normal": 1}
+        ld.set_compare("side")
+        for view in ("object", "lobe", "slice"):  # every program draws the one share
+            ld.set_view(view)
+            ld.render(gl_ctx.simple_framebuffer((8, 8)), (8, 8), 1)
+        assert calls == {"share": 4, "normal": 1}
+    finally:
+        ld.close()
+
+
+def test_one_renderer_draws_any_material(gl_ctx):
+    """A renderer without a material draws each GpuBrdf it is handed exactly as
+    a renderer made for that material alone."""
+    model = default_model()
+    pipe = MaterialPipeline(gl_ctx, model)
+    shared = Renderer(gl_ctx, mesh="testmesh")
+    with pytest.raises(NbrdfError, match="no material"):
+        shared.render_linear(ViewState(), (8, 8))
+    gold, stack = parse_material(ROUGH_GOLD), load_material(DEFAULT_MATERIAL)
+    state = ViewState(theta_i=40.0)
+    for m, mode in ((gold, "analytic"), (stack, "neural"), (gold, "neural")):
+        brdf = pipe.build(m, mode)
+        assert brdf.kind == (BrdfKind.ANALYTIC if mode == "analytic" else BrdfKind.NEURAL)
+        own = Renderer(gl_ctx, m, "testmesh", neural=pipe.decoder if brdf.neural else None, latent=brdf.latent,
+                       proxy=(brdf.uniforms["u_proxy_sigma"], brdf.uniforms["u_proxy_w"]) if brdf.neural else None)
+        for view in ("object", "lobe"):
+            s = ViewState(view=view, theta_i=state.theta_i)
+            np.testing.assert_array_equal(shared.render_linear(s, (20, 16), 2, brdf), own.render_linear(s, (20, 16), 2))
+
+
+def test_the_offscreen_renderer_is_the_pipeline(gl_ctx):
+    from nbrdf.viewer.view_cli import ViewOptions, make_renderer
+
+    m = load_material(DEFAULT_MATERIAL)
+    r = make_renderer(gl_ctx, m, ViewOptions(material=DEFAULT_MATERIAL, brdf="neural"))
+    z = default_model().material_latent(m)
+    assert r.brdf.kind == BrdfKind.NEURAL
+    np.testing.assert_allclose(r.brdf.latent.numpy(), z.numpy(), atol=1e-6)

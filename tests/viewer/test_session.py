@@ -1,0 +1,85 @@
+"""The session document: files of the previous version open and render as
+they did, a document survives a round trip, bad files end in one line."""
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import load_material
+from nbrdf.viewer.modes import CompareMode, ToneMap, View
+from nbrdf.viewer.session import SessionDoc
+from nbrdf.viewer.view_cli import DEFAULT_MATERIAL
+
+DATA = Path(__file__).parent / "data"
+V1 = DATA / "session_v1.json"  # written by the previous LookDev (before the split), with its object render
+
+
+def test_a_previous_version_file_parses():
+    doc = SessionDoc.load(V1)
+    assert doc.material.name == "varnished copper" and doc.material.layers[2].roughness == 0.6
+    assert doc.state.view is View.OBJECT and doc.state.tonemap is ToneMap.LINEAR and doc.state.exposure == 0.5
+    assert doc.state.point_light == (1.0, -2.0, 2.0)
+    assert doc.compare.mode is CompareMode.WIPE and doc.compare.wipe == 0.3
+    assert doc.interpolation.other["name"] == "rough gold" and doc.interpolation.t == 0.25
+    assert not doc.interpolation.brdf_blend
+
+
+def test_a_previous_version_file_renders_as_it_did(gl_ctx):
+    from nbrdf.viewer.lookdev import LookDev
+
+    ld = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
+    try:
+        assert ld.open_session(V1), ld.error
+        img = ld.renderer.render_linear(ld.main_state(), (24, 16), 2, ld.brdf)
+    finally:
+        ld.close()
+    ref = np.load(DATA / "session_v1_object.npy")
+    assert ref.max() > 0.05
+    np.testing.assert_allclose(img, ref, rtol=1e-4, atol=1e-5)
+
+
+def test_round_trip_is_exact(tmp_path):
+    doc = SessionDoc.load(V1)
+    doc.save(tmp_path / "s.json")
+    again = SessionDoc.load(tmp_path / "s.json")
+    assert again.to_dict() == doc.to_dict()
+    data, out = json.loads(V1.read_text()), doc.to_dict()
+    assert Path(out.pop("material_dir")) == Path(data.pop("material_dir")).resolve()  # "." as a folder
+    assert out == data  # every key the previous version wrote, written the same way
+
+
+def _broken(edit) -> dict:
+    data = copy.deepcopy(json.loads(V1.read_text()))
+    edit(data)
+    return data
+
+
+@pytest.mark.parametrize("edit,words", [
+    (lambda d: d.pop("camera"), "malformed session"),
+    (lambda d: d["view"].update(view="sideways"), "sideways"),
+    (lambda d: d["view"].update(tonemap="reinhard"), "reinhard"),
+    (lambda d: d["view"].update(compare="overlay"), "overlay"),
+    (lambda d: d["view"].update(wipe=1.5), "wipe"),
+    (lambda d: d["interpolation"].update(t=2.0), "weight"),
+    (lambda d: d["interpolation"].update(mode="slerp"), "slerp"),
+    (lambda d: d["material"]["layers"][0].update(ior=9.0), "ior"),
+    (lambda d: d.update(format="nbrdf-session/9"), "not an nbrdf-session/1 file"),
+])
+def test_bad_documents_end_in_one_line(edit, words):
+    with pytest.raises(NbrdfError) as e:
+        SessionDoc.parse(_broken(edit), "s.json")
+    msg = str(e.value)
+    assert words in msg and msg.startswith("s.json") and "\n" not in msg
+
+
+def test_missing_and_non_json_files(tmp_path):
+    with pytest.raises(NbrdfError, match="no such file"):
+        SessionDoc.load(tmp_path / "none.json")
+    (tmp_path / "bad.json").write_text("{ nope")
+    with pytest.raises(NbrdfError, match="not JSON"):
+        SessionDoc.load(tmp_path / "bad.json")

@@ -1,0 +1,169 @@
+"""The look-development session document: what an artist saves and reopens.
+
+``SessionDoc`` is the ``nbrdf-session/1`` file as a typed value: the material
+document, the mesh, the environment, the view state (camera, lights, view,
+tone mapping), the compare settings and the interpolation. ``parse`` checks a
+whole file before anything is applied, so a bad file changes nothing; files
+written by every earlier version of the previewer (the same format, with the
+optional keys they lacked) still open.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import Material, material_to_dict, parse_material
+from nbrdf.viewer.camera import OrbitCamera
+from nbrdf.viewer.modes import CompareMode, ToneMap, View
+from nbrdf.viewer.renderer import ViewState
+
+SESSION_FORMAT = "nbrdf-session/1"
+
+
+INTERPOLATION_MODES = ("latent", "brdf")
+"""latent: blend the latents and decode once; brdf: blend the two decoded BRDF values (two renders)."""
+
+
+@dataclass
+class Interpolation:
+    """The second material of an interpolation and the blend between the two."""
+
+    other: dict | None = None
+    """The second material's document (None: interpolation off)."""
+    other_dir: str = "."
+    """The folder its relative texture paths resolve against."""
+    t: float = 0.0
+    """The weight of the second material, in [0, 1]."""
+    mode: str = "latent"
+    """``latent`` (blend the latents) or ``brdf`` (blend the BRDF values)."""
+
+    def __post_init__(self) -> None:
+        if self.mode not in INTERPOLATION_MODES:
+            raise NbrdfError(f"interpolation mode {self.mode!r}: latent or brdf")
+        if not (math.isfinite(float(self.t)) and 0.0 <= float(self.t) <= 1.0):
+            raise NbrdfError(f"interpolation weight {self.t} is outside [0, 1]")
+        self.t = float(self.t)
+
+    @property
+    def active(self) -> bool:
+        return self.other is not None
+
+    @property
+    def brdf_blend(self) -> bool:
+        """Two renders blended per pixel (rather than one render of the blended latent)."""
+        return self.other is not None and self.mode == "brdf"
+
+    def other_material(self) -> Material | None:
+        return None if self.other is None else parse_material(self.other, self.other_dir)
+
+
+@dataclass
+class CompareSettings:
+    """How the reference is shown beside the neural image."""
+
+    mode: CompareMode = CompareMode.OFF
+    """off, side, wipe or error."""
+    wipe: float = 0.5
+    """The x of the A/B wipe line, 0..1 of the view."""
+    error_scale: float = 0.25
+    """The relative error shown as full red in the error view."""
+
+    def __post_init__(self) -> None:
+        self.mode = CompareMode.parse(self.mode, "compare mode")
+        self.wipe, self.error_scale = float(self.wipe), float(self.error_scale)
+        if not (0.0 <= self.wipe <= 1.0) or not (math.isfinite(self.error_scale) and self.error_scale > 0):
+            raise NbrdfError(f"compare: wipe {self.wipe} must be in [0, 1], error scale {self.error_scale} > 0")
+
+
+@dataclass
+class SessionDoc:
+    """One look-development session, as saved to and read from a file."""
+
+    material: Material
+    """The edited material."""
+    mesh: str = "sphere"
+    """sphere, testmesh or a mesh file."""
+    environment: str | None = None
+    """An equirectangular environment file (None: the built-in sky)."""
+    state: ViewState = field(default_factory=ViewState)
+    """Camera, lights, view, exposure and tone mapping."""
+    compare: CompareSettings = field(default_factory=CompareSettings)
+    """The compare mode and its settings."""
+    mipmapping: bool = True
+    """Trilinear latent-texture lookup (off shows the aliasing)."""
+    interpolation: Interpolation = field(default_factory=Interpolation)
+    """The material interpolation (off unless ``other`` is set)."""
+
+    def to_dict(self) -> dict:
+        """The ``nbrdf-session/1`` document."""
+        s = self.state
+        return {
+            "format": SESSION_FORMAT,
+            "material": material_to_dict(self.material),
+            "material_dir": str(self.material.base_dir),
+            "mesh": self.mesh,
+            "environment": self.environment,
+            "camera": asdict(s.camera),
+            "light": {"direction": list(s.light_dir), "radiance": s.light_radiance,
+                      "point": list(s.point_light) if s.point_light else None, "point_intensity": s.point_intensity},
+            "lighting": {"env_intensity": s.env_intensity, "env_rotation": s.env_rotation, "env_on": s.env_on,
+                         "background": s.background},
+            "view": {"view": View.parse(s.view).value, "theta_i": s.theta_i, "exposure": s.exposure,
+                     "tonemap": ToneMap.parse(s.tonemap).value, "compare": self.compare.mode.value,
+                     "wipe": self.compare.wipe, "error_scale": self.compare.error_scale,
+                     "mipmapping": self.mipmapping},
+            "interpolation": asdict(self.interpolation),
+        }
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def parse(cls, data: object, source: str = "session") -> "SessionDoc":
+        """A session from its document; every field is checked, errors are one line."""
+        if not isinstance(data, dict) or data.get("format") != SESSION_FORMAT:
+            raise NbrdfError(f"{source}: not an {SESSION_FORMAT} file")
+        try:
+            mat = parse_material(data["material"], data.get("material_dir", "."), source=f"{source}: material")
+            cam = OrbitCamera(**data["camera"])
+            v, lt, li = data["view"], data["lighting"], data["light"]
+            try:
+                view = View.parse(v["view"], "view")
+                tonemap = ToneMap.parse(v["tonemap"], "tone mapping")
+            except ValueError as e:
+                raise NbrdfError(f"{source}: {e}") from None
+            state = ViewState(view=view, theta_i=float(v["theta_i"]), camera=cam,
+                              light_dir=tuple(float(x) for x in li["direction"]),
+                              light_radiance=float(li["radiance"]),
+                              point_light=tuple(float(x) for x in li["point"]) if li.get("point") else None,
+                              point_intensity=float(li.get("point_intensity", 20.0)),
+                              env_intensity=float(lt["env_intensity"]), env_rotation=float(lt["env_rotation"]),
+                              env_on=bool(lt["env_on"]), background=bool(lt["background"]),
+                              exposure=float(v["exposure"]), tonemap=tonemap)
+            interp = Interpolation(**data.get("interpolation", {}))
+            try:
+                compare = CompareSettings(v.get("compare", CompareMode.OFF.value), v.get("wipe", 0.5), v.get("error_scale", 0.25))
+            except ValueError as e:
+                raise NbrdfError(f"{source}: {e}") from None
+        except NbrdfError as e:
+            msg = str(e)
+            raise NbrdfError(msg if msg.startswith(source) else f"{source}: {msg}") from None
+        except (KeyError, TypeError, ValueError) as e:
+            raise NbrdfError(f"{source}: malformed session ({type(e).__name__}: {e})") from None
+        return cls(material=mat, mesh=data.get("mesh", "sphere"), environment=data.get("environment"),
+                   state=state, compare=compare, mipmapping=bool(v.get("mipmapping", True)), interpolation=interp)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "SessionDoc":
+        """Reads and checks a session file."""
+        p = Path(path)
+        if not p.is_file():
+            raise NbrdfError(f"{p}: no such file")
+        try:
+            data = json.loads(p.read_text())
+        except json.JSONDecodeError as e:
+            raise NbrdfError(f"{p}: not JSON ({e.msg} at line {e.lineno})") from None
+        return cls.parse(data, str(p))
