@@ -37,7 +37,34 @@ from nbrdf.neural.errors import NbrdfError
 
 class Parser(argparse.ArgumentParser):
     """argparse that reports a usage error as one line (an ``NbrdfError``,
-    so exit status 2 through ``run_guarded``) instead of usage text."""
+    so exit status 2 through ``run_guarded``) instead of usage text.
+
+    ``populate(parser)``, when given, adds the flags on first use (parsing or
+    help): a subcommand whose config lives in a heavy module (torch) costs
+    nothing until it is the one run."""
+
+    def __init__(self, *args: Any, populate: Callable[["Parser"], None] | None = None, **kwargs: Any):
+        super().__init__(*args, **kwargs)
+        self.populate = populate
+
+    def ready(self) -> "Parser":
+        """Adds the deferred flags (once)."""
+        if self.populate is not None:
+            fn, self.populate = self.populate, None
+            fn(self)
+        return self
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        self.ready()
+        return super().parse_known_args(args, namespace)
+
+    def format_usage(self) -> str:
+        self.ready()
+        return super().format_usage()
+
+    def format_help(self) -> str:
+        self.ready()
+        return super().format_help()
 
     def error(self, message: str):  # type: ignore[override]
         raise NbrdfError(f"{self.prog}: {message}")

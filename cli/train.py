@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import dataclass
+from typing import Callable
 
 from nbrdf.cli.common import at_least
 from nbrdf.cli.config import Parser, add_arguments, build, values
@@ -57,24 +58,44 @@ def cmd_train_operation(a: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    """Adds ``train`` and its four subcommands to the ``nbrdf`` subcommands."""
+def _representation_flags(p: Parser) -> None:
     from nbrdf.neural.decoder import ACTIVATIONS, DecoderSpec
-    from nbrdf.training.train_operations import LayeringConfig, LeafConfig, SamplerConfig
     from nbrdf.training.train_representation import TrainConfig
 
+    p.description = TrainConfig.__doc__
+    add_arguments(p, TrainConfig, exclude=("spec",), choices={"device": ("auto", "cpu", "cuda")})
+    add_arguments(p, DecoderSpec, only=SPEC_HELP, help=SPEC_HELP, choices={"activation": tuple(ACTIVATIONS)})
+    add_arguments(p, RunArgs)
+
+
+def _operation_flags(what: str) -> Callable[[Parser], None]:
+    def populate(p: Parser) -> None:
+        from nbrdf.training import train_operations as to
+
+        cls = {"leaf": to.LeafConfig, "layering": to.LayeringConfig, "sampler": to.SamplerConfig}[what]
+        p.description = cls.__doc__
+        add_arguments(p, cls, exclude=() if what == "layering" else LAYERING_ONLY,
+                      required=("data",) if what == "layering" else (), defaults={"decoder": None})
+
+    return populate
+
+
+#: ``nbrdf train`` subcommands: name -> one-line help (the flags are added on
+#: first use, so that ``nbrdf`` does not import torch to parse other commands).
+TRAINERS = {
+    "leaf": "leaf encoders, through the frozen decoder against closed-form layers",
+    "layering": "layering network, through the decoder against Monte Carlo stacks",
+    "sampler": "proxy-pdf network, by KL divergence to decoded lobes",
+}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Adds ``train`` and its four subcommands to the ``nbrdf`` subcommands."""
     t = sub.add_parser("train", help="train networks")
     tsub = t.add_subparsers(dest="what", required=True, parser_class=Parser)
     tr = tsub.add_parser("representation", help="auto-decoder: the shared decoder and training latents",
-                         description=TrainConfig.__doc__)
-    add_arguments(tr, TrainConfig, exclude=("spec",), choices={"device": ("auto", "cpu", "cuda")})
-    add_arguments(tr, DecoderSpec, only=SPEC_HELP, help=SPEC_HELP, choices={"activation": tuple(ACTIVATIONS)})
-    add_arguments(tr, RunArgs)
+                         populate=_representation_flags)
     tr.set_defaults(fn=cmd_train_representation)
-    for what, cls in (("leaf", LeafConfig), ("layering", LayeringConfig), ("sampler", SamplerConfig)):
-        doc = cls.__doc__.split(": ", 1)[1]
-        to = tsub.add_parser(what, help=doc.rstrip("."), description=cls.__doc__)
-        add_arguments(to, cls, exclude=() if cls is LayeringConfig else LAYERING_ONLY,
-                      required=("data",) if cls is LayeringConfig else (),
-                      defaults={"decoder": None})
+    for what, help_ in TRAINERS.items():
+        to = tsub.add_parser(what, help=help_, populate=_operation_flags(what))
         to.set_defaults(fn=cmd_train_operation)

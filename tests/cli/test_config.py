@@ -140,6 +140,7 @@ def test_enum_words_are_the_mode_enum_values():
 
 
 def _walk(p, path=()):
+    p.format_help()  # adds deferred flags
     subs = [a for a in p._actions if a.__class__.__name__ == "_SubParsersAction"]
     if not subs:
         yield path, p
