@@ -14,7 +14,7 @@ from pathlib import Path
 import imageio.v3 as iio
 
 from nbrdf.viewer.app import App
-from nbrdf.viewer.view_cli import DEFAULT_MATERIAL, ViewOptions
+from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "figures" / "viewer"
 

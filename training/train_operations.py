@@ -28,7 +28,7 @@ from typing import Callable
 
 import torch
 
-from nbrdf.neural.decoder import encode, loss_target, predicted_target
+from nbrdf.neural.decoder import DEFAULT_WEIGHTS, encode, loss_target, predicted_target
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layering import LayeringNet, layering_spec
@@ -45,18 +45,61 @@ Tensor = torch.Tensor
 
 @dataclass
 class OpsConfig:
-    """One operation-training run."""
+    """One operation-training run (``nbrdf train leaf|layering|sampler``); the
+    subclasses below hold each operation's defaults."""
 
-    decoder: str  # bundle whose decoder (and earlier operation networks) it builds on
     out: str
+    """run folder (checkpoint, curves, model.safetensors)"""
+    decoder: str = str(DEFAULT_WEIGHTS)
+    """bundle to build on (default: the shipped weights); a network of the same shape already in it is fine-tuned"""
     steps: int = 3000
-    batch: int = 64  # BRDFs per step
-    pairs: int = 256  # direction pairs per BRDF per step
+    """optimisation steps (Adam, cosine schedule)"""
+    batch: int = 64
+    """BRDFs per step"""
+    pairs: int = 256
+    """direction pairs per BRDF per step"""
     lr: float = 2e-3
+    """Adam learning rate"""
     seed: int = 0
-    data: str | None = None  # layering: an `nbrdf data --preset layering` folder
-    recursion_steps: int = 1500  # layering: fine-tuning steps with three-layer stacks
-    width: int = 0  # 0: the part's default
+    """random seed of initialisation and batches"""
+    data: str | None = None
+    """layering: a folder made by `nbrdf data --preset layering`"""
+    recursion_steps: int = 1500
+    """layering: final steps that mix in three-layer stacks (recursive layering)"""
+    width: int = 0
+    """layering: hidden units per layer of the layering network (0: the default, 256)"""
+
+
+@dataclass
+class LeafConfig(OpsConfig):
+    """``nbrdf train leaf``: leaf encoders, through the frozen decoder against closed-form layers."""
+
+    steps: int = 6000
+    batch: int = 32
+    pairs: int = 128
+    lr: float = 2e-3
+
+
+@dataclass
+class LayeringConfig(OpsConfig):
+    """``nbrdf train layering``: the layering network, through the decoder against Monte Carlo stacks."""
+
+    steps: int = 5000
+    batch: int = 48
+    pairs: int = 192
+    lr: float = 1e-3
+    recursion_steps: int = 2000
+    width: int = 256
+
+
+@dataclass
+class SamplerConfig(OpsConfig):
+    """``nbrdf train sampler``: the proxy-pdf network, by KL divergence to decoded lobes."""
+
+    steps: int = 3000
+    batch: int = 64
+    pairs: int = 256
+    lr: float = 3e-3
 
 
 # --- a small resumable loop ---------------------------------------------------------------

@@ -31,17 +31,31 @@ Tensor = torch.Tensor
 
 @dataclass
 class TrainConfig:
+    """One representation-training run (``nbrdf train representation``): the
+    decoder and one latent per training BRDF, optimised together."""
+
     data: str
+    """a folder made by `nbrdf data`"""
     out: str
+    """run folder (checkpoint, decoder.safetensors, curves.png)"""
     spec: DecoderSpec = field(default_factory=DecoderSpec)
+    """the decoder's architecture (on the command line: --width, --depth, --activation, --loss-scale)"""
     epochs: int = 40
+    """passes over the training samples"""
     batch: int = 8192
+    """samples (BRDF, direction pair) per step"""
     lr: float = 2e-3
+    """Adam learning rate of the decoder (cosine schedule)"""
     latent_lr: float = 1e-2
+    """Adam learning rate of the training latents"""
     latent_reg: float = 1e-4
+    """weight of the latents' squared-norm penalty"""
     val_every: int = 5
+    """epochs between validations (validation BRDFs projected with the decoder frozen)"""
     seed: int = 0
+    """random seed of initialisation and batches"""
     device: str = "auto"
+    """auto (CUDA when available), cpu or cuda"""
 
 
 def _device(name: str) -> torch.device:

@@ -1,6 +1,7 @@
-"""``nbrdf bench render``: frame times of the GLSL decoder and of full
-shading, and the GLSL decoder's throughput against the torch CPU decoder's
-on the same machine (one run, one JSON object)."""
+"""Previewer benchmarks, run by ``nbrdf bench render`` and ``nbrdf bench app``:
+frame times of the GLSL decoder and of full shading, the GLSL decoder's
+throughput against the torch CPU decoder's on the same machine, and the
+look-development window's frame time and edit latency (one JSON object each)."""
 from __future__ import annotations
 
 import time
@@ -30,7 +31,7 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
     from nbrdf.viewer.gl import describe, offscreen_context
     from nbrdf.viewer.neural_gpu import GpuDecoder
     from nbrdf.viewer.renderer import Renderer, ViewState
-    from nbrdf.viewer.view_cli import DEFAULT_MATERIAL
+    from nbrdf.viewer.options import DEFAULT_MATERIAL
 
     dec = load_decoder(DEFAULT_WEIGHTS) if DEFAULT_WEIGHTS.is_file() else Decoder(DecoderSpec()).eval()
     torch.manual_seed(0)
@@ -115,7 +116,7 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
     import statistics
 
     from nbrdf.viewer.app import App
-    from nbrdf.viewer.view_cli import DEFAULT_MATERIAL, ViewOptions
+    from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
 
     app = App(ViewOptions(material=DEFAULT_MATERIAL, size=size), size=size)
     ld = app.lookdev

@@ -18,7 +18,7 @@ import torch
 from nbrdf.neural.material import parse_material
 from nbrdf.neural.model import default_model
 from nbrdf.viewer.image_io import tonemap
-from nbrdf.viewer.view_cli import DEFAULT_MATERIAL
+from nbrdf.viewer.options import DEFAULT_MATERIAL
 
 pytestmark = pytest.mark.gl
 
@@ -27,7 +27,7 @@ SCRIPT = textwrap.dedent("""
     from pathlib import Path
     import numpy as np
     from nbrdf.viewer.app import App
-    from nbrdf.viewer.view_cli import ViewOptions
+    from nbrdf.viewer.options import ViewOptions
     tmp = Path(sys.argv[2])
     app = App(ViewOptions(material=sys.argv[1], size=(64, 48)), size=(64, 48))
     app.BUDGET_STILL_MS = app.BUDGET_DRAG_MS = 1e9   # full resolution: compared pixel for pixel

@@ -16,7 +16,8 @@ import pytest
 
 from nbrdf.neural.material import load_material
 from nbrdf.viewer.renderer import ViewState
-from nbrdf.viewer.view_cli import DEFAULT_MATERIAL, ViewOptions, make_renderer
+from nbrdf.viewer.offscreen import make_renderer
+from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
 
 GOLDEN = Path(__file__).parent / "golden"
 MATERIALS = DEFAULT_MATERIAL.parent

@@ -100,7 +100,7 @@ def test_lobe_view_matches_the_torch_lobe_image(gl_ctx):
     from nbrdf.neural.material import load_material
     from nbrdf.neural.metrics import lobe_image
     from nbrdf.viewer.renderer import Renderer, ViewState
-    from nbrdf.viewer.view_cli import DEFAULT_MATERIAL
+    from nbrdf.viewer.options import DEFAULT_MATERIAL
 
     torch.manual_seed(6)
     dec = Decoder(DecoderSpec()).eval()

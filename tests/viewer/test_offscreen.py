@@ -1,12 +1,8 @@
 """Offscreen renders through EGL: every view of the default material, the
-GLSL lobe against the torch closed forms, image files, and bad input."""
+GLSL lobe against the torch closed forms, and image files (the command line: tests/cli/test_view.py)."""
 from __future__ import annotations
 
-import json
 import math
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +12,7 @@ from nbrdf.neural.metrics import lobe_image
 from nbrdf.training.reference import single_layer_eval
 from nbrdf.viewer.image_io import read_exr, write_image
 from nbrdf.viewer.renderer import Renderer, ViewState
-from nbrdf.viewer.view_cli import DEFAULT_MATERIAL, main
+from nbrdf.viewer.options import DEFAULT_MATERIAL
 
 pytestmark = pytest.mark.gl
 
@@ -90,76 +86,6 @@ def test_image_files_round_trip(tmp_path):
     import imageio.v3 as iio
 
     assert iio.imread(tmp_path / "a.png").shape == (5, 7, 3)
-
-
-def test_cli_offscreen_outputs(tmp_path, capsys):
-    assert main([str(DEFAULT_MATERIAL), "--offscreen", "--out", str(tmp_path / "o.npy"), "--size", "40x30", "--spp", "2"]) == 0
-    o = np.load(tmp_path / "o.npy")
-    assert o.shape == (30, 40, 3) and o.dtype == np.float32
-    assert main(["--offscreen", "--view", "lobe", "--theta-i", "30", "--out", str(tmp_path / "l.npy")]) == 0
-    assert np.load(tmp_path / "l.npy").shape == (64, 64, 3)
-    assert main(["--offscreen", "--view", "slice", "--size", "16x16", "--out", str(tmp_path / "s.exr")]) == 0
-    assert read_exr(tmp_path / "s.exr").shape == (16, 16, 3)
-
-
-@pytest.mark.parametrize("argv,needle", [
-    (["--offscreen", "--out", "x.gif"], "unknown image type"),
-    (["--offscreen", "--out", "x.png", "--size", "big"], "--size"),
-    (["--offscreen", "--out", "x.png", "--mesh", "/nonexistent.obj"], "no such file"),
-    (["--offscreen", "--out", "x.png", "--env", "/nonexistent.hdr"], "no such file"),
-    (["/nonexistent.json", "--offscreen", "--out", "x.png"], "no such file"),
-    (["--offscreen"], "--out"),
-    (["--offscreen", "--out", "x.png", "--point-light", "1,2"], "--point-light"),
-    (["--offscreen", "--out", "x.png", "--session", "/nonexistent.json"], "no such file"),
-])
-def test_cli_bad_input_one_line(tmp_path, capsys, monkeypatch, argv, needle):
-    monkeypatch.chdir(tmp_path)
-    assert main(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and needle in err[0], err
-
-
-def test_cli_invalid_material_and_unreadable_env(tmp_path, capsys, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    (tmp_path / "bad.json").write_text(json.dumps({"format": "nbrdf-material/1", "name": "b",
-                                                   "layers": [{"type": "conductor", "roughness": 0.3, "r0": 2}]}))
-    assert main(["bad.json", "--offscreen", "--out", "x.png"]) == 2
-    assert "layers[0].r0: 2 is outside [0, 1]" in capsys.readouterr().err
-    (tmp_path / "env.exr").write_bytes(b"not an exr")
-    assert main(["--offscreen", "--out", "x.png", "--env", "env.exr"]) == 2
-    assert "--env env.exr: cannot be read" in capsys.readouterr().err
-
-
-def test_headless_fallback(tmp_path):
-    """No display and no --offscreen: one line says so, and the PNG appears."""
-    env = {k: v for k, v in __import__("os").environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    exe = Path(sys.executable).parent / "nbrdf-view"
-    r = subprocess.run([str(exe), "--size", "32x32", "--spp", "1"], cwd=tmp_path, env=env, capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
-    assert r.stderr.strip().splitlines() == ["nbrdf-view: no display found; rendering offscreen to nbrdf-view.png instead"]
-    assert (tmp_path / "nbrdf-view.png").stat().st_size > 100
-
-
-def test_cli_renders_a_session_file(gl_ctx, tmp_path, capsys):
-    import imageio.v3 as iio
-
-    from nbrdf.viewer.lookdev import LookDev
-
-    ld = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
-    try:
-        ld.state.view = "slice"
-        ld.set_param(2, "roughness", 0.6)
-        assert ld.save_session(tmp_path / "s.json")
-        assert ld.screenshot(tmp_path / "direct.png", (24, 16), 1)
-    finally:
-        ld.close()
-    assert main(["--offscreen", "--session", str(tmp_path / "s.json"), "--size", "24x16", "--spp", "1",
-                 "--out", str(tmp_path / "cli.png")]) == 0
-    np.testing.assert_array_equal(iio.imread(tmp_path / "cli.png"), iio.imread(tmp_path / "direct.png"))
-    (tmp_path / "bad.json").write_text('{"format": "nbrdf-session/1"}')
-    assert main(["--offscreen", "--session", str(tmp_path / "bad.json"), "--out", str(tmp_path / "x.png")]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "malformed session" in err[0]
 
 
 def test_a_distant_point_light_equals_the_directional_light(gl_ctx):

@@ -15,7 +15,7 @@ from nbrdf.neural.model import default_model
 from nbrdf.viewer.modes import BrdfMode
 from nbrdf.viewer.pipeline import BrdfKind, MaterialPipeline
 from nbrdf.viewer.renderer import Renderer, ViewState
-from nbrdf.viewer.view_cli import DEFAULT_MATERIAL
+from nbrdf.viewer.options import DEFAULT_MATERIAL
 
 ROUGH_GOLD = {"format": "nbrdf-material/1", "name": "rough gold",
               "layers": [{"type": "conductor", "roughness": 0.4, "r0": [1.0, 0.78, 0.34]}]}
@@ -89,7 +89,8 @@ def test_one_renderer_draws_any_material(gl_ctx):
 
 
 def test_the_offscreen_renderer_is_the_pipeline(gl_ctx):
-    from nbrdf.viewer.view_cli import ViewOptions, make_renderer
+    from nbrdf.viewer.offscreen import make_renderer
+    from nbrdf.viewer.options import ViewOptions
 
     m = load_material(DEFAULT_MATERIAL)
     r = make_renderer(gl_ctx, m, ViewOptions(material=DEFAULT_MATERIAL, brdf="neural"))

@@ -1,7 +1,7 @@
 """`nbrdf bench reference --quick` runs and reports sane JSON."""
 import json
 
-from nbrdf.viewer.cli import nbrdf_main
+from nbrdf.cli.main import nbrdf_main
 
 
 def test_bench_reference_quick(capsys):

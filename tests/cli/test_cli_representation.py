@@ -106,7 +106,7 @@ def test_eval_projected_with_the_shipped_weights(tmp_path, capsys):
 
 
 def test_view_offscreen_with_the_neural_shader(tmp_path, capsys):
-    from nbrdf.viewer.view_cli import main
+    from nbrdf.cli.view import main
 
     out = tmp_path / "lobe.npy"
     mat = write_material(tmp_path / "m.json", [{"type": "conductor", "roughness": 0.3, "r0": 0.9}])

@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from test_analytic import ref_conductor, ref_dielectric
-from nbrdf.viewer.cli import nbrdf_main
+from nbrdf.cli.main import nbrdf_main
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT = REPO / "viewer" / "assets" / "materials" / "default.json"

@@ -1,0 +1,110 @@
+"""``nbrdf bench reference|render|app|operations``: speed benchmarks, each
+printed as one JSON object (the measuring code lives in the library)."""
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import dataclass, field
+
+from nbrdf.cli.common import at_least, model_or_default
+from nbrdf.cli.config import Parser, add_arguments, build
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.options import parse_size
+
+
+@dataclass
+class ReferenceBench:
+    """``nbrdf bench reference``: Monte Carlo paths per second and time to a converged lobe."""
+
+    quick: bool = False
+    """a short run (for tests)"""
+
+
+@dataclass
+class RenderBench:
+    """``nbrdf bench render``: GLSL decoder and full shading frame times, GLSL vs torch throughput."""
+
+    size: tuple[int, int] = field(default=(1920, 1080), metadata={"parse": parse_size, "shown": "1920x1080",
+                                                                    "metavar": "WxH"})
+    """size of the timed frames"""
+    repeats: int = 3
+    """timed frames per measurement (the median is reported)"""
+
+
+@dataclass
+class AppBench:
+    """``nbrdf bench app``: the window's frame time and slider-to-frame latency (needs a display)."""
+
+    size: tuple[int, int] = field(default=(1000, 620), metadata={"parse": parse_size, "shown": "1000x620",
+                                                                   "metavar": "WxH"})
+    """size of the window"""
+    edits: int = 8
+    """slider edits timed"""
+
+
+@dataclass
+class OperationsBench:
+    """``nbrdf bench operations``: CPU latency of leaf encoders and layering (what a slider runs)."""
+
+    model: str | None = None
+    """bundle (default: the shipped weights)"""
+    repeats: int = 1000
+    """timed calls per operation"""
+
+
+def cmd_bench_reference(a: argparse.Namespace) -> int:
+    from nbrdf.training.bench import bench_reference
+
+    c: ReferenceBench = build(ReferenceBench, a)
+    print(json.dumps(bench_reference(quick=c.quick), indent=2))
+    return 0
+
+
+def cmd_bench_render(a: argparse.Namespace) -> int:
+    from nbrdf.viewer.bench import bench_render
+
+    c: RenderBench = build(RenderBench, a)
+    at_least("--repeats", c.repeats)
+    print(json.dumps(bench_render(c.size, repeats=c.repeats), indent=2))
+    return 0
+
+
+def cmd_bench_app(a: argparse.Namespace) -> int:
+    from nbrdf.viewer.bench import bench_app
+    from nbrdf.viewer.offscreen import has_display
+
+    if not has_display():
+        raise NbrdfError("bench app: no display (run it under xvfb-run on a headless machine)")
+    c: AppBench = build(AppBench, a)
+    at_least("--edits", c.edits)
+    print(json.dumps(bench_app(c.size, c.edits), indent=2))
+    return 0
+
+
+def cmd_bench_operations(a: argparse.Namespace) -> int:
+    from nbrdf.neural.bench import bench_operations
+
+    c: OperationsBench = build(OperationsBench, a)
+    at_least("--repeats", c.repeats)
+    print(json.dumps(bench_operations(model_or_default(c.model), c.repeats), indent=2))
+    return 0
+
+
+#: ``nbrdf bench`` subcommands: name -> (config, command).
+BENCHES = {
+    "reference": (ReferenceBench, cmd_bench_reference),
+    "render": (RenderBench, cmd_bench_render),
+    "app": (AppBench, cmd_bench_app),
+    "operations": (OperationsBench, cmd_bench_operations),
+}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Adds ``bench`` and its subcommands to the ``nbrdf`` subcommands."""
+    b = sub.add_parser("bench", help="speed benchmarks, printed as JSON")
+    bsub = b.add_subparsers(dest="what", required=True, parser_class=Parser)
+    for name, (cls, fn) in BENCHES.items():
+        doc = cls.__doc__.split(": ", 1)[1]
+        p = bsub.add_parser(name, help=doc.rstrip("."), description=cls.__doc__)
+        add_arguments(p, cls)
+        p.set_defaults(fn=fn)

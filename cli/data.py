@@ -1,0 +1,46 @@
+"""``nbrdf data``: generate a training / validation data set (sharded,
+resumable). A new option is one field of :class:`DataArgs` plus its use in
+:func:`cmd_data`."""
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, replace
+
+from nbrdf.cli.config import add_arguments, build
+from nbrdf.neural.errors import NbrdfError
+
+
+@dataclass
+class DataArgs:
+    """``nbrdf data``: which preset, where, and overrides of the preset."""
+
+    out: str
+    """folder for the shards and manifest.json"""
+    preset: str = "tiny"
+    """tiny (seconds), cpu (the shipped decoder), layering (stacks for the layering network), paper"""
+    seed: int | None = None
+    """random seed (default: the preset's)"""
+    overwrite: bool = False
+    """replace a data set made with other settings"""
+
+
+def cmd_data(a: argparse.Namespace) -> int:
+    from nbrdf.training.dataset import PRESETS, generate
+
+    c: DataArgs = build(DataArgs, a)
+    if c.preset not in PRESETS:
+        raise NbrdfError(f"--preset: {c.preset!r} is not one of {', '.join(PRESETS)}")
+    cfg = PRESETS[c.preset]
+    if c.seed is not None:
+        cfg = replace(cfg, seed=c.seed)
+    man = generate(c.out, cfg, preset=c.preset, overwrite=c.overwrite)
+    print(f"data set ready: {man}")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Adds ``data`` to the ``nbrdf`` subcommands."""
+    p = sub.add_parser("data", help="generate a training / validation data set (sharded, resumable)",
+                       description=DataArgs.__doc__)
+    add_arguments(p, DataArgs)
+    p.set_defaults(fn=cmd_data)

@@ -1,0 +1,195 @@
+"""``nbrdf eval``, ``nbrdf lobe``, ``nbrdf sample``: a material's BRDF on
+direction pairs, its standard lobe image, and directions drawn through the
+learned proxy pdf."""
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from nbrdf.cli.common import at_least, load_material, load_pairs, model_or_default, out_path, progress, stderr_path
+from nbrdf.cli.config import add_arguments, build
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.modes import Method
+
+
+@dataclass
+class EvalConfig:
+    """``nbrdf eval``: evaluate a material's BRDF on direction pairs."""
+
+    material: str
+    """material JSON (SPEC section 4)"""
+    pairs: str
+    """float32 (N, 6) .npy: wi.xyz, wo.xyz in the local frame"""
+    out: str
+    """float32 (N, 3) .npy of RGB BRDF values (no cosine)"""
+    method: Method = Method.REFERENCE
+    """reference: closed form or Monte Carlo; neural: leaf encoders, layering and the decoder; projected: the
+    decoder at a latent fitted to the reference"""
+    spp: int = 256
+    """Monte Carlo paths per pair (reference of a stack)"""
+    seed: int = 0
+    """random seed of the Monte Carlo paths and of projection"""
+
+
+@dataclass
+class LobeConfig:
+    """``nbrdf lobe``: the standard 64x64 lobe image (SPEC section 9)."""
+
+    material: str
+    """material JSON (SPEC section 4)"""
+    theta_i: float
+    """incidence angle in degrees (phi_i = 0)"""
+    out: str
+    """.npy (the array) or .png (a picture, plus the .npy beside it)"""
+    method: Method = Method.REFERENCE
+    """how the material is evaluated (see nbrdf eval --help)"""
+    spp: int = 1024
+    """Monte Carlo paths per pair (reference of a stack)"""
+    seed: int = 0
+    """random seed of the Monte Carlo paths and of projection"""
+
+
+@dataclass
+class SampleConfig:
+    """``nbrdf sample``: importance-sample wo through the learned proxy pdf."""
+
+    material: str
+    """material JSON (SPEC section 4)"""
+    theta_i: float
+    """incidence angle in degrees (phi_i = 0)"""
+    n: int
+    """number of directions drawn"""
+    out: str
+    """float32 (N, 4) .npy: wo.xyz, pdf (0 = failed sample)"""
+    model: str | None = None
+    """bundle (default: the shipped weights)"""
+    seed: int = 0
+    """random seed of the uniform numbers"""
+
+
+# --- evaluation: the one place a method becomes a function ---------------------------------
+Evaluator = Callable[["torch.Tensor", "torch.Tensor"], tuple["torch.Tensor", "torch.Tensor | None"]]
+
+
+def make_evaluator(material, method: Method, spp: int, seed: int) -> Evaluator:
+    """fn(wi, wo) -> (f (N, 3), stderr (N, 3) or None) for a method of SPEC section 8."""
+    import torch
+
+    if method == Method.REFERENCE:
+        from nbrdf.training.reference import reference_eval
+
+        def ref(wi: torch.Tensor, wo: torch.Tensor):
+            with progress(wi.shape[0], "reference") as bar:
+                return reference_eval(material, wi, wo, spp=spp, seed=seed, progress=bar.update)
+
+        return ref
+    if method == Method.NEURAL:
+        from nbrdf.neural.model import neural_evaluator
+
+        fn = neural_evaluator(material)
+        return lambda wi, wo: (fn(wi, wo), None)
+    if method == Method.PROJECTED:
+        from nbrdf.training.project import projected_evaluator
+
+        fn = projected_evaluator(material, seed=seed)
+        return lambda wi, wo: (fn(wi, wo), None)
+    raise NbrdfError(f"unknown method {method!r}")
+
+
+def checked_evaluator(material, method: Method, spp: int, seed: int) -> Evaluator:
+    """:func:`make_evaluator` after the checks every evaluating command shares."""
+    at_least("--spp", spp)
+    try:
+        return make_evaluator(material, method, spp, seed)
+    except ModuleNotFoundError as e:
+        if e.name and e.name.split(".")[0] in ("neural", "training"):
+            raise NbrdfError(f"--method {method}: not available in this version ({e.name} is missing)") from None
+        raise
+
+
+def check_theta_i(theta_i: float) -> None:
+    if not (0.0 <= theta_i < 90.0):
+        raise NbrdfError(f"--theta-i: {theta_i} is outside [0, 90)")
+
+
+# --- commands --------------------------------------------------------------------------------
+def cmd_eval(a: argparse.Namespace) -> int:
+    import torch
+
+    c: EvalConfig = build(EvalConfig, a)
+    material = load_material(c.material)
+    wi, wo = load_pairs(c.pairs)
+    out = out_path(c.out, (".npy",))
+    fn = checked_evaluator(material, c.method, c.spp, c.seed)
+    f, se = fn(torch.from_numpy(wi), torch.from_numpy(wo))
+    np.save(out, f.detach().numpy().astype(np.float32))
+    if c.method == Method.REFERENCE:
+        np.save(stderr_path(out), se.detach().numpy().astype(np.float32))
+    return 0
+
+
+def cmd_lobe(a: argparse.Namespace) -> int:
+    import torch
+
+    from nbrdf.neural.metrics import lobe_image
+
+    c: LobeConfig = build(LobeConfig, a)
+    material = load_material(c.material)
+    out = out_path(c.out, (".npy", ".png"))
+    check_theta_i(c.theta_i)
+    fn = checked_evaluator(material, c.method, c.spp, c.seed)
+    errs: list = []
+
+    def values(wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
+        f, se = fn(wi, wo)
+        errs.append(se)
+        return f
+
+    img = lobe_image(values, c.theta_i)
+    npy = out.with_suffix(".npy") if out.suffix.lower() == ".png" else out
+    np.save(npy, img)
+    if c.method == Method.REFERENCE and errs[0] is not None:
+        se_img = lobe_image(lambda wi, wo: errs[0] / wo[:, 2:3].clamp_min(1e-12), c.theta_i)
+        np.save(stderr_path(npy), se_img)
+    if out.suffix.lower() == ".png":
+        from nbrdf.training.plots import save_lobe_png
+
+        save_lobe_png(img, out, title=f"{material.name}  theta_i={c.theta_i:g}  ({c.method.value})")
+    return 0
+
+
+def cmd_sample(a: argparse.Namespace) -> int:
+    import torch
+
+    from nbrdf.neural.geometry import incidence
+    from nbrdf.neural.sampling import proxy_sample
+
+    c: SampleConfig = build(SampleConfig, a)
+    at_least("--n", c.n)
+    if not 0 <= c.theta_i < 90:
+        raise NbrdfError(f"--theta-i: {c.theta_i} must lie in [0, 90)")
+    model = model_or_default(c.model)
+    z = model.material_latent(load_material(c.material))
+    sigma, w = model.proxy(z)
+    wi = incidence(c.theta_i).expand(c.n, 3).contiguous()
+    u = torch.rand(c.n, 3, generator=torch.Generator().manual_seed(c.seed))
+    wo, pdf = proxy_sample(wi, u, sigma, w)
+    pdf = torch.where(wo[:, 2] > 0, pdf, torch.zeros_like(pdf))  # below the horizon: a failed sample
+    np.save(out_path(c.out, (".npy",)), torch.cat([wo, pdf[:, None]], 1).numpy().astype(np.float32))
+    print(json.dumps({"sigma": sigma, "w": w, "failed": int((pdf == 0).sum())}))
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Adds ``eval``, ``lobe`` and ``sample`` to the ``nbrdf`` subcommands."""
+    for name, cls, fn, help_ in (
+            ("eval", EvalConfig, cmd_eval, "evaluate a material's BRDF on direction pairs"),
+            ("lobe", LobeConfig, cmd_lobe, "the standard 64x64 lobe image (SPEC section 9)"),
+            ("sample", SampleConfig, cmd_sample, "importance-sample wo through the learned proxy pdf")):
+        p = sub.add_parser(name, help=help_, description=cls.__doc__)
+        add_arguments(p, cls)
+        p.set_defaults(fn=fn)

@@ -1,0 +1,147 @@
+"""``nbrdf report representation|operations|interpolation``: accuracy on the
+held-out sets and the figures of SPEC section 9."""
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from nbrdf.cli.common import decoder_or_default, load_material, model_or_default
+from nbrdf.cli.config import Parser, add_arguments, build
+
+
+@dataclass
+class RepresentationReport:
+    """``nbrdf report representation``: projected latents vs converged references."""
+
+    refs: str
+    """cache folder of held-out references (made on first use)"""
+    out: str
+    """folder for representation.json and the figures"""
+    decoder: str | None = None
+    """decoder weights (default: the shipped ones)"""
+    limit: int = 0
+    """score only the first N materials (quick looks; 0: all)"""
+    record: bool = False
+    """write the summary into the decoder file's metadata"""
+
+
+@dataclass
+class OperationsReport:
+    """``nbrdf report operations``: full neural path vs projection vs analytic layering; sampling variance."""
+
+    refs: str
+    """cache folder of held-out references (made on first use)"""
+    out: str
+    """folder for operations.json / .md and figures"""
+    model: str | None = None
+    """bundle (default: the shipped weights)"""
+    limit: int = 0
+    """score only the first N held-out materials (0: all)"""
+    every: int = 7
+    """show every N-th stack in the lobe figure"""
+
+
+@dataclass
+class InterpolationReport:
+    """``nbrdf report interpolation``: latent blend vs linear blend of BRDF values (a figure)."""
+
+    a: str
+    """first material JSON (t = 0)"""
+    b: str
+    """second material JSON (t = 1)"""
+    out: str
+    """PNG"""
+    model: str | None = None
+    """bundle (default: the shipped weights)"""
+
+
+def cmd_report_representation(ns: argparse.Namespace) -> int:
+    from nbrdf.training.evaluate import build_references, projected_method, report_figures, score
+
+    c: RepresentationReport = build(RepresentationReport, ns)
+    dec = decoder_or_default(c.decoder)
+    refs = build_references(c.refs, limit=c.limit)
+    result = score(refs, projected_method(dec))
+    result["decoder_id"] = dec.weights_id()
+    out = Path(c.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "representation.json").write_text(json.dumps(result, indent=1))
+    report_figures(refs, projected_method(dec), result, out)
+    if c.record:
+        from nbrdf.neural.decoder import DEFAULT_WEIGHTS, record_accuracy
+
+        record_accuracy(c.decoder or DEFAULT_WEIGHTS, {"heldout_projected": result["summary"]})
+    print(json.dumps(result["summary"], indent=1))
+    return 0
+
+
+def cmd_report_operations(ns: argparse.Namespace) -> int:
+    from nbrdf.neural.metrics import lobe_image
+    from nbrdf.training import evaluate as ev
+    from nbrdf.training.plots import save_lobe_grid
+
+    c: OperationsReport = build(OperationsReport, ns)
+    model = model_or_default(c.model)
+    refs = ev.build_references(c.refs, limit=c.limit)
+    out = Path(c.out)
+    out.mkdir(parents=True, exist_ok=True)
+    methods = {"neural": ev.neural_method(model), "projected": ev.projected_method(model.decoder),
+               "analytic": ev.analytic_method()}
+    stacks = [x for x in refs if x[1].interfaces]  # single layers: the analytic model is the reference itself
+    results = {name: ev.score(stacks if name == "analytic" else refs, m) for name, m in methods.items()}
+    glossy = ev.glossy_stacks(refs)
+    variances = [dict(name=m.name, **ev.sampling_variance(model, m, seed=i)) for i, (_, m, _) in enumerate(glossy)]
+    ratio = lambda k: float(np.median([v[k] / max(v["proxy"], 1e-30) for v in variances])) if variances else None
+    sampling = {"glossy_stacks": len(variances), "median_variance_reduction_vs_cosine": ratio("cosine"),
+                "median_variance_reduction_vs_top_ggx": ratio("top_ggx"), "per_material": variances}
+    report = {"summary": {k: r["summary"] for k, r in results.items()}, "sampling": sampling,
+              "rows": {k: r["rows"] for k, r in results.items()}}
+    (out / "operations.json").write_text(json.dumps(report, indent=1))
+    (out / "operations.md").write_text(ev.comparison_table(results) + "\n")
+    shown = [(k, m, r) for k, m, r in refs if k in ("two_layer", "three_layer")][:: max(1, c.every)][:6]
+    rows = []
+    for k, m, r in shown:
+        imgs = [r.lobes[1]] + [lobe_image(fn(m, r), ev.THETAS[1]) for fn in methods.values()]
+        rows.append((m.name, imgs))
+    if rows:
+        save_lobe_grid(rows, ["reference"] + list(methods), out / "operations_lobes.png")
+    print(ev.comparison_table(results))
+    print(json.dumps({k: v for k, v in sampling.items() if k != "per_material"}))
+    return 0
+
+
+def cmd_report_interpolation(ns: argparse.Namespace) -> int:
+    from nbrdf.training.evaluate import interpolation_figure
+
+    c: InterpolationReport = build(InterpolationReport, ns)
+    model = model_or_default(c.model)
+    out = Path(c.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    res = interpolation_figure(model, load_material(c.a), load_material(c.b), out)
+    print(json.dumps(res))
+    return 0
+
+
+#: ``nbrdf report`` subcommands: name -> (config, command, one-line help).
+REPORTS = {
+    "representation": (RepresentationReport, cmd_report_representation,
+                       "projected latents vs converged references"),
+    "operations": (OperationsReport, cmd_report_operations,
+                   "full neural path vs projection vs analytic layering; sampling variance"),
+    "interpolation": (InterpolationReport, cmd_report_interpolation,
+                      "latent blend vs linear blend of BRDF values (a figure)"),
+}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Adds ``report`` and its subcommands to the ``nbrdf`` subcommands."""
+    rp = sub.add_parser("report", help="accuracy on the held-out sets (SPEC section 9)")
+    rsub = rp.add_subparsers(dest="what", required=True, parser_class=Parser)
+    for name, (cls, fn, help_) in REPORTS.items():
+        p = rsub.add_parser(name, help=help_, description=cls.__doc__)
+        add_arguments(p, cls)
+        p.set_defaults(fn=fn)

@@ -1,0 +1,101 @@
+"""``nbrdf train representation|leaf|layering|sampler``: the flags are the
+training code's own config dataclasses (``TrainConfig`` with the decoder's
+``DecoderSpec``; ``LeafConfig``, ``LayeringConfig``, ``SamplerConfig``), so
+``--help`` shows the defaults the code uses."""
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from typing import Callable
+
+from nbrdf.cli.common import at_least
+from nbrdf.cli.config import Parser, add_arguments, build, values
+from nbrdf.neural.errors import NbrdfError
+
+#: Operation-only fields that the leaf and sampler commands do not take.
+LAYERING_ONLY = ("data", "recursion_steps", "width")
+#: The decoder architecture fields set from the command line, with their help
+#: (``DecoderSpec`` lives in the library; its other fields are fixed).
+SPEC_HELP = {"width": "hidden units per decoder layer", "depth": "hidden layers of the decoder",
+             "activation": "hidden-layer activation", "loss_scale": "s in the loss log(1 + f cos / s)"}
+
+
+@dataclass
+class RunArgs:
+    """Options of a representation run that are not part of its configuration."""
+
+    stop_after: int | None = None
+    """end this run after N epochs (resume later)"""
+
+
+def cmd_train_representation(a: argparse.Namespace) -> int:
+    from nbrdf.neural.decoder import DecoderSpec
+    from nbrdf.training.train_representation import TrainConfig, train
+
+    for name in ("epochs", "batch", "val_every"):
+        at_least("--" + name.replace("_", "-"), getattr(a, name))
+    if a.loss_scale <= 0:
+        raise NbrdfError(f"--loss-scale: {a.loss_scale} must be positive")
+    spec = build(DecoderSpec, a, SPEC_HELP)
+    cfg = build(TrainConfig, a, spec=spec)
+    run: RunArgs = build(RunArgs, a)
+    bundle = train(cfg, stop_after=run.stop_after)
+    print(f"decoder written: {bundle}" if bundle else f"stopped after {run.stop_after} epochs; run the same command to resume")
+    return 0
+
+
+def cmd_train_operation(a: argparse.Namespace) -> int:
+    from nbrdf.training import train_operations as to
+
+    cls, train = {"leaf": (to.LeafConfig, to.train_leaf), "layering": (to.LayeringConfig, to.train_layering),
+                  "sampler": (to.SamplerConfig, to.train_sampler)}[a.what]
+    for name in ("steps", "batch", "pairs"):
+        at_least("--" + name, getattr(a, name))
+    kw = values(cls, a)
+    if not kw.get("decoder"):  # --decoder not given: the dataclass default (the shipped weights)
+        kw.pop("decoder", None)
+    print(f"bundle written: {train(cls(**kw))}")
+    return 0
+
+
+def _representation_flags(p: Parser) -> None:
+    from nbrdf.neural.decoder import ACTIVATIONS, DecoderSpec
+    from nbrdf.training.train_representation import TrainConfig
+
+    p.description = TrainConfig.__doc__
+    add_arguments(p, TrainConfig, exclude=("spec",), choices={"device": ("auto", "cpu", "cuda")})
+    add_arguments(p, DecoderSpec, only=SPEC_HELP, help=SPEC_HELP, choices={"activation": tuple(ACTIVATIONS)})
+    add_arguments(p, RunArgs)
+
+
+def _operation_flags(what: str) -> Callable[[Parser], None]:
+    def populate(p: Parser) -> None:
+        from nbrdf.training import train_operations as to
+
+        cls = {"leaf": to.LeafConfig, "layering": to.LayeringConfig, "sampler": to.SamplerConfig}[what]
+        p.description = cls.__doc__
+        add_arguments(p, cls, exclude=() if what == "layering" else LAYERING_ONLY,
+                      required=("data",) if what == "layering" else (), defaults={"decoder": None})
+
+    return populate
+
+
+#: ``nbrdf train`` subcommands: name -> one-line help (the flags are added on
+#: first use, so that ``nbrdf`` does not import torch to parse other commands).
+TRAINERS = {
+    "leaf": "leaf encoders, through the frozen decoder against closed-form layers",
+    "layering": "layering network, through the decoder against Monte Carlo stacks",
+    "sampler": "proxy-pdf network, by KL divergence to decoded lobes",
+}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Adds ``train`` and its four subcommands to the ``nbrdf`` subcommands."""
+    t = sub.add_parser("train", help="train networks")
+    tsub = t.add_subparsers(dest="what", required=True, parser_class=Parser)
+    tr = tsub.add_parser("representation", help="auto-decoder: the shared decoder and training latents",
+                         populate=_representation_flags)
+    tr.set_defaults(fn=cmd_train_representation)
+    for what, help_ in TRAINERS.items():
+        to = tsub.add_parser(what, help=help_, populate=_operation_flags(what))
+        to.set_defaults(fn=cmd_train_operation)

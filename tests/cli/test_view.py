@@ -1,0 +1,113 @@
+"""``nbrdf-view`` (SPEC section 8): offscreen outputs of every view, the
+headless fallback, sessions, and bad input ending in one line, exit status 2."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nbrdf.cli.view import build_parser, main, parse_args
+from nbrdf.neural.material import load_material
+from nbrdf.viewer.image_io import read_exr
+from nbrdf.viewer.modes import BrdfMode, ToneMap, View
+from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
+
+
+def test_flags_default_to_the_view_options():
+    """No flags: exactly the dataclass defaults (one place for defaults)."""
+    assert parse_args([]) == ViewOptions()
+    opts = parse_args(["m.json", "--view", "lobe", "--tonemap", "linear", "--brdf", "neural", "--size", "64x32",
+                       "--point-light", "1,2,3", "--no-background", "--theta-i", "-0"])
+    assert opts.view is View.LOBE and opts.tonemap is ToneMap.LINEAR and opts.brdf is BrdfMode.NEURAL
+    assert opts.size == (64, 32) and opts.point_light == (1.0, 2.0, 3.0) and opts.background is False
+    assert opts.material == Path("m.json")
+
+
+def test_help_lists_every_option_and_the_mode_words():
+    text = build_parser().format_help()
+    for flag in ("--mesh", "--env", "--env-rotation", "--env-intensity", "--point-light", "--point-intensity",
+                 "--session", "--no-background", "--view", "--theta-i", "--offscreen", "--out", "--size", "--spp",
+                 "--exposure", "--tonemap", "--brdf"):
+        assert flag in text, flag
+    assert "{object,lobe,slice}" in text and "{auto,analytic,neural,projected}" in text
+
+
+@pytest.mark.gl
+def test_cli_offscreen_outputs(tmp_path, capsys):
+    assert main([str(DEFAULT_MATERIAL), "--offscreen", "--out", str(tmp_path / "o.npy"), "--size", "40x30", "--spp", "2"]) == 0
+    o = np.load(tmp_path / "o.npy")
+    assert o.shape == (30, 40, 3) and o.dtype == np.float32
+    assert main(["--offscreen", "--view", "lobe", "--theta-i", "30", "--out", str(tmp_path / "l.npy")]) == 0
+    assert np.load(tmp_path / "l.npy").shape == (64, 64, 3)
+    assert main(["--offscreen", "--view", "slice", "--size", "16x16", "--out", str(tmp_path / "s.exr")]) == 0
+    assert read_exr(tmp_path / "s.exr").shape == (16, 16, 3)
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("argv,needle", [
+    (["--offscreen", "--out", "x.gif"], "unknown image type"),
+    (["--offscreen", "--out", "x.png", "--size", "big"], "--size"),
+    (["--offscreen", "--out", "x.png", "--mesh", "/nonexistent.obj"], "no such file"),
+    (["--offscreen", "--out", "x.png", "--env", "/nonexistent.hdr"], "no such file"),
+    (["/nonexistent.json", "--offscreen", "--out", "x.png"], "no such file"),
+    (["--offscreen"], "--out"),
+    (["--offscreen", "--out", "x.png", "--point-light", "1,2"], "--point-light"),
+    (["--offscreen", "--out", "x.png", "--session", "/nonexistent.json"], "no such file"),
+])
+def test_cli_bad_input_one_line(tmp_path, capsys, monkeypatch, argv, needle):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0], err
+
+
+@pytest.mark.gl
+def test_cli_invalid_material_and_unreadable_env(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "bad.json").write_text(json.dumps({"format": "nbrdf-material/1", "name": "b",
+                                                   "layers": [{"type": "conductor", "roughness": 0.3, "r0": 2}]}))
+    assert main(["bad.json", "--offscreen", "--out", "x.png"]) == 2
+    assert "layers[0].r0: 2 is outside [0, 1]" in capsys.readouterr().err
+    (tmp_path / "env.exr").write_bytes(b"not an exr")
+    assert main(["--offscreen", "--out", "x.png", "--env", "env.exr"]) == 2
+    assert "--env env.exr: cannot be read" in capsys.readouterr().err
+
+
+@pytest.mark.gl
+def test_headless_fallback(tmp_path):
+    """No display and no --offscreen: one line says so, and the PNG appears."""
+    env = {k: v for k, v in __import__("os").environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    exe = Path(sys.executable).parent / "nbrdf-view"
+    r = subprocess.run([str(exe), "--size", "32x32", "--spp", "1"], cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.strip().splitlines() == ["nbrdf-view: no display found; rendering offscreen to nbrdf-view.png instead"]
+    assert (tmp_path / "nbrdf-view.png").stat().st_size > 100
+
+
+@pytest.mark.gl
+def test_cli_renders_a_session_file(gl_ctx, tmp_path, capsys):
+    import imageio.v3 as iio
+
+    from nbrdf.viewer.lookdev import LookDev
+
+    ld = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
+    try:
+        ld.state.view = "slice"
+        ld.set_param(2, "roughness", 0.6)
+        assert ld.save_session(tmp_path / "s.json")
+        assert ld.screenshot(tmp_path / "direct.png", (24, 16), 1)
+    finally:
+        ld.close()
+    assert main(["--offscreen", "--session", str(tmp_path / "s.json"), "--size", "24x16", "--spp", "1",
+                 "--out", str(tmp_path / "cli.png")]) == 0
+    np.testing.assert_array_equal(iio.imread(tmp_path / "cli.png"), iio.imread(tmp_path / "direct.png"))
+    (tmp_path / "bad.json").write_text('{"format": "nbrdf-session/1"}')
+    assert main(["--offscreen", "--session", str(tmp_path / "bad.json"), "--out", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "malformed session" in err[0]
+
+

@@ -1,0 +1,74 @@
+"""The previewer without a window: render a view (or a look-development
+session) through EGL to an image file, and build the renderer of a BRDF mode.
+``nbrdf-view --offscreen`` runs this, and so does a window-less machine."""
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.options import HEADLESS_OUT, ViewOptions
+
+PROG = "nbrdf-view"
+
+
+def has_display() -> bool:
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
+    """Renders the view through EGL and writes ``opts.out``. As the fallback
+    for a window (``fallback`` = why there is none, said in one line), it is a
+    preview: on software OpenGL at most 256 x 256 and 8 passes, because the
+    neural shader costs minutes there at full size."""
+    from nbrdf.neural.material import load_material
+    from nbrdf.viewer.gl import offscreen_context
+    from nbrdf.viewer.image_io import write_image
+    from nbrdf.viewer.renderer import ViewState
+
+    out = Path(opts.out or HEADLESS_OUT)
+    material = load_material(opts.material)
+    ctx = offscreen_context()
+    if fallback is not None:
+        note = ""
+        if any(k in ctx.info.get("GL_RENDERER", "").lower() for k in ("llvmpipe", "softpipe", "swrast")):
+            w, h = opts.size
+            scale = min(1.0, 256 / max(w, h))
+            size, spp = (max(1, round(w * scale)), max(1, round(h * scale))), min(opts.spp, 8)
+            if (size, spp) != (opts.size, opts.spp):
+                opts.size, opts.spp = size, spp
+                note = f" (software OpenGL: a {size[0]}x{size[1]}, {spp}-pass preview)"
+        print(f"{PROG}: {fallback}; rendering offscreen to {out} instead{note}", file=sys.stderr)
+    if opts.session:
+        from nbrdf.viewer.lookdev import LookDev
+
+        ld = LookDev(ctx, material, opts.mesh, opts.env)
+        try:
+            if not ld.open_session(opts.session) or not ld.screenshot(out, opts.size, opts.spp):
+                raise NbrdfError(ld.error or f"{opts.session}: cannot render the session")
+        finally:
+            ld.close()
+        return out
+    r = make_renderer(ctx, material, opts)
+    state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap,
+                      env_rotation=opts.env_rotation, env_intensity=opts.env_intensity, background=opts.background,
+                      point_light=opts.point_light, point_intensity=opts.point_intensity)
+    img = r.render_linear(state, opts.size, opts.spp)
+    if opts.view == "lobe" and out.suffix.lower() == ".png":
+        img = img[::-1]  # a picture shows +y up
+    write_image(out, img, opts.exposure, opts.tonemap)
+    return out
+
+
+def make_renderer(ctx, material, opts: ViewOptions):
+    """The renderer of ``opts.brdf``: closed form, or the decoder in GLSL."""
+    from nbrdf.viewer.pipeline import MaterialPipeline
+    from nbrdf.viewer.renderer import Renderer
+
+    env = None
+    if opts.env is not None:
+        from nbrdf.viewer.image_io import read_environment
+
+        env = read_environment(opts.env)
+    return Renderer(ctx, mesh=opts.mesh, environment=env, brdf=MaterialPipeline(ctx).build(material, opts.brdf))

@@ -1,0 +1,104 @@
+"""The previewer's options (``nbrdf-view``'s flags, the window's and the
+offscreen renderer's settings): one documented dataclass, read by the viewer
+and turned into flags by ``nbrdf.cli.view``."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.modes import BrdfMode, ToneMap, View
+
+#: The material shown when none is given (varnished copper).
+DEFAULT_MATERIAL = Path(__file__).parent / "assets" / "materials" / "default.json"
+#: Where a window-less run writes its image when ``--out`` is not given.
+HEADLESS_OUT = "nbrdf-view.png"
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``WxH`` -> (W, H), each side in 1..16384; one-line error otherwise."""
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise NbrdfError(f"--size: expected WxH such as 512x512, got {text!r}") from None
+    if not (1 <= w <= 16384 and 1 <= h <= 16384):
+        raise NbrdfError(f"--size: {w}x{h} is outside 1..16384 per side")
+    return w, h
+
+
+def parse_point(text: str) -> tuple[float, float, float]:
+    """``X,Y,Z`` -> a finite world position; one-line error otherwise."""
+    try:
+        point = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        point = ()
+    if len(point) != 3 or not all(math.isfinite(x) for x in point):
+        raise NbrdfError(f"--point-light: expected X,Y,Z such as 2,-2,3, got {text!r}")
+    return point  # type: ignore[return-value]
+
+
+@dataclass
+class ViewOptions:
+    """What the previewer opens and how it renders (SPEC section 8)."""
+
+    material: Path = field(default=DEFAULT_MATERIAL, metadata={"positional": True, "shown": "varnished copper"})
+    """material JSON"""
+    mesh: str = "sphere"
+    """sphere, testmesh, or an OBJ/glTF file"""
+    env: str | None = None
+    """equirectangular .hdr/.exr environment (default: the built-in sky)"""
+    view: View = View.OBJECT
+    """what the viewport shows"""
+    theta_i: float = 30.0
+    """incidence angle of the lobe view, degrees"""
+    offscreen: bool = False
+    """render through EGL to --out instead of opening a window"""
+    out: str | None = None
+    """output image: .png (tone-mapped), .exr or .npy (linear float)"""
+    size: tuple[int, int] = field(default=(512, 512), metadata={"parse": parse_size, "shown": "512x512",
+                                                                  "metavar": "WxH"})
+    """image or window size in pixels"""
+    spp: int = 16
+    """passes accumulated per pixel"""
+    exposure: float = 0.0
+    """stops"""
+    tonemap: ToneMap = ToneMap.ACES
+    """display transform of a .png or the window"""
+    brdf: BrdfMode = BrdfMode.AUTO
+    """analytic: closed form in GLSL (single layers); neural: the shipped decoder in GLSL at the latents of leaf
+    encoders and layering; projected: at latents fitted to the material's reference; auto: analytic for a single
+    layer, else neural"""
+    env_rotation: float = 0.0
+    """environment rotation about the up axis, degrees"""
+    env_intensity: float = 0.6
+    """environment radiance scale"""
+    background: bool = True
+    """the environment behind the object (--no-background: black instead)"""
+    session: str | None = None
+    """a look-development session file (material, camera, lights, environment, view) to open"""
+    point_light: tuple[float, float, float] | None = field(default=None, metadata={"parse": parse_point,
+                                                                                    "metavar": "X,Y,Z"})
+    """a point light at this world position (z up)"""
+    point_intensity: float = 20.0
+    """the point light's radiant intensity"""
+
+    def __post_init__(self):
+        self.material = Path(self.material)
+        self.view = View.parse(self.view, "--view")
+        self.tonemap = ToneMap.parse(self.tonemap, "--tonemap")
+        self.brdf = BrdfMode.parse(self.brdf, "--brdf")
+
+    def check(self) -> "ViewOptions":
+        """Raises ``NbrdfError`` (one line naming the flag) for values out of range."""
+        if self.spp < 1:
+            raise NbrdfError(f"--spp: {self.spp} must be at least 1")
+        if not (0.0 <= self.theta_i < 90.0):
+            raise NbrdfError(f"--theta-i: {self.theta_i} is outside [0, 90)")
+        if not (math.isfinite(self.env_intensity) and self.env_intensity >= 0) or not math.isfinite(self.env_rotation):
+            raise NbrdfError("--env-intensity must be finite and >= 0, --env-rotation finite")
+        if not (math.isfinite(self.point_intensity) and self.point_intensity >= 0):
+            raise NbrdfError("--point-intensity must be finite and >= 0")
+        if self.offscreen and not self.out:
+            raise NbrdfError("--offscreen needs --out IMG")
+        return self
