@@ -22,6 +22,9 @@ class DataArgs:
     """random seed (default: the preset's)"""
     overwrite: bool = False
     """replace a data set made with other settings"""
+    ray: str | None = None
+    """run the shards as Ray tasks: auto (the cluster found on this machine), local (a private
+    instance) or a cluster address HOST:PORT / ray://HOST:PORT; shards are identical to a local run"""
 
 
 def cmd_data(a: argparse.Namespace) -> int:
@@ -33,7 +36,7 @@ def cmd_data(a: argparse.Namespace) -> int:
     cfg = PRESETS[c.preset]
     if c.seed is not None:
         cfg = replace(cfg, seed=c.seed)
-    man = generate(c.out, cfg, preset=c.preset, overwrite=c.overwrite)
+    man = generate(c.out, cfg, preset=c.preset, overwrite=c.overwrite, ray=c.ray)
     print(f"data set ready: {man}")
     return 0
 

@@ -76,39 +76,21 @@ Evaluator = Callable[["torch.Tensor", "torch.Tensor"], tuple["torch.Tensor", "to
 
 
 def make_evaluator(material, method: Method, spp: int, seed: int) -> Evaluator:
-    """fn(wi, wo) -> (f (N, 3), stderr (N, 3) or None) for a method of SPEC section 8."""
-    import torch
-
-    if method == Method.REFERENCE:
-        from nbrdf.training.reference import reference_eval
-
-        def ref(wi: torch.Tensor, wo: torch.Tensor):
-            with progress(wi.shape[0], "reference") as bar:
-                return reference_eval(material, wi, wo, spp=spp, seed=seed, progress=bar.update)
-
-        return ref
-    if method == Method.NEURAL:
-        from nbrdf.neural.model import neural_evaluator
-
-        fn = neural_evaluator(material)
-        return lambda wi, wo: (fn(wi, wo), None)
-    if method == Method.PROJECTED:
-        from nbrdf.training.project import projected_evaluator
-
-        fn = projected_evaluator(material, seed=seed)
-        return lambda wi, wo: (fn(wi, wo), None)
-    raise NbrdfError(f"unknown method {method!r}")
-
-
-def checked_evaluator(material, method: Method, spp: int, seed: int) -> Evaluator:
-    """:func:`make_evaluator` after the checks every evaluating command shares."""
+    """fn(wi, wo) -> (f (N, 3), stderr (N, 3) or None) for a method of SPEC section 8:
+    the material's BRDF from the one factory, ``training.brdfs.brdf_for``, after
+    the checks every evaluating command shares."""
     at_least("--spp", spp)
-    try:
-        return make_evaluator(material, method, spp, seed)
-    except ModuleNotFoundError as e:
-        if e.name and e.name.split(".")[0] in ("neural", "training"):
-            raise NbrdfError(f"--method {method}: not available in this version ({e.name} is missing)") from None
-        raise
+    from nbrdf.training.brdfs import brdf_for
+
+    brdf = brdf_for(material, Method.parse(method, "--method").value, spp=spp, seed=seed)
+    if method != Method.REFERENCE:
+        return brdf.eval_with_error
+
+    def ref(wi: "torch.Tensor", wo: "torch.Tensor"):
+        with progress(wi.shape[0], "reference") as bar:
+            return brdf.eval_with_error(wi, wo, progress=bar.update)
+
+    return ref
 
 
 def check_theta_i(theta_i: float) -> None:
@@ -124,7 +106,7 @@ def cmd_eval(a: argparse.Namespace) -> int:
     material = load_material(c.material)
     wi, wo = load_pairs(c.pairs)
     out = out_path(c.out, (".npy",))
-    fn = checked_evaluator(material, c.method, c.spp, c.seed)
+    fn = make_evaluator(material, c.method, c.spp, c.seed)
     f, se = fn(torch.from_numpy(wi), torch.from_numpy(wo))
     np.save(out, f.detach().numpy().astype(np.float32))
     if c.method == Method.REFERENCE:
@@ -141,7 +123,7 @@ def cmd_lobe(a: argparse.Namespace) -> int:
     material = load_material(c.material)
     out = out_path(c.out, (".npy", ".png"))
     check_theta_i(c.theta_i)
-    fn = checked_evaluator(material, c.method, c.spp, c.seed)
+    fn = make_evaluator(material, c.method, c.spp, c.seed)
     errs: list = []
 
     def values(wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:

@@ -59,6 +59,51 @@ class InterpolationReport:
     """bundle (default: the shipped weights)"""
 
 
+@dataclass
+class RenderReport:
+    """``nbrdf report render``: lit spheres (SPEC section 9, render-space error), reference vs neural
+    paths, scored with HDR-FLIP and PSNR; JSON, tables and a side-by-side figure with error maps."""
+
+    out: str
+    """folder for render.json, render.md and the figures"""
+    set: str = "lookdev,heldout"
+    """comma-separated sets: lookdev (the bundled sharp-coat set), heldout (the paper-distribution
+    held-out set), or paths of material JSON files / folders"""
+    methods: str = "neural,projected"
+    """comma-separated methods: neural, projected, coat_split (an experiment)"""
+    size: int = 96
+    """sphere image size in pixels (square)"""
+    spp: int = 384
+    """Monte Carlo paths per pixel of a stack's reference (first round)"""
+    max_spp: int = 1536
+    """paths per pixel at most while refining a reference to the noise target"""
+    noise_target: float = 0.1
+    """a reference is refined until the HDR-FLIP between its two independent halves is below this"""
+    cache: str | None = None
+    """reference cache folder (default: OUT/references); reruns resume from it"""
+    model: str | None = None
+    """bundle (default: the shipped weights)"""
+    heldout_per_class: int = 3
+    """held-out materials scored per class"""
+    seed: int = 0
+    """seed of the references and projections"""
+
+
+def cmd_report_render(ns: argparse.Namespace) -> int:
+    from nbrdf.training.render_report import RenderReportConfig, run_render_report
+
+    c: RenderReport = build(RenderReport, ns)
+    words = lambda s: tuple(w.strip() for w in s.split(",") if w.strip())
+    cfg = RenderReportConfig(sets=words(c.set), out=Path(c.out), size=c.size, spp=c.spp, max_spp=c.max_spp,
+                             noise_target=c.noise_target, cache=Path(c.cache) if c.cache else None,
+                             model=c.model, methods=words(c.methods), heldout_per_class=c.heldout_per_class,
+                             seed=c.seed)
+    from nbrdf.training.render_report import markdown_tables
+
+    print(markdown_tables(run_render_report(cfg)))
+    return 0
+
+
 def cmd_report_representation(ns: argparse.Namespace) -> int:
     from nbrdf.training.evaluate import build_references, projected_method, report_figures, score
 
@@ -134,6 +179,8 @@ REPORTS = {
                    "full neural path vs projection vs analytic layering; sampling variance"),
     "interpolation": (InterpolationReport, cmd_report_interpolation,
                       "latent blend vs linear blend of BRDF values (a figure)"),
+    "render": (RenderReport, cmd_report_render,
+               "render-space error: lit spheres, HDR-FLIP and PSNR (SPEC section 9)"),
 }
 
 

@@ -190,11 +190,3 @@ def default_model() -> NeuralModel:
             raise NbrdfError(f"the default weights {DEFAULT_WEIGHTS.name} are not installed")
         _DEFAULT["m"] = load_model(DEFAULT_WEIGHTS)
     return _DEFAULT["m"]
-
-
-def neural_evaluator(material: Material, model: NeuralModel | None = None):
-    """fn(wi, wo) -> RGB values (N, 3) through the full neural path; kept for
-    callers not yet on ``neural.neural_brdf.neural_brdf(material, model).eval``."""
-    from nbrdf.neural.neural_brdf import neural_brdf
-
-    return neural_brdf(material, model).eval

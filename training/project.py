@@ -120,15 +120,3 @@ def project_to_latent(dec: Decoder, s: Samples, source: dict, cfg: ProjectionCon
     t0 = time.perf_counter()
     z = fit(dec, s, cfg)
     return MaterialLatent(z, dec.weights_id(), source), time.perf_counter() - t0
-
-
-def projected_evaluator(material: Material, seed: int = 0, decoder: Decoder | None = None, spp: int = 64):
-    """fn(wi, wo) -> (N, 3): the decoder at the latents fitted to the material's reference."""
-    dec = decoder or default_decoder()
-    z = fit(dec, material_samples(material, spp=spp, seed=seed))
-
-    def fn(wi: Tensor, wo: Tensor) -> Tensor:
-        with torch.no_grad():
-            return dec.eval_rgb(z, wi.float(), wo.float())
-
-    return fn

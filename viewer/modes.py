@@ -74,6 +74,7 @@ class Method(_Mode):
     REFERENCE = "reference"  #: ground truth: closed form or Monte Carlo
     NEURAL = "neural"        #: the full neural path the viewer uses
     PROJECTED = "projected"  #: the decoder at a latent fitted to the reference
+    ANALYTIC = "analytic"    #: closed form; the analytic layering approximation for stacks
 
 
 def glsl_defines(*enums: type[_Mode]) -> str:
