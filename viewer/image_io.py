@@ -13,13 +13,10 @@ OUTPUT_SUFFIXES = (".png", ".exr", ".npy")
 
 
 def tonemap(img: np.ndarray, exposure: float = 0.0, mode: str = "aces") -> np.ndarray:
-    """Linear (H, W, 3) -> sRGB uint8, matching shaders/tonemap.frag."""
-    x = np.maximum(img.astype(np.float64), 0.0) * 2.0 ** exposure
-    if mode == "aces":
-        x = np.clip((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14), 0, 1)
-    x = np.clip(x, 0, 1)
-    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    return np.round(s * 255).astype(np.uint8)
+    """Linear (H, W, 3) -> sRGB uint8, matching shaders/tonemap.frag (``viewer.tonemap``)."""
+    from nbrdf.viewer.tonemap import to_display8
+
+    return to_display8(np.maximum(np.asarray(img, np.float64), 0.0), mode, exposure)
 
 
 def write_image(path: str | Path, img: np.ndarray, exposure: float = 0.0, mode: str = "aces") -> None:

@@ -7,10 +7,11 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
 from nbrdf.neural.neural_brdf import proxy_hint  # noqa: F401 (the renderer's import)
 from nbrdf.neural.stack import material_stack
+from nbrdf.viewer.modes import BaseKind
 
 MAX_INTERFACES = 2
-#: Base kinds of the shader, by their ``u_base_type`` code.
-GLSL_BASES = ("conductor", "diffuse", "dielectric")
+#: Base kinds of the shader; ``u_base_type`` is the kind's code (BASE_* in GLSL).
+GLSL_BASES = BaseKind.words()
 
 
 def analytic_uniforms(m: Material) -> dict:
@@ -32,7 +33,7 @@ def analytic_uniforms(m: Material) -> dict:
         "u_if_roughness": pad([float(x) for x in s.roughness[0]], 0.5),
         "u_if_ior": pad([float(x) for x in s.ior[0]], 1.5),
         "u_med_sigma_t": pad([float(x) for x in s.sigma_t[0]], 0.0),
-        "u_base_type": GLSL_BASES.index(s.base),
+        "u_base_type": BaseKind(s.base).code,
         "u_base_roughness": float(s.base_roughness[0]),
         "u_base_ior": float(s.base_ior[0]) if s.base_ior is not None else 1.5,
         "u_base_color": rgb(colour[0]) if colour is not None else (0.0, 0.0, 0.0),

@@ -77,11 +77,18 @@ class Method(_Mode):
     ANALYTIC = "analytic"    #: closed form; the analytic layering approximation for stacks
 
 
+class BaseKind(_Mode):
+    """The base layers the closed-form shader (shaders/analytic_brdf.glsl) evaluates."""
+    CONDUCTOR = "conductor"    #: GGX conductor, Schlick Fresnel
+    DIFFUSE = "diffuse"        #: Lambertian
+    DIELECTRIC = "dielectric"  #: a rough dielectric's reflection only
+
+
 def glsl_defines(*enums: type[_Mode]) -> str:
     """``#define`` lines for the given enums, e.g. ``#define VIEW_LOBE 1``."""
     lines = []
     for enum in enums:
         prefix = {"View": "VIEW", "CompareMode": "COMPARE", "ToneMap": "TONEMAP",
-                  "BrdfMode": "BRDF", "Method": "METHOD"}.get(enum.__name__, enum.__name__.upper())
+                  "BrdfMode": "BRDF", "Method": "METHOD", "BaseKind": "BASE"}.get(enum.__name__, enum.__name__.upper())
         lines += [f"#define {prefix}_{m.name} {m.code}" for m in enum]
     return "\n".join(lines) + "\n"

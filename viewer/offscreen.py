@@ -24,10 +24,12 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     neural shader costs minutes there at full size."""
     from nbrdf.neural.material import load_material
     from nbrdf.viewer.gl import offscreen_context
-    from nbrdf.viewer.image_io import write_image
+    from nbrdf.viewer.image_io import OUTPUT_SUFFIXES, write_image
     from nbrdf.viewer.renderer import ViewState
 
     out = Path(opts.out or HEADLESS_OUT)
+    if out.suffix.lower() not in OUTPUT_SUFFIXES:  # before minutes of rendering, not after
+        raise NbrdfError(f"{out}: unknown image type (expected {', '.join(OUTPUT_SUFFIXES)})")
     material = load_material(opts.material)
     ctx = offscreen_context()
     if fallback is not None:

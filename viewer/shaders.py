@@ -8,11 +8,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from nbrdf.viewer.modes import BrdfMode, CompareMode, ToneMap, View, glsl_defines
+from nbrdf.viewer.modes import BaseKind, BrdfMode, CompareMode, ToneMap, View, glsl_defines
 
 SHADER_DIR = Path(__file__).parent / "shaders"
 VERSION = "#version 330 core"
-MODE_DEFINES = glsl_defines(View, CompareMode, ToneMap, BrdfMode).rstrip("\n")
+MODE_DEFINES = glsl_defines(View, CompareMode, ToneMap, BrdfMode, BaseKind).rstrip("\n")
 
 
 def source(name: str, snippets: dict[str, str] | None = None, version: str = VERSION, defines: dict | None = None) -> str:

@@ -143,11 +143,11 @@ def test_report_on_a_tiny_set_writes_json_and_figure(tmp_path: Path):
 
 def test_reference_refinement_doubles_paths_and_pools_halves(tmp_path: Path):
     m = load_material(SETS_DIR / "lookdev" / "coated-gold.json")
-    geo = sphere_geometry(12)
+    geo = sphere_geometry(16)
     one = reference_render(m, geo, 4, cache=tmp_path, progress=False)
-    ref = reference_render(m, geo, 4, cache=tmp_path, progress=False, noise_target=1e-9, max_spp=16)
-    assert one.spp == 4 and ref.spp == 16
+    ref = reference_render(m, geo, 4, cache=tmp_path, progress=False, noise_target=1e-9, max_spp=32)
+    assert one.spp == 4 and ref.spp == 32
     assert ref.half_flip < one.half_flip
-    assert len(list(tmp_path.glob("*.npz"))) == 3  # one file per round: 4, 8, 16 spp
-    again = reference_render(m, geo, 4, cache=tmp_path, progress=False, noise_target=1e-9, max_spp=16)
+    assert len(list(tmp_path.glob("*.npz"))) == 4  # one file per round: 4, 8, 16, 32 spp
+    again = reference_render(m, geo, 4, cache=tmp_path, progress=False, noise_target=1e-9, max_spp=32)
     assert np.array_equal(again.image, ref.image)

@@ -15,7 +15,7 @@ uniform int u_num_interfaces;                 // interfaces above the base
 uniform float u_if_roughness[MAX_INTERFACES];
 uniform float u_if_ior[MAX_INTERFACES];      // relative IOR (below / above)
 uniform float u_med_sigma_t[MAX_INTERFACES];
-uniform int u_base_type;                      // 0 conductor, 1 diffuse, 2 dielectric (reflection only)
+uniform int u_base_type;                      // BASE_CONDUCTOR, BASE_DIFFUSE or BASE_DIELECTRIC (reflection only)
 uniform float u_base_roughness;
 uniform float u_base_ior;
 uniform vec3 u_base_color;                    // conductor r0 or diffuse albedo
@@ -58,8 +58,8 @@ float dielectric_reflection(vec3 wi, vec3 wo, float a, float eta) {
 
 vec3 base_brdf(vec3 wi, vec3 wo) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
-    if (u_base_type == 0) return conductor_brdf(wi, wo, u_base_roughness, u_base_color);
-    if (u_base_type == 1) return u_base_color / PI;
+    if (u_base_type == BASE_CONDUCTOR) return conductor_brdf(wi, wo, u_base_roughness, u_base_color);
+    if (u_base_type == BASE_DIFFUSE) return u_base_color / PI;
     return vec3(dielectric_reflection(wi, wo, u_base_roughness, u_base_ior));
 }
 
@@ -102,7 +102,7 @@ vec3 brdf(vec3 wi, vec3 wo) {
 // interface's, or the base's for a single layer.
 float lobe_roughness() {
     if (u_num_interfaces > 0) return u_if_roughness[0];
-    return u_base_type == 1 ? 1.0 : u_base_roughness;
+    return u_base_type == BASE_DIFFUSE ? 1.0 : u_base_roughness;
 }
 
 // The lit view's lobe strategy: GGX visible normals of that roughness.

@@ -1,11 +1,11 @@
-// Linear radiance -> display: exposure (stops), tone mapping (TONEMAP_LINEAR,
-// or TONEMAP_ACES: ACES filmic after Narkowicz 2015), sRGB encoding.
+// Linear radiance -> display: exposure (stops), the tone mapper named by
+// u_tonemap (a TONEMAP_* constant: linear, fitted ACES, AgX, Khronos PBR
+// Neutral; see tonemap_operators.glsl and its numpy twin viewer/tonemap.py),
+// sRGB encoding.
 uniform float u_exposure;
 uniform int u_tonemap;    // a TONEMAP_* constant
 
-vec3 aces(vec3 x) {
-    return clamp((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0);
-}
+//@INCLUDE tonemap_operators.glsl
 
 vec3 srgb(vec3 c) {
     c = clamp(c, 0.0, 1.0);
@@ -13,6 +13,5 @@ vec3 srgb(vec3 c) {
 }
 
 vec3 display(vec3 c) {
-    c *= exp2(u_exposure);
-    return srgb(u_tonemap == TONEMAP_ACES ? aces(c) : c);
+    return srgb(tm_apply(max(c, vec3(0.0)), u_tonemap, u_exposure));
 }

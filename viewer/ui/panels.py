@@ -17,7 +17,8 @@ from nbrdf.viewer.ui.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
 
 COMPARE_LABELS = {CompareMode.OFF: "off", CompareMode.SIDE: "side by side", CompareMode.WIPE: "A/B wipe",
                   CompareMode.ERROR: "error"}
-TONEMAP_LABELS = {ToneMap.ACES: "ACES filmic", ToneMap.LINEAR: "linear"}
+TONEMAP_LABELS = {ToneMap.ACES: "ACES filmic", ToneMap.AGX: "AgX", ToneMap.NEUTRAL: "Khronos PBR Neutral",
+                  ToneMap.LINEAR: "linear"}
 MESHES = ("sphere", "testmesh")
 RED = imgui.ImVec4(1.0, 0.35, 0.3, 1.0)
 DIM = imgui.ImVec4(0.7, 0.7, 0.7, 1.0)
