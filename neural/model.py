@@ -23,6 +23,7 @@ from nbrdf.neural.material import Material, Measured
 from nbrdf.neural.nets import MLPSpec, load_state, prefixed
 from nbrdf.neural.sampling import SamplerNet
 from nbrdf.neural.stack import ParamValues, Stack, material_stack
+from nbrdf.neural.stack import uniform_values as stack_uniform_values
 
 Tensor = torch.Tensor
 OPS_FORMAT = "nbrdf-operations/1"
@@ -108,14 +109,9 @@ def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, sta
     return z.reshape(n, C, -1)
 
 
-
-def uniform_values(v, place: str) -> Tensor:
-    """A uniform parameter (scalar or per channel) as a (1, 3) tensor."""
-    try:
-        return torch.tensor([Material.rgb(v)], dtype=torch.float32)
-    except NbrdfError:
-        raise NbrdfError(f"{place}: texture-mapped; evaluate it through a latent texture "
-                         "(nbrdf.neural.svbrdf.latent_texture)") from None
+#: Uniform parameters for the networks: a texture reference points to latent textures.
+uniform_values = functools.partial(stack_uniform_values,
+                                   hint="evaluate it through a latent texture (nbrdf.neural.svbrdf.latent_texture)")
 
 
 # --- files -------------------------------------------------------------------------------

@@ -115,12 +115,17 @@ class Stack:
 
 
 # --- materials -> stacks -------------------------------------------------------------------
-def _uniform(v, place: str) -> Tensor:
+#: What a one-line error about a texture-mapped parameter suggests by default.
+UNIFORM_HINT = "evaluate a uniform material (or one texel of it)"
+
+
+def uniform_values(v, place: str, hint: str = UNIFORM_HINT) -> Tensor:
+    """A uniform parameter (scalar or per channel) as a (1, 3) float64 tensor;
+    a texture reference is a one-line error naming ``place`` and ending in ``hint``."""
     try:
         return torch.tensor([Material.rgb(v)], dtype=torch.float64)
     except NbrdfError:
-        raise NbrdfError(f"{place}: a texture-mapped parameter has no single value; "
-                         "evaluate a uniform material (or one texel of it)") from None
+        raise NbrdfError(f"{place}: a texture-mapped parameter has no single value; {hint}") from None
 
 
 def material_stack(material: Material, values: ParamValues | None = None,
@@ -128,7 +133,7 @@ def material_stack(material: Material, values: ParamValues | None = None,
     """A material's stack with three channels. Uniform parameters give one
     stack (N = 1); with ``values`` a texture-mapped material gives one per
     texel. Shared parameters (roughness, ior, sigma_t) take channel 0."""
-    values = values or _uniform
+    values = values or uniform_values
     # the base first, then the interfaces bottom up: a bad parameter is named in that order
     base, place = material.base, f"layers[{len(material.layers) - 1}]"
     kw: dict[str, object] = {}
