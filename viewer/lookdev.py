@@ -514,9 +514,9 @@ class LookDev:
 
     @staticmethod
     def _read_env(path: str) -> np.ndarray:
-        from nbrdf.viewer.image_io import read_environment
+        from nbrdf.viewer.env_presets import resolve_environment
 
-        return read_environment(path)
+        return resolve_environment(str(path))
 
     def close(self) -> None:
         self.compare_part.close()

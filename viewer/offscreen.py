@@ -70,7 +70,7 @@ def make_renderer(ctx, material, opts: ViewOptions):
 
     env = None
     if opts.env is not None:
-        from nbrdf.viewer.image_io import read_environment
+        from nbrdf.viewer.env_presets import resolve_environment
 
-        env = read_environment(opts.env)
+        env = resolve_environment(str(opts.env))
     return Renderer(ctx, mesh=opts.mesh, environment=env, brdf=MaterialPipeline(ctx).build(material, opts.brdf))

@@ -47,7 +47,8 @@ class ViewOptions:
     mesh: str = "sphere"
     """sphere, testmesh, or an OBJ/glTF file"""
     env: str | None = None
-    """equirectangular .hdr/.exr environment (default: the built-in sky)"""
+    """environment: a generated preset (studio, sky, softbox) or an equirectangular .hdr/.exr file
+    (default: the built-in sky)"""
     view: View = View.OBJECT
     """what the viewport shows"""
     theta_i: float = 30.0
