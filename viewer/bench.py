@@ -4,7 +4,9 @@ throughput against the torch CPU decoder's on the same machine, and the
 look-development window's frame time and edit latency (one JSON object each)."""
 from __future__ import annotations
 
+import os
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -23,9 +25,50 @@ def _time(fn, repeats: int) -> float:
     return float(np.median(ts))
 
 
+#: FP32 peaks of GPUs in GFMA/s (half the vendor's FP32 TFLOPS at boost clock), by a
+#: fragment of the GL renderer string; the first match wins, so specific names come first.
+GPU_PEAK_GFMA = {
+    "H100 PCIe": 25_600, "H100": 33_450, "H200": 33_450, "A100": 9_750, "L40S": 45_800,
+    "L4": 15_150, "A10": 15_600, "RTX 4090": 41_300, "RTX 3090": 17_800,
+}
+
+
+def cpu_peak(cpuinfo: str | None = None, cores: int | None = None) -> dict:
+    """The CPU's FP32 fused multiply-add peak from its own report (/proc/cpuinfo):
+    cores x SIMD lanes x 2 FMA units x clock. Lanes: 16 with AVX-512 on Intel,
+    8 with AVX2 (and with AVX-512 on AMD Zen 4, which runs 512-bit FMAs as two
+    256-bit halves), 4 otherwise; no FMA flag halves the figure (a multiply and
+    an add pipe)."""
+    text = cpuinfo if cpuinfo is not None else (Path("/proc/cpuinfo").read_text()
+                                                 if Path("/proc/cpuinfo").is_file() else "")
+    field = lambda key: next((ln.split(":", 1)[1].strip() for ln in text.splitlines()
+                              if ln.split(":", 1)[0].strip() == key), "")
+    flags = set(field("flags").split())
+    amd = field("vendor_id") == "AuthenticAMD"
+    lanes = 16 if "avx512f" in flags and not amd else 8 if {"avx2", "avx512f"} & flags else 4
+    units = 2 if "fma" in flags else 1
+    mhz = float(field("cpu MHz") or 0.0)
+    n = cores or os.cpu_count() or 1
+    return {"kind": "cpu", "model": field("model name") or "unknown", "cores": n, "fp32_lanes": lanes,
+            "fma_units": units, "clock_mhz": round(mhz), "peak_gfma_per_s": round(n * lanes * units * mhz / 1000, 1)}
+
+
+def machine_peak(renderer: str) -> dict | None:
+    """The FP32 FMA peak of what runs the shaders: the CPU for software OpenGL
+    (llvmpipe), a known GPU by name, or None when the name is not in the table."""
+    low = renderer.lower()
+    if any(k in low for k in ("llvmpipe", "softpipe", "swrast")):
+        return cpu_peak()
+    for name, peak in GPU_PEAK_GFMA.items():
+        if name.lower() in low:
+            return {"kind": "gpu", "model": name, "peak_gfma_per_s": peak}
+    return None
+
+
 def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_pairs: int = 1 << 18) -> dict:
     import moderngl
 
+    from nbrdf.neural.errors import NbrdfError
     from nbrdf.neural.material import load_material
     from nbrdf.viewer import shaders
     from nbrdf.viewer.gl import describe, offscreen_context
@@ -72,6 +115,30 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
 
     t_dec = _time(decode_frame, repeats)
 
+    # The same evaluations in a compute shader with the weights in an SSBO (OpenGL 4.3).
+    t_comp = None
+    try:
+        cdec = GpuDecoder(ctx, dec, ssbo=True)
+    except NbrdfError:
+        cdec = None
+    if cdec is not None:
+        cprog = ctx.compute_shader(cdec.source("decoder_probe.comp"))
+        pin = ctx.buffer(pairs.tobytes())
+        pout = ctx.buffer(reserve=n * 16)
+
+        def decode_compute():
+            cdec.bind(cprog)
+            cdec.set_latent(cprog, z)
+            pin.bind_to_storage_buffer(1)
+            pout.bind_to_storage_buffer(2)
+            cprog["u_count"].value = n
+            cprog.run(group_x=-(-n // 64))
+            ctx.finish()
+
+        t_comp = _time(decode_compute, repeats)
+        for res in (pin, pout, cprog):
+            res.release()
+
     # Full shading: the lit sphere filling the frame, one directional light, no environment.
     r = Renderer(ctx, load_material(DEFAULT_MATERIAL), neural=gdec, latent=z)
     state = ViewState(env_on=False)
@@ -94,8 +161,22 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
     t_torch = _time(torch_run, repeats)
     glsl_rate = n / t_dec
     torch_rate = wi.shape[0] / t_torch
+    macs_rgb = 3 * dec.spec.macs()  # one RGB evaluation, latent share cached
+    info = describe(ctx)
+    peak = machine_peak(info)
+    gfma = lambda rate: round(rate * macs_rgb / 1e9, 3)
+    paths = {"fragment_texture": {"decoder_ms": round(1000 * t_dec, 2), "rgb_evals_per_s": round(glsl_rate),
+                                  "gfma_per_s": gfma(glsl_rate)}}
+    if t_comp is not None:
+        paths["compute_ssbo"] = {"decoder_ms": round(1000 * t_comp, 2), "rgb_evals_per_s": round(n / t_comp),
+                                 "gfma_per_s": gfma(n / t_comp)}
+    paths["torch_cpu"] = {"rgb_evals_per_s": round(torch_rate), "gfma_per_s": gfma(torch_rate)}
+    if peak is not None:
+        for entry in paths.values():
+            entry["fraction_of_peak"] = round(entry["gfma_per_s"] / peak["peak_gfma_per_s"], 4)
+    best = max((k for k in paths if k != "torch_cpu"), key=lambda k: paths[k]["rgb_evals_per_s"])
     return {
-        "renderer": describe(ctx),
+        "renderer": info,
         "size": f"{w}x{h}",
         "decoder": {"width": dec.spec.width, "depth": dec.spec.depth,
                     "macs_per_channel": dec.spec.macs(), "shipped_weights": DEFAULT_WEIGHTS.is_file()},
@@ -105,6 +186,11 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
         "torch_cpu_rgb_evals_per_s": round(torch_rate),
         "torch_threads": torch.get_num_threads(),
         "glsl_over_torch": round(glsl_rate / torch_rate, 3),
+        "macs_per_rgb_eval": macs_rgb,
+        "paths": paths,
+        "best_glsl_path": best,
+        "best_glsl_over_torch": round(paths[best]["rgb_evals_per_s"] / torch_rate, 3),
+        "peak": peak,
     }
 
 

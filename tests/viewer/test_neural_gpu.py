@@ -120,6 +120,26 @@ def test_bench_render_reports_both_paths():
     r = bench_render((48, 32), repeats=1, torch_pairs=4096)
     assert r["size"] == "48x32" and r["decoder_only_ms"] > 0 and r["full_shading_one_light_ms"] > 0
     assert r["glsl_over_torch"] == pytest.approx(r["glsl_rgb_evals_per_s"] / r["torch_cpu_rgb_evals_per_s"], rel=1e-2)
+    # Per path: the fragment and compute decoders and torch, as multiply-adds per second and a share of the
+    # machine's peak (llvmpipe: the CPU's).
+    assert {"fragment_texture", "compute_ssbo", "torch_cpu"} <= set(r["paths"])
+    for entry in r["paths"].values():
+        assert entry["gfma_per_s"] == pytest.approx(entry["rgb_evals_per_s"] * r["macs_per_rgb_eval"] / 1e9, rel=1e-2)
+        assert 0 < entry["fraction_of_peak"] < 1.5
+    assert r["peak"]["kind"] == "cpu" and r["best_glsl_path"] in ("fragment_texture", "compute_ssbo")
+
+
+def test_cpu_peak_from_the_cpus_own_report():
+    from nbrdf.viewer.bench import cpu_peak, machine_peak
+
+    amd = "vendor_id\t: AuthenticAMD\nmodel name\t: AMD EPYC\ncpu MHz\t\t: 2500.000\nflags\t\t: sse avx2 fma avx512f\n"
+    assert cpu_peak(amd, cores=2)["peak_gfma_per_s"] == pytest.approx(2 * 8 * 2 * 2.5)  # Zen 4: 256-bit halves
+    intel = amd.replace("AuthenticAMD", "GenuineIntel")
+    assert cpu_peak(intel, cores=2)["peak_gfma_per_s"] == pytest.approx(2 * 16 * 2 * 2.5)
+    old = "vendor_id\t: GenuineIntel\ncpu MHz\t\t: 2000\nflags\t\t: sse sse2\n"
+    assert cpu_peak(old, cores=1)["peak_gfma_per_s"] == pytest.approx(1 * 4 * 1 * 2.0)
+    assert machine_peak("NVIDIA H100 PCIe/PCIe/SSE2 / OpenGL 4.6")["peak_gfma_per_s"] == 25_600
+    assert machine_peak("Some Unknown GPU / OpenGL 4.6") is None
 
 
 def test_glsl_proxy_sampling_matches_torch_for_the_same_random_numbers(gl_ctx):
