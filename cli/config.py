@@ -141,7 +141,7 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, *, only: Iterable[
         meta = f.metadata
         tp, optional = _unwrap_optional(hints[f.name])
         default = defaults.get(f.name, _default(f))
-        text = help.get(f.name, docs.get(f.name, ""))
+        text = help.get(f.name, docs.get(f.name, "")).replace("%", "%%")  # argparse %-formats help
         kw: dict[str, Any] = {"dest": f.name}
         names = [meta.get("flag", flag_name(f.name))]
         if meta.get("positional"):

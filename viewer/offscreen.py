@@ -28,7 +28,9 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     from nbrdf.viewer.renderer import ViewState
 
     out = Path(opts.out or HEADLESS_OUT)
-    if out.suffix.lower() not in OUTPUT_SUFFIXES:  # before minutes of rendering, not after
+    if opts.turntable:
+        turntable_kind(out)  # before minutes of rendering, not after
+    elif out.suffix.lower() not in OUTPUT_SUFFIXES:
         raise NbrdfError(f"{out}: unknown image type (expected {', '.join(OUTPUT_SUFFIXES)})")
     material = load_material(opts.material)
     ctx = offscreen_context()
@@ -56,11 +58,66 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap,
                       env_rotation=opts.env_rotation, env_intensity=opts.env_intensity, background=opts.background,
                       point_light=opts.point_light, point_intensity=opts.point_intensity)
+    if opts.turntable:
+        frames = [r.render_linear(s, opts.size, opts.spp) for s in turntable_states(state, opts.turntable)]
+        write_turntable(out, frames, opts.exposure, opts.tonemap)
+        return out
     img = r.render_linear(state, opts.size, opts.spp)
     if opts.view == "lobe" and out.suffix.lower() == ".png":
         img = img[::-1]  # a picture shows +y up
     write_image(out, img, opts.exposure, opts.tonemap)
     return out
+
+
+#: Frames per second of a turntable video or GIF.
+TURNTABLE_FPS = 24
+
+
+def turntable_kind(out: Path) -> str:
+    """"video", "gif" or "frames" (a pattern such as frame_%03d.png); one line otherwise."""
+    if "%" in out.name:
+        try:
+            name = out.name % 0
+        except (TypeError, ValueError):
+            raise NbrdfError(f"{out}: a frame pattern takes one integer field, e.g. frame_%03d.png") from None
+        if Path(name).suffix.lower() not in (".png", ".exr", ".npy"):
+            raise NbrdfError(f"{out}: frames must be .png, .exr or .npy")
+        return "frames"
+    kinds = {".mp4": "video", ".gif": "gif"}
+    if out.suffix.lower() not in kinds:
+        raise NbrdfError(f"--turntable: {out} must be .mp4, .gif or a frame pattern such as frame_%03d.png")
+    return kinds[out.suffix.lower()]
+
+
+def turntable_states(state, frames: int) -> list:
+    """``frames`` copies of ``state`` whose cameras make one turn about the up axis."""
+    import copy
+
+    out = []
+    for k in range(frames):
+        s = copy.deepcopy(state)
+        s.camera.orbit(360.0 * k / frames, 0.0)
+        out.append(s)
+    return out
+
+
+def write_turntable(out: Path, frames: list, exposure: float, tonemap) -> None:
+    """Linear frames -> a video (.mp4, H.264 through imageio's ffmpeg plugin), a looping GIF, or numbered files."""
+    import imageio.v2 as iio
+
+    from nbrdf.viewer.image_io import tonemap as to_srgb8, write_image
+
+    kind = turntable_kind(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if kind == "frames":
+        for k, img in enumerate(frames):
+            write_image(out.parent / (out.name % k), img, exposure, tonemap)
+        return
+    pictures = [to_srgb8(img, exposure, tonemap) for img in frames]
+    if kind == "gif":
+        iio.mimwrite(out, pictures, duration=1000.0 / TURNTABLE_FPS, loop=0)
+    else:
+        iio.mimwrite(out, pictures, fps=TURNTABLE_FPS, macro_block_size=2, quality=8)
 
 
 def make_renderer(ctx, material, opts: ViewOptions):

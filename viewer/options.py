@@ -83,6 +83,9 @@ class ViewOptions:
     """a point light at this world position (z up)"""
     point_intensity: float = 20.0
     """the point light's radiant intensity"""
+    turntable: int = 0
+    """offscreen: N frames of one turn of the camera around the object, written to --out as .mp4, .gif or
+    a frame pattern such as frame_%03d.png (0: a single image)"""
 
     def __post_init__(self):
         self.material = Path(self.material)
@@ -102,4 +105,10 @@ class ViewOptions:
             raise NbrdfError("--point-intensity must be finite and >= 0")
         if self.offscreen and not self.out:
             raise NbrdfError("--offscreen needs --out IMG")
+        if self.turntable < 0 or self.turntable > 3600:
+            raise NbrdfError(f"--turntable: {self.turntable} is outside 0..3600 frames")
+        if self.turntable and self.view != View.OBJECT:
+            raise NbrdfError("--turntable: turns the camera around the object (--view object)")
+        if self.turntable and not self.offscreen:
+            raise NbrdfError("--turntable needs --offscreen and --out (in the window, T toggles the turntable)")
         return self

@@ -111,3 +111,26 @@ def test_cli_renders_a_session_file(gl_ctx, tmp_path, capsys):
     assert len(err) == 1 and "malformed session" in err[0]
 
 
+
+
+@pytest.mark.gl
+def test_turntable_writes_one_turn_of_frames(tmp_path, capsys):
+    """--turntable N: N frames of one camera turn, as numbered images, a GIF or an .mp4; each frame differs."""
+    import imageio.v2 as iio
+
+    gold = Path(DEFAULT_MATERIAL).parent / "rough_gold.json"
+    common = [str(gold), "--offscreen", "--size", "24x24", "--spp", "1", "--turntable", "4"]
+    assert main(common + ["--out", str(tmp_path / "f_%02d.png")]) == 0
+    frames = [iio.imread(tmp_path / f"f_{k:02d}.png").astype(float) for k in range(4)]
+    assert not (tmp_path / "f_04.png").exists()
+    assert all(np.abs(frames[0] - f).mean() > 1.0 for f in frames[1:])  # the camera moved
+    assert main(common + ["--out", str(tmp_path / "t.gif")]) == 0
+    assert len(iio.mimread(tmp_path / "t.gif")) == 4
+    assert main(common + ["--out", str(tmp_path / "t.mp4")]) == 0
+    assert iio.get_reader(tmp_path / "t.mp4").count_frames() == 4
+    for argv, needle in ((["--out", str(tmp_path / "t.png")], "must be .mp4, .gif or a frame pattern"),
+                         (["--out", str(tmp_path / "t.gif"), "--view", "lobe"], "--view object"),
+                         (["--out", str(tmp_path / "f_%d_%d.png")], "one integer field")):
+        assert main(common + argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert needle in err and "\n" not in err
