@@ -72,7 +72,7 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
     from nbrdf.neural.material import load_material
     from nbrdf.viewer import shaders
     from nbrdf.viewer.gl import describe, offscreen_context
-    from nbrdf.viewer.neural_gpu import GpuDecoder
+    from nbrdf.viewer.neural_gpu import ComputeDecoderPass, GpuDecoder
     from nbrdf.viewer.renderer import Renderer, ViewState
     from nbrdf.viewer.options import DEFAULT_MATERIAL
 
@@ -122,22 +122,9 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
     except NbrdfError:
         cdec = None
     if cdec is not None:
-        cprog = ctx.compute_shader(cdec.source("decoder_probe.comp"))
-        pin = ctx.buffer(pairs.tobytes())
-        pout = ctx.buffer(reserve=n * 16)
-
-        def decode_compute():
-            cdec.bind(cprog)
-            cdec.set_latent(cprog, z)
-            pin.bind_to_storage_buffer(1)
-            pout.bind_to_storage_buffer(2)
-            cprog["u_count"].value = n
-            cprog.run(group_x=-(-n // 64))
-            ctx.finish()
-
-        t_comp = _time(decode_compute, repeats)
-        for res in (pin, pout, cprog):
-            res.release()
+        cpass = ComputeDecoderPass(ctx, cdec, z, v[0], v[1])
+        t_comp = _time(cpass.run, repeats)
+        cpass.release()
 
     # Full shading: the lit sphere filling the frame, one directional light, no environment.
     r = Renderer(ctx, load_material(DEFAULT_MATERIAL), neural=gdec, latent=z)

@@ -180,24 +180,45 @@ def probe_proxy_sampling(ctx: moderngl.Context, wi: np.ndarray, u: np.ndarray, s
         prog.release()
 
 
+class ComputeDecoderPass:
+    """nb_decode at N pairs in a compute shader (SSBO weights): the program and
+    buffers are made once, so ``run`` can be timed alone."""
+
+    def __init__(self, ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor, wi: np.ndarray, wo: np.ndarray):
+        if not gdec.ssbo:
+            raise NbrdfError("a compute decoder pass needs a GpuDecoder made with ssbo=True")
+        self.ctx, self.gdec, self.z, self.n = ctx, gdec, z, wi.shape[0]
+        self.prog = ctx.compute_shader(gdec.source("decoder_probe.comp"))
+        self.pin = ctx.buffer(_pairs_array(wi, wo).tobytes())
+        self.pout = ctx.buffer(reserve=self.n * 16)
+
+    def run(self) -> None:
+        """One pass over the N pairs, finished."""
+        self.gdec.bind(self.prog)
+        self.gdec.set_latent(self.prog, self.z)
+        self.pin.bind_to_storage_buffer(1)
+        self.pout.bind_to_storage_buffer(2)
+        self.prog["u_count"].value = self.n
+        self.prog.run(group_x=-(-self.n // 64))
+        self.ctx.finish()
+
+    def read(self) -> np.ndarray:
+        """The last pass's RGB values, (N, 3)."""
+        return np.frombuffer(self.pout.read(), np.float32).reshape(self.n, 4)[:, :3].copy()
+
+    def release(self) -> None:
+        for r in (self.pin, self.pout, self.prog):
+            r.release()
+
+
 def probe_compute(ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor, wi: np.ndarray,
                   wo: np.ndarray) -> np.ndarray:
     """nb_decode at N pairs through a compute shader (SSBO weights); (N, 3)."""
     if not gdec.ssbo:
         raise NbrdfError("probe_compute needs a GpuDecoder made with ssbo=True")
-    n = wi.shape[0]
-    prog = ctx.compute_shader(gdec.source("decoder_probe.comp"))
-    pin = ctx.buffer(_pairs_array(wi, wo).tobytes())
-    pout = ctx.buffer(reserve=n * 16)
+    p = ComputeDecoderPass(ctx, gdec, z, wi, wo)
     try:
-        gdec.bind(prog)
-        gdec.set_latent(prog, z)
-        pin.bind_to_storage_buffer(1)
-        pout.bind_to_storage_buffer(2)
-        prog["u_count"].value = n
-        prog.run(group_x=-(-n // 64))
-        ctx.finish()
-        return np.frombuffer(pout.read(), np.float32).reshape(n, 4)[:, :3].copy()
+        p.run()
+        return p.read()
     finally:
-        for r in (pin, pout, prog):
-            r.release()
+        p.release()
