@@ -24,7 +24,6 @@ import glfw
 import moderngl
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import load_material
 from nbrdf.viewer.gl import check_version
 from nbrdf.viewer.lookdev import MAX_PASSES, LookDev
 from nbrdf.viewer.modes import View
@@ -64,7 +63,10 @@ class App:
                           env_rotation=opts.env_rotation, env_intensity=opts.env_intensity,
                           background=opts.background, point_light=opts.point_light,
                           point_intensity=opts.point_intensity)
-        self.lookdev = LookDev(self.ctx, load_material(opts.material), opts.mesh, opts.env, state)
+        material, notes = opts.load_material()
+        self.lookdev = LookDev(self.ctx, material, opts.mesh, opts.env, state)
+        if notes:
+            self.lookdev.notice = "; ".join(notes)
         from imgui_bundle.python_backends.glfw_backend import GlfwRenderer
 
         from nbrdf.viewer.ui.panels import Panels

@@ -85,26 +85,43 @@ def test_mesh(u_steps: int = 256, v_steps: int = 48) -> Mesh:
     return m.normalized()
 
 
+#: Mesh files read by the project's glTF importer (with their materials).
+GLTF_SUFFIXES = (".gltf", ".glb")
+
+
 def load_mesh(path: str | Path) -> Mesh:
-    """OBJ/glTF/PLY/... through trimesh; normals and tangents computed when missing."""
+    """OBJ/glTF/PLY/... through trimesh (a .gltf/.glb through the project's glTF
+    importer: every primitive, turned z-up, normalised together); normals and
+    tangents computed when missing."""
     import trimesh
 
     p = Path(path)
     if not p.is_file():
         raise NbrdfError(f"--mesh {path}: no such file")
-    try:
-        scene = trimesh.load(p, force="mesh", process=True)
-    except Exception as e:  # noqa: BLE001 - any loader failure is a bad file
-        raise NbrdfError(f"--mesh {path}: cannot be read as a mesh ({type(e).__name__}: {str(e)[:80]})") from None
+    if p.suffix.lower() in GLTF_SUFFIXES:
+        from nbrdf.viewer.gltf_import import import_gltf
+
+        scene = trimesh.util.concatenate([prim.mesh for prim in import_gltf(p)])
+    else:
+        try:
+            scene = trimesh.load(p, force="mesh", process=True)
+        except Exception as e:  # noqa: BLE001 - any loader failure is a bad file
+            raise NbrdfError(f"--mesh {path}: cannot be read as a mesh ({type(e).__name__}: {str(e)[:80]})") from None
     if not isinstance(scene, trimesh.Trimesh) or len(scene.faces) == 0:
         raise NbrdfError(f"--mesh {path}: holds no triangles")
-    pos = np.asarray(scene.vertices, dtype="f4")
-    nrm = np.asarray(scene.vertex_normals, dtype="f4")
-    uv = getattr(scene.visual, "uv", None)
+    return mesh_from_trimesh(scene).normalized()
+
+
+def mesh_from_trimesh(tm) -> Mesh:
+    """A trimesh.Trimesh as the renderer's arrays (uvs zero where it has none)."""
+    pos = np.asarray(tm.vertices, dtype="f4")
+    nrm = np.asarray(tm.vertex_normals, dtype="f4")
+    flat = np.linalg.norm(nrm, axis=1) < 1e-6  # vertices of degenerate faces only: any unit normal
+    nrm[flat] = (0.0, 0.0, 1.0)
+    uv = getattr(tm.visual, "uv", None)
     uv = np.zeros((len(pos), 2), "f4") if uv is None or len(uv) != len(pos) else np.asarray(uv, "f4")
-    ind = np.asarray(scene.faces, dtype=np.uint32).reshape(-1)
-    tan = _tangents(pos, nrm, uv, ind)
-    return Mesh(pos, nrm, tan, uv, ind).normalized()
+    ind = np.asarray(tm.faces, dtype=np.uint32).reshape(-1)
+    return Mesh(pos, nrm, _tangents(pos, nrm, uv, ind), uv, ind)
 
 
 def _tangents(pos, nrm, uv, ind) -> np.ndarray:
@@ -125,7 +142,9 @@ def _tangents(pos, nrm, uv, ind) -> np.ndarray:
     bad = np.linalg.norm(acc, axis=1) < 1e-8
     alt = np.cross(nrm, np.where(np.abs(nrm[:, 2:3]) < 0.9, [[0, 0, 1]], [[1, 0, 0]]))
     acc[bad] = alt[bad]
-    acc /= np.linalg.norm(acc, axis=1, keepdims=True)
+    length = np.linalg.norm(acc, axis=1, keepdims=True)
+    # A vertex without a normal (only degenerate faces) gets any unit tangent: never a NaN in the shader.
+    acc = np.where(length > 1e-12, acc / np.maximum(length, 1e-12), [[1.0, 0.0, 0.0]])
     return np.hstack([acc, np.ones((len(pos), 1))]).astype("f4")
 
 

@@ -22,7 +22,6 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     for a window (``fallback`` = why there is none, said in one line), it is a
     preview: on software OpenGL at most 256 x 256 and 8 passes, because the
     neural shader costs minutes there at full size."""
-    from nbrdf.neural.material import load_material
     from nbrdf.viewer.gl import offscreen_context
     from nbrdf.viewer.image_io import OUTPUT_SUFFIXES, write_image
     from nbrdf.viewer.renderer import ViewState
@@ -32,7 +31,9 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
         turntable_kind(out)  # before minutes of rendering, not after
     elif out.suffix.lower() not in OUTPUT_SUFFIXES:
         raise NbrdfError(f"{out}: unknown image type (expected {', '.join(OUTPUT_SUFFIXES)})")
-    material = load_material(opts.material)
+    material, notes = opts.load_material()
+    for note in notes:
+        print(f"{PROG}: {note}", file=sys.stderr)
     ctx = offscreen_context()
     if fallback is not None:
         note = ""

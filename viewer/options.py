@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.modes import BrdfMode, ToneMap, View
@@ -37,6 +38,9 @@ def parse_point(text: str) -> tuple[float, float, float]:
         raise NbrdfError(f"--point-light: expected X,Y,Z such as 2,-2,3, got {text!r}")
     return point  # type: ignore[return-value]
 
+if TYPE_CHECKING:
+    from nbrdf.neural.material import Material
+
 
 @dataclass
 class ViewOptions:
@@ -45,7 +49,7 @@ class ViewOptions:
     material: Path = field(default=DEFAULT_MATERIAL, metadata={"positional": True, "shown": "varnished copper"})
     """material JSON"""
     mesh: str = "sphere"
-    """sphere, testmesh, or an OBJ/glTF file"""
+    """sphere, testmesh, or an OBJ/glTF file (a .gltf/.glb also brings its material when no MATERIAL is given)"""
     env: str | None = None
     """environment: a generated preset (studio, sky, softbox) or an equirectangular .hdr/.exr file
     (default: the built-in sky)"""
@@ -92,6 +96,18 @@ class ViewOptions:
         self.view = View.parse(self.view, "--view")
         self.tonemap = ToneMap.parse(self.tonemap, "--tonemap")
         self.brdf = BrdfMode.parse(self.brdf, "--brdf")
+
+    def load_material(self) -> "tuple[Material, list[str]]":
+        """The material to show and one-line notes: the MATERIAL argument, or, when
+        none was given and --mesh is a glTF file, the file's first material."""
+        from nbrdf.neural.material import load_material
+
+        if self.material == DEFAULT_MATERIAL and Path(self.mesh).suffix.lower() in (".gltf", ".glb"):
+            from nbrdf.viewer.gltf_import import import_gltf
+
+            prim = import_gltf(self.mesh)[0]
+            return prim.material, [f"{self.mesh}: {note}" for note in prim.notes]
+        return load_material(self.material), []
 
     def check(self) -> "ViewOptions":
         """Raises ``NbrdfError`` (one line naming the flag) for values out of range."""

@@ -134,3 +134,25 @@ def test_turntable_writes_one_turn_of_frames(tmp_path, capsys):
         assert main(common + argv) == 2
         err = capsys.readouterr().err.strip()
         assert needle in err and "\n" not in err
+
+
+@pytest.mark.gl
+def test_a_gltf_mesh_brings_its_material(tmp_path, capsys):
+    """--mesh model.glb with no MATERIAL: every primitive, z-up, shaded with the file's converted material
+    (a one-line note per property without an equivalent); a MATERIAL given wins."""
+    from nbrdf.viewer.gltf_import import import_gltf
+    from nbrdf.viewer.mesh import load_mesh
+
+    glb = Path(DEFAULT_MATERIAL).parents[1] / "meshes" / "car_paint_pebble.glb"
+    mesh = load_mesh(glb)
+    assert np.isfinite(mesh.tangents).all() and np.isfinite(mesh.normals).all()
+    assert len(mesh.indices) == 3 * sum(len(p.mesh.faces) for p in import_gltf(glb))
+    material, notes = ViewOptions(mesh=str(glb)).load_material()
+    assert material.layers[0].type == "dielectric" and material.base.type == "conductor" and notes
+    assert ViewOptions(material=DEFAULT_MATERIAL.parent / "rough_gold.json", mesh=str(glb)).load_material()[1] == []
+    out = tmp_path / "g.npy"
+    assert main(["--mesh", str(glb), "--offscreen", "--size", "24x24", "--spp", "1", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "occlusionTexture" in err and len(err.strip().splitlines()) == len(notes)
+    img = np.load(out)
+    assert np.isfinite(img).all() and (img[..., 0] > img[..., 2]).mean() > 0.2  # red car paint on screen
