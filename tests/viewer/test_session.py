@@ -43,6 +43,25 @@ def test_a_previous_version_file_renders_as_it_did(gl_ctx):
     np.testing.assert_allclose(img, ref, rtol=1e-4, atol=1e-5)
 
 
+def test_a_generated_environment_is_kept_by_name(gl_ctx, tmp_path):
+    """The Scene panel's preset buttons: the environment is a preset's name, lights the object, and a session
+    saved with it reopens with it; a bad name is an error in the UI and changes nothing."""
+    from nbrdf.viewer.lookdev import LookDev
+
+    ld = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
+    try:
+        sky = ld.renderer.render_linear(ld.main_state(), (16, 16), 1, ld.brdf)
+        assert ld.set_environment("softbox"), ld.error
+        box = ld.renderer.render_linear(ld.main_state(), (16, 16), 1, ld.brdf)
+        assert np.isfinite(box).all() and np.abs(box - sky).mean() > 1e-3
+        assert ld.save_session(tmp_path / "s.json"), ld.error
+        assert not ld.set_environment("no-such-preset") and "no-such-preset" in ld.error
+        assert ld.env_path == "softbox"
+        assert ld.open_session(tmp_path / "s.json") and ld.env_path == "softbox"
+    finally:
+        ld.close()
+
+
 def test_round_trip_is_exact(tmp_path):
     doc = SessionDoc.load(V1)
     doc.save(tmp_path / "s.json")

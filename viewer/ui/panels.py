@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from imgui_bundle import imgui, implot
 
+from nbrdf.viewer.env_presets import ENV_PRESETS
 from nbrdf.viewer.lookdev import LookDev, presets
 from nbrdf.viewer.modes import CompareMode, ToneMap, View
 from nbrdf.viewer.ui.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
@@ -249,6 +250,11 @@ class Panels:
         if imgui.small_button("built-in sky"):
             self.env_path = ""
             ld.set_environment(None)
+        for name in ENV_PRESETS:  # the generated environments, one click each
+            imgui.same_line()
+            if imgui.small_button(name):
+                self.env_path = name
+                ld.set_environment(name)
         changes: dict = {}
 
         def take(name: str, result) -> None:
