@@ -77,10 +77,3 @@ def decoder_or_default(path: str | None):
     from nbrdf.neural.decoder import default_decoder, load_decoder
 
     return load_decoder(path) if path else default_decoder()
-
-
-def load_material(path: str):
-    """A material JSON (SPEC section 4), checked."""
-    from nbrdf.neural.material import load_material as load
-
-    return load(path)

@@ -10,9 +10,10 @@ from typing import Callable
 
 import numpy as np
 
-from nbrdf.cli.common import at_least, load_material, load_pairs, model_or_default, out_path, progress, stderr_path
+from nbrdf.cli.common import at_least, load_pairs, model_or_default, out_path, progress, stderr_path
 from nbrdf.cli.config import add_arguments, build
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import load_material
 from nbrdf.viewer.modes import Method
 
 

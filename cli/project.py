@@ -7,9 +7,10 @@ import json
 import time
 from dataclasses import dataclass
 
-from nbrdf.cli.common import at_least, decoder_or_default, load_material, out_path
+from nbrdf.cli.common import at_least, decoder_or_default, out_path
 from nbrdf.cli.config import add_arguments, build
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import load_material
 
 
 @dataclass

@@ -9,8 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from nbrdf.cli.common import decoder_or_default, load_material, model_or_default
+from nbrdf.cli.common import decoder_or_default, model_or_default
 from nbrdf.cli.config import Parser, add_arguments, build
+from nbrdf.neural.material import load_material
 
 
 @dataclass

@@ -39,18 +39,23 @@ def tonemap(x: np.ndarray) -> np.ndarray:
     return x / (1.0 + x)
 
 
-def lobe_psnr(a: np.ndarray, ref: np.ndarray) -> float:
-    """10 log10(1 / MSE) of T(a) - T(ref) over disk pixels and channels."""
-    m = disk_mask(a.shape[0])
-    mse = float(np.mean((tonemap(a[m]) - tonemap(ref[m])) ** 2))
+def compressed_psnr(a: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> float:
+    """10 log10(1 / MSE) of T(a) - T(ref) over the ``mask`` pixels and channels
+    (the lobe PSNR on the lobe disk; the render-space PSNR on the sphere)."""
+    mse = float(np.mean((tonemap(a[mask]) - tonemap(ref[mask])) ** 2))
     return float("inf") if mse == 0 else 10.0 * math.log10(1.0 / mse)
 
 
-def noise_psnr(ref: np.ndarray, ref_stderr: np.ndarray) -> float:
+def lobe_psnr(a: np.ndarray, ref: np.ndarray) -> float:
+    """10 log10(1 / MSE) of T(a) - T(ref) over disk pixels and channels."""
+    return compressed_psnr(a, ref, disk_mask(a.shape[0]))
+
+
+def noise_psnr(ref: np.ndarray, ref_stderr: np.ndarray, mask: np.ndarray | None = None) -> float:
     """The PSNR the reference's own noise would cost: expected MSE of T from
-    its standard errors, through T'(x) = 1 / (1 + x)^2."""
-    m = disk_mask(ref.shape[0])
-    d = 1.0 / (1.0 + np.maximum(ref[m], 0.0)) ** 2
+    its standard errors, through T'(x) = 1 / (1 + x)^2, over ``mask`` (default: the lobe disk)."""
+    m = disk_mask(ref.shape[0]) if mask is None else mask
+    d = 1.0 / (1.0 + np.maximum(ref[m].astype(np.float64), 0.0)) ** 2
     mse = float(np.mean((d * ref_stderr[m]) ** 2))
     return float("inf") if mse == 0 else 10.0 * math.log10(1.0 / mse)
 

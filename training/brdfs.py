@@ -32,10 +32,6 @@ Tensor = torch.Tensor
 METHODS = ("reference", "analytic", "neural", "projected")
 
 
-def _rgb(v) -> Tensor:
-    return torch.tensor(Material.rgb(v), dtype=torch.float64)
-
-
 class ClosedFormBRDF(ExactRGB):
     """A lone conductor, dielectric (its reflection: the material is seen
     from above) or diffuse layer; samples its own lobe."""
@@ -109,9 +105,9 @@ class ReferenceBRDF(_DefensivelySampled):
     ``spp`` paths per pair with ``seed``; every call draws the same paths."""
 
     def __init__(self, material: Material, spp: int = 256, seed: int = 0, dtype: torch.dtype = torch.float32):
-        from nbrdf.training.reference import _check_uniform
+        from nbrdf.training.reference import check_uniform  # imports the compiled walk: only when needed
 
-        _check_uniform(material)
+        check_uniform(material)
         if isinstance(material.base, LatentBase) and not material.interfaces:
             raise NbrdfError("layers[0]: a latent base has no reference; use --method neural")
         self.material, self.spp, self.seed, self.dtype = material, spp, seed, dtype

@@ -25,7 +25,8 @@ def _rgb(v) -> Tensor:
     return torch.tensor(Material.rgb(v), dtype=torch.float64)
 
 
-def _check_uniform(material: Material) -> None:
+def check_uniform(material: Material) -> None:
+    """One line for a texture-mapped material: a reference is for uniform materials (or one texel)."""
     if material.is_textured:
         place = material.textures()[0][0]
         raise NbrdfError(f"{place}: a texture-mapped parameter has no single reference; "
@@ -45,7 +46,7 @@ def simulator_params(stack: Stack) -> StackParams:
 
 def stack_params(material: Material, n: int = 1) -> StackParams:
     """The material's layer stack as simulator parameters, 3 channels, n copies."""
-    _check_uniform(material)
+    check_uniform(material)
     if not material.interfaces:
         raise NbrdfError("a single-layer material needs no simulation")
     base = material.base
@@ -76,7 +77,7 @@ def reference_eval(material: Material, wi: Tensor, wo: Tensor, spp: int = 256, s
                    progress: Callable[[int], None] | None = None) -> tuple[Tensor, Tensor]:
     """Reference f(wi, wo) (N, 3) and its standard error (N, 3) for N pairs.
     Pairs with a direction below the horizon give 0 (the BRDF's support)."""
-    _check_uniform(material)
+    check_uniform(material)
     wi = wi.to(dtype)
     wo = wo.to(dtype)
     n = wi.shape[0]
@@ -98,7 +99,7 @@ def reference_eval(material: Material, wi: Tensor, wo: Tensor, spp: int = 256, s
     err = torch.zeros(n, 3, dtype=dtype)
     idx = up.nonzero().squeeze(-1)
     chunk = max(1, MAX_LANES // max(spp, 1))
-    params = stack_params(material, 1)
+    stack_params(material, 1)  # a stack the simulator cannot take fails here, even with no pair above the horizon
     for k, start in enumerate(range(0, idx.numel(), chunk)):
         sel = idx[start:start + chunk]
         sp = stack_params(material, sel.numel())
@@ -106,7 +107,6 @@ def reference_eval(material: Material, wi: Tensor, wo: Tensor, spp: int = 256, s
         mean[sel], err[sel] = m, e
         if progress is not None:
             progress(sel.numel())
-    del params
     return mean, err
 
 

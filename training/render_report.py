@@ -39,6 +39,7 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Conductor, Material, load_material, material_to_dict
+from nbrdf.neural.metrics import compressed_psnr, noise_psnr
 
 Tensor = torch.Tensor
 EvalFn = Callable[[Tensor, Tensor], Tensor]  # (wi (N, 3), wo (N, 3)) local -> f (N, 3)
@@ -168,21 +169,6 @@ def flip(reference: np.ndarray, test: np.ndarray) -> tuple[float, np.ndarray]:
     return float(mean), err.reshape(ref.shape[:2])
 
 
-def render_psnr(reference: np.ndarray, test: np.ndarray, mask: np.ndarray) -> float:
-    """10 log10(1 / MSE) of x / (1 + x) over the disk pixels and channels."""
-    t = lambda a: np.maximum(a[mask].astype(np.float64), 0.0) / (1.0 + np.maximum(a[mask].astype(np.float64), 0.0))
-    mse = float(np.mean((t(test) - t(reference)) ** 2))
-    return float("inf") if mse == 0 else 10.0 * math.log10(1.0 / mse)
-
-
-def noise_psnr(reference: np.ndarray, stderr: np.ndarray, mask: np.ndarray) -> float:
-    """The PSNR the reference's own noise costs (its standard errors through T'(x) = 1/(1+x)^2)."""
-    d = 1.0 / (1.0 + np.maximum(reference[mask].astype(np.float64), 0.0)) ** 2
-    mse = float(np.mean((d * stderr[mask]) ** 2))
-    return float("inf") if mse == 0 else 10.0 * math.log10(1.0 / mse)
-
-
-# --- materials ----------------------------------------------------------------------------
 def material_class(m: Material) -> str:
     """A look-development class from the stack's structure."""
     n = len(m.interfaces)
@@ -430,7 +416,7 @@ def run_render_report(config: RenderReportConfig) -> dict:
                 img = shade(fn, geo)
                 fl, fmap = flip(ref.image, img)
                 row[meth] = {"flip": fl, "flip_disk": float(fmap[mask].mean()),
-                             "psnr": render_psnr(ref.image, img, mask)}
+                             "psnr": compressed_psnr(img, ref.image, mask)}
                 imgs[meth], imgs[f"flip_{meth}"] = img, fmap
             row["method_seconds"] = round(time.perf_counter() - t0, 2)
             rows.append(row)

@@ -42,6 +42,7 @@ import numpy as np
 from tqdm import tqdm
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.environment import LUMA
 
 #: The preset names, in the order a menu lists them (the first is the default).
 ENV_PRESETS: tuple[str, ...] = ("studio", "sky", "softbox")
@@ -51,7 +52,6 @@ VERSION = 1
 KEY_WHITE = 1.0
 #: The size maps are made at unless asked otherwise (texels ~0.35 degrees).
 DEFAULT_SIZE = (1024, 512)
-_LUMA = np.array([0.2126, 0.7152, 0.0722])
 _MAX_SIZE = 8192
 
 
@@ -327,7 +327,7 @@ def key_white(img: np.ndarray, n_normals: int = 64) -> float:
     side: max over normals n of (1/pi) sum L max(0, n.w) dOmega."""
     h, w = img.shape[:2]
     dirs = texel_directions(w, h, 1)[:, :, 0].reshape(-1, 3)
-    lum = (img.reshape(-1, 3) @ _LUMA) * np.repeat(texel_solid_angles(w, h), w)
+    lum = (img.reshape(-1, 3) @ LUMA) * np.repeat(texel_solid_angles(w, h), w)
     k = np.arange(n_normals) + 0.5  # a Fibonacci sphere of normals
     z = 1 - 2 * k / n_normals
     r = np.sqrt(1 - z * z)

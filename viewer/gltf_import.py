@@ -37,6 +37,7 @@ perceptual roughness r becomes alpha = r^2, clamped into [0.01, 1]):
 from __future__ import annotations
 
 import base64
+import functools
 import hashlib
 import io
 import json
@@ -548,3 +549,18 @@ def import_gltf(path: str | Path, out_dir: str | Path | None = None) -> list[Imp
         raise NbrdfError(f"{path}: not a valid glTF file ({reason})") from None
     except OSError as e:
         raise NbrdfError(f"{path}: cannot be read or written ({e.strerror or type(e).__name__})") from None
+
+
+def imported_scene(path: str | Path) -> tuple[ImportedPrimitive, ...]:
+    """``import_gltf`` into the default folder, kept while the file is unchanged:
+    opening a model reads it once for both its meshes and its material."""
+    p = Path(path)
+    if not p.is_file():
+        raise NbrdfError(f"{path}: no such file")
+    return _imported(str(p), p.resolve().stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=4)
+def _imported(path: str, mtime_ns: int) -> tuple[ImportedPrimitive, ...]:
+    return tuple(import_gltf(path))
+

@@ -12,6 +12,17 @@ from nbrdf.neural.errors import NbrdfError
 OUTPUT_SUFFIXES = (".png", ".exr", ".npy")
 
 
+def check_output(path: str | Path) -> Path:
+    """``path`` as an image to write: a known type in an existing folder (one line otherwise),
+    so a render can fail before its minutes of work rather than after."""
+    p = Path(path)
+    if p.suffix.lower() not in OUTPUT_SUFFIXES:
+        raise NbrdfError(f"{path}: unknown image type (expected {', '.join(OUTPUT_SUFFIXES)})")
+    if p.parent and not p.parent.exists():
+        raise NbrdfError(f"{path}: the folder {p.parent} does not exist")
+    return p
+
+
 def tonemap(img: np.ndarray, exposure: float = 0.0, mode: str = "aces") -> np.ndarray:
     """Linear (H, W, 3) -> sRGB uint8, matching shaders/tonemap.frag (``viewer.tonemap``)."""
     from nbrdf.viewer.tonemap import to_display8
@@ -21,12 +32,8 @@ def tonemap(img: np.ndarray, exposure: float = 0.0, mode: str = "aces") -> np.nd
 
 def write_image(path: str | Path, img: np.ndarray, exposure: float = 0.0, mode: str = "aces") -> None:
     """Writes linear (H, W, 3) float data, row 0 at the top."""
-    p = Path(path)
+    p = check_output(path)
     suffix = p.suffix.lower()
-    if suffix not in OUTPUT_SUFFIXES:
-        raise NbrdfError(f"{path}: unknown image type (expected {', '.join(OUTPUT_SUFFIXES)})")
-    if p.parent and not p.parent.exists():
-        raise NbrdfError(f"{path}: the folder {p.parent} does not exist")
     img = np.ascontiguousarray(img, dtype=np.float32)
     if suffix == ".npy":
         np.save(p, img)

@@ -99,9 +99,9 @@ def load_mesh(path: str | Path) -> Mesh:
     if not p.is_file():
         raise NbrdfError(f"--mesh {path}: no such file")
     if p.suffix.lower() in GLTF_SUFFIXES:
-        from nbrdf.viewer.gltf_import import import_gltf
+        from nbrdf.viewer.gltf_import import imported_scene
 
-        scene = trimesh.util.concatenate([prim.mesh for prim in import_gltf(p)])
+        scene = trimesh.util.concatenate([prim.mesh for prim in imported_scene(p)])
     else:
         try:
             scene = trimesh.load(p, force="mesh", process=True)

@@ -23,14 +23,14 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     preview: on software OpenGL at most 256 x 256 and 8 passes, because the
     neural shader costs minutes there at full size."""
     from nbrdf.viewer.gl import offscreen_context
-    from nbrdf.viewer.image_io import OUTPUT_SUFFIXES, write_image
+    from nbrdf.viewer.image_io import check_output, write_image
     from nbrdf.viewer.renderer import ViewState
 
     out = Path(opts.out or HEADLESS_OUT)
     if opts.turntable:
         turntable_kind(out)  # before minutes of rendering, not after
-    elif out.suffix.lower() not in OUTPUT_SUFFIXES:
-        raise NbrdfError(f"{out}: unknown image type (expected {', '.join(OUTPUT_SUFFIXES)})")
+    else:
+        check_output(out)
     material, notes = opts.load_material()
     for note in notes:
         print(f"{PROG}: {note}", file=sys.stderr)

@@ -103,9 +103,9 @@ class ViewOptions:
         from nbrdf.neural.material import load_material
 
         if self.material == DEFAULT_MATERIAL and Path(self.mesh).suffix.lower() in (".gltf", ".glb"):
-            from nbrdf.viewer.gltf_import import import_gltf
+            from nbrdf.viewer.gltf_import import imported_scene
 
-            prim = import_gltf(self.mesh)[0]
+            prim = imported_scene(self.mesh)[0]
             return prim.material, [f"{self.mesh}: {note}" for note in prim.notes]
         return load_material(self.material), []
 
