@@ -1,5 +1,6 @@
-"""``nbrdf project``: fit a latent (3 x 32) to a material, to measured samples
-or to a MERL table, optionally adapting a copy of the decoder."""
+"""``nbrdf project``: fit a material code (3 x 34: body latents and clear coat)
+to a material, to measured samples or to a MERL table, optionally adapting a
+copy of the decoder."""
 from __future__ import annotations
 
 import argparse
@@ -29,6 +30,9 @@ class ProjectConfig:
     """decoder weights (default: the shipped ones)"""
     finetune: bool = False
     """measured files: also adapt a copy of the decoder"""
+    coat: str | None = None
+    """--samples: ROUGHNESS,IOR of the clear coat on top of the sampled BRDF, kept exact in the code
+    (a material's coat is read from its top layer; default: none)"""
     pairs: int = 2048
     """samples drawn from the material or table"""
     spp: int = 64
@@ -58,9 +62,14 @@ def cmd_project(a: argparse.Namespace) -> int:
     elif c.samples:
         s = pj.npy_samples(c.samples)
         source = {"samples": str(c.samples)}
+        if c.coat:
+            s.coat = _coat_arg(c.coat)
+            source["coat"] = s.coat.tolist()
     else:
         s = pj.merl_samples(c.merl, n=c.pairs, seed=c.seed)
         source = {"merl": str(c.merl), "pairs": c.pairs}
+    if c.coat and not c.samples:
+        raise NbrdfError("--coat: only with --samples (a material's coat is its top layer; a MERL table has none)")
     if c.finetune and not c.merl:
         raise NbrdfError("--finetune: only for measured (--merl) files")
     lat, secs = pj.project_to_latent(dec, s, source, ProjectionConfig(steps=c.steps, seed=c.seed))
@@ -81,9 +90,24 @@ def cmd_project(a: argparse.Namespace) -> int:
     return 0
 
 
+def _coat_arg(text: str):
+    import torch
+
+    from nbrdf.neural.material import RANGES
+
+    try:
+        r, ior = (float(x) for x in text.split(","))
+    except ValueError:
+        raise NbrdfError(f"--coat: {text!r} is not ROUGHNESS,IOR (e.g. 0.02,1.5)") from None
+    (rlo, rhi), (ilo, ihi) = RANGES["roughness"], RANGES["ior"]
+    if not (rlo <= r <= rhi and ilo <= ior <= ihi):
+        raise NbrdfError(f"--coat: roughness must lie in [{rlo:g}, {rhi:g}] and ior in [{ilo:g}, {ihi:g}]")
+    return torch.tensor([r, ior])
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     """Adds ``project`` to the ``nbrdf`` subcommands."""
-    p = sub.add_parser("project", help="fit a latent (3 x 32) to a material, samples or a MERL table",
+    p = sub.add_parser("project", help="fit a material code (3 x 34) to a material, samples or a MERL table",
                        description=ProjectConfig.__doc__)
     add_arguments(p, ProjectConfig)
     p.set_defaults(fn=cmd_project)

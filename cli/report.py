@@ -71,7 +71,7 @@ class RenderReport:
     """comma-separated sets: lookdev (the bundled sharp-coat set), heldout (the paper-distribution
     held-out set), or paths of material JSON files / folders"""
     methods: str = "neural,projected"
-    """comma-separated methods: neural, projected, coat_split (an experiment)"""
+    """comma-separated methods: neural (the full neural path), projected (the decoder at a fitted latent)"""
     size: int = 96
     """sphere image size in pixels (square)"""
     spp: int = 384

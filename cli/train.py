@@ -17,7 +17,8 @@ LAYERING_ONLY = ("data", "recursion_steps", "width")
 #: The decoder architecture fields set from the command line, with their help
 #: (``DecoderSpec`` lives in the library; its other fields are fixed).
 SPEC_HELP = {"width": "hidden units per decoder layer", "depth": "hidden layers of the decoder",
-             "activation": "hidden-layer activation", "loss_scale": "s in the loss log(1 + f cos / s)"}
+             "activation": "hidden-layer activation", "loss_scale": "s in the loss log(1 + f cos / s)",
+             "coat": "the coat split (--no-coat: decode whole BRDFs, not bodies under the top interface's closed-form reflection; neural.coat)"}
 
 
 @dataclass

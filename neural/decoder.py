@@ -22,6 +22,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from nbrdf.neural.coat import code_size, coat_eval, coat_of
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.nets import load_state
 
@@ -43,6 +44,7 @@ class DecoderSpec:
     encoding: str = "rusink5"
     activation: str = "relu"
     loss_scale: float = 0.01  # s in the loss log(1 + f cos / s): below s errors count as relative
+    coat: bool = True  # the latent is a body under an analytic clear coat (neural.coat): codes carry 2 more floats
 
     def __post_init__(self):
         if self.encoding not in ENCODINGS:
@@ -56,6 +58,12 @@ class DecoderSpec:
     @property
     def features(self) -> int:
         return ENCODINGS[self.encoding]
+
+    @property
+    def code(self) -> int:
+        """Floats per channel of a material code: the latent, then the coat's
+        (roughness, ior) when the decoder represents bodies (``neural.coat``)."""
+        return code_size(self.latent, self.coat)
 
     def macs(self, latent_share_cached: bool = True) -> int:
         """Multiply-adds of one channel evaluation (the encoding's few
@@ -111,9 +119,17 @@ class Decoder(nn.Module):
 
     # -- the network -------------------------------------------------------------------
     def latent_share(self, z: Tensor) -> Tensor:
-        """The latent's part of the first layer's pre-activation, (..., width)."""
+        """The latent's part of the first layer's pre-activation, (..., width);
+        z may be a latent or a whole material code (its coat is not decoded)."""
         first = self.hidden[0]
-        return z @ first.weight[:, : self.spec.latent].T + first.bias
+        return z[..., : self.spec.latent] @ first.weight[:, : self.spec.latent].T + first.bias
+
+    def coat(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor | None:
+        """The coat term of material codes z at pairs (broadcast), or None
+        when z is a bare latent (a body alone, or a decoder without coats)."""
+        if not self.spec.coat or z.shape[-1] == self.spec.latent:
+            return None
+        return coat_eval(coat_of(z, self.spec.latent), wi, wo)
 
     def log_f_from_share(self, share: Tensor, feats: Tensor) -> Tensor:
         first = self.hidden[0]
@@ -123,22 +139,28 @@ class Decoder(nn.Module):
         return self.out(x)[..., 0]
 
     def log_f(self, z: Tensor, feats: Tensor) -> Tensor:
-        """y = log f for latents z (..., 32) and features (..., K), broadcast."""
+        """y = log f of the decoded part (the body) for latents or codes z
+        (..., 32 or code) and features (..., K), broadcast."""
         return self.log_f_from_share(self.latent_share(z), feats)
 
     def forward(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
-        """f >= 0 (...,) for one channel; directions below the horizon give 0."""
+        """f >= 0 (...,) for one channel: the decoded body, plus the coat when
+        z is a material code; directions below the horizon give 0."""
         f = torch.exp(self.log_f(z, encode(wi, wo)).clamp(max=80.0))
-        return torch.where((wi[..., 2] > 0) & (wo[..., 2] > 0), f, torch.zeros_like(f))
+        f = torch.where((wi[..., 2] > 0) & (wo[..., 2] > 0), f, torch.zeros_like(f))
+        c = self.coat(z, wi, wo)
+        return f if c is None else f + c.to(f.dtype)
 
     def eval_rgb(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
-        """RGB values (N, 3) of a material latent z (3, 32) at N pairs."""
+        """RGB values (N, 3) of a material code (or bare latents) z (3, code) at N pairs."""
         feats = encode(wi, wo)
         share = self.latent_share(z.to(feats.dtype))  # (3, W)
         y = self.log_f_from_share(share[None, :, :], feats[:, None, :])
         f = torch.exp(y.clamp(max=80.0))
         up = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
-        return torch.where(up, f, torch.zeros_like(f))
+        f = torch.where(up, f, torch.zeros_like(f))
+        c = self.coat(z[:1], wi, wo)  # the coat is the same in the three channels
+        return f if c is None else f + c.to(f.dtype)[:, None]
 
     # -- identity ------------------------------------------------------------------------
     def weights_id(self) -> str:
@@ -214,7 +236,9 @@ def record_accuracy(path: str | Path, accuracy: dict) -> None:
 def load_decoder(path: str | Path) -> Decoder:
     tensors, meta = read_bundle(path)
     try:
-        spec = DecoderSpec(**json.loads(meta["architecture"]))
+        arch = json.loads(meta["architecture"])
+        arch.setdefault("coat", False)  # files from before the coat split decode whole BRDFs
+        spec = DecoderSpec(**arch)
     except (KeyError, TypeError, json.JSONDecodeError) as e:
         raise NbrdfError(f"{path}: architecture metadata is missing or malformed ({e})") from None
     if meta.get("latent_size") != str(spec.latent):

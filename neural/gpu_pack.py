@@ -92,9 +92,10 @@ def pack(dec: Decoder) -> PackedDecoder:
 
 
 def latent_share(dec: Decoder, z: torch.Tensor) -> np.ndarray:
-    """The per-material share of layer 1 for a (3, 32) latent, laid out as the
-    shader reads it: float32 (width, 3), unit-major, channels RGB."""
-    if z.shape != (3, dec.spec.latent):
-        raise NbrdfError(f"a material latent must have shape (3, {dec.spec.latent}), got {tuple(z.shape)}")
+    """The per-material share of layer 1 for a (3, 34) code (or a bare (3, 32)
+    latent), laid out as the shader reads it: float32 (width, 3), unit-major,
+    channels RGB. The code's coat goes to ``u_coat``, not here."""
+    if z.dim() != 2 or z.shape[0] != 3 or z.shape[1] not in (dec.spec.latent, dec.spec.code):
+        raise NbrdfError(f"a material code must have shape (3, {dec.spec.code}), got {tuple(z.shape)}")
     with torch.no_grad():
         return dec.latent_share(z.float()).T.contiguous().numpy().astype(np.float32)

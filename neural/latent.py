@@ -1,4 +1,6 @@
-"""Saved material latents: a (3, 32) array that records the decoder it belongs to.
+"""Saved material codes: a (3, 34) array (body latents and clear coat,
+``neural.coat``; (3, 32) for decoders from before the coat split) that
+records the decoder it belongs to.
 
 A latent only means something to the decoder it was fitted with, so the file
 carries that decoder's weights id and loading it for any other decoder is a
@@ -15,11 +17,12 @@ import torch
 from nbrdf.neural.errors import NbrdfError
 
 FORMAT = "nbrdf-latent/1"
+SHAPES = ((3, 34), (3, 32))  # a code; a bare latent of a decoder without the coat split
 
 
 @dataclass
 class MaterialLatent:
-    z: torch.Tensor  # (3, 32): one latent per colour channel
+    z: torch.Tensor  # (3, 34): one code per colour channel (latent, then coat roughness and ior)
     decoder_id: str
     source: dict = field(default_factory=dict)  # what it was projected from, and how
 
@@ -27,8 +30,8 @@ class MaterialLatent:
 def save_latent(path: str | Path, lat: MaterialLatent) -> None:
     from safetensors.torch import save_file
 
-    if lat.z.shape != (3, 32) or not torch.isfinite(lat.z).all():
-        raise NbrdfError(f"{path}: a material latent must be a finite (3, 32) array, got {tuple(lat.z.shape)}")
+    if tuple(lat.z.shape) not in SHAPES or not torch.isfinite(lat.z).all():
+        raise NbrdfError(f"{path}: a material code must be a finite (3, 34) array, got {tuple(lat.z.shape)}")
     save_file({"latent": lat.z.detach().float().contiguous()}, str(path),
               metadata={"format": FORMAT, "decoder_id": lat.decoder_id, "source": json.dumps(lat.source)})
 
@@ -48,8 +51,8 @@ def load_latent(path: str | Path, decoder_id: str | None = None) -> MaterialLate
         raise NbrdfError(f"{path}: not a safetensors latent file ({e})") from None
     if meta.get("format") != FORMAT:
         raise NbrdfError(f"{path}: format {meta.get('format')!r} is not {FORMAT}")
-    if z is None or tuple(z.shape) != (3, 32) or not torch.isfinite(z).all():
-        raise NbrdfError(f"{path}: the latent must be a finite (3, 32) array")
+    if z is None or tuple(z.shape) not in SHAPES or not torch.isfinite(z).all():
+        raise NbrdfError(f"{path}: the code must be a finite (3, 34) array (or (3, 32) before the coat split)")
     lat = MaterialLatent(z.float(), meta.get("decoder_id", ""), json.loads(meta.get("source", "{}") or "{}"))
     if decoder_id is not None and lat.decoder_id != decoder_id:
         raise NbrdfError(f"{path}: this latent belongs to decoder {lat.decoder_id or '(unknown)'}, "

@@ -1,7 +1,8 @@
 """Latent interpolation and latent textures (SPEC section 6).
 
 A blend of materials is a weighted sum of their latents. A spatially varying
-material is a texture of latents, H x W x 3 x 32, sampled bilinearly; its mip
+material is a texture of material codes, H x W x 3 x 34 (latents and the
+clear coat's parameters, ``neural.coat``), sampled bilinearly; its mip
 chain averages 2 x 2 texels per level (an odd edge keeps its last texel), and
 a lookup by pixel footprint blends the two nearest levels (trilinear), which
 is what removes the aliasing of a minified latent texture.
@@ -43,8 +44,8 @@ class LatentTexture:
     v along rows, repeat wrapping (as a tiling material expects)."""
 
     def __init__(self, texels: Tensor):
-        if texels.dim() != 4 or texels.shape[2] != 3 or texels.shape[3] != 32:
-            raise NbrdfError(f"a latent texture is (H, W, 3, 32), got {tuple(texels.shape)}")
+        if texels.dim() != 4 or texels.shape[2] != 3 or texels.shape[3] not in (32, 34):
+            raise NbrdfError(f"a latent texture is (H, W, 3, 34) (codes: latents and coat), got {tuple(texels.shape)}")
         if not torch.isfinite(texels).all():
             raise NbrdfError("a latent texture holds NaN or infinite values")
         self.levels = [texels.float()]
@@ -56,7 +57,7 @@ class LatentTexture:
         return tuple(self.levels[0].shape[:2])  # type: ignore[return-value]
 
     def bilinear(self, uv: Tensor, level: int = 0) -> Tensor:
-        """Latents (N, 3, 32) at uv (N, 2) on one mip level."""
+        """Codes (N, 3, 34) at uv (N, 2) on one mip level."""
         lv = self.levels[max(0, min(level, len(self.levels) - 1))]
         h, w = lv.shape[:2]
         x = uv[:, 0] * w - 0.5
@@ -69,13 +70,13 @@ class LatentTexture:
                 + fy * ((1 - fx) * at(y0 + 1, x0) + fx * at(y0 + 1, x0 + 1)))
 
     def trilinear(self, uv: Tensor, footprint: Tensor | float) -> Tensor:
-        """Latents (N, 3, 32) at uv for a pixel footprint in uv units (N,):
+        """Codes (N, 3, 34) at uv for a pixel footprint in uv units (N,):
         level log2(footprint * size), blended between its two neighbours."""
         fp = torch.as_tensor(footprint, dtype=torch.float32).expand(uv.shape[0])
         lod = torch.log2((fp * max(self.size)).clamp_min(1e-8)).clamp(0, len(self.levels) - 1)
         lo = torch.floor(lod).long()
         t = (lod - lo)[:, None, None]
-        out = torch.empty(uv.shape[0], 3, 32)
+        out = torch.empty(uv.shape[0], 3, self.levels[0].shape[-1])
         for k in torch.unique(lo).tolist():
             sel = lo == k
             a = self.bilinear(uv[sel], k)

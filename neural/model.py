@@ -17,7 +17,8 @@ import torch
 
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bundle, save_decoder
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.layering import LayeringNet
+from nbrdf.neural.coat import with_coat
+from nbrdf.neural.layering import CODE, LayeringNet
 from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
 from nbrdf.neural.material import Material, Measured
 from nbrdf.neural.nets import MLPSpec, load_state, prefixed
@@ -26,7 +27,7 @@ from nbrdf.neural.stack import ParamValues, Stack, material_stack
 from nbrdf.neural.stack import uniform_values as stack_uniform_values
 
 Tensor = torch.Tensor
-OPS_FORMAT = "nbrdf-operations/1"
+OPS_FORMAT = "nbrdf-operations/2"  # /2: codes under the coat split (neural.coat)
 PARTS = ("leaf", "layering", "sampler")
 
 
@@ -53,20 +54,23 @@ class NeuralModel:
 
     # -- the full path ---------------------------------------------------------------------
     def leaf_latent(self, layer) -> Tensor:
-        """(3, 32) latents of a single uniform layer, one per colour channel."""
+        """(3, 34) code of a single uniform layer, one per colour channel."""
         return self.stack_latents(Material(name="layer", layers=(layer,)))[0]
 
     def material_latent(self, material: Material) -> Tensor:
-        """(3, 32) latents of a uniform material of any number of layers."""
+        """(3, 34) code of a uniform material of any number of layers (``neural.coat``)."""
         return self.stack_latents(material)[0]
 
     def stack_latents(self, material: Material, values: ParamValues | None = None) -> Tensor:
-        """(P, 3, 32) latents of a material whose parameters ``values`` turns
+        """(P, 3, 34) codes of a material whose parameters ``values`` turns
         into (P, 3) tensors (P = 1 for a uniform material, texels for a
         textured one): ``layered_latents`` of its stack."""
         if isinstance(material.base, Measured):
             raise NbrdfError(f"layers[{len(material.layers) - 1}]: a measured base has no leaf encoder; project it "
                              "first (`nbrdf project --merl FILE --out Z.safetensors`) and use it as a latent base")
+        if not self.decoder.spec.coat:
+            raise NbrdfError(f"{self.source or 'the weights'}: the decoder predates the coat split; "
+                             "the latent operations need a coat-split bundle (retrain, docs/RESULTS.md)")
         stack = material_stack(material, values or uniform_values, dtype=torch.float32)
         z_base = None
         if stack.base == "latent":
@@ -79,7 +83,7 @@ class NeuralModel:
             return layered_latents(leaf, layering, stack, z_base)
 
     def proxy(self, z: Tensor) -> tuple[float, float]:
-        """(sigma, w) of the proxy pdf of a material latent (3, 32)."""
+        """(sigma, w) of the proxy pdf of a material code (3, 34) (of its body)."""
         with torch.no_grad():
             s, w = self.require("sampler").material_params(z)
         return float(s), float(w)
@@ -87,26 +91,37 @@ class NeuralModel:
 
 def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, stack: Stack,
                     z_base: Tensor | None = None) -> Tensor:
-    """Latents (N, C, 32) of N stacks of C channels: the leaf encoder of the
-    base (or the given base latents ``z_base`` (N or 1, C, 32)), then the
-    layering network over each interface and its medium, bottom up.
-    Differentiable in both networks; the one place leaves meet layering."""
+    """Material codes (N, C, 34) of N stacks of C channels (``neural.coat``):
+    the leaf encoder of the base (or the given base codes ``z_base`` (N or 1,
+    C, 34)), then the layering network over each interface and its medium,
+    bottom up. Differentiable in both networks; the one place leaves meet
+    layering."""
     n, C = stack.n, stack.channels
     chan = lambda t: t[:, None].expand(n, C).reshape(-1)  # shared parameter, per channel
     if z_base is not None:
+        if z_base.shape[-1] != CODE:
+            raise NbrdfError(f"a latent base must be a material code of {CODE} floats per channel "
+                             f"(project it again with this model), got {z_base.shape[-1]}")
         z = z_base.expand(n, C, -1).reshape(n * C, -1)
     elif stack.base == "conductor":
-        z = leaf.conductor(chan(stack.base_roughness), stack.base_r0.expand(n, C).reshape(-1))
-    elif stack.base == "dielectric":  # achromatic: one latent for all channels
-        z = leaf.dielectric(stack.base_roughness, stack.base_ior)[:, None].expand(n, C, -1).reshape(n * C, -1)
+        z = with_coat(leaf.conductor(chan(stack.base_roughness), stack.base_r0.expand(n, C).reshape(-1)), None)
+    elif stack.base == "dielectric":  # a bare interface: all coat, achromatic, the encoder gives a black body
+        z_b = leaf.dielectric(stack.base_roughness, stack.base_ior)[:, None].expand(n, C, -1).reshape(n * C, -1)
+        z = with_coat(z_b, chan_pair(stack.coat().to(z_b.dtype), C))
     elif stack.base == "diffuse":
-        z = leaf.diffuse(stack.base_albedo.expand(n, C).reshape(-1))
+        z = with_coat(leaf.diffuse(stack.base_albedo.expand(n, C).reshape(-1)), None)
     else:
         raise NbrdfError(f"a {stack.base} base has no leaf encoder")
     for j in reversed(range(stack.layers)):
-        z_top = leaf.dielectric(stack.roughness[:, j], stack.ior[:, j])[:, None].expand(n, C, -1).reshape(n * C, -1)
-        z = layering(z_top, z, stack.albedo[:, j].expand(n, C).reshape(-1), chan(stack.sigma_t[:, j]))
+        top = chan_pair(torch.stack([stack.roughness[:, j], stack.ior[:, j]], -1).to(z.dtype), C)
+        z = layering(top, z, stack.albedo[:, j].expand(n, C).reshape(-1).to(z.dtype),
+                     chan(stack.sigma_t[:, j]).to(z.dtype))
     return z.reshape(n, C, -1)
+
+
+def chan_pair(t: Tensor, C: int) -> Tensor:
+    """(N, 2) per-stack pairs repeated for C channels: (N * C, 2)."""
+    return t[:, None, :].expand(t.shape[0], C, t.shape[-1]).reshape(-1, t.shape[-1])
 
 
 #: Uniform parameters for the networks: a texture reference points to latent textures.

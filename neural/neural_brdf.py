@@ -1,9 +1,10 @@
 """Neural BRDFs behind the BRDF interfaces (``neural.brdf``).
 
-``LatentBRDF``: a material's three channel latents (3, 32) decoded by the
-shared decoder, RGB, importance sampled through the proxy pdf (sigma, w)
-computed once when the BRDF is made (``neural_brdf``: the full neural path
-of a material). ``NeuralBRDF``: one colour channel of it.
+``LatentBRDF``: a material's code (3, 34) (body latents and clear coat,
+``neural.coat``) decoded by the shared decoder plus the coat in closed form,
+RGB, importance sampled by the coat's visible normals mixed with the body's
+proxy pdf (sigma, w), computed once when the BRDF is made (``neural_brdf``:
+the full neural path of a material). ``NeuralBRDF``: one colour channel.
 """
 from __future__ import annotations
 
@@ -12,13 +13,41 @@ import torch
 from nbrdf.neural.brdf import ExactRGB, Sample
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.material import Diffuse, Material
-from nbrdf.neural.sampling import proxy_pdf, proxy_sample
+from nbrdf.neural.coat import coat_of
+from nbrdf.neural.sampling import coated_pdf, coated_sample
 
 Tensor = torch.Tensor
 
 
-class NeuralBRDF:
-    """Channel ``z`` (32,) of a material under ``decoder``, with proxy (sigma, w)."""
+class _CodeSampler:
+    """Sampling shared by both classes: the coat's lobe (when the code has
+    one) mixed with the body's proxy (sigma, w)."""
+
+    decoder: Decoder
+    z: Tensor
+    sigma: float
+    w: float
+
+    def _coat(self, like: Tensor) -> Tensor | None:
+        spec = self.decoder.spec
+        if not spec.coat or self.z.shape[-1] != spec.code:
+            return None
+        return coat_of(self.z[:1], spec.latent)[0].to(like.dtype)
+
+    def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
+        s, lam = torch.tensor(self.sigma, dtype=w.dtype), torch.tensor(self.w, dtype=w.dtype)
+        p = coated_pdf(w, w_other, self._coat(w), s, lam)
+        return torch.where((w[:, 2] > 0) & (w_other[:, 2] > 0), p, torch.zeros_like(p))
+
+    def _draw(self, w: Tensor, u: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        s, lam = torch.tensor(self.sigma, dtype=w.dtype), torch.tensor(self.w, dtype=w.dtype)
+        wo, pdf = coated_sample(w, u, self._coat(w), s, lam)
+        ok = (wo[:, 2] > 0) & (w[:, 2] > 0)
+        return wo, torch.where(ok, pdf, torch.zeros_like(pdf)), ok
+
+
+class NeuralBRDF(_CodeSampler):
+    """Channel ``z`` (34,) of a material code under ``decoder``, with proxy (sigma, w)."""
 
     def __init__(self, decoder: Decoder, z: Tensor, sigma: float, w: float):
         self.decoder, self.z = decoder, z.reshape(1, -1).float()
@@ -28,24 +57,15 @@ class NeuralBRDF:
         with torch.no_grad():
             return self.decoder(self.z.expand(wi.shape[0], -1), wi.float(), wo.float()).to(wi.dtype)
 
-    def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
-        return _proxy_pdf(w, w_other, self.sigma, self.w)
-
     def sample(self, w: Tensor, u: Tensor) -> Sample:
-        wo, pdf = proxy_sample(w, u, self.sigma, self.w)
-        ok = (wo[:, 2] > 0) & (w[:, 2] > 0)
+        wo, pdf, ok = self._draw(w, u)
         f = torch.where(ok, self.eval(w, wo), torch.zeros_like(pdf))
-        return Sample(wo, f, torch.where(ok, pdf, torch.zeros_like(pdf)))
+        return Sample(wo, f, pdf)
 
 
-def _proxy_pdf(w: Tensor, w_other: Tensor, sigma: float, lam: float) -> Tensor:
-    p = proxy_pdf(w, w_other, torch.tensor(sigma, dtype=w.dtype), torch.tensor(lam, dtype=w.dtype))
-    return torch.where((w[:, 2] > 0) & (w_other[:, 2] > 0), p, torch.zeros_like(p))
-
-
-class LatentBRDF(ExactRGB):
-    """The decoder at a material's latents ``z`` (3, 32): RGB values, one
-    proxy sampler (sigma, w) for all three channels."""
+class LatentBRDF(_CodeSampler, ExactRGB):
+    """The decoder at a material's code ``z`` (3, 34): RGB values (body plus
+    coat), one sampler for all three channels."""
 
     def __init__(self, decoder: Decoder, z: Tensor, sigma: float, w: float):
         self.decoder, self.z = decoder, z.reshape(3, -1).float()
@@ -55,14 +75,10 @@ class LatentBRDF(ExactRGB):
         with torch.no_grad():
             return self.decoder.eval_rgb(self.z, wi.float(), wo.float())
 
-    def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
-        return _proxy_pdf(w, w_other, self.sigma, self.w)
-
     def sample(self, w: Tensor, u: Tensor) -> Sample:
-        wo, pdf = proxy_sample(w, u, self.sigma, self.w)
-        ok = (wo[:, 2] > 0) & (w[:, 2] > 0)
+        wo, pdf, ok = self._draw(w, u)
         f = torch.where(ok[:, None], self.eval(w, wo).to(pdf.dtype), torch.zeros(1, dtype=pdf.dtype))
-        return Sample(wo, f, torch.where(ok, pdf, torch.zeros_like(pdf)))
+        return Sample(wo, f, pdf)
 
 
 def proxy_hint(m: Material) -> tuple[float, float]:
@@ -78,7 +94,7 @@ def proxy_hint(m: Material) -> tuple[float, float]:
 
 
 def latent_brdf(decoder: Decoder, z: Tensor, material: Material, sampler=None) -> LatentBRDF:
-    """The decoder at latents z (3, 32) of ``material``, sampled through the
+    """The decoder at code z (3, 34) of ``material``, sampled through the
     sampler network's proxy when given, else through ``proxy_hint``."""
     if sampler is not None:
         with torch.no_grad():

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import torch
 
 from nbrdf.neural.decoder import Decoder, encode, loss_target, predicted_target
+from nbrdf.neural.coat import COAT_PARAMS, coat_eval, with_coat
 from nbrdf.neural.errors import NbrdfError
 
 Tensor = torch.Tensor
@@ -39,9 +40,18 @@ def check_samples(wi: Tensor, wo: Tensor, f: Tensor) -> None:
 
 
 def project(dec: Decoder, wi: Tensor, wo: Tensor, f: Tensor, cfg: ProjectionConfig = ProjectionConfig(),
-            z0: Tensor | None = None, weight: Tensor | None = None) -> Tensor:
-    """Latents (B, 32) for B BRDFs sampled at (B, n) pairs."""
+            z0: Tensor | None = None, weight: Tensor | None = None, coat: Tensor | None = None) -> Tensor:
+    """Codes (B, 34) for B BRDFs sampled at (B, n) pairs (latents (B, 32)
+    for a decoder without the coat split). Under the coat split the latent is
+    fitted to the body, the samples minus the closed-form reflection of
+    ``coat`` (B, 2) (each BRDF's top interface; None: no coat, e.g. a
+    measured table), and the code carries the coat."""
     check_samples(wi, wo, f)
+    if coat is not None and not dec.spec.coat:
+        raise NbrdfError("projection: this decoder predates the coat split and cannot take a coat")
+    if coat is not None:
+        coat = torch.as_tensor(coat, dtype=torch.float32).reshape(-1, COAT_PARAMS).expand(wi.shape[0], -1)
+        f = (f.float() - coat_eval(coat[:, None, :], wi.float(), wo.float())).clamp_min(0.0)
     up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
     feats = encode(wi.float(), wo.float())
     cos_o = wo[..., 2].float().clamp_min(0.0)
@@ -49,7 +59,8 @@ def project(dec: Decoder, wi: Tensor, wo: Tensor, f: Tensor, cfg: ProjectionConf
     w = up.float() if weight is None else weight.float() * up.float()
     w = w / w.sum(-1, keepdim=True).clamp_min(1e-12)
     B = wi.shape[0]
-    z = (dec.latent_mean.expand(B, -1).clone() if z0 is None else z0.clone().float()).requires_grad_(True)
+    L = dec.spec.latent
+    z = (dec.latent_mean.expand(B, -1).clone() if z0 is None else z0[..., :L].clone().float()).requires_grad_(True)
     opt = torch.optim.Adam([z], lr=cfg.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.steps, eta_min=cfg.lr * 0.02)
     req = [p.requires_grad for p in dec.parameters()]
@@ -67,4 +78,4 @@ def project(dec: Decoder, wi: Tensor, wo: Tensor, f: Tensor, cfg: ProjectionConf
     finally:
         for p, r in zip(dec.parameters(), req):
             p.requires_grad_(r)
-    return z.detach()
+    return with_coat(z.detach(), coat) if dec.spec.coat else z.detach()

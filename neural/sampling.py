@@ -40,8 +40,9 @@ class SamplerNet(nn.Module):
         self.mlp = MLP(self.spec)
 
     def forward(self, z: Tensor) -> tuple[Tensor, Tensor]:
-        """(sigma, w), each (N,), for latents (N, 32)."""
-        a = self.mlp(z)
+        """(sigma, w), each (N,), for latents or codes (N, 32 or 34): the
+        proxy of the body (a code's coat is sampled exactly, ``neural.coat``)."""
+        a = self.mlp(z[..., : self.spec.inputs])
         lo, hi = SIGMA_RANGE
         sigma = lo + (hi - lo) * torch.sigmoid(a[:, 0])
         w = W_RANGE[0] + (W_RANGE[1] - W_RANGE[0]) * torch.sigmoid(a[:, 1])
@@ -93,6 +94,36 @@ def proxy_sample(wi: Tensor, u: Tensor, sigma: Tensor, w: Tensor) -> tuple[Tenso
     wo = torch.where((u0 < w)[:, None], cosine_hemisphere(u1, u2), wo_g)
     wo = wo / wo.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     return wo, proxy_pdf(wi, wo, sigma, w)
+
+
+def coated_pdf(wi: Tensor, wo: Tensor, coat: Tensor | None, sigma: Tensor, w: Tensor) -> Tensor:
+    """pdf of ``coated_sample``: the coat's visible-normal lobe with
+    probability ``neural.coat.coat_probability``, the body's proxy otherwise."""
+    p = proxy_pdf(wi, wo, sigma, w)
+    if coat is None:
+        return p
+    from nbrdf.neural.coat import coat_pdf, coat_probability
+
+    pc = coat_probability(coat, wi)
+    return pc * coat_pdf(coat, wi, wo) + (1 - pc) * p
+
+
+def coated_sample(wi: Tensor, u: Tensor, coat: Tensor | None, sigma: Tensor, w: Tensor) -> tuple[Tensor, Tensor]:
+    """wo (N, 3) and its pdf for a material code: u[:, 0] picks the coat
+    (below its probability) or the body's proxy, and is rescaled to stay
+    uniform for the proxy's own choice; u[:, 1:] draw the direction."""
+    if coat is None:
+        return proxy_sample(wi, u, sigma, w)
+    from nbrdf.neural.coat import coat_probability, coat_sample
+
+    pc = coat_probability(coat, wi)
+    on_coat = u[:, 0] < pc
+    u_proxy = torch.cat([((u[:, :1] - pc[:, None]) / (1 - pc[:, None]).clamp_min(1e-6)).clamp(0, 1 - 1e-7),
+                         u[:, 1:]], -1)
+    wo_p, _ = proxy_sample(wi, u_proxy, sigma, w)
+    wo_c = coat_sample(coat, wi, u[:, 1], u[:, 2])
+    wo = torch.where(on_coat[:, None], wo_c, wo_p)
+    return wo, coated_pdf(wi, wo, coat, sigma, w)
 
 
 def gndf(fn, n: int = 64, n_wi: int = 64, seed: int = 0) -> Tensor:

@@ -81,6 +81,18 @@ class Stack:
         """Colour channels (C)."""
         return self.albedo.shape[2]
 
+    def coat(self) -> Tensor:
+        """(N, 2) (roughness, ior) of the top interface, the clear coat of the
+        coat split (``neural.coat``): the first interface, a bare dielectric
+        itself, ``NO_COAT`` for other bases."""
+        if self.layers:
+            return torch.stack([self.roughness[:, 0], self.ior[:, 0]], -1)
+        if self.base == "dielectric":
+            return torch.stack([self.base_roughness, self.base_ior], -1)
+        from nbrdf.neural.coat import NO_COAT
+
+        return torch.tensor(NO_COAT, dtype=self.roughness.dtype).expand(self.n, 2)
+
     def tensors(self) -> dict[str, Tensor]:
         """The tensor fields that are set, by name."""
         return {f.name: getattr(self, f.name) for f in fields(self)

@@ -117,15 +117,16 @@ class TextureValues:
 
 def latent_texture(model, material: Material, size: tuple[int, int] | None = None, chunk: int = 16384,
                    progress: Callable[[int, int], None] | None = None) -> LatentTexture:
-    """The (H, W, 3, 32) latent texture of a texture-mapped material, with its
+    """The (H, W, 3, 34) code texture of a texture-mapped material (a textured
+    coat roughness or ior becomes a texture channel of the codes), with its
     mip chain; the networks run ``chunk`` texels at a time (``progress(done, total)``
     after each)."""
     values = TextureValues(material, size)
     h, w = values.size
-    out = torch.empty(values.count, 3, 32)
+    out = torch.empty(values.count, 3, model.decoder.spec.code)
     for start in range(0, values.count, chunk):
         sl = slice(start, min(start + chunk, values.count))
         out[sl] = model.stack_latents(material, lambda v, place: values(v, place, sl))
         if progress is not None:
             progress(sl.stop, values.count)
-    return LatentTexture(out.reshape(h, w, 3, 32))
+    return LatentTexture(out.reshape(h, w, 3, -1))

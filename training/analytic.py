@@ -20,7 +20,7 @@ import torch
 
 from nbrdf.neural.brdf import Sample
 from nbrdf.neural.geometry import cosine_hemisphere
-from nbrdf.training.microfacet import (
+from nbrdf.neural.microfacet import (
     fresnel_dielectric,
     fresnel_schlick,
     ggx_d,

@@ -16,7 +16,7 @@ import torch
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
 from nbrdf.training.analytic import GGXDielectric
-from nbrdf.training.microfacet import fresnel_dielectric
+from nbrdf.neural.microfacet import fresnel_dielectric
 from nbrdf.training.reference import single_layer_eval
 
 Tensor = torch.Tensor

@@ -32,7 +32,7 @@ from nbrdf.neural.geometry import cosine_hemisphere
 # (neural.stack), the paper's distributions to training.distributions; re-exported here.
 from nbrdf.neural.stack import (CLASSES, DIFFUSE_BASED, PARAM_NAMES, THREE_LAYERED, P,  # noqa: F401
                                 params_to_material, params_to_stack)
-from nbrdf.training.distributions import sample_params  # noqa: F401
+from nbrdf.training.distributions import sample_params, sharpen_coats  # noqa: F401
 
 Tensor = torch.Tensor
 
@@ -48,21 +48,26 @@ class DataConfig:
     seed: int = 0
     shard_size: int = 32
     peak_fraction: float = 0.5  # share of pairs drawn near the half-vector pole
+    sharp_coats: float = 0.0  # share of stacks redrawn with a coat of roughness 0.01-0.06 over a bright base
 
 
 PRESETS: dict[str, DataConfig] = {
     "tiny": DataConfig(counts=dict(conductor=6, dielectric=6, two_layer=8, three_layer=3, diffuse_base=3),
                        val_counts=dict(conductor=2, dielectric=2, two_layer=2, three_layer=1, diffuse_base=1),
                        pairs=256, spp=16, shard_size=8),
-    "cpu": DataConfig(counts=dict(conductor=200, dielectric=200, two_layer=800, three_layer=200, diffuse_base=150),
-                      val_counts=dict(conductor=16, dielectric=16, two_layer=32, three_layer=16, diffuse_base=16),
-                      pairs=1536, spp=64),
+    # the decoder's data: a dielectric's body is black under the coat split, so few of them;
+    # 40 % of the stacks carry look-development coats (sharp, over bright bases)
+    "cpu": DataConfig(counts=dict(conductor=200, dielectric=40, two_layer=800, three_layer=200, diffuse_base=150,
+                                  three_layer_diffuse=100),
+                      val_counts=dict(conductor=16, dielectric=8, two_layer=32, three_layer=16, diffuse_base=16,
+                                      three_layer_diffuse=8),
+                      pairs=1536, spp=64, sharp_coats=0.4),
     # stacks with their parameters, for the layering network (many BRDFs, fewer pairs each)
     "layering": DataConfig(counts=dict(conductor=0, dielectric=0, two_layer=2496, three_layer=640,
                                        diffuse_base=640, three_layer_diffuse=320),
                            val_counts=dict(conductor=0, dielectric=0, two_layer=64, three_layer=32, diffuse_base=32,
                                            three_layer_diffuse=16),
-                           pairs=768, spp=32, seed=1),
+                           pairs=768, spp=32, seed=1, sharp_coats=0.4),
     "paper": DataConfig(counts=dict(conductor=300, dielectric=300, two_layer=12720, three_layer=1800,
                                     diffuse_base=1200),
                         val_counts=dict(conductor=32, dielectric=32, two_layer=128, three_layer=64, diffuse_base=32),
@@ -170,6 +175,9 @@ def plan(cfg: DataConfig) -> list[Shard]:
 def make_shard(cfg: DataConfig, shard: Shard) -> dict[str, np.ndarray]:
     g = torch.Generator().manual_seed(_stream_seed(cfg.seed, shard.split, shard.cls, shard.index))
     params = sample_params(shard.cls, shard.count, g)
+    if cfg.sharp_coats > 0:
+        gc = torch.Generator().manual_seed(_stream_seed(cfg.seed, "coats", shard.split, shard.cls, shard.index))
+        sharpen_coats(params, cfg.sharp_coats, gc)
     wi, wo = zip(*(sample_pairs(cfg.pairs, g, cfg.peak_fraction) for _ in range(shard.count)))
     wi, wo = torch.stack(wi), torch.stack(wo)
     f, se = tabulate(params, wi, wo, cfg.spp, seed=_stream_seed(cfg.seed, "mc", shard.split, shard.cls, shard.index)
@@ -241,6 +249,27 @@ class BRDFSet:
 
     def __len__(self) -> int:
         return self.params.shape[0]
+
+
+def coats(params: Tensor) -> Tensor:
+    """(K, 2) clear coats (top interface roughness, ior; ``neural.coat``) of K
+    data-set parameter vectors of any classes; ``NO_COAT`` for conductors."""
+    from nbrdf.neural.coat import NO_COAT
+
+    params = torch.as_tensor(params)
+    c = torch.stack([params[:, P["top_roughness"]], params[:, P["top_ior"]]], -1)
+    bare = params[:, P["class"]].round().long() == CLASSES.index("conductor")
+    return torch.where(bare[:, None], torch.tensor(NO_COAT, dtype=c.dtype), c)
+
+
+def body_values(data: "BRDFSet") -> Tensor:
+    """The values (K, n) without the top interface's closed-form reflection:
+    what a coat-split decoder represents (the simulator adds that reflection
+    analytically, so the difference carries no extra noise)."""
+    from nbrdf.neural.coat import coat_eval
+
+    c = coats(data.params).to(data.f.dtype)[:, None, :]
+    return (data.f - coat_eval(c, data.wi.to(data.f.dtype), data.wo.to(data.f.dtype))).clamp_min(0.0)
 
 
 def load_manifest(folder: str | Path) -> dict:

@@ -92,6 +92,22 @@ def sample_params(cls: str, n: int, g: torch.Generator) -> Tensor:
     return p
 
 
+def sharpen_coats(p: Tensor, share: float, g: torch.Generator) -> Tensor:
+    """Redraws a ``share`` of the stacks in ``p`` (in place; returned) in the
+    look-development range the paper's distributions rarely reach: a top coat
+    of roughness U(0.01, 0.06) over a bright base (r0 or albedo 1 - U(0, 1)^2).
+    Single interfaces are left alone. Draws a fixed number of uniforms per
+    row, so the result depends only on ``g``'s state and ``p``."""
+    n = p.shape[0]
+    u = torch.rand(n, 3, generator=g, dtype=torch.float64)
+    cls = p[:, P["class"]].round().long()
+    stacks = (cls != CLASSES.index("conductor")) & (cls != CLASSES.index("dielectric"))
+    pick = stacks & (u[:, 0] < share)
+    p[pick, P["top_roughness"]] = 0.01 + 0.05 * u[pick, 1]
+    p[pick, P["base_value"]] = 1.0 - u[pick, 2] ** 2
+    return p
+
+
 def mixed_params(n: int, g: torch.Generator) -> Tensor:
     """n parameter vectors over every class (even shares, the rest two-layer)."""
     per = [n // len(CLASSES)] * len(CLASSES)

@@ -162,10 +162,11 @@ def summarise(rows: list[dict]) -> dict:
 def projected_method(dec) -> Method:
     """The decoder at latents fitted to the cached projection samples."""
     from nbrdf.neural.neural_brdf import latent_brdf
-    from nbrdf.training.project import Samples, fit
+    from nbrdf.training.project import Samples, fit, material_coat
 
     def make(m: Material, r: Reference):
-        z = fit(dec, Samples(torch.from_numpy(r.wi), torch.from_numpy(r.wo), torch.from_numpy(r.f)))
+        z = fit(dec, Samples(torch.from_numpy(r.wi), torch.from_numpy(r.wo), torch.from_numpy(r.f),
+                             coat=material_coat(m)))
         return latent_brdf(dec, z, m).eval
 
     return make

@@ -33,11 +33,22 @@ class Samples:
     wo: Tensor
     f: Tensor
     seconds: float = 0.0  # time spent making them (reference evaluation)
+    coat: Tensor | None = None  # (2,) the top interface (roughness, ior) of a layered material (neural.coat)
 
     def per_channel(self) -> tuple[Tensor, Tensor, Tensor]:
         """(3, n, 3), (3, n, 3), (3, n): the layout projection takes."""
         rep = lambda t: t.float()[None].expand(3, -1, -1)
         return rep(self.wi), rep(self.wo), self.f.float().T.contiguous()
+
+
+def material_coat(material: Material) -> Tensor | None:
+    """The clear coat (2,) of a uniform material: its top interface, or
+    None (a bare conductor, diffuse or measured base)."""
+    from nbrdf.neural.stack import material_stack, uniform_values
+
+    if not material.interfaces:
+        return None
+    return material_stack(material, uniform_values, dtype=torch.float32).coat()[0]
 
 
 def material_samples(material: Material, n: int = 2048, spp: int = 64, seed: int = 0) -> Samples:
@@ -51,7 +62,7 @@ def material_samples(material: Material, n: int = 2048, spp: int = 64, seed: int
     g = torch.Generator().manual_seed(seed)
     wi, wo = sample_pairs(n, g)
     f, _ = reference_eval(material, wi.float(), wo.float(), spp=spp, seed=seed)
-    return Samples(wi.float(), wo.float(), f.float(), time.perf_counter() - t0)
+    return Samples(wi.float(), wo.float(), f.float(), time.perf_counter() - t0, coat=material_coat(material))
 
 
 def merl_samples(path: str | Path, n: int = 8192, seed: int = 0) -> Samples:
@@ -88,15 +99,19 @@ def npy_samples(path: str | Path) -> Samples:
 
 
 def fit(dec: Decoder, s: Samples, cfg: ProjectionConfig = ProjectionConfig()) -> Tensor:
-    """Latents (3, 32) of RGB samples."""
+    """The code (3, 34) of RGB samples (the body fitted under the samples' coat)."""
     wi, wo, f = s.per_channel()
-    return project(dec, wi, wo, f, cfg)
+    return project(dec, wi, wo, f, cfg, coat=s.coat if dec.spec.coat else None)
 
 
 def finetune(dec: Decoder, s: Samples, z: Tensor, steps: int = 300, lr: float = 3e-4) -> tuple[Decoder, Tensor]:
     """Adapts a copy of the decoder together with the latents to one
     measured BRDF (the shared decoder is left untouched)."""
     wi, wo, f = s.per_channel()
+    if s.coat is not None and dec.spec.coat:  # the decoder holds the body alone
+        from nbrdf.neural.coat import coat_eval
+
+        f = (f - coat_eval(s.coat, wi, wo)).clamp_min(0.0)
     feats, cos_o = encode(wi, wo), wo[..., 2]
     target = loss_target(f, cos_o, dec.spec.loss_scale)
     tuned = copy.deepcopy(dec)

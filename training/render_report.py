@@ -10,12 +10,11 @@ x / (1 + x).
 
 Methods scored against the reference:
 
-- ``neural``: the full neural path (leaf encoders + layering + decoder);
-- ``projected``: the decoder at latents fitted to the reference (its capacity
-  alone, no operation networks);
-- ``coat_split`` (an experiment, ``RenderReportConfig.coat_split``): the top
-  interface's single reflection in closed form plus the decoder at latents
-  fitted to the rest (the light that entered the stack), for stacks.
+- ``neural``: the full neural path (leaf encoders + layering + decoder, the
+  coat in closed form);
+- ``projected``: the decoder at a body latent fitted to the reference minus
+  the top interface's reflection, plus that coat (its capacity alone, no
+  operation networks).
 
 References are closed form for single interfaces and Monte Carlo for stacks,
 rendered as two independent halves (their mean is the reference; their FLIP
@@ -50,7 +49,7 @@ LIGHT = (-0.45, 0.55, 0.70)
 SETS_DIR = Path(__file__).resolve().parent / "sets"
 #: Bumped when a change makes cached reference renders stale.
 CACHE_VERSION = 1
-METHODS = ("neural", "projected", "coat_split")
+METHODS = ("neural", "projected")
 
 
 @dataclass
@@ -319,38 +318,20 @@ def _slug(name: str) -> str:
 
 
 # --- methods ------------------------------------------------------------------------------
-def top_reflection(m: Material) -> EvalFn:
-    """The closed-form single reflection (N, 3) off the stack's top interface."""
-    from nbrdf.training.reference import single_layer_eval
-
-    top = m.interfaces[0][0]
-    return lambda wi, wo: single_layer_eval(top, wi, wo)
-
-
 def method_evaluators(m: Material, model, methods: tuple[str, ...], pairs: int, spp: int,
                       seed: int) -> dict[str, EvalFn]:
-    """fn(wi, wo) of every method for one material. Both projections fit the
-    same reference samples; ``coat_split`` fits what is left once the top
-    interface's single reflection is taken out, and adds it back in closed form."""
-    from nbrdf.training.project import Samples, fit, material_samples
+    """fn(wi, wo) of every method for one material; the projection fits the
+    reference's samples under the material's own coat (``neural.coat``)."""
+    from nbrdf.training.project import fit, material_samples
 
     dec = model.decoder
     out: dict[str, EvalFn] = {}
     if "neural" in methods:
         z_n = model.material_latent(m)
         out["neural"] = lambda wi, wo, z=z_n: dec.eval_rgb(z, wi, wo)
-    need = [k for k in ("projected", "coat_split") if k in methods]
-    if not need:
-        return out
-    s = material_samples(m, n=pairs, spp=spp, seed=seed + 1)
     if "projected" in methods:
-        z_p = fit(dec, s)
+        z_p = fit(dec, material_samples(m, n=pairs, spp=spp, seed=seed + 1))
         out["projected"] = lambda wi, wo, z=z_p: dec.eval_rgb(z, wi, wo)
-    if "coat_split" in methods and m.interfaces:
-        coat = top_reflection(m)
-        body = (s.f - coat(s.wi, s.wo).to(s.f.dtype)).clamp_min(0.0)
-        z_b = fit(dec, Samples(s.wi, s.wo, body))
-        out["coat_split"] = lambda wi, wo, z=z_b: coat(wi, wo).to(wi.dtype) + dec.eval_rgb(z, wi, wo)
     return out
 
 

@@ -31,13 +31,13 @@ import torch
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, encode, loss_target, predicted_target
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.layering import LayeringNet, layering_spec
+from nbrdf.neural.layering import CODE, LATENT, LayeringNet, layering_spec
 from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
 from nbrdf.neural.model import NeuralModel, layered_latents, load_model, save_model
 from nbrdf.neural.sampling import SamplerNet, lambert_pdf, proxy_pdf, proxy_sample
-from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
+from nbrdf.training.analytic import GGXConductor, Lambertian
 from nbrdf.neural.stack import CLASSES, THREE_LAYERED, P, params_to_stack
-from nbrdf.training.dataset import load_manifest, load_split, sample_pairs
+from nbrdf.training.dataset import body_values, load_manifest, load_split, sample_pairs
 from nbrdf.training.distributions import mixed_params, random_leaf_params  # noqa: F401 (random_leaf_params re-exported)
 
 Tensor = torch.Tensor
@@ -185,11 +185,12 @@ def _decoder_loss(model: NeuralModel, z: Tensor, feats: Tensor, cos_o: Tensor, t
 
 # --- leaf encoders --------------------------------------------------------------------------
 def leaf_values(kind: str, params: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
-    """Closed-form values (B, P) of B leaves at pairs (B, P, 3)."""
+    """Closed-form values (B, P) of B leaves' bodies at pairs (B, P, 3): a
+    bare dielectric is all coat (``neural.coat``), so its body is black."""
     if kind == "conductor":
         return GGXConductor(params[:, 0:1], params[:, 1:2]).eval(wi, wo)
     if kind == "dielectric":
-        return GGXDielectric(params[:, 0:1], params[:, 1:2]).eval(wi, wo)
+        return torch.zeros(wi.shape[:-1], dtype=wi.dtype)
     return Lambertian(params[:, 0:1]).eval(wi, wo)
 
 
@@ -244,13 +245,13 @@ def train_leaf(cfg: OpsConfig, progress: bool = True) -> Path:
 
 # --- layering -------------------------------------------------------------------------------
 def stack_latents(model: NeuralModel, params: Tensor, layering: LayeringNet | None = None) -> Tensor:
-    """Latents (K, 32) of single-channel data-set BRDFs (``neural.stack``
+    """Codes (K, 34) of single-channel data-set BRDFs (``neural.stack``
     parameter vectors) through ``neural.model.layered_latents``, class by
     class; differentiable in the layering network."""
     leaf = model.require("leaf")
     net = layering if layering is not None else model.require("layering")
     cls = params[:, P["class"]].round().long()
-    out = torch.zeros(params.shape[0], 32)
+    out = torch.zeros(params.shape[0], CODE)
     for c in range(len(CLASSES)):
         sel = (cls == c).nonzero().squeeze(-1)
         if sel.numel():
@@ -259,14 +260,15 @@ def stack_latents(model: NeuralModel, params: Tensor, layering: LayeringNet | No
 
 
 class _StackData:
-    """A data set's stacks in memory with decoder features and loss targets."""
+    """A data set's stacks in memory with decoder features and loss targets
+    (of the bodies: the codes' coats are exact, ``neural.coat``)."""
 
     def __init__(self, folder: str, split: str, scale: float):
         d = load_split(folder, split)
         self.params = d.params
         self.feats = encode(d.wi, d.wo)
         self.cos_o = d.wo[..., 2]
-        self.target = loss_target(d.f, self.cos_o, scale)
+        self.target = loss_target(body_values(d), self.cos_o, scale)
         cls = [CLASSES.index(c) for c in d.classes]
         self.cls = torch.tensor(cls)
 
@@ -355,15 +357,17 @@ def random_material_params(n: int, g: torch.Generator) -> Tensor:
 
 
 def sampler_targets(model: NeuralModel, z: Tensor, n_wi: int, n_wo: int, g: torch.Generator):
-    """Importance-sampled lobes of latents z (M, 32): wi (M, n_wi, 3), wo
-    (M, n_wi, n_wo, 3), normalised weights f cos / proposal per wi."""
+    """Importance-sampled body lobes of codes z (M, 34): wi (M, n_wi, 3), wo
+    (M, n_wi, n_wo, 3), normalised weights f cos / proposal per wi (the
+    proxy serves the body; the coat is sampled exactly)."""
+    z = z[:, :LATENT]
     M = z.shape[0]
     a, b = torch.rand(M, n_wi, generator=g), torch.rand(M, n_wi, generator=g)
     wi = cosine_hemisphere(a.clamp(max=1 - 1e-4), b)  # never exactly at the horizon
     wi_r = wi[:, :, None, :].expand(M, n_wi, n_wo, 3).reshape(-1, 3)
     wo, pdf = _proposal(wi_r, g)
     with torch.no_grad():
-        f = model.decoder(z[:, None, :].expand(M, n_wi * n_wo, 32).reshape(-1, 32), wi_r, wo)
+        f = model.decoder(z[:, None, :].expand(M, n_wi * n_wo, LATENT).reshape(-1, LATENT), wi_r, wo)
     w = torch.where(wo[:, 2] > 0, f * wo[:, 2].clamp_min(0) / pdf.clamp_min(1e-12), torch.zeros_like(f))
     w = w.view(M, n_wi, n_wo)
     w = w / w.sum(-1, keepdim=True).clamp_min(1e-20)

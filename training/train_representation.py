@@ -16,7 +16,7 @@ import json
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import torch
@@ -24,7 +24,7 @@ import torch
 from nbrdf.neural.decoder import Decoder, DecoderSpec, encode, loss_target, predicted_target, save_decoder
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.projection import ProjectionConfig, project
-from nbrdf.training.dataset import CLASSES, BRDFSet, load_manifest, load_split
+from nbrdf.training.dataset import CLASSES, BRDFSet, body_values, load_manifest, load_split
 
 Tensor = torch.Tensor
 
@@ -39,7 +39,8 @@ class TrainConfig:
     out: str
     """run folder (checkpoint, decoder.safetensors, curves.png)"""
     spec: DecoderSpec = field(default_factory=DecoderSpec)
-    """the decoder's architecture (on the command line: --width, --depth, --activation, --loss-scale)"""
+    """the decoder's architecture (on the command line: --width, --depth, --activation, --loss-scale); by
+    default a coat-split decoder, trained on bodies (the values minus the top interface's reflection)"""
     epochs: int = 40
     """passes over the training samples"""
     batch: int = 8192
@@ -117,6 +118,9 @@ def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None
     torch.manual_seed(cfg.seed)
     train_set = load_split(cfg.data, "train")
     val_set = load_split(cfg.data, "val")
+    if cfg.spec.coat:  # the decoder learns bodies; the coat is closed form (neural.coat)
+        train_set = replace(train_set, f=body_values(train_set))
+        val_set = replace(val_set, f=body_values(val_set))
     flat = flatten(train_set, cfg.spec.loss_scale)
     K = len(train_set)
     dec = Decoder(cfg.spec).to(dev)

@@ -12,6 +12,7 @@ import moderngl
 import numpy as np
 import torch
 
+from nbrdf.neural.coat import NO_COAT, code_coat
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.gpu_pack import PackedDecoder, latent_share, pack
@@ -61,9 +62,11 @@ class GpuDecoder:
                 prog["u_nb_weights"].value = WEIGHT_UNIT
 
     def set_latent(self, prog: moderngl.Program, z: torch.Tensor) -> None:
-        """Uploads the (3, 32) material latent's share of layer 1 to ``prog``."""
+        """Uploads the (3, 34) material code's share of layer 1 (and its coat) to ``prog``."""
         if "u_nb_share" in prog:
             prog["u_nb_share"].write(latent_share(self.dec, z).astype("f4").tobytes())
+        if "u_coat" in prog:
+            prog["u_coat"].value = code_coat(self.dec.spec, z)
 
 
 class GpuLatentTexture:
@@ -79,6 +82,9 @@ class GpuLatentTexture:
         with torch.no_grad():
             share = gdec.dec.latent_share(tex.levels[0].float())          # (H, W, 3, width)
         layers = share.reshape(h, w, 3, width // 4, 4).permute(2, 3, 0, 1, 4).reshape(-1, h, w, 4)
+        coat = torch.zeros(1, h, w, 4)  # the last layer: the texel's coat (roughness, ior)
+        coat[0, ..., :2] = _texel_coats(gdec.dec, tex.levels[0])
+        layers = torch.cat([layers, coat])
         self.texture = ctx.texture_array((w, h, layers.shape[0]), 4, layers.contiguous().numpy().astype("f4").tobytes(),
                                          dtype="f4")
         self.texture.repeat_x = self.texture.repeat_y = True
@@ -86,7 +92,7 @@ class GpuLatentTexture:
         self.texture.anisotropy = 1.0
         self.set_mipmapped(True)
         self.size = (h, w)
-        self.mean_latent = tex.levels[-1][0, 0]                         # (3, 32): the lobe and slice views
+        self.mean_latent = tex.levels[-1][0, 0]                         # (3, 34): the lobe and slice views
 
     def set_mipmapped(self, on: bool) -> None:
         """Trilinear lookup by pixel footprint (on) or the finest level only (off: aliases)."""
@@ -100,6 +106,13 @@ class GpuLatentTexture:
 
     def release(self) -> None:
         self.texture.release()
+
+
+def _texel_coats(dec: Decoder, texels: torch.Tensor) -> torch.Tensor:
+    """(H, W, 2) coats of code texels (H, W, 3, 34); ``NO_COAT`` for bare latents."""
+    if dec.spec.coat and texels.shape[-1] == dec.spec.code:
+        return texels[:, :, 0, dec.spec.latent:].float()
+    return torch.tensor(NO_COAT).expand(*texels.shape[:2], 2)
 
 
 def _pairs_array(wi: np.ndarray, wo: np.ndarray, uv: np.ndarray | None = None) -> np.ndarray:

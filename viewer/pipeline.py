@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Callable
 import moderngl
 import torch
 
+from nbrdf.neural.coat import code_coat
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material, material_to_dict
 from nbrdf.viewer.materials_gpu import analytic_uniforms, proxy_hint
@@ -59,11 +60,11 @@ class GpuBrdf:
     kind: BrdfKind
     """A ``BrdfKind``: which program family draws it."""
     uniforms: dict = field(default_factory=dict)
-    """Closed-form uniforms, or the proxy pdf's ``u_proxy_sigma`` / ``u_proxy_w``."""
+    """Closed-form uniforms, or the proxy pdf's ``u_proxy_sigma`` / ``u_proxy_w`` and the code's ``u_coat``."""
     decoder: "GpuDecoder | None" = None
     """The decoder's weights on the GPU (neural kinds)."""
     latent: torch.Tensor | None = None
-    """The (3, 32) latent shown (a latent texture's mean for the lobe and slice views)."""
+    """The (3, 34) code shown (a latent texture's mean for the lobe and slice views)."""
     share: bytes | None = None
     """The latent's share of decoder layer 1, float32 (width, 3), ready to upload."""
     latent_texture: "GpuLatentTexture | None" = None
@@ -115,7 +116,7 @@ def gpu_brdf(ctx: moderngl.Context, material: Material, decoder: "GpuDecoder | N
     """The GPU resources of a material whose latent (or latent texture) is known.
 
     Without ``decoder`` the closed form is used; with it, the decoder at
-    ``latent`` (3, 32) or at ``latent_texture``. ``proxy`` is the sampler's
+    ``latent`` (a (3, 34) code) or at ``latent_texture``. ``proxy`` is the sampler's
     (sigma, w) (None: a guess from the top layer's roughness -- slower to
     converge, never biased)."""
     nmap = (normal_maps or NormalMaps(ctx)).get(material)
@@ -136,8 +137,8 @@ def gpu_brdf(ctx: moderngl.Context, material: Material, decoder: "GpuDecoder | N
     from nbrdf.neural.gpu_pack import latent_share
 
     sigma, w = proxy if proxy is not None else proxy_hint(material)
-    return GpuBrdf(material, BrdfKind.TEXTURED if gtex is not None else BrdfKind.NEURAL,
-                   {"u_proxy_sigma": float(sigma), "u_proxy_w": float(w)}, decoder, latent,
+    uniforms = {"u_proxy_sigma": float(sigma), "u_proxy_w": float(w), "u_coat": code_coat(decoder.dec.spec, latent)}
+    return GpuBrdf(material, BrdfKind.TEXTURED if gtex is not None else BrdfKind.NEURAL, uniforms, decoder, latent,
                    latent_share(decoder.dec, latent).astype("f4").tobytes(), gtex, nmap)
 
 

@@ -23,7 +23,6 @@ from nbrdf.training.render_report import (
     run_render_report,
     shade,
     sphere_geometry,
-    top_reflection,
 )
 
 
@@ -83,18 +82,6 @@ def test_closed_form_scores_itself_perfectly_and_perturbations_monotonically_wor
         psnrs.append(compressed_psnr(img, ref, mask))
     assert 0 < flips[0] < flips[1] < flips[2]
     assert psnrs[0] > psnrs[1] > psnrs[2]
-
-
-def test_top_reflection_is_the_black_stack_limit():
-    m = parse_material({"format": "nbrdf-material/1", "name": "coat",
-                        "layers": [{"type": "dielectric", "roughness": 0.05, "ior": 1.5},
-                                   {"type": "conductor", "roughness": 0.3, "r0": [0, 0, 0]}]})
-    alone = parse_material({"format": "nbrdf-material/1", "name": "iface",
-                            "layers": [{"type": "dielectric", "roughness": 0.05, "ior": 1.5}]})
-    geo = sphere_geometry(16)
-    a = top_reflection(m)(geo.wi.float(), geo.wo.float())
-    b = single_layer_eval(alone.base, geo.wi.float(), geo.wo.float())
-    assert torch.equal(a, b) and a.max() > 0
 
 
 def test_lookdev_set_is_complete():

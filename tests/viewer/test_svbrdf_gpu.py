@@ -44,7 +44,9 @@ def test_latent_texture_lookup_matches_torch(gl_ctx, gdec, model):
     """Texel layout, row order and bilinear filtering: the GLSL decoder at the
     texture's uv against the torch decoder at LatentTexture.bilinear(uv)."""
     g = torch.Generator().manual_seed(5)
-    texels = torch.randn(6, 10, 3, 32, generator=g) * 0.3 + model.material_latent(parse_material(ROUGH_GOLD))
+    noise = torch.zeros(6, 10, 3, 34)
+    noise[..., :32] = torch.randn(6, 10, 3, 32, generator=g) * 0.3  # the latents vary, the (absent) coat not
+    texels = noise + model.material_latent(parse_material(ROUGH_GOLD))
     tex = LatentTexture(texels)
     gtex = GpuLatentTexture(gl_ctx, gdec, tex)
     gtex.set_mipmapped(False)  # level 0 only: the probe's pixels are unrelated uvs
@@ -58,18 +60,22 @@ def test_latent_texture_lookup_matches_torch(gl_ctx, gdec, model):
         gpu = probe_fragment(gl_ctx, gdec, None, wi.numpy(), wo.numpy(), latent_tex=gtex, uv=uv.numpy())
         z = tex.bilinear(uv)
         with torch.no_grad():
-            ref = torch.stack([model.decoder.eval_rgb(z[k], wi[k:k + 1], wo[k:k + 1])[0] for k in range(n)]).numpy()
+            ref = torch.stack([model.decoder.eval_rgb(z[k, :, :32], wi[k:k + 1], wo[k:k + 1])[0]
+                               for k in range(n)]).numpy()  # the probe decodes the body
         err = np.abs(gpu - ref) / (1 + np.abs(ref))
         assert err.max() <= tol, f"max scaled error {err.max():.3g} (tolerance {tol})"
     gtex.release()
 
 
-def test_uniform_latent_texture_renders_as_the_uniform_material(gl_ctx, gdec, model):
-    m = parse_material(ROUGH_GOLD)
+@pytest.mark.parametrize("material", [ROUGH_GOLD, COATED], ids=["bare", "coated"])
+def test_uniform_latent_texture_renders_as_the_uniform_material(gl_ctx, gdec, model, material):
+    """Texels of one code render as the uniform code: the latent's share and
+    the coat (the texture's last layer, ``u_coat`` when uniform) agree."""
+    m = parse_material(material)
     z = model.material_latent(m)
     state = ViewState(background=False)
     uniform = Renderer(gl_ctx, m, neural=gdec, latent=z).render_linear(state, (32, 32), spp=2)
-    flat = LatentTexture(z.expand(4, 4, 3, 32).clone())
+    flat = LatentTexture(z.expand(4, 4, 3, z.shape[-1]).clone())
     textured = Renderer(gl_ctx, m, neural=gdec, latent=z, latent_texture=flat).render_linear(state, (32, 32), spp=2)
     np.testing.assert_allclose(textured, uniform, rtol=1e-4, atol=1e-5)
 

@@ -22,24 +22,8 @@ uniform vec3 u_base_color;                    // conductor r0 or diffuse albedo
 
 //@INCLUDE microfacet.glsl
 
-float fresnel_dielectric(float cos_i, float eta) {
-    float c = min(abs(cos_i), 1.0);
-    float s2t = (1.0 - c * c) / (eta * eta);
-    if (s2t >= 1.0) return 1.0;
-    float ct = sqrt(1.0 - s2t);
-    float rs = (c - eta * ct) / (c + eta * ct);
-    float rp = (eta * c - ct) / (eta * c + ct);
-    return 0.5 * (rs * rs + rp * rp);
-}
-
 vec3 fresnel_schlick(float cos_i, vec3 r0) {
     return r0 + (1.0 - r0) * pow(1.0 - min(abs(cos_i), 1.0), 5.0);
-}
-
-// Microfacet reflection with a given Fresnel value, both directions above.
-float microfacet_reflection(vec3 wi, vec3 wo, float a, out vec3 h) {
-    h = normalize(wi + wo);
-    return ggx_d(h, a) * smith_g1(wi, h, a) * smith_g1(wo, h, a) / max(4.0 * wi.z * wo.z, 1e-30);
 }
 
 vec3 conductor_brdf(vec3 wi, vec3 wo, float a, vec3 r0) {
@@ -47,13 +31,6 @@ vec3 conductor_brdf(vec3 wi, vec3 wo, float a, vec3 r0) {
     vec3 h;
     float dg = microfacet_reflection(wi, wo, a, h);
     return fresnel_schlick(dot(wi, h), r0) * dg;
-}
-
-float dielectric_reflection(vec3 wi, vec3 wo, float a, float eta) {
-    if (wi.z <= 0.0 || wo.z <= 0.0) return 0.0;
-    vec3 h;
-    float dg = microfacet_reflection(wi, wo, a, h);
-    return fresnel_dielectric(dot(wi, h), eta) * dg;
 }
 
 vec3 base_brdf(vec3 wi, vec3 wo) {

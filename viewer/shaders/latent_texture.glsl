@@ -1,12 +1,16 @@
 // A spatially varying neural material: the latent's share of the decoder's
 // layer 1 per texel (viewer/neural_gpu.py GpuLatentTexture), RGB channels in
-// layer groups of NB_WIDTH4 RGBA layers. nb_load_share(uv) fetches it once per
-// pixel (trilinear by the pixel's footprint when mip-mapped); every nb_decode
-// of the pixel then reads it through NB_SHARE. Include before the decoder.
+// layer groups of NB_WIDTH4 RGBA layers, then one layer of the texel's clear
+// coat (roughness, ior, 0, 0). nb_load_share(uv) fetches it once per pixel
+// (trilinear by the pixel's footprint when mip-mapped); every nb_decode and
+// coat term of the pixel then reads it through NB_SHARE and NB_COAT. Include
+// before the decoder.
 #define NB_TEXTURED 1
 uniform sampler2DArray u_nb_share_tex;
 vec3 nb_px_share[NB_WIDTH];
 #define NB_SHARE(j) nb_px_share[j]
+vec2 nb_px_coat;
+#define NB_COAT nb_px_coat
 
 void nb_load_share(vec2 uv) {
     for (int k = 0; k < NB_WIDTH4; ++k) {
@@ -18,4 +22,5 @@ void nb_load_share(vec2 uv) {
         nb_px_share[4 * k + 2] = vec3(r.z, g.z, b.z);
         nb_px_share[4 * k + 3] = vec3(r.w, g.w, b.w);
     }
+    nb_px_coat = texture(u_nb_share_tex, vec3(uv, float(3 * NB_WIDTH4))).xy;
 }

@@ -1,11 +1,27 @@
-// The BRDF of a view as the neural decoder at the material's latents
-// (uniform u_nb_share). The lit view importance-samples the material's learned
-// proxy pdf (u_proxy_sigma, u_proxy_w, computed once per material on the CPU),
-// MIS with cosine sampling.
+// The BRDF of a view as a material code (SPEC section 6, coat split): the
+// clear coat in closed form (coat.glsl, uniform u_coat or the texel's coat
+// NB_COAT) plus the neural decoder's body at the material's latents (uniform
+// u_nb_share). The lit view importance-samples the coat's visible normals
+// mixed with the body's learned proxy pdf (u_proxy_sigma, u_proxy_w,
+// computed once per material on the CPU), as neural/sampling.py coated_sample.
 //@INCLUDE neural_decoder.glsl
 //@INCLUDE sampling.glsl
+//@INCLUDE coat.glsl
 uniform float u_proxy_sigma;
 uniform float u_proxy_w;
-vec3 brdf(vec3 wi, vec3 wo) { return nb_decode(wi, wo); }
-vec3 sample_lobe(vec3 wo, vec3 u) { return sample_proxy(wo, u, u_proxy_sigma, u_proxy_w); }
-float pdf_lobe(vec3 wo, vec3 wi) { return pdf_proxy(wo, wi, u_proxy_sigma, u_proxy_w); }
+#ifndef NB_COAT
+uniform vec2 u_coat;  // (roughness, ior); ior 1: no coat
+#define NB_COAT u_coat
+#endif
+vec3 brdf(vec3 wi, vec3 wo) { return nb_decode(wi, wo) + vec3(coat_eval(wi, wo, NB_COAT)); }
+vec3 sample_lobe(vec3 wo, vec3 u) {
+    float pc = coat_probability(wo, NB_COAT);
+    if (u.x < pc) return coat_sample(wo, u.yz, NB_COAT);
+    u.x = clamp((u.x - pc) / max(1.0 - pc, 1e-6), 0.0, 1.0 - 1e-7);
+    return sample_proxy(wo, u, u_proxy_sigma, u_proxy_w);
+}
+float pdf_lobe(vec3 wo, vec3 wi) {
+    float pc = coat_probability(wo, NB_COAT);
+    float p = (1.0 - pc) * pdf_proxy(wo, wi, u_proxy_sigma, u_proxy_w);
+    return pc > 0.0 ? p + pc * coat_pdf(wo, wi, NB_COAT) : p;
+}
