@@ -178,14 +178,16 @@ def probe_fragment(ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor | No
 
 
 def probe_proxy_sampling(ctx: moderngl.Context, wi: np.ndarray, u: np.ndarray, sigma: float,
-                         w: float) -> np.ndarray:
-    """GLSL sample_proxy / pdf_proxy for N (wi, u) items: (N, 4) = wo.xyz, pdf."""
+                         w: float, coat: tuple[float, float] = NO_COAT) -> np.ndarray:
+    """GLSL coated_sample / coated_pdf (the proxy alone without a coat) for N
+    (wi, u) items: (N, 4) = wo.xyz, pdf."""
     prog = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
                        fragment_shader=shaders.source("sampling_probe.frag"))
 
     def setup(p: moderngl.Program) -> None:
         p["u_sigma"].value = float(sigma)
         p["u_w"].value = float(w)
+        p["u_coat"].value = tuple(float(x) for x in coat)
 
     try:
         return probe_pass(ctx, prog, _pairs_array(wi, u), wi.shape[0], setup)

@@ -158,3 +158,22 @@ def test_glsl_proxy_sampling_matches_torch_for_the_same_random_numbers(gl_ctx):
         np.testing.assert_allclose(out[:, :3], wo.numpy(), atol=2e-4)
         ok = wo[:, 2].numpy() > 0.01
         np.testing.assert_allclose(out[ok, 3], pdf.numpy()[ok], rtol=2e-3, atol=1e-4)
+
+
+def test_glsl_coated_sampling_matches_torch_for_the_same_random_numbers(gl_ctx):
+    """A code's sampler (coat lobe mixed with the proxy) in GLSL against
+    neural/sampling.py coated_sample / coated_pdf."""
+    from nbrdf.neural.sampling import coated_sample
+    from nbrdf.viewer.neural_gpu import probe_proxy_sampling
+
+    g = torch.Generator().manual_seed(12)
+    n = 2048
+    wi = torch.nn.functional.normalize(torch.rand(n, 3, generator=g) * torch.tensor([2.0, 2.0, 1.0])
+                                       - torch.tensor([1.0, 1.0, -0.05]), dim=-1)
+    u = torch.rand(n, 3, generator=g) * 0.998 + 0.001
+    for coat, sigma, w in (((0.02, 1.5), 0.2, 0.3), ((0.3, 1.8), 0.5, 0.6)):
+        wo, pdf = coated_sample(wi, u, torch.tensor(coat), torch.tensor(sigma), torch.tensor(w))
+        out = probe_proxy_sampling(gl_ctx, wi.numpy(), u.numpy(), sigma, w, coat)
+        np.testing.assert_allclose(out[:, :3], wo.numpy(), atol=2e-4)
+        ok = wo[:, 2].numpy() > 0.01
+        np.testing.assert_allclose(out[ok, 3], pdf.numpy()[ok], rtol=2e-3, atol=1e-4)

@@ -25,3 +25,19 @@ vec3 coat_sample(vec3 w, vec2 u, vec2 c) {
 }
 
 float coat_pdf(vec3 w, vec3 l, vec2 c) { return pdf_ggx_reflection(w, l, coat_params(c).x); }
+
+// A material code's sampler (neural/sampling.py coated_sample / coated_pdf):
+// the coat's lobe with probability coat_probability, else the body's proxy
+// (s, w); u.x picks and is rescaled to stay uniform for the proxy.
+vec3 coated_sample(vec3 wo, vec3 u, vec2 c, float s, float w) {
+    float pc = coat_probability(wo, c);
+    if (u.x < pc) return coat_sample(wo, u.yz, c);
+    u.x = clamp((u.x - pc) / max(1.0 - pc, 1e-6), 0.0, 1.0 - 1e-7);
+    return sample_proxy(wo, u, s, w);
+}
+
+float coated_pdf(vec3 wo, vec3 wi, vec2 c, float s, float w) {
+    float pc = coat_probability(wo, c);
+    float p = (1.0 - pc) * pdf_proxy(wo, wi, s, w);
+    return pc > 0.0 ? p + pc * coat_pdf(wo, wi, c) : p;
+}

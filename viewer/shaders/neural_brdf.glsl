@@ -14,14 +14,5 @@ uniform vec2 u_coat;  // (roughness, ior); ior 1: no coat
 #define NB_COAT u_coat
 #endif
 vec3 brdf(vec3 wi, vec3 wo) { return nb_decode(wi, wo) + vec3(coat_eval(wi, wo, NB_COAT)); }
-vec3 sample_lobe(vec3 wo, vec3 u) {
-    float pc = coat_probability(wo, NB_COAT);
-    if (u.x < pc) return coat_sample(wo, u.yz, NB_COAT);
-    u.x = clamp((u.x - pc) / max(1.0 - pc, 1e-6), 0.0, 1.0 - 1e-7);
-    return sample_proxy(wo, u, u_proxy_sigma, u_proxy_w);
-}
-float pdf_lobe(vec3 wo, vec3 wi) {
-    float pc = coat_probability(wo, NB_COAT);
-    float p = (1.0 - pc) * pdf_proxy(wo, wi, u_proxy_sigma, u_proxy_w);
-    return pc > 0.0 ? p + pc * coat_pdf(wo, wi, NB_COAT) : p;
-}
+vec3 sample_lobe(vec3 wo, vec3 u) { return coated_sample(wo, u, NB_COAT, u_proxy_sigma, u_proxy_w); }
+float pdf_lobe(vec3 wo, vec3 wi) { return coated_pdf(wo, wi, NB_COAT, u_proxy_sigma, u_proxy_w); }
