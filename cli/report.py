@@ -11,6 +11,7 @@ import numpy as np
 
 from nbrdf.cli.common import decoder_or_default, model_or_default
 from nbrdf.cli.config import Parser, add_arguments, build
+from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
 
 
@@ -44,6 +45,9 @@ class OperationsReport:
     """score only the first N held-out materials (0: all)"""
     every: int = 7
     """show every N-th stack in the lobe figure"""
+    set: str = "heldout"
+    """materials scored: heldout (the paper-distribution held-out set) or lookdev (the look-development set,
+    training/sets/lookdev); keep one --refs folder per set"""
 
 
 @dataclass
@@ -132,7 +136,14 @@ def cmd_report_operations(ns: argparse.Namespace) -> int:
 
     c: OperationsReport = build(OperationsReport, ns)
     model = model_or_default(c.model)
-    refs = ev.build_references(c.refs, limit=c.limit)
+    if c.set not in ("heldout", "lookdev"):
+        raise NbrdfError(f"--set: {c.set!r} is not heldout or lookdev")
+    items = None
+    if c.set == "lookdev":
+        from nbrdf.training.render_report import load_set
+
+        items = load_set("lookdev")
+    refs = ev.build_references(c.refs, limit=c.limit, items=items)
     out = Path(c.out)
     out.mkdir(parents=True, exist_ok=True)
     methods = {"neural": ev.neural_method(model), "projected": ev.projected_method(model.decoder),
@@ -148,7 +159,8 @@ def cmd_report_operations(ns: argparse.Namespace) -> int:
               "rows": {k: r["rows"] for k, r in results.items()}}
     (out / "operations.json").write_text(json.dumps(report, indent=1))
     (out / "operations.md").write_text(ev.comparison_table(results) + "\n")
-    shown = [(k, m, r) for k, m, r in refs if k in ("two_layer", "three_layer")][:: max(1, c.every)][:6]
+    shown = [(k, m, r) for k, m, r in refs if k in ("two_layer", "three_layer") or c.set == "lookdev"]
+    shown = shown[:: max(1, c.every)][:6]
     rows = []
     for k, m, r in shown:
         imgs = [r.lobes[1]] + [lobe_image(fn(m, r), ev.THETAS[1]) for fn in methods.values()]

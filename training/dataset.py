@@ -32,7 +32,7 @@ from nbrdf.neural.geometry import cosine_hemisphere
 # (neural.stack), the paper's distributions to training.distributions; re-exported here.
 from nbrdf.neural.stack import (CLASSES, DIFFUSE_BASED, PARAM_NAMES, THREE_LAYERED, P,  # noqa: F401
                                 params_to_material, params_to_stack)
-from nbrdf.training.distributions import sample_params, sharpen_coats  # noqa: F401
+from nbrdf.training.distributions import clear_top_slabs, sample_params, sharpen_coats  # noqa: F401
 
 Tensor = torch.Tensor
 
@@ -49,6 +49,7 @@ class DataConfig:
     shard_size: int = 32
     peak_fraction: float = 0.5  # share of pairs drawn near the half-vector pole
     sharp_coats: float = 0.0  # share of stacks redrawn with a coat of roughness 0.01-0.06 over a bright base
+    clear_top_slabs: float = 0.0  # share of stacks whose top slab is redrawn clear (sigma_t 0, or U(0, 0.3))
 
 
 PRESETS: dict[str, DataConfig] = {
@@ -67,7 +68,7 @@ PRESETS: dict[str, DataConfig] = {
                                        diffuse_base=640, three_layer_diffuse=320),
                            val_counts=dict(conductor=0, dielectric=0, two_layer=64, three_layer=32, diffuse_base=32,
                                            three_layer_diffuse=16),
-                           pairs=768, spp=32, seed=1, sharp_coats=0.4),
+                           pairs=768, spp=32, seed=1, sharp_coats=0.4, clear_top_slabs=0.3),
     "paper": DataConfig(counts=dict(conductor=300, dielectric=300, two_layer=12720, three_layer=1800,
                                     diffuse_base=1200),
                         val_counts=dict(conductor=32, dielectric=32, two_layer=128, three_layer=64, diffuse_base=32),
@@ -178,6 +179,9 @@ def make_shard(cfg: DataConfig, shard: Shard) -> dict[str, np.ndarray]:
     if cfg.sharp_coats > 0:
         gc = torch.Generator().manual_seed(_stream_seed(cfg.seed, "coats", shard.split, shard.cls, shard.index))
         sharpen_coats(params, cfg.sharp_coats, gc)
+    if cfg.clear_top_slabs > 0:
+        gm = torch.Generator().manual_seed(_stream_seed(cfg.seed, "slabs", shard.split, shard.cls, shard.index))
+        clear_top_slabs(params, cfg.clear_top_slabs, gm)
     wi, wo = zip(*(sample_pairs(cfg.pairs, g, cfg.peak_fraction) for _ in range(shard.count)))
     wi, wo = torch.stack(wi), torch.stack(wo)
     f, se = tabulate(params, wi, wo, cfg.spp, seed=_stream_seed(cfg.seed, "mc", shard.split, shard.cls, shard.index)

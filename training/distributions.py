@@ -108,6 +108,22 @@ def sharpen_coats(p: Tensor, share: float, g: torch.Generator) -> Tensor:
     return p
 
 
+def clear_top_slabs(p: Tensor, share: float, g: torch.Generator) -> Tensor:
+    """Redraws the top slab of a ``share`` of the stacks in ``p`` (in place;
+    returned) as a clear coat's: no medium at all (sigma_t 0) for half of
+    them, a thin one (sigma_t U(0, 0.3)) for the rest -- a coat laid straight
+    on its base (coated metals, glazes, the clear coat over a car paint's
+    base coat), which U(0, 5) almost never draws. Single interfaces are left
+    alone; a fixed number of uniforms per row."""
+    n = p.shape[0]
+    u = torch.rand(n, 3, generator=g, dtype=torch.float64)
+    cls = p[:, P["class"]].round().long()
+    stacks = (cls != CLASSES.index("conductor")) & (cls != CLASSES.index("dielectric"))
+    pick = stacks & (u[:, 0] < share)
+    p[pick, P["sigma_t_1"]] = torch.where(u[pick, 1] < 0.5, 0.0, 0.3 * u[pick, 2])
+    return p
+
+
 def mixed_params(n: int, g: torch.Generator) -> Tensor:
     """n parameter vectors over every class (even shares, the rest two-layer)."""
     per = [n // len(CLASSES)] * len(CLASSES)

@@ -92,17 +92,19 @@ def make_reference(material: Material, noise_target: float = 48.0, max_spp: int 
 
 
 def build_references(folder: str | Path, progress: bool = True, limit: int = 0, noise_target: float = 48.0,
-                     max_spp: int = 256) -> list[tuple[str, Material, Reference]]:
-    """Makes (or resumes) the cached references of the held-out set in ``folder``
-    (the first ``limit`` materials only, when given); ``noise_target`` and
-    ``max_spp`` go to ``make_reference`` (60 dB needs a larger ``max_spp``)."""
+                     max_spp: int = 256, items: list[tuple[str, Material]] | None = None
+                     ) -> list[tuple[str, Material, Reference]]:
+    """Makes (or resumes) the cached references of the held-out set (or of
+    ``items``, (class, material) pairs) in ``folder`` (the first ``limit``
+    materials only, when given); ``noise_target`` and ``max_spp`` go to
+    ``make_reference`` (60 dB needs a larger ``max_spp``)."""
     from safetensors.numpy import load_file, save_file
     from tqdm import tqdm
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     out = []
-    items = heldout_set()[: limit or None]
+    items = (heldout_set() if items is None else items)[: limit or None]
     for i, (cls, m) in enumerate(tqdm(items, desc="held-out references", unit="material", file=sys.stderr,
                                       disable=not progress or None)):
         path = folder / f"{m.name}.safetensors"

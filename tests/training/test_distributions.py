@@ -35,3 +35,31 @@ def test_leaf_parameters_follow_them():
         assert p.dtype == torch.float32 and p.shape == (4096, 1 if kind == "diffuse" else 2)
     p = D.random_leaf_params("dielectric", 4096, g)
     assert float(p[:, 1].min()) >= RANGES["ior"][0] and float(p[:, 1].max()) <= RANGES["ior"][1]
+
+
+def test_look_development_redraws_stay_legal_and_touch_stacks_only():
+    """sharpen_coats / clear_top_slabs: their share of the stacks, legal values,
+    single interfaces untouched, the same result for the same generator."""
+    from nbrdf.neural.stack import CLASSES, P, params_to_material
+
+    g = torch.Generator().manual_seed(3)
+    p = torch.cat([D.sample_params(c, 2000, g) for c in ("conductor", "dielectric", "two_layer", "three_layer")])
+    before = p.clone()
+    a = D.clear_top_slabs(D.sharpen_coats(p.clone(), 0.4, torch.Generator().manual_seed(4)), 0.3,
+                          torch.Generator().manual_seed(5))
+    b = D.clear_top_slabs(D.sharpen_coats(p.clone(), 0.4, torch.Generator().manual_seed(4)), 0.3,
+                          torch.Generator().manual_seed(5))
+    assert torch.equal(a, b)
+    singles = a[:, P["class"]] < 2
+    assert torch.equal(a[singles], before[singles])
+    stacks = a[~singles]
+    sharp = (stacks[:, P["top_roughness"]] <= 0.06).double().mean()
+    assert 0.50 < sharp < 0.57  # 40 % redrawn + 60 % x P(U(0.216, 1)^3 <= 0.06) = 0.534
+    clear = (stacks[:, P["sigma_t_1"]] == 0).double().mean()
+    assert 0.13 < clear < 0.17  # half of 30 %
+    for row in stacks[::97]:  # every redrawn stack validates as a material
+        assert params_to_material(row).layers
+    lo, hi = RANGES["roughness"]
+    assert float(stacks[:, P["top_roughness"]].min()) >= lo
+    assert float(stacks[:, P["base_value"]].max()) <= 1.0 and float(stacks[:, P["sigma_t_1"]].min()) >= 0
+    assert CLASSES.index("conductor") == 0 and CLASSES.index("dielectric") == 1
