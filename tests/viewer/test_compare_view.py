@@ -1,0 +1,67 @@
+"""The compare view in a real window (Xvfb): the reference side shows what the
+reference holds -- in particular the clear coat's highlight, which the README's
+1000 x 620 capture lost behind the "Scene and view" panel (the panels floated
+over the view) -- and the HDR-FLIP view's map and mean."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from nbrdf.viewer.options import DEFAULT_MATERIAL
+
+pytestmark = pytest.mark.gl
+
+SCRIPT = textwrap.dedent("""
+    import json, sys
+    from pathlib import Path
+    import numpy as np
+    from nbrdf.viewer.app import App
+    from nbrdf.viewer.options import ViewOptions
+    tmp = Path(sys.argv[2])
+    size = (1000, 620)  # the README capture's window
+    app = App(ViewOptions(material=sys.argv[1], size=size), size=size)
+    app._adapt_scale = lambda w, h: 0.125  # the render scale software OpenGL settles at (cheap)
+    ld = app.lookdev
+    try:
+        ld.set_compare("side")
+        app.step()
+        r = ld.worker.wait(ld.compare_part._job, 8, timeout=400)
+        for _ in range(2):
+            app.step()
+        w, h = app.framebuffer_size()
+        vp = app.viewport() if hasattr(app, "viewport") else (0, 0, w, h)
+        np.savez(tmp / "side.npz", screen=app.read_pixels(), ref=r.image, vp=np.array(vp))
+    finally:
+        app.close()
+""")
+
+
+@pytest.fixture(scope="module")
+def side_run(xvfb_display, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("compare")
+    env = dict(os.environ, DISPLAY=xvfb_display)
+    r = subprocess.run([sys.executable, "-c", SCRIPT, str(DEFAULT_MATERIAL), str(tmp)], env=env,
+                       capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return np.load(tmp / "side.npz")
+
+
+def test_reference_side_shows_the_coat_highlight(side_run):
+    """The Monte Carlo image's brightest pixel (the clear coat's highlight of the
+    default varnished copper) appears on screen where the right half of the
+    view shows it: white, not covered by anything."""
+    screen, ref, (vx, vy, vw, vh) = side_run["screen"], side_run["ref"], side_run["vp"]
+    lum = ref @ np.array([0.2126, 0.7152, 0.0722])
+    row, col = np.unravel_index(np.argmax(lum), lum.shape)
+    assert lum[row, col] > 5.0  # the coat's highlight is in the reference (ACES maps it to white)
+    half = vw / 2
+    x = int(vx + half + (col + 0.5) / ref.shape[1] * half)
+    y = int(vy + (row + 0.5) / ref.shape[0] * vh)
+    patch = screen[y - 1:y + 2, x - 1:x + 2].reshape(-1, 3)
+    assert patch.min() >= 200, f"pixel ({x}, {y}) of the reference's highlight shows {patch.tolist()}"
