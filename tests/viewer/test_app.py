@@ -32,6 +32,7 @@ SCRIPT = textwrap.dedent("""
     app = App(ViewOptions(material=sys.argv[1], size=(64, 48)), size=(64, 48))
     app.BUDGET_STILL_MS = app.BUDGET_DRAG_MS = 1e9   # full resolution: compared pixel for pixel
     app.panels.visible = False
+    app.frame()  # the view is the whole window now (F)
     ld = app.lookdev
     out = {}
     try:
@@ -67,7 +68,7 @@ SCRIPT = textwrap.dedent("""
                         ld.screenshot(tmp / "shot.bmp", (8, 8), 1), ld.error]
         # Every panel and mode draws: compare modes, views, interpolation, a textured preset.
         app.panels.visible = app.panels.expand_all = True
-        for view, mode in (("lobe", "side"), ("slice", "error"), ("object", "wipe")):
+        for view, mode in (("lobe", "side"), ("slice", "error"), ("object", "wipe"), ("lobe", "flip")):
             ld.state.view = view
             ld.set_compare(mode)
             app.step()

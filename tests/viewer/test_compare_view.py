@@ -65,3 +65,39 @@ def test_reference_side_shows_the_coat_highlight(side_run):
     y = int(vy + (row + 0.5) / ref.shape[0] * vh)
     patch = screen[y - 1:y + 2, x - 1:x + 2].reshape(-1, 3)
     assert patch.min() >= 200, f"pixel ({x}, {y}) of the reference's highlight shows {patch.tolist()}"
+
+
+GOLD = {"format": "nbrdf-material/1", "name": "g", "layers": [{"type": "conductor", "roughness": 0.3,
+                                                             "r0": [1.0, 0.78, 0.34]}]}
+
+
+def test_flip_view_shows_the_hdr_flip_of_neural_against_reference(gl_ctx):
+    """The FLIP view's mean and map are flip-evaluator's HDR-FLIP of the neural
+    image against its reference (here the closed form of a conductor), and the
+    view draws the map in magma (black where FLIP is 0)."""
+    from nbrdf.neural.material import parse_material
+    from nbrdf.training.render_report import flip
+    from nbrdf.viewer.lookdev import LookDev
+
+    ld = LookDev(gl_ctx, parse_material(GOLD))
+    try:
+        size, passes = (40, 32), 4
+        assert ld.set_compare("flip")
+        fbo = gl_ctx.simple_framebuffer(size, components=4)
+        ld.render(fbo, size, passes)
+        shown = np.frombuffer(fbo.read(components=3), np.uint8).reshape(size[1], size[0], 3)[::-1]
+        state = ld.main_state()
+        neural = ld.renderer.render_linear(state, size, passes, ld.brdf)
+        reference = ld.renderer.render_linear(state, size, passes, ld.ref_brdf)
+        mean, fmap = flip(reference, neural)
+        assert ld.flip_mean == pytest.approx(mean, rel=1e-4, abs=1e-6) and 0.0 < mean < 0.5
+        # Magma: the worst pixel is the brightest of the view; zero error is near black.
+        worst = np.unravel_index(np.argmax(fmap), fmap.shape)
+        best = np.unravel_index(np.argmin(fmap), fmap.shape)
+        assert shown[worst].astype(int).sum() > shown[best].astype(int).sum() + 60
+        assert ld.set_compare("error")
+        ld.render(fbo, size, passes)
+        other = np.frombuffer(fbo.read(components=3), np.uint8).reshape(size[1], size[0], 3)[::-1]
+        assert np.abs(other.astype(int) - shown).mean() > 5  # a different view, not the same picture
+    finally:
+        ld.close()
