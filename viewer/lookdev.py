@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import moderngl
@@ -66,6 +66,22 @@ class Timings:
 
 
 @dataclass
+class TurntableCapture:
+    """A turntable being rendered from the window, one frame per displayed frame."""
+
+    out: Path
+    """.mp4, .gif or a frame pattern such as frame_%03d.png."""
+    states: list
+    """The view state of every frame (one camera turn)."""
+    size: tuple[int, int]
+    """Pixels per frame."""
+    spp: int
+    """Passes per frame."""
+    frames: list = field(default_factory=list)
+    """Linear frames rendered so far."""
+
+
+@dataclass
 class SvbrdfBuild:
     """A latent texture being built in a worker thread."""
 
@@ -96,6 +112,7 @@ class LookDev:
         self.other_brdf: GpuBrdf | None = None  # the second material of a BRDF blend
         self._edit_t0: float | None = None
         self._svbrdf: SvbrdfBuild | None = None
+        self._turntable: TurntableCapture | None = None
         self.renderer = Renderer(ctx, mesh=mesh, environment=self._read_env(env) if env else None)
         self.compare_part = Compare(ctx, self.renderer)
         self.backdrop = backdrop or BackdropSettings()
@@ -358,10 +375,51 @@ class LookDev:
         return None
 
     def poll(self) -> None:
-        """Picks up finished background work (latent textures)."""
+        """Picks up finished background work (latent textures) and renders the
+        next frame of a turntable capture."""
         if self._svbrdf is not None and (self._svbrdf.result is not None or self._svbrdf.error):
             self._guard(self._apply_material)
             self.notice = ""
+        if self._turntable is not None and self.brdf is not None:
+            self._guard(self._turntable_step)
+
+    # --- turntable capture (viewer/offscreen.py writes the file) -----------------------------
+    def start_turntable(self, path: str | Path, frames: int = 36, size: tuple[int, int] = (480, 480),
+                        spp: int = 16) -> bool:
+        """Starts rendering one camera turn of ``frames`` frames to ``path``
+        (.mp4, .gif or frame_%03d.png), one frame per window frame."""
+        def go():
+            from nbrdf.viewer.offscreen import turntable_kind, turntable_states
+
+            out = Path(path)
+            turntable_kind(out)
+            if not (1 <= int(frames) <= 3600) or min(size) < 1 or spp < 1:
+                raise NbrdfError(f"turntable: {frames} frames of {size} x {spp} passes is out of range")
+            if View.parse(self.state.view) != View.OBJECT:
+                raise NbrdfError("turntable: turns the camera around the object (object view)")
+            self._turntable = TurntableCapture(out, turntable_states(self.main_state(), int(frames)),
+                                               tuple(size), int(spp))
+        return self._guard(go)
+
+    def _turntable_step(self) -> None:
+        job = self._turntable
+        try:
+            state = job.states[len(job.frames)]
+            job.frames.append(self.backdrop_part.render_linear(state, job.size, job.spp, self.brdf, self.backdrop))
+            if len(job.frames) == len(job.states):
+                from nbrdf.viewer.offscreen import write_turntable
+
+                write_turntable(job.out, job.frames, self.state.exposure, self.state.tonemap)
+                self._turntable = None
+                self.notice = f"wrote {job.out} ({len(job.frames)} frames)"
+        except Exception:
+            self._turntable = None
+            raise
+
+    def turntable_progress(self) -> float | None:
+        """The share of the turntable capture's frames rendered (None: no capture running)."""
+        job = self._turntable
+        return None if job is None else len(job.frames) / len(job.states)
 
     def svbrdf_progress(self) -> float | None:
         return None if self._svbrdf is None else self._svbrdf.progress

@@ -69,9 +69,10 @@ class ViewOptions:
     spp: int = 16
     """passes accumulated per pixel"""
     exposure: float = 0.0
-    """stops"""
-    tonemap: ToneMap = ToneMap.ACES
-    """display transform of a .png or the window"""
+    """exposure in EV (stops: +1 doubles the brightness)"""
+    tonemap: ToneMap = ToneMap.NEUTRAL
+    """display transform of a .png or the window (Khronos PBR Neutral keeps base colours: presets read as
+    their names)"""
     brdf: BrdfMode = BrdfMode.AUTO
     """analytic: closed form in GLSL (single layers); neural: the shipped decoder in GLSL at the latents of leaf
     encoders and layering; projected: at latents fitted to the material's reference; auto: analytic for a single

@@ -62,24 +62,32 @@ SCRIPT = textwrap.dedent("""
 
 @pytest.fixture(scope="module")
 def screen_1280():
+    """An Xvfb server with a 1280 x 800 screen; -displayfd says when it accepts clients."""
+    import select
+
     exe = shutil.which("Xvfb")
     if exe is None:
         pytest.skip("Xvfb is not installed (run `make test`, which installs it)")
-    for n in range(140, 180):
-        if os.path.exists(f"/tmp/.X11-unix/X{n}") or os.path.exists(f"/tmp/.X{n}-lock"):
-            continue
-        proc = subprocess.Popen([exe, f":{n}", "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        for _ in range(100):
-            if os.path.exists(f"/tmp/.X11-unix/X{n}"):
+    r, w = os.pipe()
+    proc = subprocess.Popen([exe, "-displayfd", str(w), "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
+                            pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(w)
+    text = b""
+    end = time.monotonic() + 60  # a loaded machine starts Xvfb slowly
+    while not text.endswith(b"\n") and time.monotonic() < end and proc.poll() is None:
+        if select.select([r], [], [], 1.0)[0]:
+            chunk = os.read(r, 16)
+            if not chunk:
                 break
-            time.sleep(0.05)
-        if proc.poll() is None:
-            yield f":{n}"
-            proc.terminate()
-            proc.wait(5)
-            return
-    pytest.skip("could not start Xvfb on a free display")
+            text += chunk
+    os.close(r)
+    if not text.strip().isdigit():
+        proc.kill()
+        proc.wait(5)
+        pytest.skip("could not start Xvfb")
+    yield f":{text.strip().decode()}"
+    proc.terminate()
+    proc.wait(5)
 
 
 @pytest.fixture(scope="module")

@@ -24,6 +24,8 @@ TONEMAP_LABELS = {ToneMap.ACES: "ACES filmic", ToneMap.AGX: "AgX", ToneMap.NEUTR
 MESHES = ("sphere", "testmesh")
 BACKGROUND_LABELS = {Background.ENV: "environment", Background.BLUR: "blurred environment",
                      Background.FLAT: "flat colour", Background.NONE: "none (black)"}
+#: The longest side of a turntable captured from the window, pixels.
+TURNTABLE_MAX_SIDE = 480
 #: Side bars: a share of the window's width, clamped (pixels).
 SIDEBAR_SHARE, SIDEBAR_MIN, SIDEBAR_MAX = 0.24, 240, 360
 RED = imgui.ImVec4(1.0, 0.35, 0.3, 1.0)
@@ -38,6 +40,8 @@ class Panels:
         self.material_path = ""
         self.session_path = "session.nbrdf.json"
         self.shot_path = "nbrdf-shot.png"
+        self.turntable_path = "turntable.mp4"
+        self.turntable_frames = 36
         self.mesh_path = ""
         self.env_path = lookdev.env_path or ""
         self.turntable = False
@@ -332,7 +336,7 @@ class Panels:
             if c10:
                 changes["point_light"] = tuple(float(x) for x in pos)
             take("point_intensity", imgui.slider_float("point intensity", s.point_intensity, 0.0, 200.0))
-        take("exposure", imgui.slider_float("exposure (stops)", s.exposure, -6.0, 6.0))
+        take("exposure", imgui.slider_float("exposure (EV)", s.exposure, -6.0, 6.0, "%+.1f EV"))
         tonemaps = list(ToneMap)
         c8, k = imgui.combo("tone mapping", tonemaps.index(s.tonemap), [TONEMAP_LABELS[t] for t in tonemaps])
         if c8:
@@ -361,6 +365,18 @@ class Panels:
         if imgui.button("screenshot (.png/.exr)"):
             w, h = self.view_size
             ld.screenshot(self.shot_path, (max(w, 1), max(h, 1)), 16)
+        imgui.separator()
+        _, self.turntable_path = imgui.input_text("turntable file", self.turntable_path)
+        _, self.turntable_frames = imgui.slider_int("frames", self.turntable_frames, 4, 240)
+        progress = ld.turntable_progress()
+        if progress is None:
+            if imgui.button("capture turntable (.mp4/.gif/%03d.png)"):
+                w, h = self.view_size
+                k = min(1.0, TURNTABLE_MAX_SIDE / max(w, h, 1))  # the view's shape, at most 480 pixels a side
+                ld.start_turntable(self.turntable_path, self.turntable_frames,
+                                   (max(2, round(w * k)), max(2, round(h * k))))
+        else:
+            imgui.progress_bar(progress, imgui.ImVec2(-1, 0), "turntable")
 
     # --- status (top of the right side bar) -----------------------------------------------------
     def _status(self) -> None:
