@@ -2,8 +2,11 @@
 
 imgui_bundle is imported before glfw so that both use the one GLFW library
 bundled with imgui_bundle; its own GLFW / OpenGL 3 backend draws the panels.
-Mouse: left-drag orbits, right-drag pans, the wheel zooms (when the pointer
-is not over a panel). Keys: F frames the object, T toggles the turntable,
+The panels are two fixed side bars; the 3D view is the rest of the window,
+never covered (``viewport``). The window opens at its remembered size, else
+about 80 % of the screen (viewer/session.py ``WindowPrefs``), and frames the
+object for the view's aspect. Mouse: left-drag orbits, right-drag pans, the
+wheel zooms (when the pointer is in the view). Keys: F frames the object, T toggles the turntable,
 H hides the panels, Esc quits. The view renders at the fraction of the
 window that keeps a frame within budget (60 ms while the user drags, 200 ms
 when still; software OpenGL ends at 1/8), one pass per frame while dragging,

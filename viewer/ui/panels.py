@@ -2,9 +2,12 @@
 method (the panels never change the session's state themselves), so what a
 panel does is exactly what the tests drive.
 
-Panels: Material (the layer stack, presets, files), Scene (mesh, environment,
-light, camera, exposure), View (view, incidence, compare, interpolation,
-mip-mapping, the plane-of-incidence plot), and a performance overlay.
+Two fixed side bars that never cover the 3D view: at the left, Material (the
+layer stack, presets, files); at the right, the timings, View (view,
+incidence, compare with its error scales, interpolation, mip-mapping, the
+plane-of-incidence plot), Scene (mesh, environment, background and ground,
+light, camera and field of view, exposure in EV, tone mapping) and Files
+(sessions, screenshots, turntable capture).
 """
 from __future__ import annotations
 
