@@ -69,6 +69,7 @@ def test_round_trip_is_exact(tmp_path):
     assert again.to_dict() == doc.to_dict()
     data, out = json.loads(V1.read_text()), doc.to_dict()
     assert Path(out.pop("material_dir")) == Path(data.pop("material_dir")).resolve()  # "." as a folder
+    assert out.pop("backdrop") == {"mode": "blur", "flat_colour": [0.18] * 3, "ground": True}  # new: the default
     assert out == data  # every key the previous version wrote, written the same way
 
 
