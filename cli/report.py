@@ -184,6 +184,29 @@ def cmd_report_interpolation(ns: argparse.Namespace) -> int:
     return 0
 
 
+@dataclass
+class GalleryReport:
+    """``nbrdf report gallery``: every bundled preset on the sphere, offscreen, under the previewer's default
+    environment and look, in one labelled image grid."""
+
+    out: str = "docs/figures/gallery.png"
+    """the grid PNG"""
+    tile: int = 160
+    """pixels per side of one material's tile"""
+    spp: int = 32
+    """passes per pixel of each tile"""
+    columns: int = 4
+    """tiles per row"""
+
+
+def cmd_report_gallery(ns: argparse.Namespace) -> int:
+    from nbrdf.viewer.gallery import GalleryConfig, render_gallery
+
+    c: GalleryReport = build(GalleryReport, ns)
+    print(render_gallery(GalleryConfig(Path(c.out), c.tile, c.spp, c.columns)))
+    return 0
+
+
 #: ``nbrdf report`` subcommands: name -> (config, command, one-line help).
 REPORTS = {
     "representation": (RepresentationReport, cmd_report_representation,
@@ -194,6 +217,8 @@ REPORTS = {
                       "latent blend vs linear blend of BRDF values (a figure)"),
     "render": (RenderReport, cmd_report_render,
                "render-space error: lit spheres, HDR-FLIP and PSNR (SPEC section 9)"),
+    "gallery": (GalleryReport, cmd_report_gallery,
+                "every preset rendered with the previewer's defaults, one image grid"),
 }
 
 

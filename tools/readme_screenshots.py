@@ -3,10 +3,12 @@ mode, rendered in a real window (run under Xvfb on a machine without a display):
 
     xvfb-run -s "-screen 0 1280x800x24" .venv/bin/python tools/readme_screenshots.py
 
-Full resolution and several passes: minutes on software OpenGL.
+The view renders at half the window's resolution (``--scale``) with 24 passes:
+minutes on software OpenGL.
 """
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from pathlib import Path
@@ -19,28 +21,26 @@ from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
 OUT = Path(__file__).resolve().parents[1] / "docs" / "figures" / "viewer"
 
 
-def settle(app: App, frames: int) -> None:
+def settle(app: App, frames: int, passes: int = 1) -> None:
     for _ in range(frames):
-        app.step()
+        app.step(passes)
 
 
-def main(size=(1000, 620)) -> int:
+def main(size=(1100, 680), scale: float = 0.5, passes: int = 24, wait: float = 300.0) -> int:
     OUT.mkdir(parents=True, exist_ok=True)
     app = App(ViewOptions(material=DEFAULT_MATERIAL, size=size), size=size)
-    app.BUDGET_STILL_MS = app.BUDGET_DRAG_MS = 1e9  # full resolution for the picture
+    app._adapt_scale = lambda w, h: scale  # a fixed render scale: the picture, not the frame rate
     ld = app.lookdev
     try:
-        ld.state.camera.distance = 3.6
-        ld.invalidate()
-        settle(app, 6)
+        settle(app, 3, passes // 3)
         iio.imwrite(OUT / "main_window.png", app.read_pixels())
         ld.set_compare("side")
-        settle(app, 1)
+        settle(app, 1, passes)
         t0 = time.monotonic()
-        while "..." in ld.reference_status() and time.monotonic() - t0 < 240:
+        while "..." in ld.reference_status() and time.monotonic() - t0 < wait:
             time.sleep(2)
-            app.step()
-        settle(app, 4)
+            app.step(1)
+        settle(app, 1)
         iio.imwrite(OUT / "compare_mode.png", app.read_pixels())
         print(ld.reference_status())
     finally:
@@ -49,4 +49,9 @@ def main(size=(1000, 620)) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scale", type=float, default=0.5)
+    ap.add_argument("--passes", type=int, default=24)
+    ap.add_argument("--wait", type=float, default=300.0, help="seconds to wait for the Monte Carlo reference")
+    a = ap.parse_args()
+    sys.exit(main(scale=a.scale, passes=a.passes, wait=a.wait))

@@ -2,8 +2,11 @@
 
 imgui_bundle is imported before glfw so that both use the one GLFW library
 bundled with imgui_bundle; its own GLFW / OpenGL 3 backend draws the panels.
-Mouse: left-drag orbits, right-drag pans, the wheel zooms (when the pointer
-is not over a panel). Keys: F frames the object, T toggles the turntable,
+The panels are two fixed side bars; the 3D view is the rest of the window,
+never covered (``viewport``). The window opens at its remembered size, else
+about 80 % of the screen (viewer/session.py ``WindowPrefs``), and frames the
+object for the view's aspect. Mouse: left-drag orbits, right-drag pans, the
+wheel zooms (when the pointer is in the view). Keys: F frames the object, T toggles the turntable,
 H hides the panels, Esc quits. The view renders at the fraction of the
 window that keeps a frame within budget (60 ms while the user drags, 200 ms
 when still; software OpenGL ends at 1/8), one pass per frame while dragging,
@@ -30,6 +33,16 @@ from nbrdf.viewer.modes import View
 from nbrdf.viewer.renderer import ViewState
 
 
+def _screen_size() -> tuple[int, int] | None:
+    """The primary monitor's size in screen coordinates (None when glfw cannot tell)."""
+    try:
+        monitor = glfw.get_primary_monitor()
+        mode = glfw.get_video_mode(monitor) if monitor else None
+        return (mode.size.width, mode.size.height) if mode else None
+    except Exception:  # noqa: BLE001 - any glfw failure: the caller falls back
+        return None
+
+
 class WindowUnavailable(RuntimeError):
     """No window could be opened (no display, no GL 3.3 visual)."""
 
@@ -49,7 +62,10 @@ class App:
         glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
         glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
         glfw.window_hint(glfw.VISIBLE, visible)
-        w, h = size or opts.size
+        from nbrdf.viewer.session import WindowPrefs
+
+        self.prefs = WindowPrefs.load()
+        w, h = size or getattr(opts, "window_size", None) or self.prefs.initial_size(_screen_size())
         self.window = glfw.create_window(w, h, "nbrdf-view", None, None)
         if not self.window:
             glfw.terminate()
@@ -61,10 +77,10 @@ class App:
         self.screen = self.ctx.detect_framebuffer()  # the window's default framebuffer, bound now
         state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap,
                           env_rotation=opts.env_rotation, env_intensity=opts.env_intensity,
-                          background=opts.background, point_light=opts.point_light,
+                          background=opts.background != "none", point_light=opts.point_light,
                           point_intensity=opts.point_intensity)
         material, notes = opts.load_material()
-        self.lookdev = LookDev(self.ctx, material, opts.mesh, opts.env, state)
+        self.lookdev = LookDev(self.ctx, material, opts.mesh, opts.env, state, opts.backdrop())
         if notes:
             self.lookdev.notice = "; ".join(notes)
         from imgui_bundle.python_backends.glfw_backend import GlfwRenderer
@@ -76,6 +92,7 @@ class App:
         imgui.get_io().set_ini_filename("")  # no imgui.ini beside the user's files
         self.gui = GlfwRenderer(self.window)
         self.panels = Panels(self.lookdev)
+        self.panels.frame_view = self.frame
         if getattr(opts, "session", None) and not self.lookdev.open_session(opts.session):
             self.close()
             raise NbrdfError(self.lookdev.error or f"{opts.session}: cannot open the session")
@@ -85,6 +102,8 @@ class App:
         self._last_ms: float | None = None
         self._frames = 0
         glfw.set_key_callback(self.window, self._on_key)
+        if not getattr(opts, "session", None):
+            self.frame()  # the object fits the view (whatever the window's shape)
 
     # --- input -----------------------------------------------------------------------
     def _on_key(self, window, key, scancode, action, mods) -> None:
@@ -94,31 +113,37 @@ class App:
         if key == glfw.KEY_ESCAPE:
             glfw.set_window_should_close(window, True)
         elif key == glfw.KEY_F:
-            self.lookdev.frame()
+            self.frame()
         elif key == glfw.KEY_T:
             self.panels.turntable = not self.panels.turntable
         elif key == glfw.KEY_H:
             self.panels.visible = not self.panels.visible
 
+    def frame(self) -> None:
+        """Fits the object into the 3D view (F, the panel's button, the first frame)."""
+        _, _, w, h = self.viewport()
+        self.lookdev.frame(w / max(h, 1))
+
     def _mouse(self) -> None:
         io = imgui.get_io()
         ld = self.lookdev
         x, y = glfw.get_cursor_pos(self.window)
+        vx, vy, vw, vh = self.panels.viewport(self._window_size())
+        inside = vx <= x < vx + vw and vy <= y < vy + vh
         button = next((b for b in (glfw.MOUSE_BUTTON_LEFT, glfw.MOUSE_BUTTON_RIGHT)
                        if glfw.get_mouse_button(self.window, b) == glfw.PRESS), None)
-        if button is not None and (self._drag is not None or not io.want_capture_mouse):
+        if button is not None and (self._drag is not None or (inside and not io.want_capture_mouse)):
             if self._drag is not None and self._drag[0] == button and (x, y) != self._drag[1:]:
                 dx, dy = x - self._drag[1], y - self._drag[2]
                 if button == glfw.MOUSE_BUTTON_LEFT:
                     ld.orbit(-dx * 0.3, dy * 0.3)
                 else:
-                    h = max(self.framebuffer_size()[1], 1)
-                    ld.pan(dx / h, dy / h)
+                    ld.pan(dx / max(vh, 1), dy / max(vh, 1))
             self._drag = (button, x, y)
         else:
             self._drag = None
         self.dragging = self._drag is not None
-        if io.mouse_wheel and not io.want_capture_mouse:
+        if io.mouse_wheel and inside and not io.want_capture_mouse:
             ld.zoom(0.9 ** io.mouse_wheel)
         if self.panels.turntable:
             ld.orbit(0.5, 0.0)
@@ -126,6 +151,18 @@ class App:
     # --- frames ----------------------------------------------------------------------
     def framebuffer_size(self) -> tuple[int, int]:
         return glfw.get_framebuffer_size(self.window)
+
+    def _window_size(self) -> tuple[int, int]:
+        w, h = glfw.get_window_size(self.window)
+        return max(w, 1), max(h, 1)
+
+    def viewport(self) -> tuple[int, int, int, int]:
+        """(x, y, w, h) of the 3D view in framebuffer pixels, top-left origin: the
+        window less the side bars (the panels never cover the view)."""
+        (ww, wh), (fw, fh) = self._window_size(), self.framebuffer_size()
+        sx, sy = fw / ww, fh / wh  # hi-DPI: the panels lay out in window coordinates
+        x, y, w, h = self.panels.viewport((ww, wh))
+        return round(x * sx), round(y * sy), max(1, round(w * sx)), max(1, round(h * sy))
 
     def step(self, passes_per_frame: int = 1) -> None:
         """Processes input, renders the view and the panels, presents the frame."""
@@ -135,13 +172,17 @@ class App:
         imgui.new_frame()
         w, h = self.framebuffer_size()
         w, h = max(w, 1), max(h, 1)
-        self.panels.draw((w, h))
+        self.panels.draw(self._window_size())
         self._mouse()
         self.screen.use()
         self.screen.viewport = (0, 0, w, h)
-        scale = self._adapt_scale(w, h)
+        self.screen.clear(0.0, 0.0, 0.0, 1.0)
+        vx, vy, vw, vh = self.viewport()
+        self.screen.viewport = (vx, h - vy - vh, vw, vh)  # GL's origin is the bottom left
+        scale = self._adapt_scale(vw, vh)
         passes = 1 if self.dragging else passes_per_frame
-        self.lookdev.render(self.screen, (w, h), passes, scale=scale)
+        self.lookdev.render(self.screen, (vw, vh), passes, scale=scale)
+        self.screen.viewport = (0, 0, w, h)
         self.screen.use()
         self.screen.viewport = (0, 0, w, h)
         imgui.render()
@@ -196,6 +237,8 @@ class App:
 
     def close(self) -> None:
         if self.window:
+            self.prefs.size = self._window_size()
+            self.prefs.save()
             self.lookdev.close()
             _ = self.ctx.error
             self.gui.shutdown()

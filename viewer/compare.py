@@ -6,12 +6,15 @@ renderer into its own accumulation slot; a stack's comes from the Monte Carlo
 worker process (viewer/reference.py), fed with the pairs of the view (the lit
 object's from the renderer's G-buffer) and uploaded as it refines. The
 compositor draws A alone, A | B, an A/B wipe, the relative error in false
-colour, or a linear blend of two renders, with exposure and tone mapping.
+colour, the HDR-FLIP map (NVIDIA's ``flip-evaluator``, computed on the CPU
+from the two linear images whenever either has refined, shown in magma with
+its mean), or a linear blend of two renders, with exposure and tone mapping.
 """
 from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import asdict, replace
 
 import moderngl
@@ -52,6 +55,9 @@ class Compare:
         self._tex: moderngl.Texture | None = None
         self._tex_key: tuple | None = None
         self._job: str | None = None      # the key of the Monte Carlo job the view shows
+        self.flip_mean: float | None = None  # mean HDR-FLIP of the last FLIP view (None: no reference yet)
+        self._flip_tex: moderngl.Texture | None = None
+        self._flip_key: tuple | None = None
 
     # --- Monte Carlo jobs ---------------------------------------------------------------
     @staticmethod
@@ -156,6 +162,26 @@ class Compare:
             self.worker.request(ReferenceJob(key, material, wi, wo, wo[:, 2:3], np.ones((1, n), bool), 2048))
         return None if r is None else r.image[0]
 
+    # --- HDR-FLIP -------------------------------------------------------------------------------
+    def update_flip(self, a: moderngl.Texture, pa: float, b: moderngl.Texture, pb: float) -> float | None:
+        """The HDR-FLIP map of A (sum of ``pa`` passes) against the reference B,
+        recomputed when B changes or A's passes reach the next power of two (the
+        FLIP evaluation is CPU work); returns the mean (None: no reference yet)."""
+        if b.size == (1, 1):  # the Monte Carlo worker has sent nothing yet
+            self.flip_mean, self._flip_key = None, None
+            return None
+        key = (id(b), b.size, self._tex_key if b is self._tex else int(math.log2(max(pb, 1.0))),
+               a.size, int(math.log2(max(pa, 1.0))))
+        if key != self._flip_key:
+            test = _resample(_read_linear(a, pa), b.size)
+            self.flip_mean, fmap = hdr_flip(_read_linear(b, pb), test)
+            data = np.ascontiguousarray(fmap, dtype="f4")
+            if self._flip_tex is not None:
+                self._flip_tex.release()
+            self._flip_tex = self.ctx.texture(b.size, 1, data.tobytes(), dtype="f4")
+            self._flip_key = key
+        return self.flip_mean
+
     # --- the composite ------------------------------------------------------------------------
     def composite(self, target: moderngl.Framebuffer, a: moderngl.Texture, pa: float, b: moderngl.Texture,
                   pb: float, mode: CompareMode, blend: float | None, wipe: float, error_scale: float,
@@ -168,6 +194,12 @@ class Compare:
         a.use(0)
         b.use(1)
         p["u_a"].value, p["u_b"].value = 0, 1
+        flip = CompareMode.parse(mode) == CompareMode.FLIP and blend is None
+        if flip and self._flip_tex is not None and self._flip_key is not None:
+            self._flip_tex.use(2)
+        else:
+            self.renderer.unbind_textures(2)  # no map yet: FLIP 0 (black) until the reference arrives
+        p["u_flip"].value = 2
         p["u_passes_a"].value, p["u_passes_b"].value = pa, pb
         p["u_mode"].value = CompareMode.OFF.code if blend is not None else CompareMode.parse(mode).code
         p["u_blend"].value = int(blend is not None)
@@ -176,10 +208,42 @@ class Compare:
         p["u_exposure"].value = exposure
         p["u_tonemap"].value = ToneMap.parse(tonemap).code
         self._vao.render(moderngl.TRIANGLES, vertices=3)
-        self.renderer.unbind_textures(0, 1)
+        self.renderer.unbind_textures(0, 1, 2)
 
     def close(self) -> None:
         self.worker.close()
-        if self._tex is not None:
-            self._tex.release()
-            self._tex = None
+        for tex in (self._tex, self._flip_tex):
+            if tex is not None:
+                tex.release()
+        self._tex = self._flip_tex = None
+
+
+def hdr_flip(reference: np.ndarray, test: np.ndarray) -> tuple[float, np.ndarray]:
+    """HDR-FLIP (default settings) of two linear (H, W, 3) images: (mean, (H, W) map);
+    the same evaluation as ``nbrdf report render`` (training/render_report.py)."""
+    from nbrdf.training.render_report import flip
+
+    return flip(reference, test)
+
+
+def _read_linear(tex: moderngl.Texture, passes: float) -> np.ndarray:
+    """A float texture as linear RGB (H, W, 3) in texture row order, divided by its passes."""
+    img = np.frombuffer(tex.read(), dtype="f4").reshape(tex.height, tex.width, tex.components)
+    return img[..., :3] / max(passes, 1.0)
+
+
+def _resample(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``img`` bilinearly sampled at the pixel centres of a (w, h) grid over the same
+    extent (edges clamped): what the compositor's linear filtering shows."""
+    h, w = img.shape[:2]
+    tw, th = size
+    if (w, h) == (tw, th):
+        return img
+    x = np.clip((np.arange(tw) + 0.5) * w / tw - 0.5, 0, w - 1)
+    y = np.clip((np.arange(th) + 0.5) * h / th - 0.5, 0, h - 1)
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    fx, fy = (x - x0)[None, :, None], (y - y0)[:, None, None]
+    top = img[y0][:, x0] * (1 - fx) + img[y0][:, x1] * fx
+    bottom = img[y1][:, x0] * (1 - fx) + img[y1][:, x1] * fx
+    return top * (1 - fy) + bottom * fy

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import moderngl
@@ -32,8 +32,9 @@ import torch
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent_texture import LatentTexture, blend
 from nbrdf.neural.material import Material, load_material, material_to_dict, save_material
+from nbrdf.viewer.backdrop import Backdrop, BackdropSettings
 from nbrdf.viewer.compare import Compare, reference_state
-from nbrdf.viewer.modes import BrdfMode, CompareMode, ToneMap, View
+from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, ToneMap, View
 from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, gpu_brdf, material_key
 from nbrdf.viewer.renderer import Renderer, ViewState
 from nbrdf.viewer.session import CompareSettings, Interpolation, SessionDoc
@@ -65,6 +66,22 @@ class Timings:
 
 
 @dataclass
+class TurntableCapture:
+    """A turntable being rendered from the window, one frame per displayed frame."""
+
+    out: Path
+    """.mp4, .gif or a frame pattern such as frame_%03d.png."""
+    states: list
+    """The view state of every frame (one camera turn)."""
+    size: tuple[int, int]
+    """Pixels per frame."""
+    spp: int
+    """Passes per frame."""
+    frames: list = field(default_factory=list)
+    """Linear frames rendered so far."""
+
+
+@dataclass
 class SvbrdfBuild:
     """A latent texture being built in a worker thread."""
 
@@ -76,7 +93,7 @@ class SvbrdfBuild:
 
 class LookDev:
     def __init__(self, ctx: moderngl.Context, material: Material, mesh: str = "sphere", env: str | None = None,
-                 state: ViewState | None = None):
+                 state: ViewState | None = None, backdrop: BackdropSettings | None = None):
         self.ctx = ctx
         self.pipeline = MaterialPipeline(ctx)
         self.editor = StackEditor.from_material(material)
@@ -95,8 +112,11 @@ class LookDev:
         self.other_brdf: GpuBrdf | None = None  # the second material of a BRDF blend
         self._edit_t0: float | None = None
         self._svbrdf: SvbrdfBuild | None = None
+        self._turntable: TurntableCapture | None = None
         self.renderer = Renderer(ctx, mesh=mesh, environment=self._read_env(env) if env else None)
         self.compare_part = Compare(ctx, self.renderer)
+        self.backdrop = backdrop or BackdropSettings()
+        self.backdrop_part = Backdrop(ctx, self.renderer)
         self._apply_material()
 
     @property
@@ -137,6 +157,11 @@ class LookDev:
     @property
     def err_scale(self) -> float:
         return self.compare_settings.error_scale
+
+    @property
+    def flip_mean(self) -> float | None:
+        """The mean HDR-FLIP of the FLIP compare view (None until there is a reference)."""
+        return self.compare_part.flip_mean
 
     def set_param(self, index: int, key: str, value) -> bool:
         return self._guard(lambda: (self.editor.set_param(index, key, value), self._apply_material()))
@@ -194,6 +219,16 @@ class LookDev:
                 self.invalidate()
         return self._guard(go)
 
+    def set_backdrop(self, mode: Background | str | None = None, flat_colour=None, ground: bool | None = None) -> bool:
+        """The background behind the object (env, blur, flat, none), its flat
+        colour and the ground's contact shadow; None keeps a setting."""
+        def go():
+            b = self.backdrop
+            self.backdrop = BackdropSettings(b.mode if mode is None else mode,
+                                             b.flat_colour if flat_colour is None else flat_colour,
+                                             b.ground if ground is None else ground)
+        return self._guard(go)  # display only: the accumulation goes on
+
     def set_view(self, view: View | str) -> bool:
         return self.update_state(view=view)
 
@@ -209,9 +244,19 @@ class LookDev:
         self.state.camera.zoom(factor)
         self.invalidate()
 
-    def frame(self) -> None:
-        self.state.camera.frame()
+    def frame(self, aspect: float = 1.0) -> None:
+        """Fits the object into a view of ``aspect`` (w / h) with a margin."""
+        self.state.camera.frame(aspect)
         self.invalidate()
+
+    def set_fov(self, fov: float) -> bool:
+        """The camera's vertical field of view, degrees (the object keeps its size)."""
+        def go():
+            if not math.isfinite(float(fov)):
+                raise NbrdfError(f"field of view {fov} is not a number")
+            self.state.camera.set_fov(float(fov))
+            self.invalidate()
+        return self._guard(go)
 
     def set_compare(self, mode: CompareMode | str) -> bool:
         try:
@@ -330,10 +375,51 @@ class LookDev:
         return None
 
     def poll(self) -> None:
-        """Picks up finished background work (latent textures)."""
+        """Picks up finished background work (latent textures) and renders the
+        next frame of a turntable capture."""
         if self._svbrdf is not None and (self._svbrdf.result is not None or self._svbrdf.error):
             self._guard(self._apply_material)
             self.notice = ""
+        if self._turntable is not None and self.brdf is not None:
+            self._guard(self._turntable_step)
+
+    # --- turntable capture (viewer/offscreen.py writes the file) -----------------------------
+    def start_turntable(self, path: str | Path, frames: int = 36, size: tuple[int, int] = (480, 480),
+                        spp: int = 16) -> bool:
+        """Starts rendering one camera turn of ``frames`` frames to ``path``
+        (.mp4, .gif or frame_%03d.png), one frame per window frame."""
+        def go():
+            from nbrdf.viewer.offscreen import turntable_kind, turntable_states
+
+            out = Path(path)
+            turntable_kind(out)
+            if not (1 <= int(frames) <= 3600) or min(size) < 1 or spp < 1:
+                raise NbrdfError(f"turntable: {frames} frames of {size} x {spp} passes is out of range")
+            if View.parse(self.state.view) != View.OBJECT:
+                raise NbrdfError("turntable: turns the camera around the object (object view)")
+            self._turntable = TurntableCapture(out, turntable_states(self.main_state(), int(frames)),
+                                               tuple(size), int(spp))
+        return self._guard(go)
+
+    def _turntable_step(self) -> None:
+        job = self._turntable
+        try:
+            state = job.states[len(job.frames)]
+            job.frames.append(self.backdrop_part.render_linear(state, job.size, job.spp, self.brdf, self.backdrop))
+            if len(job.frames) == len(job.states):
+                from nbrdf.viewer.offscreen import write_turntable
+
+                write_turntable(job.out, job.frames, self.state.exposure, self.state.tonemap)
+                self._turntable = None
+                self.notice = f"wrote {job.out} ({len(job.frames)} frames)"
+        except Exception:
+            self._turntable = None
+            raise
+
+    def turntable_progress(self) -> float | None:
+        """The share of the turntable capture's frames rendered (None: no capture running)."""
+        job = self._turntable
+        return None if job is None else len(job.frames) / len(job.states)
 
     def svbrdf_progress(self) -> float | None:
         return None if self._svbrdf is None else self._svbrdf.progress
@@ -374,19 +460,29 @@ class LookDev:
         if view != View.OBJECT:
             n, first = (1, 0) if first == 0 else (0, first)
         state = self.main_state()
+        lit = replace(state, background=False)  # the backdrop pass draws what is behind the object
         r = self.renderer
-        a = r.accumulate(state, vw, h, first, n, self.brdf) if n else r.frame_texture(view, vw, h)
+        a = r.accumulate(lit, vw, h, first, n, self.brdf) if n else r.frame_texture(view, vw, h)
         self.passes = first + n if view == View.OBJECT else 1
         pa = float(self.passes)
-        b, pb, weight = a, pa, None
+        b, pb, weight = None, pa, None
         if comparing:
-            b, pb = self.compare_part.reference(self.material, self.ref_brdf, self.brdf, state, self.mesh,
+            b, pb = self.compare_part.reference(self.material, self.ref_brdf, self.brdf, lit, self.mesh,
                                                 vw, h, first, n, self.passes)
         elif blending:
-            b = (r.accumulate(state, vw, h, first, n, self.other_brdf, "other") if n
+            b = (r.accumulate(lit, vw, h, first, n, self.other_brdf, "other") if n
                  else r.frame_texture(view, vw, h, "other"))
             weight = self.interp.t
         s = self.compare_settings
+        if comparing and s.mode == CompareMode.FLIP:
+            self.compare_part.update_flip(a, pa, b, pb)
+        if view == View.OBJECT and not (comparing and s.mode in (CompareMode.ERROR, CompareMode.FLIP)):
+            # The backdrop on what is shown (the error views score the object alone).
+            a, pa = self.backdrop_part.apply(a, pa, state, self.backdrop), 1.0
+            if b is not None and (blending or (comparing and self.ref_brdf is not None)):
+                b, pb = self.backdrop_part.apply(b, pb, state, self.backdrop, "other"), 1.0
+        if b is None:
+            b, pb = a, pa
         self.compare_part.composite(target, a, pa, b, pb, s.mode if comparing else CompareMode.OFF, weight,
                                     s.wipe, s.error_scale, self.state.exposure, self.state.tonemap)
         self.timings.frame_ms = (time.perf_counter() - t0) * 1000.0
@@ -447,7 +543,7 @@ class LookDev:
     def document(self) -> SessionDoc:
         """The session as a document."""
         return SessionDoc(self.material, self.mesh, self.env_path, self.state, self.compare_settings,
-                          self.mipmapping, self.interp)
+                          self.mipmapping, self.interp, self.backdrop)
 
     def session(self) -> dict:
         return self.document().to_dict()
@@ -464,7 +560,7 @@ class LookDev:
 
     def restore(self, doc: SessionDoc) -> None:
         """Makes ``doc`` the session (a failure puts the previous one back)."""
-        old = (self.editor, self.state, self.interp, self.compare_settings, self.mipmapping)
+        old = (self.editor, self.state, self.interp, self.compare_settings, self.mipmapping, self.backdrop)
         try:
             if doc.mesh != self.mesh and not self.set_mesh(doc.mesh):
                 raise NbrdfError(self.error or "mesh")
@@ -472,10 +568,10 @@ class LookDev:
                 raise NbrdfError(self.error or "environment")
             self.editor = StackEditor.from_material(doc.material)
             self.state, self.interp, self.compare_settings = doc.state, doc.interpolation, doc.compare
-            self.mipmapping = doc.mipmapping
+            self.mipmapping, self.backdrop = doc.mipmapping, doc.backdrop
             self._apply_material()
         except NbrdfError:
-            self.editor, self.state, self.interp, self.compare_settings, self.mipmapping = old
+            self.editor, self.state, self.interp, self.compare_settings, self.mipmapping, self.backdrop = old
             self._apply_material()
             raise
         self.invalidate()
@@ -506,7 +602,11 @@ class LookDev:
                     fbo_ldr.release()
                     self.invalidate()
             else:
-                img = self.renderer.render_linear(self.main_state(), size, passes, self.brdf)
+                state = self.main_state()
+                if View.parse(state.view) == View.OBJECT:
+                    img = self.backdrop_part.render_linear(state, size, passes, self.brdf, self.backdrop)
+                else:
+                    img = self.renderer.render_linear(state, size, passes, self.brdf)
                 write_image(p, img, self.state.exposure, ToneMap.parse(self.state.tonemap).value)
                 self.invalidate()
             self.notice = f"wrote {p}"
@@ -520,3 +620,4 @@ class LookDev:
 
     def close(self) -> None:
         self.compare_part.close()
+        self.backdrop_part.release()

@@ -51,6 +51,7 @@ class CompareMode(_Mode):
     SIDE = "side"       #: side by side, neural left
     WIPE = "wipe"       #: an A/B wipe at a movable split
     ERROR = "error"     #: false-colour relative error with a scale bar
+    FLIP = "flip"       #: HDR-FLIP error map (magma) with its mean
 
 
 class ToneMap(_Mode):
@@ -92,3 +93,11 @@ def glsl_defines(*enums: type[_Mode]) -> str:
                   "BrdfMode": "BRDF", "Method": "METHOD", "BaseKind": "BASE"}.get(enum.__name__, enum.__name__.upper())
         lines += [f"#define {prefix}_{m.name} {m.code}" for m in enum]
     return "\n".join(lines) + "\n"
+
+
+class Background(_Mode):
+    """What is behind the object, independent of what lights it (viewer/backdrop.py)."""
+    ENV = "env"     #: the environment itself
+    BLUR = "blur"   #: the environment pre-filtered (a soft backdrop that still reads as the room)
+    FLAT = "flat"   #: one flat colour
+    NONE = "none"   #: black (the object alone)

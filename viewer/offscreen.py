@@ -48,7 +48,7 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     if opts.session:
         from nbrdf.viewer.lookdev import LookDev
 
-        ld = LookDev(ctx, material, opts.mesh, opts.env)
+        ld = LookDev(ctx, material, opts.mesh, opts.env, backdrop=opts.backdrop())
         try:
             if not ld.open_session(opts.session) or not ld.screenshot(out, opts.size, opts.spp):
                 raise NbrdfError(ld.error or f"{opts.session}: cannot render the session")
@@ -57,13 +57,19 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
         return out
     r = make_renderer(ctx, material, opts)
     state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap,
-                      env_rotation=opts.env_rotation, env_intensity=opts.env_intensity, background=opts.background,
+                      env_rotation=opts.env_rotation, env_intensity=opts.env_intensity, background=opts.background != "none",
                       point_light=opts.point_light, point_intensity=opts.point_intensity)
+    render = r.render_linear
+    if opts.view == "object":  # the object over its backdrop (background, ground shadow)
+        from nbrdf.viewer.backdrop import Backdrop
+
+        backdrop, settings = Backdrop(ctx, r), opts.backdrop()
+        render = lambda s, size, spp: backdrop.render_linear(s, size, spp, r.brdf, settings)  # noqa: E731
     if opts.turntable:
-        frames = [r.render_linear(s, opts.size, opts.spp) for s in turntable_states(state, opts.turntable)]
+        frames = [render(s, opts.size, opts.spp) for s in turntable_states(state, opts.turntable)]
         write_turntable(out, frames, opts.exposure, opts.tonemap)
         return out
-    img = r.render_linear(state, opts.size, opts.spp)
+    img = render(state, opts.size, opts.spp)
     if opts.view == "lobe" and out.suffix.lower() == ".png":
         img = img[::-1]  # a picture shows +y up
     write_image(out, img, opts.exposure, opts.tonemap)

@@ -9,10 +9,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.viewer.modes import BrdfMode, ToneMap, View
+from nbrdf.viewer.modes import Background, BrdfMode, ToneMap, View
 
 #: The material shown when none is given (varnished copper).
 DEFAULT_MATERIAL = Path(__file__).parent / "assets" / "materials" / "default.json"
+#: The size of an offscreen image when --size is not given.
+DEFAULT_IMAGE_SIZE = (512, 512)
 #: Where a window-less run writes its image when ``--out`` is not given.
 HEADLESS_OUT = "nbrdf-view.png"
 
@@ -50,9 +52,8 @@ class ViewOptions:
     """material JSON"""
     mesh: str = "sphere"
     """sphere, testmesh, or an OBJ/glTF file (a .gltf/.glb also brings its material when no MATERIAL is given)"""
-    env: str | None = None
-    """environment: a generated preset (studio, sky, softbox) or an equirectangular .hdr/.exr file
-    (default: the built-in sky)"""
+    env: str | None = "studio"
+    """environment: a generated preset (studio, sky, softbox) or an equirectangular .hdr/.exr file"""
     view: View = View.OBJECT
     """what the viewport shows"""
     theta_i: float = 30.0
@@ -61,15 +62,17 @@ class ViewOptions:
     """render through EGL to --out instead of opening a window"""
     out: str | None = None
     """output image: .png (tone-mapped), .exr or .npy (linear float)"""
-    size: tuple[int, int] = field(default=(512, 512), metadata={"parse": parse_size, "shown": "512x512",
-                                                                  "metavar": "WxH"})
+    size: tuple[int, int] | None = field(default=None, metadata={
+        "parse": parse_size, "metavar": "WxH",
+        "shown": "512x512 offscreen; a window opens at its last size, or 80% of the screen"})
     """image or window size in pixels"""
     spp: int = 16
     """passes accumulated per pixel"""
     exposure: float = 0.0
-    """stops"""
-    tonemap: ToneMap = ToneMap.ACES
-    """display transform of a .png or the window"""
+    """exposure in EV (stops: +1 doubles the brightness)"""
+    tonemap: ToneMap = ToneMap.NEUTRAL
+    """display transform of a .png or the window (Khronos PBR Neutral keeps base colours: presets read as
+    their names)"""
     brdf: BrdfMode = BrdfMode.AUTO
     """analytic: closed form in GLSL (single layers); neural: the shipped decoder in GLSL at the latents of leaf
     encoders and layering; projected: at latents fitted to the material's reference; auto: analytic for a single
@@ -78,8 +81,11 @@ class ViewOptions:
     """environment rotation about the up axis, degrees"""
     env_intensity: float = 0.6
     """environment radiance scale"""
-    background: bool = True
-    """the environment behind the object (--no-background: black instead)"""
+    background: Background = Background.BLUR
+    """what is seen behind the object, independent of what lights it: the environment, the environment
+    blurred, a flat colour, or none (black)"""
+    ground: bool = True
+    """a soft contact shadow on the ground under the object (--no-ground: none)"""
     session: str | None = None
     """a look-development session file (material, camera, lights, environment, view) to open"""
     point_light: tuple[float, float, float] | None = field(default=None, metadata={"parse": parse_point,
@@ -92,10 +98,21 @@ class ViewOptions:
     a frame pattern such as frame_%03d.png (0: a single image)"""
 
     def __post_init__(self):
+        #: The window size asked for (None: the window picks, see session.WindowPrefs).
+        self.window_size: tuple[int, int] | None = self.size
+        if self.size is None:
+            self.size = DEFAULT_IMAGE_SIZE
         self.material = Path(self.material)
         self.view = View.parse(self.view, "--view")
         self.tonemap = ToneMap.parse(self.tonemap, "--tonemap")
         self.brdf = BrdfMode.parse(self.brdf, "--brdf")
+        self.background = Background.parse(self.background, "--background")
+
+    def backdrop(self):
+        """The backdrop settings of these options (viewer/backdrop.py)."""
+        from nbrdf.viewer.backdrop import BackdropSettings
+
+        return BackdropSettings(self.background, ground=self.ground)
 
     def load_material(self) -> "tuple[Material, list[str]]":
         """The material to show and one-line notes: the MATERIAL argument, or, when

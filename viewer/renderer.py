@@ -70,8 +70,8 @@ class ViewState:
     """The environment behind the object."""
     exposure: float = 0.0
     """Stops."""
-    tonemap: ToneMap = ToneMap.ACES
-    """aces or linear."""
+    tonemap: ToneMap = ToneMap.NEUTRAL
+    """The display transform (Khronos PBR Neutral keeps base colours)."""
 
     def __post_init__(self) -> None:
         try:

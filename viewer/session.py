@@ -16,6 +16,7 @@ from pathlib import Path
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material, material_to_dict, parse_material
+from nbrdf.viewer.backdrop import BackdropSettings
 from nbrdf.viewer.camera import OrbitCamera
 from nbrdf.viewer.modes import CompareMode, ToneMap, View
 from nbrdf.viewer.renderer import ViewState
@@ -96,6 +97,8 @@ class SessionDoc:
     """Trilinear latent-texture lookup (off shows the aliasing)."""
     interpolation: Interpolation = field(default_factory=Interpolation)
     """The material interpolation (off unless ``other`` is set)."""
+    backdrop: BackdropSettings = field(default_factory=BackdropSettings)
+    """The background behind the object and the ground's contact shadow."""
 
     def to_dict(self) -> dict:
         """The ``nbrdf-session/1`` document."""
@@ -116,6 +119,8 @@ class SessionDoc:
                      "wipe": self.compare.wipe, "error_scale": self.compare.error_scale,
                      "mipmapping": self.mipmapping},
             "interpolation": asdict(self.interpolation),
+            "backdrop": {"mode": self.backdrop.mode.value, "flat_colour": list(self.backdrop.flat_colour),
+                         "ground": self.backdrop.ground},
         }
 
     def save(self, path: str | Path) -> None:
@@ -144,6 +149,9 @@ class SessionDoc:
                               env_on=bool(lt["env_on"]), background=bool(lt["background"]),
                               exposure=float(v["exposure"]), tonemap=tonemap)
             interp = Interpolation(**data.get("interpolation", {}))
+            bd = data.get("backdrop") or {}  # older sessions: the defaults
+            backdrop = BackdropSettings(bd.get("mode", BackdropSettings.mode), bd.get("flat_colour", (0.18,) * 3),
+                                        bd.get("ground", True))
             try:
                 compare = CompareSettings(v.get("compare", CompareMode.OFF.value), v.get("wipe", 0.5), v.get("error_scale", 0.25))
             except ValueError as e:
@@ -154,7 +162,8 @@ class SessionDoc:
         except (KeyError, TypeError, ValueError) as e:
             raise NbrdfError(f"{source}: malformed session ({type(e).__name__}: {e})") from None
         return cls(material=mat, mesh=data.get("mesh", "sphere"), environment=data.get("environment"),
-                   state=state, compare=compare, mipmapping=bool(v.get("mipmapping", True)), interpolation=interp)
+                   state=state, compare=compare, mipmapping=bool(v.get("mipmapping", True)), interpolation=interp,
+                   backdrop=backdrop)
 
     @classmethod
     def load(cls, path: str | Path) -> "SessionDoc":
@@ -167,3 +176,59 @@ class SessionDoc:
         except json.JSONDecodeError as e:
             raise NbrdfError(f"{p}: not JSON ({e.msg} at line {e.lineno})") from None
         return cls.parse(data, str(p))
+
+
+# --- the window's remembered size ---------------------------------------------------------
+#: The share of the screen a first window opens at (each side).
+SCREEN_SHARE = 0.8
+WINDOW_PREFS_FORMAT = "nbrdf-window/1"
+
+
+def prefs_path() -> Path:
+    """Where the window's size is kept between runs: $XDG_CONFIG_HOME/nbrdf/window.json."""
+    import os
+
+    base = os.environ.get("XDG_CONFIG_HOME") or os.path.join(os.path.expanduser("~"), ".config")
+    return Path(base) / "nbrdf" / "window.json"
+
+
+@dataclass
+class WindowPrefs:
+    """What the window remembers between runs (not part of a session: a session
+    opened on another screen keeps that screen's window)."""
+
+    size: tuple[int, int] | None = None
+    """The window's last size in screen coordinates (None: never opened)."""
+
+    def initial_size(self, screen: tuple[int, int] | None) -> tuple[int, int]:
+        """The size a window opens at: the remembered one if it fits ``screen``,
+        else ``SCREEN_SHARE`` of the screen (1024 x 640 when it is unknown)."""
+        if screen is None or screen[0] <= 0 or screen[1] <= 0:
+            return self.size or (1024, 640)
+        if self.size is not None and self.size[0] <= screen[0] and self.size[1] <= screen[1]:
+            return self.size
+        return max(320, round(screen[0] * SCREEN_SHARE)), max(240, round(screen[1] * SCREEN_SHARE))
+
+    @classmethod
+    def load(cls, path: Path | None = None) -> "WindowPrefs":
+        """The remembered preferences; a missing or unreadable file gives the defaults
+        (the window must open whatever is in it)."""
+        p = path or prefs_path()
+        try:
+            data = json.loads(p.read_text())
+            w, h = (int(x) for x in data["size"])
+            if data.get("format") != WINDOW_PREFS_FORMAT or not (100 <= w <= 16384 and 100 <= h <= 16384):
+                return cls()
+            return cls(size=(w, h))
+        except (OSError, ValueError, KeyError, TypeError):
+            return cls()
+
+    def save(self, path: Path | None = None) -> None:
+        """Writes the preferences (a read-only home only loses the memory, never the session)."""
+        p = path or prefs_path()
+        try:
+            p.parent.mkdir(parents=True, exist_ok=True)
+            p.write_text(json.dumps({"format": WINDOW_PREFS_FORMAT,
+                                     "size": list(self.size) if self.size else None}) + "\n")
+        except OSError:
+            pass

@@ -21,16 +21,16 @@ def test_flags_default_to_the_view_options():
     """No flags: exactly the dataclass defaults (one place for defaults)."""
     assert parse_args([]) == ViewOptions()
     opts = parse_args(["m.json", "--view", "lobe", "--tonemap", "linear", "--brdf", "neural", "--size", "64x32",
-                       "--point-light", "1,2,3", "--no-background", "--theta-i", "-0"])
+                       "--point-light", "1,2,3", "--background", "none", "--theta-i", "-0"])
     assert opts.view is View.LOBE and opts.tonemap is ToneMap.LINEAR and opts.brdf is BrdfMode.NEURAL
-    assert opts.size == (64, 32) and opts.point_light == (1.0, 2.0, 3.0) and opts.background is False
+    assert opts.size == (64, 32) and opts.point_light == (1.0, 2.0, 3.0) and opts.background == "none"
     assert opts.material == Path("m.json")
 
 
 def test_help_lists_every_option_and_the_mode_words():
     text = build_parser().format_help()
     for flag in ("--mesh", "--env", "--env-rotation", "--env-intensity", "--point-light", "--point-intensity",
-                 "--session", "--no-background", "--view", "--theta-i", "--offscreen", "--out", "--size", "--spp",
+                 "--session", "--background", "--no-ground", "--view", "--theta-i", "--offscreen", "--out", "--size", "--spp",
                  "--exposure", "--tonemap", "--brdf"):
         assert flag in text, flag
     assert "{object,lobe,slice}" in text and "{auto,analytic,neural,projected}" in text

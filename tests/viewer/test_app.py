@@ -32,6 +32,7 @@ SCRIPT = textwrap.dedent("""
     app = App(ViewOptions(material=sys.argv[1], size=(64, 48)), size=(64, 48))
     app.BUDGET_STILL_MS = app.BUDGET_DRAG_MS = 1e9   # full resolution: compared pixel for pixel
     app.panels.visible = False
+    app.frame()  # the view is the whole window now (F)
     ld = app.lookdev
     out = {}
     try:
@@ -67,7 +68,7 @@ SCRIPT = textwrap.dedent("""
                         ld.screenshot(tmp / "shot.bmp", (8, 8), 1), ld.error]
         # Every panel and mode draws: compare modes, views, interpolation, a textured preset.
         app.panels.visible = app.panels.expand_all = True
-        for view, mode in (("lobe", "side"), ("slice", "error"), ("object", "wipe")):
+        for view, mode in (("lobe", "side"), ("slice", "error"), ("object", "wipe"), ("lobe", "flip")):
             ld.state.view = view
             ld.set_compare(mode)
             app.step()
@@ -105,7 +106,10 @@ def session_run(xvfb_display, tmp_path_factory):
 
 
 def test_slider_changes_latents_and_pixels_as_offscreen(session_run, gl_ctx):
+    from nbrdf.viewer.backdrop import Backdrop
+    from nbrdf.viewer.env_presets import resolve_environment
     from nbrdf.viewer.neural_gpu import GpuDecoder
+    from nbrdf.viewer.options import ViewOptions
     from nbrdf.viewer.renderer import Renderer, ViewState
 
     _, out, f = session_run
@@ -115,8 +119,11 @@ def test_slider_changes_latents_and_pixels_as_offscreen(session_run, gl_ctx):
     m = parse_material(out["doc"])
     z = model.material_latent(m)
     np.testing.assert_allclose(f["zb"], z.numpy(), atol=1e-5)
-    r = Renderer(gl_ctx, m, neural=GpuDecoder(gl_ctx, model.decoder), latent=z, proxy=model.proxy(z))
-    expected = tonemap(r.render_linear(ViewState(), (64, 48), spp=2)).astype(int)
+    opts = ViewOptions()  # the window's defaults: studio environment, backdrop, tone mapper
+    r = Renderer(gl_ctx, m, neural=GpuDecoder(gl_ctx, model.decoder), latent=z, proxy=model.proxy(z),
+                 environment=resolve_environment(opts.env))
+    img = Backdrop(gl_ctx, r).render_linear(ViewState(), (64, 48), 2, r.brdf, opts.backdrop())
+    expected = tonemap(img, opts.exposure, opts.tonemap.value).astype(int)
     assert np.abs(f["b"].astype(int) - expected).max() <= 2
     assert 0 < out["latent_ms"] < 1000 and out["edit_to_frame_ms"] >= out["latent_ms"]
 

@@ -69,6 +69,7 @@ def test_round_trip_is_exact(tmp_path):
     assert again.to_dict() == doc.to_dict()
     data, out = json.loads(V1.read_text()), doc.to_dict()
     assert Path(out.pop("material_dir")) == Path(data.pop("material_dir")).resolve()  # "." as a folder
+    assert out.pop("backdrop") == {"mode": "blur", "flat_colour": [0.18] * 3, "ground": True}  # new: the default
     assert out == data  # every key the previous version wrote, written the same way
 
 
@@ -102,3 +103,34 @@ def test_missing_and_non_json_files(tmp_path):
     (tmp_path / "bad.json").write_text("{ nope")
     with pytest.raises(NbrdfError, match="not JSON"):
         SessionDoc.load(tmp_path / "bad.json")
+
+
+def test_backdrop_round_trips_and_older_files_get_the_default():
+    from nbrdf.viewer.backdrop import BackdropSettings
+    from nbrdf.viewer.modes import Background
+
+    assert SessionDoc.load(V1).backdrop == BackdropSettings()  # written before backdrops existed
+    doc = SessionDoc(load_material(DEFAULT_MATERIAL), backdrop=BackdropSettings("flat", (0.1, 0.2, 0.3), False))
+    back = SessionDoc.parse(json.loads(json.dumps(doc.to_dict())))
+    assert back.backdrop.mode is Background.FLAT and back.backdrop.flat_colour == (0.1, 0.2, 0.3)
+    assert back.backdrop.ground is False
+    bad = doc.to_dict()
+    bad["backdrop"]["mode"] = "plaid"
+    with pytest.raises(NbrdfError, match="plaid") as e:
+        SessionDoc.parse(bad, "s.json")
+    assert "\n" not in str(e.value) and str(e.value).startswith("s.json")
+
+
+def test_window_prefs_open_at_80_percent_and_remember(tmp_path):
+    from nbrdf.viewer.session import WindowPrefs
+
+    path = tmp_path / "cfg" / "window.json"
+    prefs = WindowPrefs.load(path)
+    assert prefs.size is None and prefs.initial_size((1280, 800)) == (1024, 640)
+    prefs.size = (900, 560)
+    prefs.save(path)
+    again = WindowPrefs.load(path)
+    assert again.initial_size((1280, 800)) == (900, 560)
+    assert again.initial_size((800, 600)) == (640, 480)  # remembered on a larger screen: 80 % of this one
+    path.write_text("{ not json")
+    assert WindowPrefs.load(path).size is None  # a broken file never stops the window from opening

@@ -2,25 +2,35 @@
 method (the panels never change the session's state themselves), so what a
 panel does is exactly what the tests drive.
 
-Panels: Material (the layer stack, presets, files), Scene (mesh, environment,
-light, camera, exposure), View (view, incidence, compare, interpolation,
-mip-mapping, the plane-of-incidence plot), and a performance overlay.
+Two fixed side bars that never cover the 3D view: at the left, Material (the
+layer stack, presets, files); at the right, the timings, View (view,
+incidence, compare with its error scales, interpolation, mip-mapping, the
+plane-of-incidence plot), Scene (mesh, environment, background and ground,
+light, camera and field of view, exposure in EV, tone mapping) and Files
+(sessions, screenshots, turntable capture).
 """
 from __future__ import annotations
 
 import numpy as np
 from imgui_bundle import imgui, implot
 
+from nbrdf.viewer.camera import FOV_RANGE
 from nbrdf.viewer.env_presets import ENV_PRESETS
 from nbrdf.viewer.lookdev import LookDev, presets
-from nbrdf.viewer.modes import CompareMode, ToneMap, View
+from nbrdf.viewer.modes import Background, CompareMode, ToneMap, View
 from nbrdf.viewer.ui.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
 
 COMPARE_LABELS = {CompareMode.OFF: "off", CompareMode.SIDE: "side by side", CompareMode.WIPE: "A/B wipe",
-                  CompareMode.ERROR: "error"}
+                  CompareMode.ERROR: "relative error", CompareMode.FLIP: "HDR-FLIP"}
 TONEMAP_LABELS = {ToneMap.ACES: "ACES filmic", ToneMap.AGX: "AgX", ToneMap.NEUTRAL: "Khronos PBR Neutral",
                   ToneMap.LINEAR: "linear"}
 MESHES = ("sphere", "testmesh")
+BACKGROUND_LABELS = {Background.ENV: "environment", Background.BLUR: "blurred environment",
+                     Background.FLAT: "flat colour", Background.NONE: "none (black)"}
+#: The longest side of a turntable captured from the window, pixels.
+TURNTABLE_MAX_SIDE = 480
+#: Side bars: a share of the window's width, clamped (pixels).
+SIDEBAR_SHARE, SIDEBAR_MIN, SIDEBAR_MAX = 0.24, 240, 360
 RED = imgui.ImVec4(1.0, 0.35, 0.3, 1.0)
 DIM = imgui.ImVec4(0.7, 0.7, 0.7, 1.0)
 
@@ -33,29 +43,49 @@ class Panels:
         self.material_path = ""
         self.session_path = "session.nbrdf.json"
         self.shot_path = "nbrdf-shot.png"
+        self.turntable_path = "turntable.mp4"
+        self.turntable_frames = 36
         self.mesh_path = ""
         self.env_path = lookdev.env_path or ""
         self.turntable = False
         self.visible = True
         self.expand_all = False  # opens every section (tests draw every widget)
+        self.frame_view = lambda: lookdev.frame()  # the window sets its own (it knows the view's aspect)
+        self.view_size = (512, 512)  # the 3D view's size, for screenshots
 
     def _header(self, label: str, default_open: bool = False) -> bool:
         if self.expand_all:
             imgui.set_next_item_open(True)
         return imgui.collapsing_header(label, imgui.TreeNodeFlags_.default_open if default_open else 0)
 
+    def viewport(self, size: tuple[int, int]) -> tuple[int, int, int, int]:
+        """(x, y, w, h) of the 3D view in window coordinates (top-left origin): the
+        window less the two side bars, the whole window when the panels are hidden."""
+        w, h = size
+        if not self.visible:
+            return 0, 0, w, h
+        side = sidebar_width(w)
+        return side, 0, max(1, w - 2 * side), h
+
     def draw(self, size: tuple[int, int]) -> None:
+        """The two side bars (fixed, full height): the material at the left, the
+        view, scene and files at the right; they never cover the 3D view."""
         if not self.visible:
             return
-        self._overlay(size)
-        imgui.set_next_window_pos(imgui.ImVec2(8, 8), imgui.Cond_.first_use_ever)
-        imgui.set_next_window_size(imgui.ImVec2(300, 440), imgui.Cond_.first_use_ever)
-        if imgui.begin("Material")[0]:
+        w, h = size
+        self.view_size = self.viewport(size)[2:]
+        side = sidebar_width(w)
+        flags = (imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse
+                 | imgui.WindowFlags_.no_saved_settings | imgui.WindowFlags_.no_bring_to_front_on_focus)
+        imgui.set_next_window_pos(imgui.ImVec2(0, 0), imgui.Cond_.always)
+        imgui.set_next_window_size(imgui.ImVec2(side, h), imgui.Cond_.always)
+        if imgui.begin("Material", None, flags)[0]:
             self._material()
         imgui.end()
-        imgui.set_next_window_pos(imgui.ImVec2(size[0] - 308, 8), imgui.Cond_.first_use_ever)
-        imgui.set_next_window_size(imgui.ImVec2(300, 440), imgui.Cond_.first_use_ever)
-        if imgui.begin("Scene and view")[0]:
+        imgui.set_next_window_pos(imgui.ImVec2(w - side, 0), imgui.Cond_.always)
+        imgui.set_next_window_size(imgui.ImVec2(side, h), imgui.Cond_.always)
+        if imgui.begin("Scene and view", None, flags)[0]:
+            self._status()
             self._view()
             self._scene()
             self._files()
@@ -172,6 +202,8 @@ class Panels:
                 if changed:
                     ld.set_error_scale(x)
                 self._error_bar()
+            if ld.compare == CompareMode.FLIP:
+                self._flip_bar()
         if ld.material.is_textured:
             changed, on = imgui.checkbox("latent mip-mapping", ld.mipmapping)
             if changed:
@@ -193,6 +225,22 @@ class Panels:
             dl.add_rect_filled_multi_color(a, b, col0, col1, col1, col0)
         imgui.dummy(imgui.ImVec2(w, h))
         imgui.text(f"0 %{'':>30}{self.ld.err_scale * 100:.0f} % relative error")
+
+    def _flip_bar(self) -> None:
+        """The magma scale of the FLIP map and the mean FLIP."""
+        dl = imgui.get_window_draw_list()
+        p = imgui.get_cursor_screen_pos()
+        w, h = imgui.get_content_region_avail().x, 12.0
+        stops = [(0.0, (0.0, 0.0, 0.02)), (0.25, (0.32, 0.07, 0.5)), (0.5, (0.72, 0.21, 0.47)),
+                 (0.75, (0.99, 0.53, 0.38)), (1.0, (0.99, 0.99, 0.75))]
+        for (t0, c0), (t1, c1) in zip(stops, stops[1:]):
+            a, b = imgui.ImVec2(p.x + w * t0, p.y), imgui.ImVec2(p.x + w * t1, p.y + h)
+            col0 = imgui.get_color_u32(imgui.ImVec4(*c0, 1.0))
+            col1 = imgui.get_color_u32(imgui.ImVec4(*c1, 1.0))
+            dl.add_rect_filled_multi_color(a, b, col0, col1, col1, col0)
+        imgui.dummy(imgui.ImVec2(w, h))
+        mean = self.ld.flip_mean
+        imgui.text(f"FLIP 0 ... 1   mean {'(waiting for the reference)' if mean is None else f'{mean:.4f}'}")
 
     def _interpolation(self) -> None:
         ld = self.ld
@@ -263,7 +311,18 @@ class Panels:
                 changes[name] = value
 
         take("env_on", imgui.checkbox("environment light", s.env_on))
-        take("background", imgui.checkbox("background", s.background))
+        bd = ld.backdrop
+        kinds = list(Background)
+        c12, k = imgui.combo("background", kinds.index(bd.mode), [BACKGROUND_LABELS[m] for m in kinds])
+        if c12:
+            ld.set_backdrop(kinds[k])
+        if bd.mode == Background.FLAT:
+            c13, colour = imgui.color_edit3("background colour", list(bd.flat_colour))
+            if c13:
+                ld.set_backdrop(flat_colour=[float(x) for x in colour])
+        c14, on = imgui.checkbox("ground shadow", bd.ground)
+        if c14:
+            ld.set_backdrop(ground=on)
         take("env_rotation", imgui.slider_float("env rotation", s.env_rotation, -180.0, 180.0))
         take("env_intensity", imgui.slider_float("env intensity", s.env_intensity, 0.0, 4.0))
         az, el = _angles(s.light_dir)
@@ -280,15 +339,18 @@ class Panels:
             if c10:
                 changes["point_light"] = tuple(float(x) for x in pos)
             take("point_intensity", imgui.slider_float("point intensity", s.point_intensity, 0.0, 200.0))
-        take("exposure", imgui.slider_float("exposure (stops)", s.exposure, -6.0, 6.0))
+        take("exposure", imgui.slider_float("exposure (EV)", s.exposure, -6.0, 6.0, "%+.1f EV"))
         tonemaps = list(ToneMap)
         c8, k = imgui.combo("tone mapping", tonemaps.index(s.tonemap), [TONEMAP_LABELS[t] for t in tonemaps])
         if c8:
             changes["tonemap"] = tonemaps[k]
+        c11, fov = imgui.slider_float("field of view", s.camera.fov, *FOV_RANGE, "%.0f deg")
+        if c11:
+            ld.set_fov(fov)
         _, self.turntable = imgui.checkbox("turntable", self.turntable)
         imgui.same_line()
-        if imgui.button("frame"):
-            ld.frame()
+        if imgui.button("frame (F)"):
+            self.frame_view()
         if changes:
             ld.update_state(**changes)
 
@@ -304,24 +366,39 @@ class Panels:
             ld.save_session(self.session_path)
         _, self.shot_path = imgui.input_text("screenshot", self.shot_path)
         if imgui.button("screenshot (.png/.exr)"):
-            w, h = (int(x) for x in imgui.get_io().display_size)
+            w, h = self.view_size
             ld.screenshot(self.shot_path, (max(w, 1), max(h, 1)), 16)
+        imgui.separator()
+        _, self.turntable_path = imgui.input_text("turntable file", self.turntable_path)
+        _, self.turntable_frames = imgui.slider_int("frames", self.turntable_frames, 4, 240)
+        progress = ld.turntable_progress()
+        if progress is None:
+            if imgui.button("capture turntable (.mp4/.gif/%03d.png)"):
+                w, h = self.view_size
+                k = min(1.0, TURNTABLE_MAX_SIDE / max(w, h, 1))  # the view's shape, at most 480 pixels a side
+                ld.start_turntable(self.turntable_path, self.turntable_frames,
+                                   (max(2, round(w * k)), max(2, round(h * k))))
+        else:
+            imgui.progress_bar(progress, imgui.ImVec2(-1, 0), "turntable")
 
-    # --- overlay -----------------------------------------------------------------------------
-    def _overlay(self, size: tuple[int, int]) -> None:
+    # --- status (top of the right side bar) -----------------------------------------------------
+    def _status(self) -> None:
         ld, t = self.ld, self.ld.timings
-        imgui.set_next_window_pos(imgui.ImVec2(316, 8), imgui.Cond_.always)
-        imgui.set_next_window_bg_alpha(0.55)
-        flags = (imgui.WindowFlags_.no_decoration | imgui.WindowFlags_.always_auto_resize
-                 | imgui.WindowFlags_.no_inputs | imgui.WindowFlags_.no_focus_on_appearing | imgui.WindowFlags_.no_nav)
-        if imgui.begin("performance", None, flags)[0]:
-            imgui.text(f"{t.fps:5.1f} fps   frame {t.frame_ms:6.1f} ms   passes {ld.passes}")
-            imgui.text(f"latent update {t.latent_ms:5.2f} ms   edit -> frame {t.edit_to_frame_ms:6.1f} ms")
-            if ld.notice:
-                imgui.text_colored(DIM, ld.notice)
-            if ld.error:
-                imgui.text_colored(RED, ld.error)
-        imgui.end()
+        imgui.text(f"{t.fps:5.1f} fps  frame {t.frame_ms:6.1f} ms  passes {ld.passes}")
+        imgui.text(f"latent {t.latent_ms:5.2f} ms  edit -> frame {t.edit_to_frame_ms:6.1f} ms")
+        if ld.notice:
+            imgui.text_wrapped(ld.notice)
+        if ld.error:
+            imgui.push_style_color(imgui.Col_.text, RED)
+            imgui.text_wrapped(ld.error)
+            imgui.pop_style_color()
+        imgui.separator()
+
+
+def sidebar_width(window_w: int) -> int:
+    """The width of each side bar: ``SIDEBAR_SHARE`` of the window within
+    [SIDEBAR_MIN, SIDEBAR_MAX], and never more than a quarter of it (the view keeps half)."""
+    return int(min(max(window_w * SIDEBAR_SHARE, SIDEBAR_MIN), SIDEBAR_MAX, window_w / 4))
 
 
 def _angles(d) -> tuple[float, float]:

@@ -1,0 +1,103 @@
+"""The compare view in a real window (Xvfb): the reference side shows what the
+reference holds -- in particular the clear coat's highlight, which the README's
+1000 x 620 capture lost behind the "Scene and view" panel (the panels floated
+over the view) -- and the HDR-FLIP view's map and mean."""
+from __future__ import annotations
+
+import os
+from dataclasses import replace
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from nbrdf.viewer.options import DEFAULT_MATERIAL
+
+pytestmark = pytest.mark.gl
+
+SCRIPT = textwrap.dedent("""
+    import json, sys
+    from pathlib import Path
+    import numpy as np
+    from nbrdf.viewer.app import App
+    from nbrdf.viewer.options import ViewOptions
+    tmp = Path(sys.argv[2])
+    size = (1000, 620)  # the README capture's window
+    app = App(ViewOptions(material=sys.argv[1], size=size), size=size)
+    app._adapt_scale = lambda w, h: 0.125  # the render scale software OpenGL settles at (cheap)
+    ld = app.lookdev
+    try:
+        ld.set_compare("side")
+        app.step()
+        r = ld.worker.wait(ld.compare_part._job, 8, timeout=400)
+        for _ in range(2):
+            app.step()
+        w, h = app.framebuffer_size()
+        vp = app.viewport() if hasattr(app, "viewport") else (0, 0, w, h)
+        np.savez(tmp / "side.npz", screen=app.read_pixels(), ref=r.image, vp=np.array(vp))
+    finally:
+        app.close()
+""")
+
+
+@pytest.fixture(scope="module")
+def side_run(xvfb_display, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("compare")
+    env = dict(os.environ, DISPLAY=xvfb_display)
+    r = subprocess.run([sys.executable, "-c", SCRIPT, str(DEFAULT_MATERIAL), str(tmp)], env=env,
+                       capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return np.load(tmp / "side.npz")
+
+
+def test_reference_side_shows_the_coat_highlight(side_run):
+    """The Monte Carlo image's brightest pixel (the clear coat's highlight of the
+    default varnished copper) appears on screen where the right half of the
+    view shows it: white, not covered by anything."""
+    screen, ref, (vx, vy, vw, vh) = side_run["screen"], side_run["ref"], side_run["vp"]
+    lum = ref @ np.array([0.2126, 0.7152, 0.0722])
+    row, col = np.unravel_index(np.argmax(lum), lum.shape)
+    assert lum[row, col] > 5.0  # the coat's highlight is in the reference (ACES maps it to white)
+    half = vw / 2
+    x = int(vx + half + (col + 0.5) / ref.shape[1] * half)
+    y = int(vy + (row + 0.5) / ref.shape[0] * vh)
+    patch = screen[y - 1:y + 2, x - 1:x + 2].reshape(-1, 3)
+    assert patch.min() >= 200, f"pixel ({x}, {y}) of the reference's highlight shows {patch.tolist()}"
+
+
+GOLD = {"format": "nbrdf-material/1", "name": "g", "layers": [{"type": "conductor", "roughness": 0.3,
+                                                             "r0": [1.0, 0.78, 0.34]}]}
+
+
+def test_flip_view_shows_the_hdr_flip_of_neural_against_reference(gl_ctx):
+    """The FLIP view's mean and map are flip-evaluator's HDR-FLIP of the neural
+    image against its reference (here the closed form of a conductor), and the
+    view draws the map in magma (black where FLIP is 0)."""
+    from nbrdf.neural.material import parse_material
+    from nbrdf.training.render_report import flip
+    from nbrdf.viewer.lookdev import LookDev
+
+    ld = LookDev(gl_ctx, parse_material(GOLD))
+    try:
+        size, passes = (40, 32), 4
+        assert ld.set_compare("flip")
+        fbo = gl_ctx.simple_framebuffer(size, components=4)
+        ld.render(fbo, size, passes)
+        shown = np.frombuffer(fbo.read(components=3), np.uint8).reshape(size[1], size[0], 3)[::-1]
+        state = replace(ld.main_state(), background=False)  # the error views score the object alone
+        neural = ld.renderer.render_linear(state, size, passes, ld.brdf)
+        reference = ld.renderer.render_linear(state, size, passes, ld.ref_brdf)
+        mean, fmap = flip(reference, neural)
+        assert ld.flip_mean == pytest.approx(mean, rel=1e-4, abs=1e-6) and 0.0 < mean < 0.5
+        # Magma: the worst pixel is the brightest of the view; zero error is near black.
+        worst = np.unravel_index(np.argmax(fmap), fmap.shape)
+        best = np.unravel_index(np.argmin(fmap), fmap.shape)
+        assert shown[worst].astype(int).sum() > shown[best].astype(int).sum() + 60
+        assert ld.set_compare("error")
+        ld.render(fbo, size, passes)
+        other = np.frombuffer(fbo.read(components=3), np.uint8).reshape(size[1], size[0], 3)[::-1]
+        assert np.abs(other.astype(int) - shown).mean() > 5  # a different view, not the same picture
+    finally:
+        ld.close()
