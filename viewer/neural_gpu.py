@@ -48,9 +48,11 @@ class WeightStorage(str, Enum):
         return self == WeightStorage.CONST
 
 
-#: The compute path's weights unless told otherwise: the fastest of ``nbrdf bench
-#: render`` on Mesa llvmpipe (see docs/RESULTS.md, issue 12).
-COMPUTE_STORAGE = WeightStorage.CONST
+#: The compute path's weights unless told otherwise: a uniform buffer (a broadcast
+#: read; on Mesa llvmpipe a scalar load, 4x the texture's throughput). Literals
+#: (CONST) decode faster still but LLVM 15 takes minutes to compile them into the
+#: lit pass (issue 12 figures), so they stay an option of the decoder probe.
+COMPUTE_STORAGE = WeightStorage.UBO
 
 
 class GpuDecoder:

@@ -9,7 +9,7 @@ import torch
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, DecoderSpec, load_decoder
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.gpu_pack import latent_share, pack
-from nbrdf.viewer.neural_gpu import GpuDecoder, probe_compute, probe_fragment
+from nbrdf.viewer.neural_gpu import COMPUTE_STORAGE, GpuDecoder, WeightStorage, probe_compute, probe_fragment
 
 
 def pairs(n: int, seed: int):
@@ -47,7 +47,9 @@ def test_fragment_decoder_matches_torch(gl_ctx, name, dec):
     check_tolerance(gpu, ref)
 
 
-def test_compute_decoder_matches_torch(gl_ctx):
+@pytest.mark.parametrize("storage", list(WeightStorage), ids=lambda s: s.value)
+def test_compute_decoder_matches_torch(gl_ctx, storage):
+    """Every weight storage of the compute path, float32: the SPEC tolerance."""
     if gl_ctx.version_code < 430:
         pytest.skip("no OpenGL 4.3 here")
     torch.manual_seed(4)
@@ -56,7 +58,42 @@ def test_compute_decoder_matches_torch(gl_ctx):
     wi, wo = pairs(1000, 2)
     with torch.no_grad():
         ref = dec.eval_rgb(z, wi, wo).numpy()
-    check_tolerance(probe_compute(gl_ctx, GpuDecoder(gl_ctx, dec, ssbo=True), z, wi.numpy(), wo.numpy()), ref)
+    check_tolerance(probe_compute(gl_ctx, GpuDecoder(gl_ctx, dec), z, wi.numpy(), wo.numpy(), storage), ref)
+
+
+@pytest.mark.skipif(not DEFAULT_WEIGHTS.is_file(), reason="no shipped weights")
+def test_compute_default_storage_matches_torch_with_shipped_weights(gl_ctx):
+    """The lit pass's default (weights compiled in as literals) on the shipped
+    decoder at random latents, directions below the horizon included (zero)."""
+    if gl_ctx.version_code < 430:
+        pytest.skip("no OpenGL 4.3 here")
+    dec = load_decoder(DEFAULT_WEIGHTS).eval()
+    g = torch.Generator().manual_seed(11)
+    wi, wo = pairs(1000, 4)
+    wo[:100, 2] *= -1
+    gdec = GpuDecoder(gl_ctx, dec)
+    assert gdec.compute_storage == COMPUTE_STORAGE
+    for k in range(3):
+        z = dec.latent_mean + 0.5 * torch.randn(3, 32, generator=g)
+        with torch.no_grad():
+            ref = dec.eval_rgb(z, wi, wo).numpy()
+        ref[:100] = 0.0
+        check_tolerance(probe_compute(gl_ctx, gdec, z, wi.numpy(), wo.numpy()), ref)
+
+
+def test_unrolled_literals_are_the_weights_exactly():
+    """Weights compiled into the shader read back as the same float32 values."""
+    import re
+
+    torch.manual_seed(6)
+    dec = Decoder(DecoderSpec(width=16, depth=2))
+    p = pack(dec)
+    code = p.unrolled_net(literal=True)
+    lits = [np.float32(float(x)) for x in re.findall(r"(?<![\w.\[])(\d\.?\d*e[+-]\d+)", code)]
+    want = np.abs(p.stream.reshape(-1))
+    want = np.sort(want[want != 0])
+    np.testing.assert_array_equal(np.sort(np.array(lits, np.float32)), want)
+    assert "nb_fetch" not in code and "nb_fetch(" in p.unrolled_net(literal=False)
 
 
 def test_directions_below_the_horizon_decode_to_zero(gl_ctx):
