@@ -9,7 +9,7 @@ The object view is deferred where OpenGL 4.3 exists: a raster pass writes a
 G-buffer (gbuffer_lit.frag: shading normal, position, uv, coverage, latent mip
 level) and a compute pass (lit.comp) shades every pixel with the BRDF into the
 float accumulation image, so the decoder runs in compute shaders (all of a
-data-centre GPU; weights compiled in as constants by default). On OpenGL
+data-centre GPU; weights in a uniform buffer by default: a broadcast read). On OpenGL
 3.3-4.2 (macOS) the fragment path object.frag shades instead, with a one-line
 notice; both call lit_shade.glsl with the same random numbers.
 
@@ -112,6 +112,14 @@ class Renderer:
         path (None: wherever OpenGL 4.3 exists, see gl.use_compute)."""
         self.ctx = ctx
         self.deferred = use_compute(ctx, compute)
+        self.strategies = 3
+        """Per pass, the light and the environment strategies: 3 = environment CDF and the
+        BRDF's lobe (balance heuristic; the learned proxy's own cosine part covers the
+        diffuse directions), 4 = also the cosine lobe (before issue 12: four BRDF
+        evaluations per pass instead of three at the same noise)."""
+        self.one_sample_mis = False
+        """True: one environment sample per pass from the strategies' mixture (fewer BRDF
+        evaluations, more noise: slower to equal noise than ``strategies`` 3, issue 12)."""
         self._gbuf: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = {}
         self.neural = neural
         self._programs: dict[tuple, moderngl.Program] = {}
@@ -413,7 +421,8 @@ class Renderer:
         p["u_point_intensity"].value = (state.point_intensity,) * 3
         p["u_env_intensity"].value = state.env_intensity
         p["u_env_on"].value = int(state.env_on)
-        p["u_strategies"].value = 4
+        p["u_strategies"].value = self.strategies
+        p["u_one_sample"].value = int(self.one_sample_mis)
         self.env.bind(p, math.radians(state.env_rotation))
 
     def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,

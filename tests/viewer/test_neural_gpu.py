@@ -154,16 +154,21 @@ def test_lobe_view_matches_the_torch_lobe_image(gl_ctx):
 def test_bench_render_reports_both_paths():
     from nbrdf.viewer.bench import bench_render
 
-    r = bench_render((48, 32), repeats=1, torch_pairs=4096)
+    r = bench_render((48, 32), repeats=1, torch_pairs=4096, storages=("texture", "ssbo", "ubo"))
     assert r["size"] == "48x32" and r["decoder_only_ms"] > 0 and r["full_shading_one_light_ms"] > 0
     assert r["glsl_over_torch"] == pytest.approx(r["glsl_rgb_evals_per_s"] / r["torch_cpu_rgb_evals_per_s"], rel=1e-2)
     # Per path: the fragment and compute decoders and torch, as multiply-adds per second and a share of the
     # machine's peak (llvmpipe: the CPU's).
-    assert {"fragment_texture", "compute_ssbo", "torch_cpu"} <= set(r["paths"])
+    assert {"fragment_texture", "compute_texture", "compute_ssbo", "compute_ubo", "torch_cpu"} <= set(r["paths"])
+    # Lit frames per path: one light, and one pass with the environment (more work).
+    for path in ("compute", "fragment"):
+        f = r["lit_frames"][path]
+        assert 0 < f["one_light_ms"] and 0 < f["env_pass_ms"]
+    assert r["lit_frames"]["compute"]["storage"] == "ubo" and r["full_shading_one_light_ms"] > 0
     for entry in r["paths"].values():
         assert entry["gfma_per_s"] == pytest.approx(entry["rgb_evals_per_s"] * r["macs_per_rgb_eval"] / 1e9, rel=1e-2)
         assert 0 < entry["fraction_of_peak"] < 1.5
-    assert r["peak"]["kind"] == "cpu" and r["best_glsl_path"] in ("fragment_texture", "compute_ssbo")
+    assert r["peak"]["kind"] == "cpu" and r["best_glsl_path"] in set(r["paths"]) - {"torch_cpu"}
 
 
 def test_cpu_peak_from_the_cpus_own_report():

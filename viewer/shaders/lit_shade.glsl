@@ -1,9 +1,11 @@
 // The lit object's radiance toward the viewer at one surface point for one
 // pass: a directional light, an optional point light and an HDR environment.
-// Per pass and pixel, one sample each of three strategies -- the environment's
-// luminance CDF, the BRDF's lobe (sample_lobe / pdf_lobe of the BRDF snippet:
+// Per pass and pixel, one sample each of two strategies -- the environment's
+// luminance CDF and the BRDF's lobe (sample_lobe / pdf_lobe of the BRDF snippet:
 // the learned proxy pdf for neural materials, GGX visible normals for
-// closed-form ones) and the cosine lobe -- combined by the balance heuristic.
+// closed-form ones) -- combined by the balance heuristic; u_strategies = 4 adds
+// the cosine lobe as a third (issue 12 measured it: no less noise for a fourth
+// BRDF evaluation per pass), u_one_sample draws one sample from their mixture.
 // No shadowing: one object under a distant environment. Both lit paths call
 // it -- object.frag (fragment fallback) and lit.comp (deferred compute pass) --
 // with the same pixel and pass, hence the same random numbers and image.
@@ -16,8 +18,11 @@ uniform vec3 u_point_pos;       // world space
 uniform vec3 u_point_intensity; // radiant intensity: irradiance I cos / d^2
 uniform float u_env_intensity;
 uniform int u_env_on;           // 0: the light alone (benchmarks, quick previews)
-uniform int u_strategies;  // 4: the light and three environment strategies (a uniform, so the loop
-                           // is not unrolled: one call site of the BRDF keeps the shader small)
+uniform int u_strategies;  // 4: the light and three environment strategies, 3: without the cosine lobe
+                           // (a uniform, so the loop is not unrolled: one call site of the BRDF keeps
+                           // the shader small)
+uniform int u_one_sample;  // 1: one environment sample per pass from the mixture of the three strategies
+                           // (one-sample MIS, balance heuristic): two BRDF evaluations per pass, not four
 
 // ``tbn``: the shading frame (columns tangent, bitangent, normal; world);
 // ``view``: unit vector to the eye; ``world``: the surface point.
@@ -25,15 +30,18 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
     mat3 to_local = transpose(tbn);
     vec3 wo = to_local * view;
     vec3 color = vec3(0.0);
-    int count = u_env_on == 0 ? 1 : u_strategies;
+    int count = u_env_on == 0 ? 1 : u_one_sample != 0 ? 2 : u_strategies;
+    // One-sample MIS: the strategy of the single environment sample, chosen uniformly.
+    float pick = u_one_sample != 0 ? rand2(px, pass_index, 4u).x * 3.0 : 0.0;
     for (int k = u_point_on != 0 ? -1 : 0; k < count; ++k) {
         vec3 l;
         float unused;
         vec3 to_point = u_point_pos - world;
-        if (k == -1) l = to_local * normalize(to_point);
-        else if (k == 0) l = to_local * normalize(u_light_dir);
-        else if (k == 1) l = to_local * sample_env(rand2(px, pass_index, 0u), unused);
-        else if (k == 2) l = sample_lobe(wo, vec3(rand2(px, pass_index, 1u), rand2(px, pass_index, 2u).x));
+        int s = k == 1 && u_one_sample != 0 ? 1 + min(int(pick), 2) : k;
+        if (s == -1) l = to_local * normalize(to_point);
+        else if (s == 0) l = to_local * normalize(u_light_dir);
+        else if (s == 1) l = to_local * sample_env(rand2(px, pass_index, 0u), unused);
+        else if (s == 2) l = sample_lobe(wo, vec3(rand2(px, pass_index, 1u), rand2(px, pass_index, 2u).x));
         else l = sample_cosine(rand2(px, pass_index, 3u), unused);
         if (l.z <= 0.0) continue;
         vec3 weight;  // radiance over (MIS-weighted) pdf
@@ -43,7 +51,8 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
             weight = u_light_radiance;
         } else {
             vec3 lw = tbn * l;
-            float p = pdf_env(lw) + pdf_lobe(wo, l) + pdf_cosine(l);
+            float p = pdf_env(lw) + pdf_lobe(wo, l) + (u_strategies > 3 || u_one_sample != 0 ? pdf_cosine(l) : 0.0);
+            if (u_one_sample != 0) p *= 1.0 / 3.0;  // the mixture's pdf
             if (p <= 0.0) continue;
             weight = env_radiance(lw) * u_env_intensity / p;
         }
