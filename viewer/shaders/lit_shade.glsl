@@ -1,11 +1,12 @@
 // The lit object's radiance toward the viewer at one surface point for one
 // pass: a directional light, an optional point light and an HDR environment.
-// Per pass and pixel, one sample each of two strategies -- the environment's
-// luminance CDF and the BRDF's lobe (sample_lobe / pdf_lobe of the BRDF snippet:
+// Per pass and pixel, one sample each of three strategies -- the environment's
+// luminance CDF, the BRDF's lobe (sample_lobe / pdf_lobe of the BRDF snippet:
 // the learned proxy pdf for neural materials, GGX visible normals for
-// closed-form ones) -- combined by the balance heuristic; u_strategies = 4 adds
-// the cosine lobe as a third (issue 12 measured it: no less noise for a fourth
-// BRDF evaluation per pass), u_one_sample draws one sample from their mixture.
+// closed-form ones) and the cosine lobe -- combined by the balance heuristic.
+// u_strategies = 3 drops the cosine lobe (issue 12 measured the same noise for
+// one BRDF evaluation less per pass); u_one_sample draws a single sample from
+// the three strategies' mixture (one-sample MIS: more noise per unit time).
 // No shadowing: one object under a distant environment. Both lit paths call
 // it -- object.frag (fragment fallback) and lit.comp (deferred compute pass) --
 // with the same pixel and pass, hence the same random numbers and image.
