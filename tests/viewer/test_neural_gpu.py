@@ -163,7 +163,7 @@ def test_bench_render_reports_both_paths():
     # Lit frames per path: one light, and one pass with the environment (more work).
     for path in ("compute", "fragment"):
         f = r["lit_frames"][path]
-        assert 0 < f["one_light_ms"] and 0 < f["env_pass_ms"]
+        assert 0 < f["one_light_ms"] and 0 < f["env_pass_ms"] and 0 < f["env_pass_two_strategies_ms"]
     assert r["lit_frames"]["compute"]["storage"] == "ubo" and r["full_shading_one_light_ms"] > 0
     for entry in r["paths"].values():
         assert entry["gfma_per_s"] == pytest.approx(entry["rgb_evals_per_s"] * r["macs_per_rgb_eval"] / 1e9, rel=1e-2)
