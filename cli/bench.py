@@ -29,6 +29,8 @@ class RenderBench:
     """size of the timed frames"""
     repeats: int = 3
     """timed frames per measurement (the median is reported)"""
+    storages: str = "texture,ssbo,ubo,const"
+    """compute-shader weight storages timed, comma-separated (texture, ssbo, ubo, const)"""
 
 
 @dataclass
@@ -65,7 +67,8 @@ def cmd_bench_render(a: argparse.Namespace) -> int:
 
     c: RenderBench = build(RenderBench, a)
     at_least("--repeats", c.repeats)
-    print(json.dumps(bench_render(c.size, repeats=c.repeats), indent=2))
+    storages = tuple(x.strip() for x in c.storages.split(",") if x.strip())
+    print(json.dumps(bench_render(c.size, repeats=c.repeats, storages=storages), indent=2))
     return 0
 
 

@@ -24,6 +24,15 @@ from nbrdf.neural.decoder import Decoder, DecoderSpec
 from nbrdf.neural.errors import NbrdfError
 
 TEXTURE_WIDTH = 256  # texels per row of the weight texture
+#: Where the shader reads the weights (``NB_STORAGE``): a float texture
+#: (texelFetch), a shader storage buffer, a uniform buffer, or literals compiled
+#: into the shader (viewer/neural_gpu.py WeightStorage names them).
+STORE_TEXTURE, STORE_SSBO, STORE_UBO, STORE_CONST = 0, 1, 2, 3
+
+
+def _glsl_float(v: np.float32) -> str:
+    """The shortest decimal that reads back as exactly ``v`` (GLSL float literal)."""
+    return np.format_float_scientific(v, unique=True, trim="0")
 
 
 @dataclass
@@ -43,11 +52,56 @@ class PackedDecoder:
         buf[: self.stream.shape[0]] = self.stream
         return buf.tobytes()
 
-    def defines(self, ssbo: bool = False) -> dict[str, object]:
+    def defines(self, storage: int = STORE_TEXTURE, unrolled: bool = False) -> dict[str, object]:
+        """The decoder's ``#define``s; ``storage`` is one of the STORE_* codes
+        (``NB_STORAGE`` in neural_decoder.glsl), ``unrolled``: the network is
+        the ``nb_net`` snippet of ``unrolled_net`` instead of the loops."""
         s = self.spec
         return {"NB_WIDTH": s.width, "NB_WIDTH4": s.width // 4, "NB_DEPTH": s.depth,
                 "NB_FEATS4": -(-s.features // 4), "NB_ACT": 0 if s.activation == "relu" else 1,
-                "NB_TEX_W": TEXTURE_WIDTH, "NB_SSBO": int(ssbo), "NB_OFF_OUT": self.offsets["out"]}
+                "NB_TEX_W": TEXTURE_WIDTH, "NB_STORAGE": storage, "NB_COUNT": self.stream.shape[0],
+                "NB_OFF_OUT": self.offsets["out"], "NB_UNROLLED": int(unrolled)}
+
+    def unrolled_net(self, literal: bool) -> str:
+        """The whole network after the encoding as straight-line GLSL (no loops,
+        every weight at a constant place): ``literal`` writes each weight as a
+        float literal (weights compiled into the shader: each one a broadcast
+        operand of a vector FMA), otherwise as ``nb_fetch(i).c`` at a constant
+        index (one uniform load per weight for UBO / SSBO storage). Reads
+        ``e`` (the encoding) and NB_SHARE(j); leaves the output in ``vec3 y``."""
+        st, s = self.stream, self.spec
+        wd, w4, f4 = s.width, s.width // 4, -(-s.features // 4)
+
+        def weight(i: int, c: int) -> str | None:
+            if not literal:
+                return f"nb_fetch({i}).{'xyzw'[c]}"
+            v = np.float32(st[i, c])
+            return None if v == 0 else _glsl_float(v)
+
+        def dot(terms: list[tuple[str | None, str]], first: str) -> str:
+            out = first
+            for wt, x in terms:
+                if wt is None:
+                    continue
+                out += f" - {wt[1:]} * {x}" if wt.startswith("-") else f" + {wt} * {x}"
+            return out
+
+        lines = [f"    vec3 a[{wd}];", f"    vec3 b[{wd}];"]
+        for o in range(wd):
+            terms = [(weight(o * f4 + k // 4, k % 4), f"e[{k // 4}].{'xyzw'[k % 4]}") for k in range(s.features)]
+            lines.append(f"    a[{o}] = nb_act(NB_SHARE({o}) + vec3({dot(terms, '0.0')}));")
+        src, dst = "a", "b"
+        for k in range(1, s.depth):
+            off = self.offsets[f"hidden{k}"]
+            for o in range(wd):
+                bias = weight(off + wd * w4 + o // 4, o % 4) or "0.0"
+                terms = [(weight(off + o * w4 + j // 4, j % 4), f"{src}[{j}]") for j in range(wd)]
+                lines.append(f"    {dst}[{o}] = nb_act({dot(terms, f'vec3({bias})')});")
+            src, dst = dst, src
+        off = self.offsets["out"]
+        terms = [(weight(off + j // 4, j % 4), f"{src}[{j}]") for j in range(wd)]
+        lines.append(f"    vec3 y = {dot(terms, f'vec3({weight(off + w4, 0) or 0.0})')};")
+        return "\n".join(lines)
 
     def layer_chain(self) -> str:
         """GLSL statements that run the hidden layers 2..depth, ping-ponging

@@ -65,17 +65,32 @@ def machine_peak(renderer: str) -> dict | None:
     return None
 
 
-def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_pairs: int = 1 << 18) -> dict:
+def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_pairs: int = 1 << 18,
+                 storages: tuple[str, ...] = ("texture", "ssbo", "ubo", "const"), frames: bool = True) -> dict:
+    """Per decoder path -- the fragment shader (weights in a texture) and the
+    compute shader with each weight storage of ``storages`` -- one RGB decoder
+    evaluation per pixel of a (w, h) frame at random directions: evaluations
+    and effective multiply-adds per second, and the share of the machine's
+    FP32 FMA peak; the torch CPU decoder's throughput in the same run; and
+    (``frames``) the lit sphere filling the frame per lit path (deferred compute
+    with its default storage, fragment fallback): ms per frame with one
+    directional light and ms per environment pass (the light and three
+    environment strategies; and with two, ``Renderer.strategies`` 3). Never
+    needs a display."""
     import moderngl
 
     from nbrdf.neural.errors import NbrdfError
     from nbrdf.neural.material import load_material
     from nbrdf.viewer import shaders
-    from nbrdf.viewer.gl import describe, offscreen_context
-    from nbrdf.viewer.neural_gpu import ComputeDecoderPass, GpuDecoder
-    from nbrdf.viewer.renderer import Renderer, ViewState
+    from nbrdf.viewer.gl import COMPUTE_VERSION, describe, offscreen_context
+    from nbrdf.viewer.neural_gpu import ComputeDecoderPass, GpuDecoder, WeightStorage
     from nbrdf.viewer.options import DEFAULT_MATERIAL
+    from nbrdf.viewer.renderer import Renderer, ViewState
 
+    try:
+        chosen = [WeightStorage(x) for x in storages]
+    except ValueError:
+        raise NbrdfError(f"--storages: each one of {', '.join(s.value for s in WeightStorage)}") from None
     dec = load_decoder(DEFAULT_WEIGHTS) if DEFAULT_WEIGHTS.is_file() else Decoder(DecoderSpec()).eval()
     torch.manual_seed(0)
     z = dec.latent_mean.expand(3, -1).clone()
@@ -113,29 +128,37 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
         vao.render(moderngl.TRIANGLES, vertices=3)
         ctx.finish()
 
-    t_dec = _time(decode_frame, repeats)
-
-    # The same evaluations in a compute shader with the weights in an SSBO (OpenGL 4.3).
-    t_comp = None
-    try:
-        cdec = GpuDecoder(ctx, dec, ssbo=True)
-    except NbrdfError:
-        cdec = None
-    if cdec is not None:
-        cpass = ComputeDecoderPass(ctx, cdec, z, v[0], v[1])
-        t_comp = _time(cpass.run, repeats)
+    times = {"fragment_texture": _time(decode_frame, repeats)}
+    # The same evaluations in a compute shader, per weight storage (OpenGL 4.3).
+    compute = ctx.version_code >= COMPUTE_VERSION
+    for st in chosen if compute else ():
+        cpass = ComputeDecoderPass(ctx, gdec, z, v[0], v[1], st)
+        times[f"compute_{st.value}"] = _time(cpass.run, repeats)
         cpass.release()
 
-    # Full shading: the lit sphere filling the frame, one directional light, no environment.
-    r = Renderer(ctx, load_material(DEFAULT_MATERIAL), neural=gdec, latent=z)
-    state = ViewState(env_on=False)
-    state.camera.distance = 2.2
+    # Full shading: the lit sphere filling the frame; one directional light, then
+    # one pass of the light and the environment (no background: the object alone).
+    frame_ms: dict[str, dict] = {}
+    if frames:
+        mat = load_material(DEFAULT_MATERIAL)
+        for name, comp in (("compute", True), ("fragment", False)) if compute else (("fragment", False),):
+            r = Renderer(ctx, mat, neural=gdec, latent=z, compute=comp)
+            out = {}
+            for key, state in (("one_light_ms", ViewState(env_on=False)),
+                               ("env_pass_ms", ViewState(env_on=True, background=False))):
+                state.camera.distance = 2.2
 
-    def shade_frame():
-        r.accumulate(state, w, h, 0, 1)
-        ctx.finish()
+                def shade_frame(state=state):
+                    r.accumulate(state, w, h, 0, 1)
+                    ctx.finish()
 
-    t_full = _time(shade_frame, repeats)
+                out[key] = round(1000 * _time(shade_frame, repeats), 2)
+                if key == "env_pass_ms":  # the cheaper estimator: environment CDF + lobe, no cosine lobe
+                    r.strategies = 3
+                    out["env_pass_two_strategies_ms"] = round(1000 * _time(shade_frame, repeats), 2)
+                    r.strategies = 4
+            out["storage"] = gdec.compute_storage.value if comp else "texture"
+            frame_ms[name] = out
 
     # The torch decoder on this CPU, same work per evaluation (RGB at one pair).
     wi = torch.from_numpy(v[0, :torch_pairs].copy())
@@ -146,29 +169,28 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
             dec.eval_rgb(z, wi, wo)
 
     t_torch = _time(torch_run, repeats)
-    glsl_rate = n / t_dec
     torch_rate = wi.shape[0] / t_torch
     macs_rgb = 3 * dec.spec.macs()  # one RGB evaluation, latent share cached
     info = describe(ctx)
     peak = machine_peak(info)
     gfma = lambda rate: round(rate * macs_rgb / 1e9, 3)
-    paths = {"fragment_texture": {"decoder_ms": round(1000 * t_dec, 2), "rgb_evals_per_s": round(glsl_rate),
-                                  "gfma_per_s": gfma(glsl_rate)}}
-    if t_comp is not None:
-        paths["compute_ssbo"] = {"decoder_ms": round(1000 * t_comp, 2), "rgb_evals_per_s": round(n / t_comp),
-                                 "gfma_per_s": gfma(n / t_comp)}
+    paths = {k: {"decoder_ms": round(1000 * t, 2), "rgb_evals_per_s": round(n / t), "gfma_per_s": gfma(n / t)}
+             for k, t in times.items()}
     paths["torch_cpu"] = {"rgb_evals_per_s": round(torch_rate), "gfma_per_s": gfma(torch_rate)}
     if peak is not None:
         for entry in paths.values():
             entry["fraction_of_peak"] = round(entry["gfma_per_s"] / peak["peak_gfma_per_s"], 4)
     best = max((k for k in paths if k != "torch_cpu"), key=lambda k: paths[k]["rgb_evals_per_s"])
+    glsl_rate = n / times["fragment_texture"]
+    lit = frame_ms.get("compute", frame_ms.get("fragment", {}))
     return {
         "renderer": info,
         "size": f"{w}x{h}",
         "decoder": {"width": dec.spec.width, "depth": dec.spec.depth,
                     "macs_per_channel": dec.spec.macs(), "shipped_weights": DEFAULT_WEIGHTS.is_file()},
-        "decoder_only_ms": round(1000 * t_dec, 2),
-        "full_shading_one_light_ms": round(1000 * t_full, 2),
+        "decoder_only_ms": round(1000 * times["fragment_texture"], 2),
+        "full_shading_one_light_ms": lit.get("one_light_ms"),
+        "lit_frames": frame_ms,
         "glsl_rgb_evals_per_s": round(glsl_rate),
         "torch_cpu_rgb_evals_per_s": round(torch_rate),
         "torch_threads": torch.get_num_threads(),

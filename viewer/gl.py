@@ -2,11 +2,18 @@
 and version checks with one-line errors."""
 from __future__ import annotations
 
+import os
+import sys
+
 import moderngl
 
 from nbrdf.neural.errors import NbrdfError
 
 MIN_VERSION = 330  # OpenGL 3.3 core: float textures, texelFetch, fragment shaders
+COMPUTE_VERSION = 430  # OpenGL 4.3 core: compute shaders, images, SSBOs (the deferred lit path)
+#: Set to 1 to force the fragment-shader lit path where compute shaders exist (tests, comparisons).
+FRAGMENT_ENV = "NBRDF_FRAGMENT_PATH"
+_noticed: set[str] = set()
 
 
 def offscreen_context() -> moderngl.Context:
@@ -29,3 +36,28 @@ def check_version(ctx: moderngl.Context, need: int = MIN_VERSION, what: str = "t
 
 def describe(ctx: moderngl.Context) -> str:
     return f"{ctx.info.get('GL_RENDERER', '?')} / OpenGL {ctx.info.get('GL_VERSION', '?')}"
+
+
+def use_compute(ctx: moderngl.Context, want: bool | None = None) -> bool:
+    """Whether the lit view shades in the deferred compute pass (OpenGL 4.3)
+    rather than in fragment shaders. ``want`` None: wherever the context has
+    compute shaders and ``NBRDF_FRAGMENT_PATH`` is not set; False: never; True:
+    required. Choosing the fallback prints one notice line on stderr (once per reason)."""
+    if want is False:
+        return False
+    if ctx.version_code < COMPUTE_VERSION:
+        if want:
+            check_version(ctx, COMPUTE_VERSION, "the deferred compute lit path")
+        _notice(f"nbrdf: OpenGL {ctx.info.get('GL_VERSION', ctx.version_code)} has no compute shaders (4.3): "
+                "the lit view shades in fragment shaders (slower fallback)")
+        return False
+    if want is None and os.environ.get(FRAGMENT_ENV, "") not in ("", "0"):
+        _notice(f"nbrdf: {FRAGMENT_ENV} is set: the lit view shades in fragment shaders (fallback path)")
+        return False
+    return True
+
+
+def _notice(line: str) -> None:
+    if line not in _noticed:
+        _noticed.add(line)
+        print(line, file=sys.stderr)

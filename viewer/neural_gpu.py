@@ -8,6 +8,8 @@ for the decoder-only benchmark.
 """
 from __future__ import annotations
 
+from enum import Enum
+
 import moderngl
 import numpy as np
 import torch
@@ -15,7 +17,7 @@ import torch
 from nbrdf.neural.coat import NO_COAT, code_coat
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.gpu_pack import PackedDecoder, latent_share, pack
+from nbrdf.neural.gpu_pack import STORE_CONST, STORE_SSBO, STORE_TEXTURE, STORE_UBO, PackedDecoder, latent_share, pack
 from nbrdf.neural.latent_texture import LatentTexture
 from nbrdf.viewer import shaders
 from nbrdf.viewer.gl import check_version
@@ -23,40 +25,113 @@ from nbrdf.viewer.gl import check_version
 WEIGHT_UNIT = 7  # texture unit of the weight texture
 SHARE_UNIT = 8   # texture unit of a latent texture's per-texel share
 SSBO_VERSION = 430
+WEIGHT_BINDING = 0  # SSBO / uniform-block binding point of the weights
+
+
+class WeightStorage(str, Enum):
+    """Where a program reads the decoder's weights (``NB_STORAGE`` in neural_decoder.glsl)."""
+
+    TEXTURE = "texture"  #: a float texture, one texelFetch per weight and pixel (OpenGL 3.3: the fragment path)
+    SSBO = "ssbo"        #: a shader storage buffer (OpenGL 4.3)
+    UBO = "ubo"          #: a uniform buffer: every pixel reads the same weight at once (a broadcast)
+    CONST = "const"      #: float literals in the unrolled network, compiled into the shader
+
+    @property
+    def code(self) -> int:
+        return {WeightStorage.TEXTURE: STORE_TEXTURE, WeightStorage.SSBO: STORE_SSBO,
+                WeightStorage.UBO: STORE_UBO, WeightStorage.CONST: STORE_CONST}[self]
+
+    @property
+    def unrolled(self) -> bool:
+        """Literals run the straight-line network (every weight an immediate
+        operand); the buffers and the texture keep the loops (Mesa 22 / LLVM 15
+        take minutes to compile their unrolled forms, which ran slower: issue 12)."""
+        return self == WeightStorage.CONST
+
+
+#: The compute path's weights unless told otherwise: a uniform buffer (a broadcast
+#: read; on Mesa llvmpipe a scalar load, 4x the texture's throughput). Literals
+#: (CONST) decode faster still but LLVM 15 takes minutes to compile them into the
+#: lit pass (issue 12 figures), so they stay an option of the decoder probe.
+COMPUTE_STORAGE = WeightStorage.UBO
 
 
 class GpuDecoder:
-    def __init__(self, ctx: moderngl.Context, dec: Decoder, ssbo: bool = False):
-        if ssbo:
-            check_version(ctx, SSBO_VERSION, "the SSBO / compute-shader decoder")
-        self.ctx, self.dec, self.ssbo = ctx, dec, ssbo
+    """One decoder's weights in one context: the weight texture (every
+    context), and on OpenGL 4.3 the buffers of the compute path, made on first
+    use. ``storage`` is what ``source`` and ``bind`` use unless told otherwise
+    (``ssbo=True`` is ``storage=WeightStorage.SSBO``)."""
+
+    def __init__(self, ctx: moderngl.Context, dec: Decoder, ssbo: bool = False,
+                 storage: WeightStorage | str | None = None):
+        storage = WeightStorage(storage) if storage is not None else (
+            WeightStorage.SSBO if ssbo else WeightStorage.TEXTURE)
+        if storage != WeightStorage.TEXTURE:
+            check_version(ctx, SSBO_VERSION, f"the {storage.value} weight storage (compute shaders)")
+        self.ctx, self.dec, self.storage = ctx, dec, storage
         self.packed: PackedDecoder = pack(dec)
-        if ssbo:
-            self.buffer = ctx.buffer(self.packed.stream.astype("f4").tobytes())
-        else:
-            w, h = self.packed.texture_size
-            self.texture = ctx.texture((w, h), 4, self.packed.texture_bytes(), dtype="f4")
-            self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        w, h = self.packed.texture_size
+        self.texture = ctx.texture((w, h), 4, self.packed.texture_bytes(), dtype="f4")
+        self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self._buffers: dict[WeightStorage, moderngl.Buffer] = {}
+        self._nets: dict[bool, str] = {}
+        self.compute_storage: WeightStorage = storage if storage != WeightStorage.TEXTURE else COMPUTE_STORAGE
+        """Where the compute lit pass (viewer/renderer.py) reads the weights."""
+        if storage in (WeightStorage.SSBO, WeightStorage.UBO):
+            self._buffer(storage)
 
     @property
-    def version(self) -> str:
-        return f"#version {SSBO_VERSION} core" if self.ssbo else shaders.VERSION
+    def ssbo(self) -> bool:
+        return self.storage == WeightStorage.SSBO
 
-    def snippets(self) -> dict[str, str]:
-        return {"nb_layers": self.packed.layer_chain(), "nb_share": ""}
+    @property
+    def buffer(self) -> moderngl.Buffer:
+        """The SSBO of the weights."""
+        return self._buffer(WeightStorage.SSBO)
 
-    def defines(self) -> dict[str, object]:
-        return self.packed.defines(self.ssbo)
+    def _buffer(self, storage: WeightStorage) -> moderngl.Buffer:
+        if storage not in self._buffers:
+            if storage == WeightStorage.UBO:
+                limit = self.ctx.info.get("GL_MAX_UNIFORM_BLOCK_SIZE", 16384)
+                if self.packed.stream.nbytes > limit:
+                    raise NbrdfError(f"the decoder's {self.packed.stream.nbytes} bytes of weights exceed this "
+                                     f"context's uniform-block limit ({limit} bytes): use --weights ssbo")
+            self._buffers[storage] = self.ctx.buffer(self.packed.stream.astype("f4").tobytes())
+        return self._buffers[storage]
 
-    def source(self, name: str, snippets: dict[str, str] | None = None, defines: dict | None = None) -> str:
-        return shaders.source(name, {**self.snippets(), **(snippets or {})}, version=self.version,
-                              defines={**self.defines(), **(defines or {})})
+    def version(self, storage: WeightStorage, compute: bool = False) -> str:
+        return f"#version {SSBO_VERSION} core" if compute or storage != WeightStorage.TEXTURE else shaders.VERSION
 
-    def bind(self, prog: moderngl.Program) -> None:
+    def snippets(self, storage: WeightStorage | None = None) -> dict[str, str]:
+        storage = storage or self.storage
+        out = {"nb_layers": self.packed.layer_chain(), "nb_share": "", "nb_net": ""}
+        if storage.unrolled:
+            literal = storage == WeightStorage.CONST
+            if literal not in self._nets:
+                self._nets[literal] = self.packed.unrolled_net(literal)
+            out["nb_net"] = self._nets[literal]
+        return out
+
+    def defines(self, storage: WeightStorage | None = None) -> dict[str, object]:
+        storage = storage or self.storage
+        return self.packed.defines(storage.code, storage.unrolled)
+
+    def source(self, name: str, snippets: dict[str, str] | None = None, defines: dict | None = None,
+               storage: WeightStorage | None = None) -> str:
+        """Shader ``name`` with the decoder filled in for ``storage`` (default: this decoder's)."""
+        storage = storage or self.storage
+        return shaders.source(name, {**self.snippets(storage), **(snippets or {})},
+                              version=self.version(storage, name.endswith(".comp")),
+                              defines={**self.defines(storage), **(defines or {})})
+
+    def bind(self, prog: moderngl.Program | moderngl.ComputeShader, storage: WeightStorage | None = None) -> None:
         """Makes the weights visible to ``prog`` (call before rendering with it)."""
-        if self.ssbo:
-            self.buffer.bind_to_storage_buffer(0)
-        else:
+        storage = storage or self.storage
+        if storage == WeightStorage.SSBO:
+            self._buffer(storage).bind_to_storage_buffer(WEIGHT_BINDING)
+        elif storage == WeightStorage.UBO:
+            self._buffer(storage).bind_to_uniform_block(WEIGHT_BINDING)
+        elif storage == WeightStorage.TEXTURE:
             self.texture.use(WEIGHT_UNIT)
             if "u_nb_weights" in prog:
                 prog["u_nb_weights"].value = WEIGHT_UNIT
@@ -199,17 +274,18 @@ class ComputeDecoderPass:
     """nb_decode at N pairs in a compute shader (SSBO weights): the program and
     buffers are made once, so ``run`` can be timed alone."""
 
-    def __init__(self, ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor, wi: np.ndarray, wo: np.ndarray):
-        if not gdec.ssbo:
-            raise NbrdfError("a compute decoder pass needs a GpuDecoder made with ssbo=True")
+    def __init__(self, ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor, wi: np.ndarray, wo: np.ndarray,
+                 storage: WeightStorage | None = None):
+        check_version(ctx, SSBO_VERSION, "a compute decoder pass")
         self.ctx, self.gdec, self.z, self.n = ctx, gdec, z, wi.shape[0]
-        self.prog = ctx.compute_shader(gdec.source("decoder_probe.comp"))
+        self.storage = storage or (gdec.storage if gdec.storage != WeightStorage.TEXTURE else COMPUTE_STORAGE)
+        self.prog = ctx.compute_shader(gdec.source("decoder_probe.comp", storage=self.storage))
         self.pin = ctx.buffer(_pairs_array(wi, wo).tobytes())
         self.pout = ctx.buffer(reserve=self.n * 16)
 
     def run(self) -> None:
         """One pass over the N pairs, finished."""
-        self.gdec.bind(self.prog)
+        self.gdec.bind(self.prog, self.storage)
         self.gdec.set_latent(self.prog, self.z)
         self.pin.bind_to_storage_buffer(1)
         self.pout.bind_to_storage_buffer(2)
@@ -227,11 +303,10 @@ class ComputeDecoderPass:
 
 
 def probe_compute(ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor, wi: np.ndarray,
-                  wo: np.ndarray) -> np.ndarray:
-    """nb_decode at N pairs through a compute shader (SSBO weights); (N, 3)."""
-    if not gdec.ssbo:
-        raise NbrdfError("probe_compute needs a GpuDecoder made with ssbo=True")
-    p = ComputeDecoderPass(ctx, gdec, z, wi, wo)
+                  wo: np.ndarray, storage: WeightStorage | None = None) -> np.ndarray:
+    """nb_decode at N pairs through a compute shader (weights in ``storage``,
+    default: the decoder's own, or the compute path's default); (N, 3)."""
+    p = ComputeDecoderPass(ctx, gdec, z, wi, wo, storage)
     try:
         p.run()
         return p.read()

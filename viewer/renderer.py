@@ -5,6 +5,14 @@ image of SPEC section 9, computed in GLSL) and ``slice`` (theta_h x theta_d).
 Everything renders linear radiance into a float framebuffer; the object view
 accumulates ``spp`` passes with different random numbers (progressive).
 
+The object view is deferred where OpenGL 4.3 exists: a raster pass writes a
+G-buffer (gbuffer_lit.frag: shading normal, position, uv, coverage, latent mip
+level) and a compute pass (lit.comp) shades every pixel with the BRDF into the
+float accumulation image, so the decoder runs in compute shaders (all of a
+data-centre GPU; weights in a uniform buffer by default: a broadcast read). On OpenGL
+3.3-4.2 (macOS) the fragment path object.frag shades instead, with a one-line
+notice; both call lit_shade.glsl with the same random numbers.
+
 One ``Renderer`` owns the scene's GPU resources -- programs (built once per
 BRDF kind), the mesh buffers, the environment's sampling tables and the
 accumulation targets -- and draws with the BRDF it is handed per draw (a
@@ -26,8 +34,10 @@ from nbrdf.neural.material import Material
 from nbrdf.viewer import shaders
 from nbrdf.viewer.camera import OrbitCamera
 from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
+from nbrdf.viewer.gl import use_compute
 from nbrdf.viewer.mesh import Mesh, named_mesh
 from nbrdf.viewer.modes import ToneMap, View
+from nbrdf.viewer.neural_gpu import SHARE_UNIT
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf, NormalMaps, gpu_brdf
 
 if TYPE_CHECKING:
@@ -39,6 +49,9 @@ if TYPE_CHECKING:
 VIEWS = View.words()
 LOBE_SIZE = 64
 NORMAL_UNIT = 9  # texture unit of a material's normal map
+GBUFFER_UNITS = (10, 11, 12)  # texture units of the G-buffer in the compute lit pass
+LIT_GROUP = 8     # lit.comp's work group is LIT_GROUP x LIT_GROUP pixels
+LIT_CHUNK = 8     # passes per compute dispatch (bounds one dispatch's duration)
 MAIN = "main"    # the default accumulation slot
 
 
@@ -88,14 +101,28 @@ class Renderer:
     def __init__(self, ctx: moderngl.Context, material: Material | None = None, mesh: str | Mesh = "sphere",
                  neural: "GpuDecoder | None" = None, latent: "torch.Tensor | None" = None,
                  proxy: tuple[float, float] | None = None, environment: np.ndarray | None = None,
-                 latent_texture: "LatentTexture | None" = None, brdf: GpuBrdf | None = None):
+                 latent_texture: "LatentTexture | None" = None, brdf: GpuBrdf | None = None,
+                 compute: bool | None = None):
         """``brdf`` (from viewer/pipeline.py) or ``material`` (optional) becomes the default BRDF: with ``neural``
         (with the material's ``latent``, (3, 32), and its proxy pdf's (sigma, w))
         the decoder in GLSL, without it the closed form. A texture-mapped
         material comes as its ``latent_texture`` instead of a latent.
         ``environment`` is an equirectangular float32 (H, W, 3) radiance map
-        (default: the project's own sky)."""
+        (default: the project's own sky). ``compute``: the deferred compute lit
+        path (None: wherever OpenGL 4.3 exists, see gl.use_compute)."""
         self.ctx = ctx
+        self.deferred = use_compute(ctx, compute)
+        self.strategies = 4
+        """Per pass, the light and the environment strategies: 4 = environment CDF, the
+        BRDF's lobe and the cosine lobe (balance heuristic; the golden images), 3 = without
+        the cosine lobe (the learned proxy's own cosine part covers the diffuse
+        directions): three BRDF evaluations per pass instead of four at the same noise
+        (issue 12 measured 0.68x the time to equal noise; to become the default with
+        regenerated object goldens)."""
+        self.one_sample_mis = False
+        """True: one environment sample per pass from the strategies' mixture (fewer BRDF
+        evaluations, more noise: slower to equal noise than ``strategies`` 3, issue 12)."""
+        self._gbuf: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = {}
         self.neural = neural
         self._programs: dict[tuple, moderngl.Program] = {}
         self._mesh_vaos: dict[tuple, moderngl.VertexArray] = {}
@@ -135,6 +162,26 @@ class Renderer:
             raise NbrdfError(f"shader build failed on {self.ctx.info.get('GL_RENDERER', '?')}: "
                              f"{str(e).splitlines()[0]}") from None
 
+    def compute_program(self, brdf: GpuBrdf) -> moderngl.ComputeShader:
+        """lit.comp for ``brdf``'s kind (neural: weights in the decoder's ``compute_storage``), kept."""
+        storage = brdf.decoder.compute_storage if brdf.neural else None
+        key = ("lit.comp", brdf.kind, id(brdf.decoder) if brdf.neural else 0, storage)
+        if key not in self._programs:
+            version = "#version 430 core"
+            if brdf.kind == BrdfKind.ANALYTIC:
+                src = shaders.source("lit.comp", {"brdf": shaders.read("analytic_brdf.glsl")}, version=version)
+            else:
+                code = shaders.read("neural_brdf.glsl")
+                if brdf.kind == BrdfKind.TEXTURED:
+                    code = shaders.read("latent_texture.glsl") + "\n" + code
+                src = brdf.decoder.source("lit.comp", {"brdf": code}, storage=storage)
+            try:
+                self._programs[key] = self.ctx.compute_shader(src)
+            except moderngl.Error as e:
+                raise NbrdfError(f"compute shader build failed on {self.ctx.info.get('GL_RENDERER', '?')}: "
+                                 f"{str(e).splitlines()[0]}") from None
+        return self._programs[key]
+
     def program(self, frag: str, brdf: GpuBrdf, vert: str = "fullscreen.vert") -> moderngl.Program:
         """The program of ``frag`` for ``brdf``'s kind, built on first use and kept."""
         key = (vert, frag, brdf.kind, id(brdf.decoder) if brdf.neural else 0)
@@ -158,10 +205,10 @@ class Renderer:
                 skip_errors=True)
         return self._mesh_vaos[key]
 
-    def _bind_brdf(self, prog: moderngl.Program, brdf: GpuBrdf) -> None:
+    def _bind_brdf(self, prog: moderngl.Program, brdf: GpuBrdf, compute: bool = False) -> None:
         """Makes ``brdf`` the program's BRDF: weights, latent share (or latent texture), uniforms."""
         if brdf.neural:
-            brdf.decoder.bind(prog)
+            brdf.decoder.bind(prog, brdf.decoder.compute_storage if compute else None)
             if brdf.share is not None and "u_nb_share" in prog:
                 prog["u_nb_share"].write(brdf.share)
             if brdf.latent_texture is not None:
@@ -234,7 +281,8 @@ class Renderer:
         p["u_model"].write(np.eye(4, dtype="f4").tobytes())
         p["u_eye"].value = tuple(cam.eye())
         ld = np.asarray(state.light_dir, dtype=np.float64)
-        p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
+        if "u_light_dir" in p:
+            p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
         if "u_has_normal_map" in p:
             p["u_has_normal_map"].value = int(normal_map is not None)
         if normal_map is not None:
@@ -267,7 +315,7 @@ class Renderer:
         if first_pass == 0:
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         if view == View.OBJECT:
-            self._object_passes(state, w, h, first_pass, passes, brdf)
+            self._object_passes(state, w, h, first_pass, passes, brdf, slot)
         elif first_pass == 0:
             p = self.program("lobe.frag" if view == View.LOBE else "slice.frag", brdf)
             self._bind_brdf(p, brdf)
@@ -278,20 +326,72 @@ class Renderer:
             self._fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
         return tex
 
-    def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf) -> None:
-        cam = state.camera
+    def _gbuffer_target(self, w: int, h: int, slot: str) -> tuple[moderngl.Framebuffer, list[moderngl.Texture]]:
+        """The G-buffer of ``slot`` at (w, h): three RGBA32F targets sharing the
+        accumulation target's depth buffer (the background pass then fills the rest)."""
+        key = (slot, w, h)
+        if key not in self._gbuf:
+            depth = self._target(w, h, slot)[0].depth_attachment
+            texs = [self.ctx.texture((w, h), 4, dtype="f4") for _ in GBUFFER_UNITS]
+            for t in texs:
+                t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._gbuf[key] = (self.ctx.framebuffer(texs, depth), texs)
+        return self._gbuf[key]
+
+    def _deferred_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
+                         slot: str) -> np.ndarray:
+        """The deferred lit path: on a slot's first pass, rasterise its G-buffer
+        (gbuffer_lit.frag); then ``passes`` passes of lit.comp over it into the
+        slot's accumulation image. Returns the view-projection matrix."""
+        gfbo, gtex = self._gbuffer_target(w, h, slot)
+        key = ("object.vert", "gbuffer_lit.frag", None, 0)
+        if key not in self._programs:
+            self._programs[key] = self.ctx.program(vertex_shader=shaders.source("object.vert"),
+                                                   fragment_shader=shaders.source("gbuffer_lit.frag",
+                                                                                  version="#version 430 core"))
+        g = self._programs[key]
+        vp = self._surface_uniforms(g, state, w, h, brdf.normal_map)
+        if first == 0:
+            gfbo.use()
+            gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            self.ctx.enable(moderngl.DEPTH_TEST)
+            self.ctx.disable(moderngl.BLEND)
+            self.ctx.depth_func = "<"
+            textured = brdf.latent_texture is not None
+            if textured:
+                brdf.latent_texture.bind(g)
+            # A sampler array on unit 0 beside the normal map's 2D sampler would void the draw.
+            g["u_nb_share_tex"].value = SHARE_UNIT
+            g["u_textured"].value = int(textured)
+            self._mesh_vao(g).render(moderngl.TRIANGLES)
+        c = self.compute_program(brdf)
+        self._bind_brdf(c, brdf, compute=True)
+        self._lit_uniforms(c, state)
+        c["u_eye"].value = tuple(state.camera.eye())
+        for t, unit, name in zip(gtex, GBUFFER_UNITS, ("u_gb_normal", "u_gb_world", "u_gb_uv")):
+            t.use(unit)
+            if name in c:
+                c[name].value = unit
+        tex = self._target(w, h, slot)[1]
+        tex.bind_to_image(0, read=True, write=True)
+        self.ctx.memory_barrier()
+        for k in range(first, first + passes, LIT_CHUNK):
+            c["u_first_pass"].value = k
+            c["u_passes"].value = min(LIT_CHUNK, first + passes - k)
+            c.run(-(-w // LIT_GROUP), -(-h // LIT_GROUP))
+            self.ctx.memory_barrier()
+        self.unbind_textures(*GBUFFER_UNITS)
+        return vp
+
+    def _fragment_passes(self, state: ViewState, w: int, h: int, first: int, passes: int,
+                         brdf: GpuBrdf) -> tuple[np.ndarray, moderngl.Framebuffer]:
+        """The fallback lit path: ``passes`` passes of object.frag blended into the
+        bound target; returns the view-projection matrix and that target."""
         p = self.program("object.frag", brdf, "object.vert")
         vao = self._mesh_vao(p)
         self._bind_brdf(p, brdf)
         vp = self._surface_uniforms(p, state, w, h, brdf.normal_map)
-        p["u_light_radiance"].value = (state.light_radiance,) * 3
-        p["u_point_on"].value = int(state.point_light is not None)
-        p["u_point_pos"].value = tuple(state.point_light or (0.0, 0.0, 0.0))
-        p["u_point_intensity"].value = (state.point_intensity,) * 3
-        p["u_env_intensity"].value = state.env_intensity
-        p["u_env_on"].value = int(state.env_on)
-        p["u_strategies"].value = 4
-        self.env.bind(p, math.radians(state.env_rotation))
+        self._lit_uniforms(p, state)
         fbo = self.ctx.fbo
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.disable(moderngl.BLEND)
@@ -311,6 +411,35 @@ class Renderer:
         for k in range(first, first + passes):
             p["u_pass"].value = k
             vao.render(moderngl.TRIANGLES)
+        return vp, fbo
+
+    def _lit_uniforms(self, p: moderngl.Program | moderngl.ComputeShader, state: ViewState) -> None:
+        """The lights and the environment of lit_shade.glsl."""
+        ld = np.asarray(state.light_dir, dtype=np.float64)
+        p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
+        p["u_light_radiance"].value = (state.light_radiance,) * 3
+        p["u_point_on"].value = int(state.point_light is not None)
+        p["u_point_pos"].value = tuple(state.point_light or (0.0, 0.0, 0.0))
+        p["u_point_intensity"].value = (state.point_intensity,) * 3
+        p["u_env_intensity"].value = state.env_intensity
+        p["u_env_on"].value = int(state.env_on)
+        p["u_strategies"].value = self.strategies
+        p["u_one_sample"].value = int(self.one_sample_mis)
+        self.env.bind(p, math.radians(state.env_rotation))
+
+    def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
+                       slot: str = MAIN) -> None:
+        cam = state.camera
+        if self.deferred:
+            vp = self._deferred_passes(state, w, h, first, passes, brdf, slot)
+            fbo = self._target(w, h, slot)[0]
+            fbo.depth_mask = False
+            fbo.use()
+            self.ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
+            self.ctx.depth_func = "<="
+            self.ctx.blend_func = moderngl.ONE, moderngl.ONE
+        else:
+            vp, fbo = self._fragment_passes(state, w, h, first, passes, brdf)
         if state.background and state.env_on:
             bg = self.background_prog
             self.env.bind(bg, math.radians(state.env_rotation))

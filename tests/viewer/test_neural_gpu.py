@@ -9,7 +9,7 @@ import torch
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, DecoderSpec, load_decoder
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.gpu_pack import latent_share, pack
-from nbrdf.viewer.neural_gpu import GpuDecoder, probe_compute, probe_fragment
+from nbrdf.viewer.neural_gpu import COMPUTE_STORAGE, GpuDecoder, WeightStorage, probe_compute, probe_fragment
 
 
 def pairs(n: int, seed: int):
@@ -47,16 +47,55 @@ def test_fragment_decoder_matches_torch(gl_ctx, name, dec):
     check_tolerance(gpu, ref)
 
 
-def test_compute_decoder_matches_torch(gl_ctx):
+@pytest.mark.parametrize("storage", list(WeightStorage), ids=lambda s: s.value)
+def test_compute_decoder_matches_torch(gl_ctx, storage):
+    """Every weight storage of the compute path, float32: the SPEC tolerance."""
     if gl_ctx.version_code < 430:
         pytest.skip("no OpenGL 4.3 here")
     torch.manual_seed(4)
-    dec = Decoder(DecoderSpec()).eval()
+    # literals: a smaller network (LLVM takes ~35 s to compile the 64 x 3 one, once per weights)
+    spec = DecoderSpec(width=32, depth=2) if storage == WeightStorage.CONST else DecoderSpec()
+    dec = Decoder(spec).eval()
     z = torch.randn(3, 32)
     wi, wo = pairs(1000, 2)
     with torch.no_grad():
         ref = dec.eval_rgb(z, wi, wo).numpy()
-    check_tolerance(probe_compute(gl_ctx, GpuDecoder(gl_ctx, dec, ssbo=True), z, wi.numpy(), wo.numpy()), ref)
+    check_tolerance(probe_compute(gl_ctx, GpuDecoder(gl_ctx, dec), z, wi.numpy(), wo.numpy(), storage), ref)
+
+
+@pytest.mark.skipif(not DEFAULT_WEIGHTS.is_file(), reason="no shipped weights")
+def test_compute_default_storage_matches_torch_with_shipped_weights(gl_ctx):
+    """The lit pass's default (weights compiled in as literals) on the shipped
+    decoder at random latents, directions below the horizon included (zero)."""
+    if gl_ctx.version_code < 430:
+        pytest.skip("no OpenGL 4.3 here")
+    dec = load_decoder(DEFAULT_WEIGHTS).eval()
+    g = torch.Generator().manual_seed(11)
+    wi, wo = pairs(1000, 4)
+    wo[:100, 2] *= -1
+    gdec = GpuDecoder(gl_ctx, dec)
+    assert gdec.compute_storage == COMPUTE_STORAGE
+    for k in range(3):
+        z = dec.latent_mean + 0.5 * torch.randn(3, 32, generator=g)
+        with torch.no_grad():
+            ref = dec.eval_rgb(z, wi, wo).numpy()
+        ref[:100] = 0.0
+        check_tolerance(probe_compute(gl_ctx, gdec, z, wi.numpy(), wo.numpy()), ref)
+
+
+def test_unrolled_literals_are_the_weights_exactly():
+    """Weights compiled into the shader read back as the same float32 values."""
+    import re
+
+    torch.manual_seed(6)
+    dec = Decoder(DecoderSpec(width=16, depth=2))
+    p = pack(dec)
+    code = p.unrolled_net(literal=True)
+    lits = [np.float32(float(x)) for x in re.findall(r"(?<![\w.\[])(\d\.?\d*e[+-]\d+)", code)]
+    want = np.abs(p.stream.reshape(-1))
+    want = np.sort(want[want != 0])
+    np.testing.assert_array_equal(np.sort(np.array(lits, np.float32)), want)
+    assert "nb_fetch" not in code and "nb_fetch(" in p.unrolled_net(literal=False)
 
 
 def test_directions_below_the_horizon_decode_to_zero(gl_ctx):
@@ -117,16 +156,21 @@ def test_lobe_view_matches_the_torch_lobe_image(gl_ctx):
 def test_bench_render_reports_both_paths():
     from nbrdf.viewer.bench import bench_render
 
-    r = bench_render((48, 32), repeats=1, torch_pairs=4096)
+    r = bench_render((48, 32), repeats=1, torch_pairs=4096, storages=("texture", "ssbo", "ubo"))
     assert r["size"] == "48x32" and r["decoder_only_ms"] > 0 and r["full_shading_one_light_ms"] > 0
     assert r["glsl_over_torch"] == pytest.approx(r["glsl_rgb_evals_per_s"] / r["torch_cpu_rgb_evals_per_s"], rel=1e-2)
     # Per path: the fragment and compute decoders and torch, as multiply-adds per second and a share of the
     # machine's peak (llvmpipe: the CPU's).
-    assert {"fragment_texture", "compute_ssbo", "torch_cpu"} <= set(r["paths"])
+    assert {"fragment_texture", "compute_texture", "compute_ssbo", "compute_ubo", "torch_cpu"} <= set(r["paths"])
+    # Lit frames per path: one light, and one pass with the environment (more work).
+    for path in ("compute", "fragment"):
+        f = r["lit_frames"][path]
+        assert 0 < f["one_light_ms"] and 0 < f["env_pass_ms"] and 0 < f["env_pass_two_strategies_ms"]
+    assert r["lit_frames"]["compute"]["storage"] == "ubo" and r["full_shading_one_light_ms"] > 0
     for entry in r["paths"].values():
         assert entry["gfma_per_s"] == pytest.approx(entry["rgb_evals_per_s"] * r["macs_per_rgb_eval"] / 1e9, rel=1e-2)
         assert 0 < entry["fraction_of_peak"] < 1.5
-    assert r["peak"]["kind"] == "cpu" and r["best_glsl_path"] in ("fragment_texture", "compute_ssbo")
+    assert r["peak"]["kind"] == "cpu" and r["best_glsl_path"] in set(r["paths"]) - {"torch_cpu"}
 
 
 def test_cpu_peak_from_the_cpus_own_report():

@@ -6,14 +6,22 @@
 // fetched once per pixel and used for R, G and B.
 //
 // Needs: PI (common.glsl); NB_WIDTH, NB_WIDTH4, NB_DEPTH, NB_FEATS4, NB_ACT,
-// NB_TEX_W, NB_SSBO, NB_OFF_OUT; the chain of hidden layers (snippet
-// nb_layers); and NB_SHARE(j), the latent's share of layer 1 for unit j
-// (default: the uniform array of a uniform material).
+// NB_TEX_W, NB_STORAGE, NB_COUNT, NB_OFF_OUT, NB_UNROLLED; the chain of hidden
+// layers (snippet nb_layers) or, unrolled, the whole network (snippet nb_net,
+// straight-line code from neural/gpu_pack.py); and NB_SHARE(j), the latent's
+// share of layer 1 for unit j (default: the uniform array of a uniform material).
+//
+// Weight storage (NB_STORAGE): 0 a float texture (OpenGL 3.3, per-pixel
+// fetches), 1 an SSBO, 2 a uniform buffer (every pixel reads the same weight:
+// a broadcast), 3 literals compiled into the unrolled network (no reads at all).
 
-#if NB_SSBO
+#if NB_STORAGE == 1
 layout(std430, binding = 0) readonly buffer NbWeights { vec4 nb_w[]; };
 vec4 nb_fetch(int i) { return nb_w[i]; }
-#else
+#elif NB_STORAGE == 2
+layout(std140, binding = 0) uniform NbWeightsU { vec4 nb_u[NB_COUNT]; };
+vec4 nb_fetch(int i) { return nb_u[i]; }
+#elif NB_STORAGE == 0
 uniform sampler2D u_nb_weights;
 vec4 nb_fetch(int i) { return texelFetch(u_nb_weights, ivec2(i % NB_TEX_W, i / NB_TEX_W), 0); }
 #endif
@@ -50,6 +58,7 @@ void nb_encode(vec3 wi, vec3 wo, out vec4 e[NB_FEATS4]) {
     e[1] = vec4(0.5 * (wi.z + wo.z), 0.0, 0.0, 0.0);
 }
 
+#if !NB_UNROLLED
 // One hidden layer after the first: y = act(W x + b).
 void nb_hidden(in vec3 x[NB_WIDTH], out vec3 y[NB_WIDTH], int off) {
     for (int o = 0; o < NB_WIDTH; ++o) {
@@ -61,12 +70,16 @@ void nb_hidden(in vec3 x[NB_WIDTH], out vec3 y[NB_WIDTH], int off) {
         y[o] = nb_act(s);
     }
 }
+#endif
 
 // f(wi, wo) for R, G, B (no cosine); 0 when a direction is below the horizon.
 vec3 nb_decode(vec3 wi, vec3 wo) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
     vec4 e[NB_FEATS4];
     nb_encode(wi, wo, e);
+#if NB_UNROLLED
+//@INCLUDE nb_net
+#else
     vec3 a[NB_WIDTH];
     vec3 b[NB_WIDTH];
     // Layer 1: the direction part is the same for all channels; the latent
@@ -82,5 +95,6 @@ vec3 nb_decode(vec3 wi, vec3 wo) {
         vec4 w = nb_fetch(NB_OFF_OUT + k);
         y += w.x * a[4 * k] + w.y * a[4 * k + 1] + w.z * a[4 * k + 2] + w.w * a[4 * k + 3];
     }
+#endif
     return exp(min(y, vec3(80.0)));
 }

@@ -1,0 +1,20 @@
+// G-buffer of the deferred lit view (lit.comp shades it): per pixel the
+// shading normal of shading_frame.glsl (world; normal map applied) with the
+// coverage in w, the world position with the latent texture's mip level in w
+// (what texture() would pick here; the compute pass has no derivatives), and
+// the uv. The shading frame is frame_from_normal of that normal in both paths.
+//@INCLUDE common.glsl
+//@INCLUDE shading_frame.glsl
+uniform sampler2DArray u_nb_share_tex;  // a textured neural material's share (mip level only)
+uniform int u_textured;
+layout(location = 0) out vec4 out_normal;
+layout(location = 1) out vec4 out_world;
+layout(location = 2) out vec4 out_uv;
+void main() {
+    vec3 view;
+    mat3 tbn = shading_frame(view);
+    float lod = u_textured != 0 ? textureQueryLod(u_nb_share_tex, v_uv).x : 0.0;
+    out_normal = vec4(tbn[2], 1.0);
+    out_world = vec4(v_world, lod);
+    out_uv = vec4(v_uv, 0.0, 0.0);
+}

@@ -1,0 +1,42 @@
+// Lit object, deferred compute path (OpenGL 4.3): one invocation per pixel of
+// the G-buffer (gbuffer_lit.frag) runs u_passes passes of lit_shade.glsl --
+// the same BRDF snippet, samplers and random numbers (pixel, pass) as the
+// fragment path object.frag -- and adds their sum to the float accumulation
+// image (alpha counts the passes, as the fragment path's blending does).
+//@INCLUDE common.glsl
+// No derivatives in a compute shader: the latent texture is read at the mip
+// level the G-buffer pass found (textureQueryLod), which is what texture()
+// picks in the fragment path. Only the BRDF snippet sees this macro.
+float nb_px_lod = 0.0;
+#define texture(s, p) textureLod(s, p, nb_px_lod)
+//@INCLUDE brdf
+#undef texture
+//@INCLUDE sampling.glsl
+//@INCLUDE environment.glsl
+//@INCLUDE lit_shade.glsl
+
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(rgba32f, binding = 0) uniform image2D u_accum;
+uniform sampler2D u_gb_normal;  // shading normal (world), w = coverage
+uniform sampler2D u_gb_world;   // world position, w = latent mip level
+uniform sampler2D u_gb_uv;      // uv
+uniform vec3 u_eye;
+uniform uint u_first_pass;
+uniform int u_passes;
+
+void main() {
+    ivec2 px = ivec2(gl_GlobalInvocationID.xy);
+    if (any(greaterThanEqual(px, imageSize(u_accum)))) return;
+    vec4 n = texelFetch(u_gb_normal, px, 0);
+    if (n.w < 0.5) return;
+    vec4 world = texelFetch(u_gb_world, px, 0);
+    mat3 tbn = frame_from_normal(n.xyz);
+    vec3 view = normalize(u_eye - world.xyz);
+#ifdef NB_TEXTURED
+    nb_px_lod = world.w;
+    nb_load_share(texelFetch(u_gb_uv, px, 0).xy);
+#endif
+    vec3 sum = vec3(0.0);
+    for (int k = 0; k < u_passes; ++k) sum += shade_lit(tbn, view, world.xyz, uvec2(px), u_first_pass + uint(k));
+    imageStore(u_accum, px, imageLoad(u_accum, px) + vec4(sum, float(u_passes)));
+}
