@@ -30,13 +30,16 @@ def _timed(fn, repeats: int) -> dict:
 def bench_operations(model, repeats: int = 1000) -> dict:
     leaf, net = model.require("leaf"), model.require("layering")
     r3 = torch.tensor([0.9, 0.6, 0.3])
-    z_top, z_bot = leaf.dielectric(torch.tensor([0.1]), torch.tensor([1.5])).expand(3, -1), leaf.conductor(0.3, r3)
+    from nbrdf.neural.coat import with_coat
+
+    top = torch.tensor([[0.1, 1.5]]).expand(3, 2)  # the interface's (roughness, ior): the code's coat
+    z_bot = with_coat(leaf.conductor(0.3, r3), None)
     material = parse_material(THREE_LAYER)
     with torch.no_grad():
         out = {
             "leaf_conductor_rgb": _timed(lambda: leaf.conductor(0.3, r3), repeats),
             "leaf_dielectric": _timed(lambda: leaf.dielectric(torch.tensor([0.1]), torch.tensor([1.5])), repeats),
-            "layering_rgb": _timed(lambda: net(z_top, z_bot, r3, torch.full((3,), 1.0)), repeats),
+            "layering_rgb": _timed(lambda: net(top, z_bot, r3, torch.full((3,), 1.0)), repeats),
             "three_layer_material_latent": _timed(lambda: model.material_latent(material), repeats // 4),
         }
     out["machine"] = {"cpu": platform.processor() or platform.machine(), "torch_threads": torch.get_num_threads()}

@@ -147,9 +147,12 @@ def score(refs: list[tuple[str, Material, Reference]], method: Method, progress:
 
 
 def summarise(rows: list[dict]) -> dict:
+    """Per class (the held-out classes first, then any other in order of
+    appearance) and over all rows: lobe PSNR median / p10, albedo error."""
     out = {}
-    for cls in CLASS_COUNTS:
-        sel = [r for r in rows if r["class"] == cls]
+    seen = list(dict.fromkeys(r["class"] for r in rows))
+    for cls in [c for c in CLASS_COUNTS if c in seen] + [c for c in seen if c not in CLASS_COUNTS] + ["all"]:
+        sel = [r for r in rows if cls == "all" or r["class"] == cls]
         if not sel:
             continue
         ps = np.array([p for r in sel for p in r["psnr"]])
@@ -222,7 +225,7 @@ def analytic_method() -> Method:
 def comparison_table(results: dict[str, dict]) -> str:
     """Markdown: one row per class, median / p10 PSNR and median albedo error per method."""
     methods = list(results)
-    classes = [c for c in CLASS_COUNTS if any(c in r["summary"] for r in results.values())]
+    classes = list(dict.fromkeys(c for r in results.values() for c in r["summary"]))
     head = "| class | " + " | ".join(f"{m}: PSNR median / p10 (dB), albedo err" for m in methods) + " |"
     lines = [head, "|---" * (len(methods) + 1) + "|"]
     for c in classes:
@@ -244,21 +247,23 @@ def glossy_stacks(refs: list[tuple[str, Material, Reference]], max_roughness: fl
 
 def sampling_variance(model, material: Material, n: int = 8192, seed: int = 0) -> dict[str, float]:
     """Variance of the directional-albedo estimator f cos / pdf of the neural
-    BRDF (channel mean), averaged over the standard incidences, for the
-    learned proxy, cosine sampling, and sampling the top interface's GGX lobe."""
+    BRDF (channel mean), averaged over the standard incidences, for its own
+    sampler (the coat's visible normals mixed with the learned proxy, key
+    "proxy"), cosine sampling, and sampling the top interface's GGX lobe."""
     from nbrdf.neural.geometry import cosine_hemisphere, incidence
-    from nbrdf.neural.sampling import proxy_sample
+    from nbrdf.neural.neural_brdf import latent_brdf
     from nbrdf.training.analytic import GGXConductor
 
     z = model.material_latent(material)
-    sigma, w = model.proxy(z)
+    brdf = latent_brdf(model.decoder, z, material, model.sampler)
     top = float(material.interfaces[0][0].roughness) if material.interfaces else 0.3
     g = torch.Generator().manual_seed(seed)
     out = {"proxy": 0.0, "cosine": 0.0, "top_ggx": 0.0}
     for th in THETAS:
         wi = incidence(th).expand(n, 3).contiguous()
         u = torch.rand(n, 3, generator=g)
-        wo_p, pdf_p = proxy_sample(wi, u, sigma, w)
+        sp = brdf.sample(wi, u)
+        wo_p, pdf_p = sp.w, sp.pdf
         wo_c = cosine_hemisphere(u[:, 1], u[:, 2])
         pdf_c = wo_c[:, 2] / math.pi
         s = GGXConductor(top, 1.0).sample(wi, u)

@@ -60,7 +60,18 @@ def test_project_samples_and_merl(tmp_path, capsys, decoder_file):
     assert code == 0, err
     rep = json.loads(out)
     lat = load_latent(tmp_path / "z.safetensors", rep["decoder_id"])
-    assert lat.z.shape == (3, 32)
+    assert lat.z.shape == (3, 34)  # a code: body latent and (no) coat
+    assert lat.z[:, 33].tolist() == [1.0, 1.0, 1.0]
+    code, out, err = run(["project", "--samples", tmp_path / "s.npy", "--out", tmp_path / "zc.safetensors",
+                          "--decoder", decoder_file, "--steps", 20, "--coat", "0.02,1.5"], capsys)
+    assert code == 0, err
+    coated = load_latent(tmp_path / "zc.safetensors", json.loads(out)["decoder_id"])
+    assert torch.allclose(coated.z[:, 32:], torch.tensor([[0.02, 1.5]]).expand(3, 2))
+    for bad in ("0.02", "0.02,9", "x,y"):
+        code, _, err = run(["project", "--samples", tmp_path / "s.npy", "--out", tmp_path / "zb.safetensors",
+                            "--decoder", decoder_file, "--coat", bad], capsys)
+        assert_one_line_error(code, err)
+        assert "--coat" in err
 
     c = GGXConductor(0.3, torch.tensor([0.9, 0.6, 0.3], dtype=torch.float64))
     MerlBRDF.tabulate(lambda wi, wo: c.eval(wi[:, None].expand(-1, 3, -1), wo[:, None].expand(-1, 3, -1))).save(

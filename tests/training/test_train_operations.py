@@ -52,8 +52,10 @@ def test_the_bundle_drives_the_full_path_for_any_stack(bundles):
     _, _, _, smp = bundles
     m = load_model(smp)
     z = m.material_latent(THREE)
-    assert z.shape == (3, 32) and bool(torch.isfinite(z).all())
+    assert z.shape == (3, 34) and bool(torch.isfinite(z).all())
     assert not torch.allclose(z[0], z[2])  # colour reaches the latents
+    top = THREE.layers[0]
+    assert torch.allclose(z[:, 32:], torch.tensor([[top.roughness, top.ior]]).expand(3, 2))  # the exact coat
     sigma, w = m.proxy(z)
     assert 0.003 <= sigma <= 2.0 and 0.02 <= w <= 0.98
     wi = torch.nn.functional.normalize(torch.tensor([[0.3, 0.1, 0.9]]).expand(256, 3), dim=-1)
