@@ -1,6 +1,6 @@
 """``nbrdf eval``, ``nbrdf lobe``, ``nbrdf sample``: a material's BRDF on
 direction pairs, its standard lobe image, and directions drawn through the
-learned proxy pdf."""
+material's sampler (clear coat + learned proxy pdf)."""
 from __future__ import annotations
 
 import argparse
@@ -56,7 +56,8 @@ class LobeConfig:
 
 @dataclass
 class SampleConfig:
-    """``nbrdf sample``: importance-sample wo through the learned proxy pdf."""
+    """``nbrdf sample``: importance-sample wo through the material's sampler (the clear coat's visible normals
+    mixed with the body's learned proxy pdf)."""
 
     material: str
     """material JSON (SPEC section 4)"""
@@ -148,22 +149,24 @@ def cmd_lobe(a: argparse.Namespace) -> int:
 def cmd_sample(a: argparse.Namespace) -> int:
     import torch
 
+    from nbrdf.neural.coat import code_coat
     from nbrdf.neural.geometry import incidence
-    from nbrdf.neural.sampling import proxy_sample
+    from nbrdf.neural.neural_brdf import latent_brdf
 
     c: SampleConfig = build(SampleConfig, a)
     at_least("--n", c.n)
     if not 0 <= c.theta_i < 90:
         raise NbrdfError(f"--theta-i: {c.theta_i} must lie in [0, 90)")
     model = model_or_default(c.model)
-    z = model.material_latent(load_material(c.material))
-    sigma, w = model.proxy(z)
+    material = load_material(c.material)
+    z = model.material_latent(material)
+    brdf = latent_brdf(model.decoder, z, material, model.require("sampler"))
     wi = incidence(c.theta_i).expand(c.n, 3).contiguous()
     u = torch.rand(c.n, 3, generator=torch.Generator().manual_seed(c.seed))
-    wo, pdf = proxy_sample(wi, u, sigma, w)
-    pdf = torch.where(wo[:, 2] > 0, pdf, torch.zeros_like(pdf))  # below the horizon: a failed sample
-    np.save(out_path(c.out, (".npy",)), torch.cat([wo, pdf[:, None]], 1).numpy().astype(np.float32))
-    print(json.dumps({"sigma": sigma, "w": w, "failed": int((pdf == 0).sum())}))
+    s = brdf.sample(wi, u)  # the coat's visible normals mixed with the body's proxy; pdf 0 below the horizon
+    np.save(out_path(c.out, (".npy",)), torch.cat([s.w, s.pdf[:, None]], 1).numpy().astype(np.float32))
+    print(json.dumps({"sigma": brdf.sigma, "w": brdf.w, "coat": list(code_coat(model.decoder.spec, z)),
+                      "failed": int((s.pdf == 0).sum())}))
     return 0
 
 
@@ -172,7 +175,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     for name, cls, fn, help_ in (
             ("eval", EvalConfig, cmd_eval, "evaluate a material's BRDF on direction pairs"),
             ("lobe", LobeConfig, cmd_lobe, "the standard 64x64 lobe image (SPEC section 9)"),
-            ("sample", SampleConfig, cmd_sample, "importance-sample wo through the learned proxy pdf")):
+            ("sample", SampleConfig, cmd_sample,
+             "importance-sample wo: the clear coat's visible normals mixed with the learned proxy pdf")):
         p = sub.add_parser(name, help=help_, description=cls.__doc__)
         add_arguments(p, cls)
         p.set_defaults(fn=fn)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from nbrdf.neural.model import default_model
-from nbrdf.neural.sampling import proxy_pdf
+from nbrdf.neural.sampling import coated_pdf
 from test_cli import DEFAULT, assert_one_line_error, random_pairs, run, write_material
 
 THREE = [{"type": "dielectric", "roughness": 0.1, "ior": 1.5}, {"type": "medium", "albedo": 0.5, "sigma_t": 0.2},
@@ -41,7 +41,8 @@ def test_lobe_neural_is_the_eval_on_the_lobe_grid(tmp_path, capsys):
     assert img.shape == (64, 64, 3) and img.max() > 0.1
 
 
-def test_sample_writes_directions_and_their_proxy_pdf(tmp_path, capsys):
+def test_sample_writes_directions_and_their_pdf(tmp_path, capsys):
+    """The material's sampler: the coat's lobe mixed with the body's proxy, its exact mixture pdf."""
     code, out, err = run(["sample", "--material", DEFAULT, "--theta-i", 45, "--n", 4000, "--out",
                           tmp_path / "s.npy"], capsys)
     assert code == 0, err
@@ -54,8 +55,10 @@ def test_sample_writes_directions_and_their_proxy_pdf(tmp_path, capsys):
 
     t = math.radians(45)
     wi = torch.tensor([[math.sin(t), 0.0, math.cos(t)]]).expand(int(ok.sum()), 3)
-    pdf = proxy_pdf(wi, torch.from_numpy(s[ok, :3]), torch.tensor(info["sigma"]), torch.tensor(info["w"]))
+    pdf = coated_pdf(wi, torch.from_numpy(s[ok, :3]), torch.tensor(info["coat"]), torch.tensor(info["sigma"]),
+                     torch.tensor(info["w"]))
     assert np.allclose(pdf.numpy(), s[ok, 3], rtol=1e-4)
+    assert info["coat"][1] > 1  # the default material has a clear coat
     assert (s[~ok, 2] <= 0).all()  # a failed sample is one below the horizon
 
 
