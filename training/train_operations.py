@@ -63,7 +63,7 @@ class OpsConfig:
     seed: int = 0
     """random seed of initialisation and batches"""
     data: str | None = None
-    """layering: a folder made by `nbrdf data --preset layering`"""
+    """layering: a folder made by `nbrdf data --preset layering` (several: comma-separated)"""
     recursion_steps: int = 1500
     """layering: final steps that mix in three-layer stacks (recursive layering)"""
     width: int = 0
@@ -263,14 +263,16 @@ class _StackData:
     """A data set's stacks in memory with decoder features and loss targets
     (of the bodies: the codes' coats are exact, ``neural.coat``)."""
 
-    def __init__(self, folder: str, split: str, scale: float):
-        d = load_split(folder, split)
-        self.params = d.params
-        self.feats = encode(d.wi, d.wo)
-        self.cos_o = d.wo[..., 2]
-        self.target = loss_target(body_values(d), self.cos_o, scale)
-        cls = [CLASSES.index(c) for c in d.classes]
-        self.cls = torch.tensor(cls)
+    def __init__(self, folders: str, split: str, scale: float):
+        """``folders``: one data set, or several joined by commas (same pairs per stack)."""
+        parts = [load_split(f.strip(), split) for f in folders.split(",") if f.strip()]
+        if len({p.wi.shape[1] for p in parts}) != 1:
+            raise NbrdfError(f"--data: {folders}: the data sets have different numbers of pairs per stack")
+        self.params = torch.cat([d.params for d in parts])
+        self.feats = torch.cat([encode(d.wi, d.wo) for d in parts])
+        self.cos_o = torch.cat([d.wo[..., 2] for d in parts])
+        self.target = torch.cat([loss_target(body_values(d), d.wo[..., 2], scale) for d in parts])
+        self.cls = torch.tensor([CLASSES.index(c) for d in parts for c in d.classes])
 
     def index_of(self, *names: str) -> Tensor:
         return torch.isin(self.cls, torch.tensor([CLASSES.index(n) for n in names])).nonzero().squeeze(-1)
@@ -288,7 +290,7 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
         raise NbrdfError("--data: the layering network trains on a stack data set (nbrdf data --preset layering)")
     model = load_model(cfg.decoder)
     model.require("leaf")
-    manifest = load_manifest(cfg.data)
+    manifests = [load_manifest(f.strip()) for f in cfg.data.split(",") if f.strip()]
     torch.manual_seed(cfg.seed)
     g = torch.Generator().manual_seed(cfg.seed)
     s_ = model.decoder.spec.loss_scale
@@ -333,7 +335,7 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
     model.trained_on.pop("sampler", None)
     return _finish("layering", cfg, model, history, {
         "seconds_this_run": round(time.perf_counter() - t0, 1), "val_loss": history["val"][-1],
-        "data_preset": manifest.get("preset"), "train_stacks": int(two.numel() + three.numel())})
+        "data_preset": ",".join(str(m.get("preset")) for m in manifests), "train_stacks": int(two.numel() + three.numel())})
 
 
 # --- sampler --------------------------------------------------------------------------------
