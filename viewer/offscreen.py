@@ -20,8 +20,9 @@ def has_display() -> bool:
 def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     """Renders the view through EGL and writes ``opts.out``. As the fallback
     for a window (``fallback`` = why there is none, said in one line), it is a
-    preview: on software OpenGL at most 256 x 256 and 8 passes, because the
-    neural shader costs minutes there at full size."""
+    preview: on software OpenGL at most 256 x 256 and 32 passes (the default
+    16 take about 10 s on two cores with the compute lit pass; full size
+    costs minutes)."""
     from nbrdf.viewer.gl import offscreen_context
     from nbrdf.viewer.image_io import check_output, write_image
     from nbrdf.viewer.renderer import ViewState
@@ -40,7 +41,7 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
         if any(k in ctx.info.get("GL_RENDERER", "").lower() for k in ("llvmpipe", "softpipe", "swrast")):
             w, h = opts.size
             scale = min(1.0, 256 / max(w, h))
-            size, spp = (max(1, round(w * scale)), max(1, round(h * scale))), min(opts.spp, 8)
+            size, spp = (max(1, round(w * scale)), max(1, round(h * scale))), min(opts.spp, 32)
             if (size, spp) != (opts.size, opts.spp):
                 opts.size, opts.spp = size, spp
                 note = f" (software OpenGL: a {size[0]}x{size[1]}, {spp}-pass preview)"
