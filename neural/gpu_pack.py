@@ -62,19 +62,15 @@ class PackedDecoder:
                 "NB_TEX_W": TEXTURE_WIDTH, "NB_STORAGE": storage, "NB_COUNT": self.stream.shape[0],
                 "NB_OFF_OUT": self.offsets["out"], "NB_UNROLLED": int(unrolled)}
 
-    def unrolled_net(self, literal: bool) -> str:
-        """The whole network after the encoding as straight-line GLSL (no loops,
-        every weight at a constant place): ``literal`` writes each weight as a
-        float literal (weights compiled into the shader: each one a broadcast
-        operand of a vector FMA), otherwise as ``nb_fetch(i).c`` at a constant
-        index (one uniform load per weight for UBO / SSBO storage). Reads
-        ``e`` (the encoding) and NB_SHARE(j); leaves the output in ``vec3 y``."""
+    def unrolled_net(self) -> str:
+        """The whole network after the encoding as straight-line GLSL with every
+        weight a float literal (compiled into the shader: each one a broadcast
+        operand of a vector FMA; zero weights are left out). Reads ``e`` (the
+        encoding) and NB_SHARE(j); leaves the output in ``vec3 y``."""
         st, s = self.stream, self.spec
         wd, w4, f4 = s.width, s.width // 4, -(-s.features // 4)
 
         def weight(i: int, c: int) -> str | None:
-            if not literal:
-                return f"nb_fetch({i}).{'xyzw'[c]}"
             v = np.float32(st[i, c])
             return None if v == 0 else _glsl_float(v)
 

@@ -194,6 +194,19 @@ def material_stack(material: Material, values: ParamValues | None = None,
 
 
 # --- the data sets' flat vectors -----------------------------------------------------------
+def params_coats(params: Tensor) -> Tensor:
+    """(K, 2) clear coats (``Stack.coat``) of K parameter vectors of any
+    classes at once: the top interface's (roughness, ior), ``NO_COAT`` for a
+    conductor (every other class stores its top interface, or the bare
+    dielectric itself, in the top columns)."""
+    from nbrdf.neural.coat import NO_COAT
+
+    params = torch.as_tensor(params)
+    c = torch.stack([params[:, P["top_roughness"]], params[:, P["top_ior"]]], -1)
+    bare = params[:, P["class"]].round().long() == CLASSES.index("conductor")
+    return torch.where(bare[:, None], torch.tensor(NO_COAT, dtype=c.dtype), c)
+
+
 def params_to_stack(params: Tensor) -> Stack:
     """Decodes K single-channel parameter vectors (K, 11) of ONE class into
     a stack (C = 1), float64."""

@@ -31,7 +31,7 @@ from nbrdf.neural.geometry import cosine_hemisphere
 # The stack classes and the on-disk parameter vector belong to the stack translation
 # (neural.stack), the paper's distributions to training.distributions; re-exported here.
 from nbrdf.neural.stack import (CLASSES, DIFFUSE_BASED, PARAM_NAMES, THREE_LAYERED, P,  # noqa: F401
-                                params_to_material, params_to_stack)
+                                params_coats, params_to_material, params_to_stack)
 from nbrdf.training.distributions import clear_top_slabs, sample_params, sharpen_coats  # noqa: F401
 
 Tensor = torch.Tensor
@@ -255,24 +255,13 @@ class BRDFSet:
         return self.params.shape[0]
 
 
-def coats(params: Tensor) -> Tensor:
-    """(K, 2) clear coats (top interface roughness, ior; ``neural.coat``) of K
-    data-set parameter vectors of any classes; ``NO_COAT`` for conductors."""
-    from nbrdf.neural.coat import NO_COAT
-
-    params = torch.as_tensor(params)
-    c = torch.stack([params[:, P["top_roughness"]], params[:, P["top_ior"]]], -1)
-    bare = params[:, P["class"]].round().long() == CLASSES.index("conductor")
-    return torch.where(bare[:, None], torch.tensor(NO_COAT, dtype=c.dtype), c)
-
-
 def body_values(data: "BRDFSet") -> Tensor:
     """The values (K, n) without the top interface's closed-form reflection:
     what a coat-split decoder represents (the simulator adds that reflection
     analytically, so the difference carries no extra noise)."""
     from nbrdf.neural.coat import coat_eval
 
-    c = coats(data.params).to(data.f.dtype)[:, None, :]
+    c = params_coats(data.params).to(data.f.dtype)[:, None, :]
     return (data.f - coat_eval(c, data.wi.to(data.f.dtype), data.wo.to(data.f.dtype))).clamp_min(0.0)
 
 

@@ -92,17 +92,23 @@ def sample_params(cls: str, n: int, g: torch.Generator) -> Tensor:
     return p
 
 
+def _pick_stacks(p: Tensor, share: float, g: torch.Generator) -> tuple[Tensor, Tensor]:
+    """Three uniforms per row of ``p`` (drawn for every row, so the stream does
+    not depend on the classes) and the mask of the stacks (not single
+    interfaces) whose first uniform falls below ``share``."""
+    u = torch.rand(p.shape[0], 3, generator=g, dtype=torch.float64)
+    cls = p[:, P["class"]].round().long()
+    stacks = (cls != CLASSES.index("conductor")) & (cls != CLASSES.index("dielectric"))
+    return u, stacks & (u[:, 0] < share)
+
+
 def sharpen_coats(p: Tensor, share: float, g: torch.Generator) -> Tensor:
     """Redraws a ``share`` of the stacks in ``p`` (in place; returned) in the
     look-development range the paper's distributions rarely reach: a top coat
     of roughness U(0.01, 0.06) over a bright base (r0 or albedo 1 - U(0, 1)^2).
     Single interfaces are left alone. Draws a fixed number of uniforms per
     row, so the result depends only on ``g``'s state and ``p``."""
-    n = p.shape[0]
-    u = torch.rand(n, 3, generator=g, dtype=torch.float64)
-    cls = p[:, P["class"]].round().long()
-    stacks = (cls != CLASSES.index("conductor")) & (cls != CLASSES.index("dielectric"))
-    pick = stacks & (u[:, 0] < share)
+    u, pick = _pick_stacks(p, share, g)
     p[pick, P["top_roughness"]] = 0.01 + 0.05 * u[pick, 1]
     p[pick, P["base_value"]] = 1.0 - u[pick, 2] ** 2
     return p
@@ -115,11 +121,7 @@ def clear_top_slabs(p: Tensor, share: float, g: torch.Generator) -> Tensor:
     on its base (coated metals, glazes, the clear coat over a car paint's
     base coat), which U(0, 5) almost never draws. Single interfaces are left
     alone; a fixed number of uniforms per row."""
-    n = p.shape[0]
-    u = torch.rand(n, 3, generator=g, dtype=torch.float64)
-    cls = p[:, P["class"]].round().long()
-    stacks = (cls != CLASSES.index("conductor")) & (cls != CLASSES.index("dielectric"))
-    pick = stacks & (u[:, 0] < share)
+    u, pick = _pick_stacks(p, share, g)
     p[pick, P["sigma_t_1"]] = torch.where(u[pick, 1] < 0.5, 0.0, 0.3 * u[pick, 2])
     return p
 

@@ -174,7 +174,9 @@ class Compare:
                a.size, int(math.log2(max(pa, 1.0))))
         if key != self._flip_key:
             test = _resample(_read_linear(a, pa), b.size)
-            self.flip_mean, fmap = hdr_flip(_read_linear(b, pb), test)
+            from nbrdf.training.render_report import flip  # the evaluation of `nbrdf report render`
+
+            self.flip_mean, fmap = flip(_read_linear(b, pb), test)
             data = np.ascontiguousarray(fmap, dtype="f4")
             if self._flip_tex is not None:
                 self._flip_tex.release()
@@ -216,14 +218,6 @@ class Compare:
             if tex is not None:
                 tex.release()
         self._tex = self._flip_tex = None
-
-
-def hdr_flip(reference: np.ndarray, test: np.ndarray) -> tuple[float, np.ndarray]:
-    """HDR-FLIP (default settings) of two linear (H, W, 3) images: (mean, (H, W) map);
-    the same evaluation as ``nbrdf report render`` (training/render_report.py)."""
-    from nbrdf.training.render_report import flip
-
-    return flip(reference, test)
 
 
 def _read_linear(tex: moderngl.Texture, passes: float) -> np.ndarray:

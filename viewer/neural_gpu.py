@@ -74,7 +74,7 @@ class GpuDecoder:
         self.texture = ctx.texture((w, h), 4, self.packed.texture_bytes(), dtype="f4")
         self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self._buffers: dict[WeightStorage, moderngl.Buffer] = {}
-        self._nets: dict[bool, str] = {}
+        self._net: str | None = None  # the unrolled network with literal weights, made on first use
         self.compute_storage: WeightStorage = storage if storage != WeightStorage.TEXTURE else COMPUTE_STORAGE
         """Where the compute lit pass (viewer/renderer.py) reads the weights."""
         if storage in (WeightStorage.SSBO, WeightStorage.UBO):
@@ -106,10 +106,9 @@ class GpuDecoder:
         storage = storage or self.storage
         out = {"nb_layers": self.packed.layer_chain(), "nb_share": "", "nb_net": ""}
         if storage.unrolled:
-            literal = storage == WeightStorage.CONST
-            if literal not in self._nets:
-                self._nets[literal] = self.packed.unrolled_net(literal)
-            out["nb_net"] = self._nets[literal]
+            if self._net is None:
+                self._net = self.packed.unrolled_net()
+            out["nb_net"] = self._net
         return out
 
     def defines(self, storage: WeightStorage | None = None) -> dict[str, object]:

@@ -104,7 +104,7 @@ class Renderer:
                  latent_texture: "LatentTexture | None" = None, brdf: GpuBrdf | None = None,
                  compute: bool | None = None):
         """``brdf`` (from viewer/pipeline.py) or ``material`` (optional) becomes the default BRDF: with ``neural``
-        (with the material's ``latent``, (3, 32), and its proxy pdf's (sigma, w))
+        (with the material's ``latent``, a (3, 34) code, and its proxy pdf's (sigma, w))
         the decoder in GLSL, without it the closed form. A texture-mapped
         material comes as its ``latent_texture`` instead of a latent.
         ``environment`` is an equirectangular float32 (H, W, 3) radiance map

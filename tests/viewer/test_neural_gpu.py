@@ -90,12 +90,12 @@ def test_unrolled_literals_are_the_weights_exactly():
     torch.manual_seed(6)
     dec = Decoder(DecoderSpec(width=16, depth=2))
     p = pack(dec)
-    code = p.unrolled_net(literal=True)
+    code = p.unrolled_net()
     lits = [np.float32(float(x)) for x in re.findall(r"(?<![\w.\[])(\d\.?\d*e[+-]\d+)", code)]
     want = np.abs(p.stream.reshape(-1))
     want = np.sort(want[want != 0])
     np.testing.assert_array_equal(np.sort(np.array(lits, np.float32)), want)
-    assert "nb_fetch" not in code and "nb_fetch(" in p.unrolled_net(literal=False)
+    assert "nb_fetch" not in code
 
 
 def test_directions_below_the_horizon_decode_to_zero(gl_ctx):
