@@ -25,6 +25,20 @@ more frequent with 1/F(entry) times less weight: those paths carried the rare
 large contributions (docs/RESULTS.md, "Ground truth v2"). Both changes keep
 the estimator unbiased (a weight moved out of a random choice; roulette with
 any survival probability > 0 divided out).
+
+Two more changes for that light:
+
+- for an empty top slab over a conductor, a two-bounce connection at the entry and at every internal reflection at
+  the top: the reflected direction is drawn from the exit lobe toward wo
+  mirrored about the plane, the base's from its VNDF, and the exit is
+  evaluated in closed form; it is one of three strategies (walk, next-event
+  at the base, connection) for the same three-vertex path, combined by the
+  balance heuristic, so the product of the coat's exit lobe and a
+  near-mirror base is no longer found by chance;
+- on every stack, reciprocity: the walk starts from the more grazing of
+  (wi, wo) (a stack reflects into the air it is lit from), whose light
+  refracts nearer the critical angle, so the trapped state is reached often
+  (on the benchmark's stack this also lowers variance x vertices by 15 %).
 """
 from __future__ import annotations
 
@@ -279,14 +293,25 @@ def _top_reflect(wx, wy, wz, a, eta, u0, u1, u2, lam, wide, a_wide, ox, oy, oz):
         if pg <= 0.0:
             return tx, ty, tz, 0.0, 0.0
         dx, dy, dz = -tx, -ty, tz  # -t goes up; mirrored about the plane it goes down
-    if wz * dz <= 0.0:
+    fc, p = _top_eval(wx, wy, wz, dx, dy, dz, a, eta, lam, wide, a_wide, ox, oy, oz)
+    if p <= 0.0:
         return dx, dy, dz, 0.0, 0.0
+    return dx, dy, dz, fc / p, p
+
+
+@njit(**_JIT)
+def _top_eval(wx, wy, wz, dx, dy, dz, a, eta, lam, wide, a_wide, ox, oy, oz):
+    """(f_r(w, d) |d_z|, the density ``_top_reflect`` draws d with) for the
+    internal reflection at the top seen from below."""
+    if wz * dz <= 0.0:
+        return 0.0, 0.0
+    aw = max(a, a_wide)
     hx, hy, hz = _norm3(wx + dx, wy + dy, wz + dz)
     if hz < 0.0:
         hx, hy, hz = -hx, -hy, -hz
     wm = abs(wx * hx + wy * hy + wz * hz)
     if wm == 0.0:
-        return dx, dy, dz, 0.0, 0.0
+        return 0.0, 0.0
     pa = _vndf_pdf(wx, wy, wz, hx, hy, hz, a) / (4.0 * wm)
     p = pa
     if lam < 1.0:
@@ -295,12 +320,10 @@ def _top_reflect(wx, wy, wz, a, eta, u0, u1, u2, lam, wide, a_wide, ox, oy, oz):
         else:
             alt = _ft_pdf(a, eta, ox, oy, oz, -dx, -dy, dz)
         p = lam * pa + (1.0 - lam) * alt
-    if p <= 0.0:
-        return dx, dy, dz, 0.0, 0.0
     F = _fresnel(wm, eta if wz > 0.0 else 1.0 / eta)
     f = (F * _ggx_d(hx, hy, hz, a) * _g1(wx, wy, wz, hx, hy, hz, a) * _g1(dx, dy, dz, hx, hy, hz, a)
          / max(4.0 * abs(wz * dz), 1e-30))
-    return dx, dy, dz, f * abs(dz) / p, p
+    return f * abs(dz), p
 
 
 @njit(**_JIT)
@@ -349,6 +372,43 @@ def _cond_geo(ix, iy, iz, ox, oy, oz, a):
     return f, p, x
 
 
+@njit(**_JIT)
+def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, ox, oy, oz, u0, u1, u2, u3, entry):
+    """Strategy C of the two-bounce connection (top reflection -> base ->
+    exit toward wo) for an empty top slab over a conductor: draws the
+    reflected direction g from the exit lobe toward wo mirrored about the
+    plane (the guide), the base's direction u from its VNDF, and evaluates
+    the exit in closed form. Returns (value without Fresnel and beta:
+    f_r |g_z| / p_g * f_c u_z / p_c * f_exit * MIS weight, Schlick's x at the
+    base); the MIS weight is C's share of the balance heuristic over A (walk:
+    p_mix(g) p_c(u)), B (next-event at the base: p_mix(g) p_n(u)) and C
+    (p_g(g) p_c(u)). ``entry``: w is wi above the stack and the first vertex
+    is the forced refraction into it instead of the internal reflection."""
+    tx, ty, tz, _, pg = _ft_sample(a0, e0, ox, oy, oz, u0, u1)
+    if pg <= 0.0:
+        return 0.0, 0.0
+    gx, gy, gz = -tx, -ty, tz
+    if entry:
+        fr, _ = _diel_eval_pdf(wx, wy, wz, gx, gy, gz, a0, e0)
+        fr *= abs(gz)
+        pm = _ft_pdf(a0, e0, wx, wy, wz, gx, gy, gz)
+    else:
+        fr, pm = _top_eval(wx, wy, wz, gx, gy, gz, a0, e0, lam, wide, a_wide, ox, oy, oz)
+    if fr <= 0.0:
+        return 0.0, 0.0
+    mx, my, mz = _sample_vndf(-gx, -gy, -gz, ba, u2, u3)
+    ux, uy, uz = _reflect(-gx, -gy, -gz, mx, my, mz)
+    fc, pc, x = _cond_geo(-gx, -gy, -gz, ux, uy, uz, ba)
+    if fc <= 0.0 or pc <= 0.0:
+        return 0.0, 0.0
+    fe, _ = _diel_eval_pdf(-ux, -uy, -uz, ox, oy, oz, a0, e0)
+    if fe <= 0.0:
+        return 0.0, 0.0
+    pn = _ft_pdf(a0, e0, ox, oy, oz, -ux, -uy, -uz)
+    w = pg * pc / (pm * pc + pm * pn + pg * pc)
+    return fr / pg * fc * uz / pc * fe * w, x
+
+
 # --- the walk -----------------------------------------------------------------------------
 @njit(**_JIT)
 def _nee(z, ox, oy, oz, a0, e0, tau0, u0, u1):
@@ -381,6 +441,13 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
     dx, dy, dz, w_entry, _ = _ft_sample(a0, e0, ix, iy, iz, u0, u1)
     for c in range(C):
         out[c] = 0.0
+    conn = forced and L == 1 and base == 0 and tau0 == 0.0
+    if conn:  # strategy C from the entry (independent of the walk's first sample)
+        k, x = _mirror_connection(ix, iy, iz, a0, e0, b_rough[q], 1.0, False, a_wide, ox, oy, oz,
+                                  _uniform(key, 2), _uniform(key, 3), _uniform(key, 4), _uniform(key, 5), True)
+        if k > 0.0:
+            for c in range(C):
+                out[c] += k * (x + b_r0[q, c] * (1.0 - x))
     if w_entry <= 0.0:
         return 0
     for c in range(C):
@@ -392,6 +459,14 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
     bounces = 0
     vx = vy = vz = pn = p = 0.0
     nx, ny, nz = dx, dy, dz
+    # the two-bounce connection (strategy C) is on for an empty top slab over
+    # a conductor; (pm, pg): densities of the current downward direction from
+    # the walk's mixture and from the guide (pg = 0: no top vertex before it)
+    pm, pg = 1.0, 0.0
+    if conn:
+        ctr = 6
+        pm = _ft_pdf(a0, e0, ix, iy, iz, dx, dy, dz)
+        pg = _ft_pdf(a0, e0, ox, oy, oz, -dx, -dy, dz)
     while bounces < max_depth:
         bounces += 1
         vertices += 1
@@ -436,17 +511,27 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 f, _ = _diel_eval_pdf(wx, wy, wz, ox, oy, oz, a0, e0)
                 if f > 0.0:
                     pn = _ft_pdf(a0, e0, ox, oy, oz, wx, wy, wz)
-                    k = f * pdf_last / (pdf_last + pn)
+                    k = f * pm * pdf_last / (pm * pdf_last + pm * pn + pg * pdf_last)
                     for c in range(C):
                         out[c] += beta[c] * k
                 if forced:
                     trapped = (1.0 - wz * wz) * e0 * e0 >= 1.0
                     if trapped:
-                        lm, wide = (lam if tau0 == 0.0 else 1.0), False
+                        lm, wide = (1.0 if conn else lam if tau0 == 0.0 else 1.0), False
                     else:
                         lm, wide = lam_w, True
                     nx, ny, nz, wgt, p = _top_reflect(wx, wy, wz, a0, e0, _uniform(key, ctr), _uniform(key, ctr + 1),
                                                       _uniform(key, ctr + 2), lm, wide, a_wide, ox, oy, oz)
+                    if conn:
+                        k, x = _mirror_connection(wx, wy, wz, a0, e0, b_rough[q], lm, wide, a_wide, ox, oy, oz,
+                                                  _uniform(key, ctr + 3), _uniform(key, ctr + 4),
+                                                  _uniform(key, ctr + 5), _uniform(key, ctr + 6), False)
+                        if k > 0.0:
+                            for c in range(C):
+                                out[c] += beta[c] * k * (x + b_r0[q, c] * (1.0 - x))
+                        ctr += 4
+                        pm = p
+                        pg = _ft_pdf(a0, e0, ox, oy, oz, -nx, -ny, nz) if p > 0.0 else 0.0
                 else:
                     nx, ny, nz, wgt, p = _diel_sample(wx, wy, wz, a0, e0, _uniform(key, ctr), _uniform(key, ctr + 1),
                                                       _uniform(key, ctr + 2))
@@ -485,7 +570,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 if base == 0:
                     if sc > 0.0:
                         f, pb, x = _cond_geo(wx, wy, wz, vx, vy, vz, ba)
-                        k = f * abs(vz) * sc * pn / (pn + pb)
+                        k = f * abs(vz) * sc * pm * pn / (pm * pn + pm * pb + pg * pb)
                         for c in range(C):
                             out[c] += beta[c] * k * (x + b_r0[q, c] * (1.0 - x))
                     mx, my, mz = _sample_vndf(wx, wy, wz, ba, _uniform(key, ctr), _uniform(key, ctr + 1))
@@ -523,19 +608,22 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
             dx, dy, dz, pdf_last = nx, ny, nz, p
         u = _uniform(key, ctr)
         ctr += 1
-        if not alive:
-            break
-        bmax = 0.0
-        for c in range(C):
-            bmax = max(bmax, beta[c])
-        if not bmax > 0.0:
-            break
-        if bounces >= rr_depth:
-            qs = min(bmax / rr_weight, 1.0) if forced else min(bmax, 0.95)
-            if u >= qs:
-                break
+        stop = not alive
+        if not stop:
+            bmax = 0.0
             for c in range(C):
-                beta[c] /= qs
+                bmax = max(bmax, beta[c])
+            if not bmax > 0.0:
+                stop = True
+            elif bounces >= rr_depth:
+                qs = min(bmax / rr_weight, 1.0) if forced else min(bmax, 0.95)
+                if u >= qs:
+                    stop = True
+                else:
+                    for c in range(C):
+                        beta[c] /= qs
+        if stop:
+            break
     return vertices
 
 
@@ -583,6 +671,14 @@ def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndar
     the path contributions (N, C), the per-block sums (N, n_blocks, C) for
     batch means, the vertex count and the number of dropped paths."""
     f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)
+    if forced:
+        # reciprocity (both directions lie above the stack): walk from the
+        # more grazing one, whose light refracts nearer the critical angle and
+        # feeds the light trapped under the coat; the steeper one's exit lobe
+        # is then reached by next-event estimation and the two-bounce
+        # connection instead of by rare paths (docs/RESULTS.md, Ground truth v2)
+        swap = (np.asarray(wo)[:, 2] < np.asarray(wi)[:, 2])[:, None]
+        wi, wo = np.where(swap, wo, wi), np.where(swap, wi, wo)
     N = wi.shape[0]
     C = alb.shape[2]
     s1, s2, verts, dropped = _run(f64(wi), f64(wo), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, f64(rough), f64(ior),

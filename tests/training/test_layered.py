@@ -21,7 +21,11 @@ CONFIGS = (
     + [([(0.2, 1.5, 0.8, 1.0)], ("diffuse", 0.7)),
        ([(0.4, 1.3, 0.95, 2.0)], ("dielectric", 0.2, 1.6)),
        ([(0.3, 1.5, 0.9, 1.0), (0.2, 1.3, 0.5, 0.5)], ("conductor", 0.3, 0.9)),
-       ([(0.1, 1.6, 0.7, 0.3), (0.5, 1.2, 0.9, 2.0)], ("diffuse", 0.5))]
+       ([(0.1, 1.6, 0.7, 0.3), (0.5, 1.2, 0.9, 2.0)], ("diffuse", 0.5)),
+       # empty top slabs over conductors: the two-bounce connection and the
+       # reversed walk (light trapped by total internal reflection, issue 14)
+       ([(0.15, 1.5, 0.0, 0.0)], ("conductor", 0.02, 1.0)),
+       ([(0.3, 1.3, 0.0, 0.0)], ("conductor", 0.2, 0.7))]
 )
 Z_LIMIT = z_threshold(1e-3, len(CONFIGS) * N_THETA * N_PHI)
 

@@ -86,8 +86,8 @@ def test_input_that_cannot_be_simulated_is_one_line(what):
 
 def test_v2_agrees_with_v1_and_costs_less_on_the_trapping_stack():
     """Same expectation as the v1 estimator (long runs, z-scores with
-    Bonferroni); variance x vertices at least 1.5x lower where the trapped
-    light leaves (55-65 degrees, off the plane of incidence)."""
+    Bonferroni); variance x vertices at least 20x lower where the trapped
+    light leaves (55-65 degrees, off the plane of incidence; measured 87x)."""
     n = 16
     wo = _dirs(n, 5, 55.0, 65.0, off_plane=True)
     s1, s2 = SimStats(), SimStats()
@@ -99,7 +99,7 @@ def test_v2_agrees_with_v1_and_costs_less_on_the_trapping_stack():
     assert z.abs().max() < z_threshold(1e-3, z.numel()), z
     cost1 = ((e1[:, 0] / m1[:, 0]) ** 2).mean() * s1.vertices
     cost2 = ((e2[:, 0] / m2[:, 0]) ** 2).mean() * s2.vertices
-    assert cost1 > 1.5 * cost2, (float(cost1), float(cost2))
+    assert cost1 > 20 * cost2, (float(cost1), float(cost2))
 
 
 def _z_scores(stack_fn, n: int, seed: int):
@@ -114,8 +114,22 @@ def test_64_path_errors_hold_on_the_standard_stack():
     assert stats.kstest(z, "norm").pvalue > 1e-3, (z.mean(), z.std())
 
 
-@pytest.mark.xfail(strict=True, reason="issue 14 open: at 64 paths the trapped light is still heavy-tailed "
-                                       "(docs/RESULTS.md, Ground truth v2)")
+def test_64_path_estimates_are_no_longer_low_where_trapped_light_leaves():
+    """The issue's symptom: at theta_i 20 degrees, 64-path estimates 55-65
+    degrees from the normal, off the plane of incidence, came out about 3x too
+    low (median 0.14 of the long run with v1, 0.43 with v2 before the
+    two-bounce connection). Now the median is within 10 % in every direction."""
+    n, r = 16, 200
+    wo = _dirs(n, 5, 55.0, 65.0, off_plane=True)
+    truth, _ = simulate(trap_stack(n), _wi(n), wo, spp=100_000, seed=1, dtype=D, include_top_reflection=False)
+    m, _ = simulate(trap_stack(n * r), _wi(n * r), wo.repeat(r, 1), spp=64, seed=2, dtype=D,
+                    include_top_reflection=False)
+    median = (m[:, 0].view(r, n) / truth[:, 0]).median(0).values
+    assert median.min() > 0.9, median
+
+
+@pytest.mark.xfail(strict=True, reason="issue 14 open: the trapped light still gives heavy tails at 64 paths "
+                                       "(z mean -0.4, sd 1.3 over 480 directions; docs/RESULTS.md, Ground truth v2)")
 def test_64_path_errors_hold_on_the_trapping_stack():
-    z = _z_scores(trap_stack, 160, 31)
+    z = _z_scores(trap_stack, 480, 31)
     assert stats.kstest(z, "norm").pvalue > 1e-3, (z.mean(), z.std())
