@@ -17,7 +17,7 @@ class DataArgs:
     out: str
     """folder for the shards and manifest.json"""
     preset: str = "tiny"
-    """tiny (seconds), cpu (the shipped decoder), layering (stacks for the layering network), paper"""
+    """tiny (seconds), cpu (the shipped decoder), layering (stacks for the layering network), coats (look-development stacks to fine-tune it), paper"""
     seed: int | None = None
     """random seed (default: the preset's)"""
     overwrite: bool = False

@@ -186,6 +186,20 @@ def predicted_target(y: Tensor, cos_o: Tensor, scale: float) -> Tensor:
     return nn.functional.softplus(y + torch.log(cos_o.clamp_min(1e-6)) - math.log(scale))
 
 
+def unbiased_error(y: Tensor, f: Tensor, cos_o: Tensor, scale: float) -> Tensor:
+    """Squared error of the prediction p = exp(y) against a Monte Carlo
+    estimate f, relative to the prediction: ((p - f) cos / (s + p cos))^2 with
+    the denominator held constant. Its expectation over the noise of f is
+    smallest at p = E[f], whatever the noise; the log loss is smallest at a
+    geometric mean instead, which right-skewed Monte Carlo noise (bright
+    bodies under clear coats) pulls below the mean -- up to 45 % too dark
+    at 64 paths per pair (docs/RESULTS.md). Near the solution it weighs
+    errors like the log loss (its first-order expansion)."""
+    p = torch.exp(y.clamp(max=30.0))
+    d = scale + (p * cos_o).detach()
+    return ((p - f) * cos_o / d) ** 2
+
+
 # --- weight files --------------------------------------------------------------------
 def save_decoder(dec: Decoder, path: str | Path, trained_on: dict | None = None, accuracy: dict | None = None,
                  extra: dict[str, Tensor] | None = None, extra_meta: dict | None = None) -> str:

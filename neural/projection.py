@@ -2,8 +2,10 @@
 
 Works on a batch of B single-channel BRDFs at once (B = 3 for one RGB
 material), each given as n samples (wi, wo, f). The loss is the training
-loss (log(1 + f cos) squared error), so a projection finds the latent that
-training would have found.
+loss (log(1 + f cos) squared error) for the first steps, then the
+prediction-relative squared error (``decoder.unbiased_error``), whose
+minimum is the mean of noisy Monte Carlo samples rather than their
+geometric mean.
 """
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ from dataclasses import dataclass
 
 import torch
 
-from nbrdf.neural.decoder import Decoder, encode, loss_target, predicted_target
+from nbrdf.neural.decoder import Decoder, encode, loss_target, predicted_target, unbiased_error
 from nbrdf.neural.coat import COAT_PARAMS, coat_eval, with_coat
 from nbrdf.neural.errors import NbrdfError
 
@@ -24,6 +26,7 @@ class ProjectionConfig:
     lr: float = 0.08
     latent_reg: float = 1e-4  # the training's prior on latents
     seed: int = 0
+    unbiased_share: float = 0.5  # final share of the steps on ``decoder.unbiased_error`` (fits the noisy mean)
 
 
 def check_samples(wi: Tensor, wo: Tensor, f: Tensor) -> None:
@@ -66,10 +69,14 @@ def project(dec: Decoder, wi: Tensor, wo: Tensor, f: Tensor, cfg: ProjectionConf
     req = [p.requires_grad for p in dec.parameters()]
     for p in dec.parameters():
         p.requires_grad_(False)
+    switch = cfg.steps - int(round(cfg.unbiased_share * cfg.steps))
     try:
-        for _ in range(cfg.steps):
+        for step in range(cfg.steps):
             y = dec.log_f(z[:, None, :], feats)
-            err = (predicted_target(y, cos_o, dec.spec.loss_scale) - target) ** 2
+            if step < switch:  # the training loss first (robust far from the solution) ...
+                err = (predicted_target(y, cos_o, dec.spec.loss_scale) - target) ** 2
+            else:  # ... then the error whose minimum is the samples' mean, not their geometric mean
+                err = unbiased_error(y, f.float(), cos_o, dec.spec.loss_scale)
             loss = (err * w).sum() + cfg.latent_reg * (z * z).sum()
             opt.zero_grad(set_to_none=True)
             loss.backward()

@@ -49,6 +49,7 @@ class DataConfig:
     shard_size: int = 32
     peak_fraction: float = 0.5  # share of pairs drawn near the half-vector pole
     sharp_coats: float = 0.0  # share of stacks redrawn with a coat of roughness 0.01-0.06 over a bright base
+    bright_bases: float = 1.0  # share of those sharp-coated stacks whose base is redrawn bright (the rest keep theirs)
     clear_top_slabs: float = 0.0  # share of stacks whose top slab is redrawn clear (sigma_t 0, or U(0, 0.3))
 
 
@@ -69,6 +70,14 @@ PRESETS: dict[str, DataConfig] = {
                            val_counts=dict(conductor=0, dielectric=0, two_layer=64, three_layer=32, diffuse_base=32,
                                            three_layer_diffuse=16),
                            pairs=768, spp=32, seed=1, sharp_coats=0.4, clear_top_slabs=0.3),
+    # look-development stacks for fine-tuning the layering network: most carry
+    # a sharp coat over a clear (or thin) top slab -- clear-coated metals,
+    # lacquers and three-layer car paints (issue 16)
+    "coats": DataConfig(counts=dict(conductor=0, dielectric=0, two_layer=768, three_layer=768, diffuse_base=256,
+                                    three_layer_diffuse=256),
+                        val_counts=dict(conductor=0, dielectric=0, two_layer=32, three_layer=32, diffuse_base=16,
+                                        three_layer_diffuse=16),
+                        pairs=768, spp=32, seed=2, sharp_coats=0.7, bright_bases=0.6, clear_top_slabs=0.8),
     "paper": DataConfig(counts=dict(conductor=300, dielectric=300, two_layer=12720, three_layer=1800,
                                     diffuse_base=1200),
                         val_counts=dict(conductor=32, dielectric=32, two_layer=128, three_layer=64, diffuse_base=32),
@@ -178,7 +187,7 @@ def make_shard(cfg: DataConfig, shard: Shard) -> dict[str, np.ndarray]:
     params = sample_params(shard.cls, shard.count, g)
     if cfg.sharp_coats > 0:
         gc = torch.Generator().manual_seed(_stream_seed(cfg.seed, "coats", shard.split, shard.cls, shard.index))
-        sharpen_coats(params, cfg.sharp_coats, gc)
+        sharpen_coats(params, cfg.sharp_coats, gc, cfg.bright_bases)
     if cfg.clear_top_slabs > 0:
         gm = torch.Generator().manual_seed(_stream_seed(cfg.seed, "slabs", shard.split, shard.cls, shard.index))
         clear_top_slabs(params, cfg.clear_top_slabs, gm)
@@ -192,6 +201,16 @@ def make_shard(cfg: DataConfig, shard: Shard) -> dict[str, np.ndarray]:
 
 def _config_dict(cfg: DataConfig) -> dict:
     return json.loads(json.dumps(asdict(cfg)))
+
+
+def _same_config(old: dict | None, new: dict) -> bool:
+    """Whether a manifest's config equals ``new``; fields added to
+    ``DataConfig`` since the manifest was written count at their defaults
+    (they reproduce the old draws), so older data sets still resume."""
+    from dataclasses import MISSING, fields
+
+    defaults = {f.name: f.default for f in fields(DataConfig) if f.default is not MISSING}
+    return old is not None and json.loads(json.dumps({**defaults, **old})) == new
 
 
 def generate(out: str | Path, cfg: DataConfig, preset: str = "custom", overwrite: bool = False,
@@ -209,7 +228,7 @@ def generate(out: str | Path, cfg: DataConfig, preset: str = "custom", overwrite
                 "shards": [asdict(s) for s in shards]}
     if man_path.exists():
         old = json.loads(man_path.read_text())
-        if old.get("config") != manifest["config"]:
+        if not _same_config(old.get("config"), manifest["config"]):
             if not overwrite:
                 raise NbrdfError(f"{out}: holds a data set made with other settings; "
                                  "pass --overwrite to replace it or choose another folder")

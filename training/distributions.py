@@ -102,15 +102,20 @@ def _pick_stacks(p: Tensor, share: float, g: torch.Generator) -> tuple[Tensor, T
     return u, stacks & (u[:, 0] < share)
 
 
-def sharpen_coats(p: Tensor, share: float, g: torch.Generator) -> Tensor:
+def sharpen_coats(p: Tensor, share: float, g: torch.Generator, bright: float = 1.0) -> Tensor:
     """Redraws a ``share`` of the stacks in ``p`` (in place; returned) in the
     look-development range the paper's distributions rarely reach: a top coat
-    of roughness U(0.01, 0.06) over a bright base (r0 or albedo 1 - U(0, 1)^2).
-    Single interfaces are left alone. Draws a fixed number of uniforms per
-    row, so the result depends only on ``g``'s state and ``p``."""
+    of roughness U(0.01, 0.06), over a bright base (r0 or albedo
+    1 - U(0, 1)^2) for a ``bright`` share of them (the rest keep their base:
+    lacquers over dark bases). Single interfaces are left alone. Draws a fixed
+    number of uniforms per row (one more when ``bright`` < 1), so the result
+    depends only on ``g``'s state and ``p``."""
     u, pick = _pick_stacks(p, share, g)
     p[pick, P["top_roughness"]] = 0.01 + 0.05 * u[pick, 1]
-    p[pick, P["base_value"]] = 1.0 - u[pick, 2] ** 2
+    lit = pick
+    if bright < 1.0:
+        lit = pick & (torch.rand(p.shape[0], generator=g, dtype=torch.float64) < bright)
+    p[lit, P["base_value"]] = 1.0 - u[lit, 2] ** 2
     return p
 
 

@@ -28,7 +28,7 @@ from typing import Callable
 
 import torch
 
-from nbrdf.neural.decoder import DEFAULT_WEIGHTS, encode, loss_target, predicted_target
+from nbrdf.neural.decoder import DEFAULT_WEIGHTS, encode, loss_target, predicted_target, unbiased_error
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layering import CODE, LATENT, LayeringNet, layering_spec
@@ -68,6 +68,9 @@ class OpsConfig:
     """layering: final steps that mix in three-layer stacks (recursive layering)"""
     width: int = 0
     """layering: hidden units per layer of the layering network (0: the default, 256)"""
+    loss: str = "log"
+    """layering: log (the decoder's training loss) or mean (``neural.decoder.unbiased_error``: fits the
+    Monte Carlo mean, where the log loss fits a geometric mean that skewed noise pulls too dark)"""
 
 
 @dataclass
@@ -177,9 +180,13 @@ def _finish(name: str, cfg: OpsConfig, model: NeuralModel, history: dict, extra:
     return bundle
 
 
-def _decoder_loss(model: NeuralModel, z: Tensor, feats: Tensor, cos_o: Tensor, target: Tensor) -> Tensor:
-    """The decoder's training loss for latents z (B, 32) at pairs (B, P, .)."""
+def _decoder_loss(model: NeuralModel, z: Tensor, feats: Tensor, cos_o: Tensor, target: Tensor,
+                  f: Tensor | None = None) -> Tensor:
+    """The decoder's training loss for latents z (B, 32) at pairs (B, P, .);
+    with the values ``f`` themselves, ``neural.decoder.unbiased_error`` instead."""
     y = model.decoder.log_f(z[:, None, :], feats)
+    if f is not None:
+        return unbiased_error(y, f, cos_o, model.decoder.spec.loss_scale).mean()
     return ((predicted_target(y, cos_o, model.decoder.spec.loss_scale) - target) ** 2).mean()
 
 
@@ -271,7 +278,8 @@ class _StackData:
         self.params = torch.cat([d.params for d in parts])
         self.feats = torch.cat([encode(d.wi, d.wo) for d in parts])
         self.cos_o = torch.cat([d.wo[..., 2] for d in parts])
-        self.target = torch.cat([loss_target(body_values(d), d.wo[..., 2], scale) for d in parts])
+        self.body = torch.cat([body_values(d) for d in parts])
+        self.target = loss_target(self.body, self.cos_o, scale)
         self.cls = torch.tensor([CLASSES.index(c) for d in parts for c in d.classes])
 
     def index_of(self, *names: str) -> Tensor:
@@ -282,7 +290,8 @@ class _StackData:
         cols = torch.randint(0, n, (idx.numel(), pairs), generator=g) if pairs < n else \
             torch.arange(n).expand(idx.numel(), n)
         rows = idx[:, None].expand_as(cols)
-        return self.params[idx], self.feats[rows, cols], self.cos_o[rows, cols], self.target[rows, cols]
+        return (self.params[idx], self.feats[rows, cols], self.cos_o[rows, cols], self.target[rows, cols],
+                self.body[rows, cols])
 
 
 def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
@@ -308,9 +317,13 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
             net.mlp.net[-1].weight.mul_(0.1)
             net.mlp.net[-1].bias.zero_()
 
-    def loss_on(data: _StackData, idx: Tensor, pairs: int) -> Tensor:
-        params, feats, cos_o, target = data.batch(idx, pairs, g)
-        return _decoder_loss(model, stack_latents(model, params, net), feats, cos_o, target)
+    if cfg.loss not in ("log", "mean"):
+        raise NbrdfError(f"--loss: {cfg.loss!r} is not one of log, mean")
+
+    def loss_on(data: _StackData, idx: Tensor, pairs: int, fit_mean: bool = cfg.loss == "mean") -> Tensor:
+        params, feats, cos_o, target, body = data.batch(idx, pairs, g)
+        return _decoder_loss(model, stack_latents(model, params, net), feats, cos_o, target,
+                             body if fit_mean else None)
 
     def step(s: int) -> Tensor:
         if s >= cfg.steps - cfg.recursion_steps and three.numel():
@@ -325,7 +338,7 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
         for name in ("two_layer", "diffuse_base") + THREE_LAYERED:
             idx = val.index_of(name)
             if idx.numel():
-                out[name] = loss_on(val, idx, val.feats.shape[1]).item()
+                out[name] = loss_on(val, idx, val.feats.shape[1], fit_mean=False).item()  # comparable across runs
         return out
 
     t0 = time.perf_counter()

@@ -85,6 +85,13 @@ def test_generate_resume_and_overwrite_rules(tmp_path):
     data = load_split(out, "train")
     assert len(data) == sum(SMALL.counts.values()) and data.f.shape == (len(data), SMALL.pairs)
     assert (data.f >= 0).all() and torch.isfinite(data.f).all()
+    # a manifest written before a DataConfig field existed resumes (the field at its default)
+    man = json.loads((out / "manifest.json").read_text())
+    del man["config"]["bright_bases"], man["config"]["clear_top_slabs"]
+    (out / "manifest.json").write_text(json.dumps(man))
+    victim.unlink()
+    generate(out, SMALL, progress=False)
+    assert victim.exists()
     with pytest.raises(NbrdfError, match="other settings"):
         generate(out, replace(SMALL, pairs=32), progress=False)
     generate(out, replace(SMALL, pairs=32), overwrite=True, progress=False)

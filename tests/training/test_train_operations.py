@@ -3,6 +3,8 @@ and drive the full neural path."""
 from __future__ import annotations
 
 import json
+import math
+from dataclasses import replace
 
 import pytest
 import torch
@@ -90,3 +92,17 @@ def test_a_checkpoint_of_other_settings_is_refused(bundles):
     with pytest.raises(NbrdfError, match="other settings"):
         train_leaf(OpsConfig(decoder=str(DEFAULT_WEIGHTS), out=str(root / "leaf"), steps=101, batch=16, pairs=64),
                    progress=False)
+
+
+def test_layering_fits_the_monte_carlo_mean_on_request(bundles):
+    """``--loss mean`` trains on ``unbiased_error`` (lower on its own error than
+    the start) and names a bad choice in one line."""
+    root, leaf, lay, _ = bundles
+    cfg = OpsConfig(decoder=str(lay), out=str(root / "lay_mean"), steps=100, batch=8, pairs=32,
+                    data=str(root / "data"), recursion_steps=50, width=32, loss="mean")
+    out = train_layering(cfg, progress=False)
+    metrics = json.loads((out.parent / "layering_metrics.json").read_text())
+    assert all(math.isfinite(v) for v in metrics["val_loss"].values())
+    assert metrics["history"]["train"][-1] < metrics["history"]["train"][0]
+    with pytest.raises(NbrdfError, match="--loss"):
+        train_layering(replace(cfg, out=str(root / "lay_bad"), loss="median"), progress=False)
