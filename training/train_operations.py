@@ -93,6 +93,7 @@ class LayeringConfig(OpsConfig):
     lr: float = 1e-3
     recursion_steps: int = 2000
     width: int = 256
+    loss: str = "mean"
 
 
 @dataclass
