@@ -106,7 +106,8 @@ class PackedDecoder:
         six multiply-adds (two pairs x RGB) instead of three: on Mesa llvmpipe 1.4x
         the single-pair throughput (issue 12; three or four pairs spill and ran slower)."""
         wd, w4 = self.spec.width, self.spec.width // 4
-        lines = [f"void nb_hidden2(in vec3 x0[{wd}], in vec3 x1[{wd}], out vec3 y0[{wd}], out vec3 y1[{wd}], int off) {{",
+        lines = [f"void nb_hidden2(in vec3 x0[{wd}], in vec3 x1[{wd}], out vec3 y0[{wd}], out vec3 y1[{wd}],"
+                 " int off) {",
                  f"    for (int o = 0; o < {wd}; ++o) {{",
                  f"        vec3 s0 = vec3(nb_fetch(off + {wd * w4} + o / 4)[o % 4]);",
                  "        vec3 s1 = s0;"]
