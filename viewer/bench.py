@@ -25,12 +25,34 @@ def _time(fn, repeats: int) -> float:
     return float(np.median(ts))
 
 
+def _time_interleaved(fns: dict[str, object], repeats: int) -> dict[str, float]:
+    """Median seconds of each fn() over ``repeats`` rounds that run every fn once
+    in turn (after one warm-up each): on a machine shared with other work, a
+    change of load then hits every path alike and their ratios stay fair."""
+    for fn in fns.values():
+        fn()
+    ts: dict[str, list[float]] = {k: [] for k in fns}
+    for _ in range(repeats):
+        for k, fn in fns.items():
+            t0 = time.perf_counter()
+            fn()
+            ts[k].append(time.perf_counter() - t0)
+    return {k: float(np.median(v)) for k, v in ts.items()}
+
+
 #: FP32 peaks of GPUs in GFMA/s (half the vendor's FP32 TFLOPS at boost clock), by a
 #: fragment of the GL renderer string; the first match wins, so specific names come first.
 GPU_PEAK_GFMA = {
-    "H100 PCIe": 25_600, "H100": 33_450, "H200": 33_450, "A100": 9_750, "L40S": 45_800,
-    "L4": 15_150, "A10": 15_600, "RTX 4090": 41_300, "RTX 3090": 17_800,
+    "H100 PCIe": 25_600,  # 51.2 TFLOPS
+    "H100 NVL": 30_000,   # 60 TFLOPS
+    "GH200": 33_450, "H100": 33_450, "H200": 33_450,  # SXM: 66.9 TFLOPS
+    "A100": 9_750, "A40": 18_700, "A30": 5_150, "A10": 15_600,  # A10 / A10G: 31.2 TFLOPS
+    "L40S": 45_800, "L40": 45_250, "L4": 15_150, "T4": 4_050, "V100": 7_850,
+    "RTX 6000 Ada": 45_500, "RTX A6000": 19_350, "RTX 4090": 41_300, "RTX 4080": 24_350,
+    "RTX 3090": 17_800, "RTX 3080": 14_900,
 }
+#: The reference frame size of the per-frame figures (a 1080p frame).
+FRAME_1080P = 1920 * 1080
 
 
 def cpu_peak(cpuinfo: str | None = None, cores: int | None = None) -> dict:
@@ -68,21 +90,26 @@ def machine_peak(renderer: str) -> dict | None:
 def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_pairs: int = 1 << 18,
                  storages: tuple[str, ...] = ("texture", "ssbo", "ubo", "const"), frames: bool = True) -> dict:
     """Per decoder path -- the fragment shader (weights in a texture) and the
-    compute shader with each weight storage of ``storages`` -- one RGB decoder
+    compute shader with each weight storage of ``storages``, one pair per
+    invocation and (the loop forms) two (``_x2``: nb_decode2) -- one RGB decoder
     evaluation per pixel of a (w, h) frame at random directions: evaluations
-    and effective multiply-adds per second, and the share of the machine's
-    FP32 FMA peak; the torch CPU decoder's throughput in the same run; and
-    (``frames``) the lit sphere filling the frame per lit path (deferred compute
-    with its default storage, fragment fallback): ms per frame with one
-    directional light and ms per environment pass (the light and three
-    environment strategies; and with two, ``Renderer.strategies`` 3). Never
-    needs a display."""
+    and effective multiply-adds per second, the share of the machine's FP32
+    FMA peak and the ratio to the torch CPU decoder's throughput in the same
+    run; and (``frames``) the lit sphere filling the frame per lit path
+    (deferred compute with its default storage, fragment fallback): ms per frame with one directional light and ms per
+    environment pass (the light and three environment strategies; and with
+    two, ``Renderer.strategies`` 3), the first frame's seconds (shader
+    compilation included), and the same per 1080p frame (scaled by pixel
+    count when ``size`` is another). Also which half-precision arithmetic
+    extensions the context offers. The decoder paths and torch are timed in
+    interleaved rounds (fair ratios on a shared machine). Never needs a display; the GPU's name picks
+    its peak (``GPU_PEAK_GFMA``), software OpenGL the CPU's."""
     import moderngl
 
     from nbrdf.neural.errors import NbrdfError
     from nbrdf.neural.material import load_material
     from nbrdf.viewer import shaders
-    from nbrdf.viewer.gl import COMPUTE_VERSION, describe, offscreen_context
+    from nbrdf.viewer.gl import COMPUTE_VERSION, describe, half_float_extensions, offscreen_context
     from nbrdf.viewer.neural_gpu import ComputeDecoderPass, GpuDecoder, WeightStorage
     from nbrdf.viewer.options import DEFAULT_MATERIAL
     from nbrdf.viewer.renderer import Renderer, ViewState
@@ -128,12 +155,27 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
         vao.render(moderngl.TRIANGLES, vertices=3)
         ctx.finish()
 
-    times = {"fragment_texture": _time(decode_frame, repeats)}
-    # The same evaluations in a compute shader, per weight storage (OpenGL 4.3).
+    runs = {"fragment_texture": decode_frame}
+    # The same evaluations in a compute shader, per weight storage (OpenGL 4.3),
+    # one pair per invocation and (the loop forms) two.
     compute = ctx.version_code >= COMPUTE_VERSION
+    cpasses = []
     for st in chosen if compute else ():
-        cpass = ComputeDecoderPass(ctx, gdec, z, v[0], v[1], st)
-        times[f"compute_{st.value}"] = _time(cpass.run, repeats)
+        for pairs in (1,) if st.unrolled else (1, 2):
+            cpasses.append(ComputeDecoderPass(ctx, gdec, z, v[0], v[1], st, pairs))
+            runs[f"compute_{st.value}" + ("_x2" if pairs == 2 else "")] = cpasses[-1].run
+    # The torch decoder on this CPU, same work per evaluation (RGB at one pair), timed in the same rounds.
+    wi = torch.from_numpy(v[0, :torch_pairs].copy())
+    wo = torch.from_numpy(v[1, :torch_pairs].copy())
+
+    def torch_run():
+        with torch.no_grad():
+            dec.eval_rgb(z, wi, wo)
+
+    runs["torch_cpu"] = torch_run
+    times = _time_interleaved(runs, repeats)
+    t_torch = times.pop("torch_cpu")
+    for cpass in cpasses:
         cpass.release()
 
     # Full shading: the lit sphere filling the frame; one directional light, then
@@ -143,7 +185,7 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
         mat = load_material(DEFAULT_MATERIAL)
         for name, comp in (("compute", True), ("fragment", False)) if compute else (("fragment", False),):
             r = Renderer(ctx, mat, neural=gdec, latent=z, compute=comp)
-            out = {}
+            out: dict[str, object] = {}
             for key, state in (("one_light_ms", ViewState(env_on=False)),
                                ("env_pass_ms", ViewState(env_on=True, background=False))):
                 state.camera.distance = 2.2
@@ -152,23 +194,21 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
                     r.accumulate(state, w, h, 0, 1)
                     ctx.finish()
 
+                if key == "one_light_ms":  # the first frame builds the programs
+                    t0 = time.perf_counter()
+                    shade_frame()
+                    out["first_frame_s"] = round(time.perf_counter() - t0, 2)
                 out[key] = round(1000 * _time(shade_frame, repeats), 2)
                 if key == "env_pass_ms":  # the cheaper estimator: environment CDF + lobe, no cosine lobe
                     r.strategies = 3
                     out["env_pass_two_strategies_ms"] = round(1000 * _time(shade_frame, repeats), 2)
                     r.strategies = 4
             out["storage"] = gdec.compute_storage.value if comp else "texture"
+            scale = FRAME_1080P / n
+            out["per_1080p_frame"] = {k: round(val * scale, 1) for k, val in out.items()
+                                      if k.endswith("_ms")}
             frame_ms[name] = out
 
-    # The torch decoder on this CPU, same work per evaluation (RGB at one pair).
-    wi = torch.from_numpy(v[0, :torch_pairs].copy())
-    wo = torch.from_numpy(v[1, :torch_pairs].copy())
-
-    def torch_run():
-        with torch.no_grad():
-            dec.eval_rgb(z, wi, wo)
-
-    t_torch = _time(torch_run, repeats)
     torch_rate = wi.shape[0] / t_torch
     macs_rgb = 3 * dec.spec.macs()  # one RGB evaluation, latent share cached
     info = describe(ctx)
@@ -177,8 +217,9 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
     paths = {k: {"decoder_ms": round(1000 * t, 2), "rgb_evals_per_s": round(n / t), "gfma_per_s": gfma(n / t)}
              for k, t in times.items()}
     paths["torch_cpu"] = {"rgb_evals_per_s": round(torch_rate), "gfma_per_s": gfma(torch_rate)}
-    if peak is not None:
-        for entry in paths.values():
+    for entry in paths.values():
+        entry["over_torch"] = round(entry["rgb_evals_per_s"] / torch_rate, 3)
+        if peak is not None:
             entry["fraction_of_peak"] = round(entry["gfma_per_s"] / peak["peak_gfma_per_s"], 4)
     best = max((k for k in paths if k != "torch_cpu"), key=lambda k: paths[k]["rgb_evals_per_s"])
     glsl_rate = n / times["fragment_texture"]
@@ -200,6 +241,7 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
         "best_glsl_path": best,
         "best_glsl_over_torch": round(paths[best]["rgb_evals_per_s"] / torch_rate, 3),
         "peak": peak,
+        "f16_arithmetic_extensions": half_float_extensions(ctx),
     }
 
 

@@ -34,6 +34,17 @@ def check_version(ctx: moderngl.Context, need: int = MIN_VERSION, what: str = "t
                          f"{ctx.info.get('GL_VERSION', ctx.version_code)}")
 
 
+#: GLSL extensions with 16-bit float arithmetic (probed at run time; Mesa llvmpipe has none).
+HALF_FLOAT_EXTENSIONS = ("GL_NV_gpu_shader5", "GL_AMD_gpu_shader_half_float",
+                         "GL_EXT_shader_explicit_arithmetic_types_float16")
+
+
+def half_float_extensions(ctx: moderngl.Context) -> list[str]:
+    """Those of ``HALF_FLOAT_EXTENSIONS`` this context offers."""
+    have = set(ctx.extensions)
+    return [e for e in HALF_FLOAT_EXTENSIONS if e in have]
+
+
 def describe(ctx: moderngl.Context) -> str:
     return f"{ctx.info.get('GL_RENDERER', '?')} / OpenGL {ctx.info.get('GL_VERSION', '?')}"
 

@@ -77,6 +77,7 @@ class GpuDecoder:
         self._net: str | None = None  # the unrolled network with literal weights, made on first use
         self.compute_storage: WeightStorage = storage if storage != WeightStorage.TEXTURE else COMPUTE_STORAGE
         """Where the compute lit pass (viewer/renderer.py) reads the weights."""
+
         if storage in (WeightStorage.SSBO, WeightStorage.UBO):
             self._buffer(storage)
 
@@ -104,7 +105,10 @@ class GpuDecoder:
 
     def snippets(self, storage: WeightStorage | None = None) -> dict[str, str]:
         storage = storage or self.storage
-        out = {"nb_layers": self.packed.layer_chain(), "nb_share": "", "nb_net": ""}
+        out = {"nb_layers": self.packed.layer_chain(), "nb_share": "", "nb_net": "",
+               "nb_hidden2": "", "nb_chain2": ""}
+        if not storage.unrolled:
+            out["nb_hidden2"], out["nb_chain2"] = self.packed.paired_hidden(), self.packed.paired_chain()
         if storage.unrolled:
             if self._net is None:
                 self._net = self.packed.unrolled_net()
@@ -270,15 +274,22 @@ def probe_proxy_sampling(ctx: moderngl.Context, wi: np.ndarray, u: np.ndarray, s
 
 
 class ComputeDecoderPass:
-    """nb_decode at N pairs in a compute shader (SSBO weights): the program and
-    buffers are made once, so ``run`` can be timed alone."""
+    """nb_decode at N pairs in a compute shader (weights in ``storage``): the
+    program and buffers are made once, so ``run`` can be timed alone.
+    ``pairs_per_invocation`` 2 runs nb_decode2 (two pairs per invocation; the
+    loop forms only, not the literal weights)."""
 
     def __init__(self, ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor, wi: np.ndarray, wo: np.ndarray,
-                 storage: WeightStorage | None = None):
+                 storage: WeightStorage | None = None, pairs_per_invocation: int = 1):
         check_version(ctx, SSBO_VERSION, "a compute decoder pass")
         self.ctx, self.gdec, self.z, self.n = ctx, gdec, z, wi.shape[0]
         self.storage = storage or (gdec.storage if gdec.storage != WeightStorage.TEXTURE else COMPUTE_STORAGE)
-        self.prog = ctx.compute_shader(gdec.source("decoder_probe.comp", storage=self.storage))
+        if pairs_per_invocation not in (1, 2) or (pairs_per_invocation == 2 and self.storage.unrolled):
+            raise NbrdfError(f"pairs per invocation: 1, or 2 with texture, ssbo or ubo weights "
+                             f"(got {pairs_per_invocation} with {self.storage.value})")
+        self.pairs_per_invocation = pairs_per_invocation
+        self.prog = ctx.compute_shader(gdec.source("decoder_probe.comp", storage=self.storage,
+                                                   defines={"NB_PAIRS": pairs_per_invocation}))
         self.pin = ctx.buffer(_pairs_array(wi, wo).tobytes())
         self.pout = ctx.buffer(reserve=self.n * 16)
 
@@ -289,7 +300,7 @@ class ComputeDecoderPass:
         self.pin.bind_to_storage_buffer(1)
         self.pout.bind_to_storage_buffer(2)
         self.prog["u_count"].value = self.n
-        self.prog.run(group_x=-(-self.n // 64))
+        self.prog.run(group_x=-(-self.n // (64 * self.pairs_per_invocation)))
         self.ctx.finish()
 
     def read(self) -> np.ndarray:
@@ -302,10 +313,11 @@ class ComputeDecoderPass:
 
 
 def probe_compute(ctx: moderngl.Context, gdec: GpuDecoder, z: torch.Tensor, wi: np.ndarray,
-                  wo: np.ndarray, storage: WeightStorage | None = None) -> np.ndarray:
-    """nb_decode at N pairs through a compute shader (weights in ``storage``,
-    default: the decoder's own, or the compute path's default); (N, 3)."""
-    p = ComputeDecoderPass(ctx, gdec, z, wi, wo, storage)
+                  wo: np.ndarray, storage: WeightStorage | None = None, pairs_per_invocation: int = 1) -> np.ndarray:
+    """nb_decode (or, two pairs per invocation, nb_decode2) at N pairs through a
+    compute shader (weights in ``storage``, default: the decoder's own, or the
+    compute path's default); (N, 3)."""
+    p = ComputeDecoderPass(ctx, gdec, z, wi, wo, storage, pairs_per_invocation)
     try:
         p.run()
         return p.read()

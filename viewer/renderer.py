@@ -162,19 +162,22 @@ class Renderer:
             raise NbrdfError(f"shader build failed on {self.ctx.info.get('GL_RENDERER', '?')}: "
                              f"{str(e).splitlines()[0]}") from None
 
-    def compute_program(self, brdf: GpuBrdf) -> moderngl.ComputeShader:
-        """lit.comp for ``brdf``'s kind (neural: weights in the decoder's ``compute_storage``), kept."""
+    def compute_program(self, brdf: GpuBrdf, name: str = "lit.comp",
+                        defines: dict | None = None) -> moderngl.ComputeShader:
+        """Compute shader ``name`` (lit.comp; view.comp: lobe and slice) for ``brdf``'s
+        kind (neural: weights in the decoder's ``compute_storage``), kept."""
         storage = brdf.decoder.compute_storage if brdf.neural else None
-        key = ("lit.comp", brdf.kind, id(brdf.decoder) if brdf.neural else 0, storage)
+        key = (name, brdf.kind, id(brdf.decoder) if brdf.neural else 0, storage, tuple(sorted((defines or {}).items())))
         if key not in self._programs:
             version = "#version 430 core"
             if brdf.kind == BrdfKind.ANALYTIC:
-                src = shaders.source("lit.comp", {"brdf": shaders.read("analytic_brdf.glsl")}, version=version)
+                src = shaders.source(name, {"brdf": shaders.read("analytic_brdf.glsl")}, version=version,
+                                     defines=defines)
             else:
                 code = shaders.read("neural_brdf.glsl")
                 if brdf.kind == BrdfKind.TEXTURED:
                     code = shaders.read("latent_texture.glsl") + "\n" + code
-                src = brdf.decoder.source("lit.comp", {"brdf": code}, storage=storage)
+                src = brdf.decoder.source(name, {"brdf": code}, storage=storage, defines=defines)
             try:
                 self._programs[key] = self.ctx.compute_shader(src)
             except moderngl.Error as e:
@@ -316,6 +319,8 @@ class Renderer:
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         if view == View.OBJECT:
             self._object_passes(state, w, h, first_pass, passes, brdf, slot)
+        elif first_pass == 0 and self.deferred:
+            self._view_compute(view, state, w, h, brdf, tex)
         elif first_pass == 0:
             p = self.program("lobe.frag" if view == View.LOBE else "slice.frag", brdf)
             self._bind_brdf(p, brdf)
@@ -325,6 +330,18 @@ class Renderer:
             self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
             self._fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
         return tex
+
+    def _view_compute(self, view: View, state: ViewState, w: int, h: int, brdf: GpuBrdf,
+                      tex: moderngl.Texture) -> None:
+        """The lobe or slice view in view.comp (the compute decoder, one pixel per invocation) into ``tex``."""
+        c = self.compute_program(brdf, "view.comp", {"VIEW_IS_LOBE": 1} if view == View.LOBE else None)
+        self._bind_brdf(c, brdf, compute=True)
+        if view == View.LOBE:
+            c["u_wi"].value = _incidence(state.theta_i)
+        c["u_size"].value = (float(w), float(h))
+        tex.bind_to_image(0, read=False, write=True)
+        c.run(-(-w // LIT_GROUP), -(-h // LIT_GROUP))
+        self.ctx.memory_barrier()
 
     def _gbuffer_target(self, w: int, h: int, slot: str) -> tuple[moderngl.Framebuffer, list[moderngl.Texture]]:
         """The G-buffer of ``slot`` at (w, h): three RGBA32F targets sharing the

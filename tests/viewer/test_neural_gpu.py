@@ -162,15 +162,52 @@ def test_bench_render_reports_both_paths():
     # Per path: the fragment and compute decoders and torch, as multiply-adds per second and a share of the
     # machine's peak (llvmpipe: the CPU's).
     assert {"fragment_texture", "compute_texture", "compute_ssbo", "compute_ubo", "torch_cpu"} <= set(r["paths"])
+    # two pairs per invocation (nb_decode2) for every loop form of the weights
+    assert {"compute_texture_x2", "compute_ssbo_x2", "compute_ubo_x2"} <= set(r["paths"])
+    assert r["paths"]["torch_cpu"]["over_torch"] == 1.0
+    for entry in r["paths"].values():
+        assert entry["over_torch"] == pytest.approx(entry["rgb_evals_per_s"] / r["torch_cpu_rgb_evals_per_s"], rel=1e-2)
+    from nbrdf.viewer.gl import HALF_FLOAT_EXTENSIONS
+
+    assert set(r["f16_arithmetic_extensions"]) <= set(HALF_FLOAT_EXTENSIONS)
     # Lit frames per path: one light, and one pass with the environment (more work).
     for path in ("compute", "fragment"):
         f = r["lit_frames"][path]
         assert 0 < f["one_light_ms"] and 0 < f["env_pass_ms"] and 0 < f["env_pass_two_strategies_ms"]
+        assert f["first_frame_s"] > 0
+        # the per-1080p figures scale the measured ones by pixel count (48 x 32 here)
+        assert f["per_1080p_frame"]["one_light_ms"] == pytest.approx(f["one_light_ms"] * 1920 * 1080 / (48 * 32),
+                                                                     rel=1e-2)
     assert r["lit_frames"]["compute"]["storage"] == "ubo" and r["full_shading_one_light_ms"] > 0
     for entry in r["paths"].values():
         assert entry["gfma_per_s"] == pytest.approx(entry["rgb_evals_per_s"] * r["macs_per_rgb_eval"] / 1e9, rel=1e-2)
         assert 0 < entry["fraction_of_peak"] < 1.5
     assert r["peak"]["kind"] == "cpu" and r["best_glsl_path"] in set(r["paths"]) - {"torch_cpu"}
+
+
+def test_gpu_peaks_by_renderer_name():
+    """Renderer strings as NVIDIA's EGL reports them: the specific names win over their prefixes."""
+    from nbrdf.viewer.bench import machine_peak
+
+    peak = lambda name: machine_peak(name)["peak_gfma_per_s"]
+    assert peak("NVIDIA H100 80GB HBM3/PCIe/SSE2") == 33_450        # SXM: 66.9 TFLOPS FP32
+    assert peak("NVIDIA H100 PCIe/PCIe/SSE2") == 25_600             # 51.2 TFLOPS
+    assert peak("NVIDIA A100-SXM4-80GB/PCIe/SSE2") == 9_750
+    assert peak("NVIDIA A10G/PCIe/SSE2") == 15_600
+    assert peak("NVIDIA L40S/PCIe/SSE2") == 45_800 and peak("NVIDIA L4/PCIe/SSE2") == 15_150
+    assert machine_peak("NVIDIA H200/PCIe/SSE2")["kind"] == "gpu"
+    assert machine_peak("Some Future GPU/PCIe") is None
+
+
+def test_half_float_extensions_are_probed_from_the_context():
+    from nbrdf.viewer.gl import HALF_FLOAT_EXTENSIONS, half_float_extensions
+
+    class Ctx:
+        extensions = {"GL_ARB_gpu_shader5", "GL_NV_gpu_shader5", "GL_EXT_shader_explicit_arithmetic_types_float16"}
+
+    assert half_float_extensions(Ctx()) == ["GL_NV_gpu_shader5", "GL_EXT_shader_explicit_arithmetic_types_float16"]
+    Ctx.extensions = {"GL_ARB_gpu_shader5"}
+    assert half_float_extensions(Ctx()) == [] and len(HALF_FLOAT_EXTENSIONS) == 3
 
 
 def test_cpu_peak_from_the_cpus_own_report():

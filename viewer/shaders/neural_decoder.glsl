@@ -10,6 +10,8 @@
 // layers (snippet nb_layers) or, unrolled, the whole network (snippet nb_net,
 // straight-line code from neural/gpu_pack.py); and NB_SHARE(j), the latent's
 // share of layer 1 for unit j (default: the uniform array of a uniform material).
+// The loop forms also define nb_decode2 (two pairs per call: snippets
+// nb_hidden2 and nb_chain2).
 //
 // Weight storage (NB_STORAGE): 0 a float texture (OpenGL 3.3, per-pixel
 // fetches), 1 an SSBO, 2 a uniform buffer (every pixel reads the same weight:
@@ -69,6 +71,44 @@ void nb_hidden(in vec3 x[NB_WIDTH], out vec3 y[NB_WIDTH], int off) {
         }
         y[o] = nb_act(s);
     }
+}
+#endif
+
+#if !NB_UNROLLED
+//@INCLUDE nb_hidden2
+// f at two (wi, wo) pairs in one call (f0, f1: as nb_decode gives them): every
+// weight fetched once feeds both pairs (register blocking; issue 12). Compute
+// passes that evaluate several pairs per invocation call this.
+void nb_decode2(vec3 wi0, vec3 wo0, vec3 wi1, vec3 wo1, out vec3 f0, out vec3 f1) {
+    vec4 e0[NB_FEATS4];
+    vec4 e1[NB_FEATS4];
+    nb_encode(wi0, wo0, e0);
+    nb_encode(wi1, wo1, e1);
+    vec3 a0[NB_WIDTH];
+    vec3 a1[NB_WIDTH];
+    vec3 b0[NB_WIDTH];
+    vec3 b1[NB_WIDTH];
+    for (int o = 0; o < NB_WIDTH; ++o) {
+        float d0 = 0.0, d1 = 0.0;
+        for (int k = 0; k < NB_FEATS4; ++k) {
+            vec4 w = nb_fetch(o * NB_FEATS4 + k);
+            d0 += dot(w, e0[k]);
+            d1 += dot(w, e1[k]);
+        }
+        a0[o] = nb_act(NB_SHARE(o) + d0);
+        a1[o] = nb_act(NB_SHARE(o) + d1);
+    }
+//@INCLUDE nb_chain2
+    vec3 y0 = vec3(nb_fetch(NB_OFF_OUT + NB_WIDTH4).x);
+    vec3 y1 = y0;
+    for (int k = 0; k < NB_WIDTH4; ++k) {
+        vec4 w = nb_fetch(NB_OFF_OUT + k);
+        y0 += w.x * a0[4 * k] + w.y * a0[4 * k + 1] + w.z * a0[4 * k + 2] + w.w * a0[4 * k + 3];
+        y1 += w.x * a1[4 * k] + w.y * a1[4 * k + 1] + w.z * a1[4 * k + 2] + w.w * a1[4 * k + 3];
+    }
+    // a select, not a product: directions below the horizon may encode to NaN
+    f0 = wi0.z > 0.0 && wo0.z > 0.0 ? exp(min(y0, vec3(80.0))) : vec3(0.0);
+    f1 = wi1.z > 0.0 && wo1.z > 0.0 ? exp(min(y1, vec3(80.0))) : vec3(0.0);
 }
 #endif
 
