@@ -12,11 +12,19 @@ several per pass. Every strategy draws its random numbers from its own
 Owen-scrambled Sobol sequence per pixel (common.glsl ``rand3``): the passes of
 a pixel are stratified per strategy.
 
+The body's environment light is resampled (Talbot et al. 2005): per decoder
+sample, ``ris_candidates`` directions (half from the environment CDF, half
+from the body's lobe) are weighted by lighting x lobe, a cheap target with no
+decoder, and the decoder runs at one of them. For the default render (studio,
+varnished copper) this cut the relative noise at 16 passes from 5.6 % (the
+balance heuristic over three strategies, same decoder evaluations) to 1.4 %.
+
 The firefly clamp (``clamp`` > 0) scales any one environment sample's
-contribution down to that luminance. It is off by default: with the split
-estimator and stratified samples the default render has no outliers to clip
-(viewer/noise.py measures the largest sample against the pixel's mean), and a
-clamp darkens the sharp highlights it clips.
+contribution down to that luminance. It is off by default: with the split,
+resampled estimator no sample of the default render reaches luminance 1 (a
+clamp at 1 changes no pixel), while a clamp darkens the highlights it clips
+(at 0.05: the object's mean -5.4 %). viewer/noise.py ``clamp_bias`` measures
+a clamp's bias against an unclamped render.
 """
 from __future__ import annotations
 
