@@ -28,8 +28,11 @@ a clamp's bias against an unclamped render.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from enum import IntFlag
+
+from nbrdf.neural.errors import NbrdfError
 
 
 class Term(IntFlag):
@@ -68,8 +71,20 @@ class LitSampling:
     terms: Term = Term.ALL
     """The estimator's terms kept (diagnostics: which strategy the noise comes from)."""
 
+    def check(self) -> "LitSampling":
+        """Raises ``NbrdfError`` for settings out of range. The bounds keep one
+        dispatch (8 passes) under llvmpipe's 65535 loop iterations per invocation,
+        past which Mesa silently stops a shader's loops."""
+        if not (0 <= self.ris_samples <= 8 and 2 <= self.ris_candidates <= 64 and 0 <= self.coat_samples <= 16):
+            raise NbrdfError(f"lit sampling: ris_samples {self.ris_samples} (0..8), ris_candidates "
+                             f"{self.ris_candidates} (2..64), coat_samples {self.coat_samples} (0..16)")
+        if not (math.isfinite(self.clamp) and self.clamp >= 0):
+            raise NbrdfError(f"lit sampling: clamp {self.clamp} must be finite and >= 0 (0: off)")
+        return self
+
     def bind(self, prog) -> None:
         """Sets the lit program's sampling uniforms (those it has)."""
+        self.check()
         values = {"u_ris_samples": int(self.ris_samples), "u_ris_candidates": int(self.ris_candidates),
                   "u_coat_samples": int(self.coat_samples), "u_clamp": float(self.clamp),
                   "u_seed": int(self.seed) & 0xFFFFFFFF, "u_terms": int(self.terms)}

@@ -76,3 +76,14 @@ def test_clamp_bias(default):
     assert abs(mild["mean_bias"]) < 0.002, mild
     harsh = clamp_bias(r, state, 0.05, SIZE, reference_spp=32)
     assert harsh["mean_bias"] < -0.03, harsh
+
+
+def test_sampling_settings_out_of_range_end_in_one_line():
+    from nbrdf.neural.errors import NbrdfError
+    from nbrdf.viewer.lit_sampling import LitSampling
+
+    assert LitSampling().check().ris_samples == 3
+    for bad in (LitSampling(ris_candidates=512), LitSampling(ris_samples=-1), LitSampling(clamp=float("nan")),
+                LitSampling(coat_samples=99)):
+        with pytest.raises(NbrdfError, match="lit sampling"):
+            bad.check()
