@@ -6,19 +6,18 @@
 // Needs common.glsl, the BRDF snippet, sampling.glsl and environment.glsl.
 //
 // The environment integral, per pass and pixel (viewer/lit_sampling.py):
+// - The body (the whole BRDF when it is not split): u_ris_samples decoder
+//   samples by resampled importance sampling (ris_body_sample: candidates from
+//   the environment CDF and the body's lobe, target lighting x lobe, no
+//   decoder); with u_ris_samples 0, one sample each of the environment CDF,
+//   the body's lobe and the cosine lobe, balance heuristic (u_strategies = 3
+//   drops the cosine lobe; u_one_sample draws one sample from their mixture).
 // - BRDFs split into a closed-form clear coat and a body (neural materials,
-//   NB_SPLIT_COAT) get two estimators. The body: one sample each of the
-//   environment's luminance CDF, the body's lobe (the learned proxy pdf) and
-//   the cosine lobe, balance heuristic -- one decoder evaluation each. The
-//   coat (analytic, no decoder, the sharp reflections of the studio's panels:
-//   most of the grain): u_coat_samples samples of its GGX visible normals plus
-//   the environment sample, balance heuristic with the sample counts. Each
-//   strategy spends its samples on its own term: none lands in the coat and is
-//   wasted on the body or the other way round.
-// - Other BRDFs: one sample each of the environment CDF, the BRDF's lobe
-//   (sample_lobe / pdf_lobe) and the cosine lobe, balance heuristic.
-// u_strategies = 3 drops the cosine lobe; u_one_sample draws the body's single
-// environment sample from the three strategies' mixture (one-sample MIS).
+//   NB_SPLIT_COAT): the coat (no decoder; the sharp reflections of the
+//   studio's panels) apart, from u_coat_samples samples of its GGX visible
+//   normals plus every direction the pass looked up, balance heuristic with
+//   the sample counts. No sample lands in the coat and is wasted on the body
+//   or the other way round.
 // Random numbers: rand3 (common.glsl), one Owen-scrambled Sobol sequence per
 // strategy and pixel. u_clamp > 0 clamps one sample's contribution (the
 // firefly clamp, see lit_sampling.py; biased, default off).
