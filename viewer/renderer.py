@@ -34,6 +34,7 @@ from nbrdf.neural.material import Material
 from nbrdf.viewer import shaders
 from nbrdf.viewer.camera import OrbitCamera
 from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
+from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.gl import use_compute
 from nbrdf.viewer.mesh import Mesh, named_mesh
 from nbrdf.viewer.modes import ToneMap, View
@@ -122,6 +123,8 @@ class Renderer:
         self.one_sample_mis = False
         """True: one environment sample per pass from the strategies' mixture (fewer BRDF
         evaluations, more noise: slower to equal noise than ``strategies`` 3, issue 12)."""
+        self.sampling = LitSampling()
+        """The lit pass's sampling: coat samples per pass, firefly clamp, seed (viewer/lit_sampling.py)."""
         self._gbuf: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = {}
         self.neural = neural
         self._programs: dict[tuple, moderngl.Program] = {}
@@ -442,6 +445,7 @@ class Renderer:
         p["u_env_on"].value = int(state.env_on)
         p["u_strategies"].value = self.strategies
         p["u_one_sample"].value = int(self.one_sample_mis)
+        self.sampling.bind(p)
         self.env.bind(p, math.radians(state.env_rotation))
 
     def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,

@@ -1,16 +1,26 @@
 // The lit object's radiance toward the viewer at one surface point for one
 // pass: a directional light, an optional point light and an HDR environment.
-// Per pass and pixel, one sample each of three strategies -- the environment's
-// luminance CDF, the BRDF's lobe (sample_lobe / pdf_lobe of the BRDF snippet:
-// the learned proxy pdf for neural materials, GGX visible normals for
-// closed-form ones) and the cosine lobe -- combined by the balance heuristic.
-// u_strategies = 3 drops the cosine lobe (issue 12 measured the same noise for
-// one BRDF evaluation less per pass); u_one_sample draws a single sample from
-// the three strategies' mixture (one-sample MIS: more noise per unit time).
 // No shadowing: one object under a distant environment. Both lit paths call
 // it -- object.frag (fragment fallback) and lit.comp (deferred compute pass) --
 // with the same pixel and pass, hence the same random numbers and image.
 // Needs common.glsl, the BRDF snippet, sampling.glsl and environment.glsl.
+//
+// The environment integral, per pass and pixel (viewer/lit_sampling.py):
+// - The body (the whole BRDF when it is not split): u_ris_samples decoder
+//   samples by resampled importance sampling (ris_body_sample: candidates from
+//   the environment CDF and the body's lobe, target lighting x lobe, no
+//   decoder); with u_ris_samples 0, one sample each of the environment CDF,
+//   the body's lobe and the cosine lobe, balance heuristic (u_strategies = 3
+//   drops the cosine lobe; u_one_sample draws one sample from their mixture).
+// - BRDFs split into a closed-form clear coat and a body (neural materials,
+//   NB_SPLIT_COAT): the coat (no decoder; the sharp reflections of the
+//   studio's panels) apart, from u_coat_samples samples of its GGX visible
+//   normals plus every direction the pass looked up, balance heuristic with
+//   the sample counts. No sample lands in the coat and is wasted on the body
+//   or the other way round.
+// Random numbers: rand3 (common.glsl), one Owen-scrambled Sobol sequence per
+// strategy and pixel. u_clamp > 0 clamps one sample's contribution (the
+// firefly clamp, see lit_sampling.py; biased, default off).
 
 uniform vec3 u_light_dir;       // toward the light, world space
 uniform vec3 u_light_radiance;
@@ -24,6 +34,101 @@ uniform int u_strategies;  // 4: the light and three environment strategies, 3: 
                            // the shader small)
 uniform int u_one_sample;  // 1: one environment sample per pass from the mixture of the three strategies
                            // (one-sample MIS, balance heuristic): two BRDF evaluations per pass, not four
+uniform uint u_seed;         // 0: the default image; others: independent renders (noise measurements)
+uniform int u_terms;         // bit mask of the estimator's terms kept (TERM_*; diagnostics), -1: all
+uniform int u_coat_samples;  // coat visible-normal samples per pass (split BRDFs)
+uniform float u_clamp;       // > 0: a sample's contribution is scaled down to this luminance at most
+uniform int u_ris_samples;   // > 0: the body's environment light by resampling, this many decoder samples per pass
+uniform int u_ris_candidates;  // candidates per resampled sample (even: half environment, half body lobe)
+
+// Terms of the estimator (u_terms bits), as viewer/lit_sampling.py Term.
+const int TERM_LIGHT = 1;      // the directional and the point light
+const int TERM_ENV_BODY = 2;   // environment-CDF samples, body (the whole BRDF when not split)
+const int TERM_LOBE_BODY = 4;  // the body's lobe (the BRDF's lobe when not split)
+const int TERM_COS_BODY = 8;   // cosine-lobe samples, body (the whole BRDF when not split)
+const int TERM_ENV_COAT = 16;  // environment-CDF samples, coat
+const int TERM_LOBE_COAT = 32; // the coat's visible-normal samples
+
+// Random-number streams (rand3's dim_set), one per strategy.
+const uint STREAM_ENV = 0u, STREAM_LOBE = 1u, STREAM_COS = 2u, STREAM_PICK = 3u, STREAM_COAT = 4u;
+
+#ifndef NB_SPLIT_COAT
+vec3 body_brdf(vec3 wi, vec3 wo) { return brdf(wi, wo); }
+vec3 sample_body(vec3 wo, vec3 u) { return sample_lobe(wo, u); }
+float pdf_body(vec3 wo, vec3 wi) { return pdf_lobe(wo, wi); }
+#endif
+
+// A sample's contribution, scaled down to luminance u_clamp at most when the clamp is on.
+vec3 clamp_contribution(vec3 c) {
+    float y = dot(c, vec3(0.2126, 0.7152, 0.0722));
+    return u_clamp > 0.0 && y > u_clamp ? c * (u_clamp / y) : c;
+}
+
+#ifdef NB_SPLIT_COAT
+// The coat's balance-heuristic estimator over every environment direction the
+// pass looks up (environment and resampling candidates) and its own samples:
+// per-pass sample counts per strategy (environment, body lobe, coat) and the coat.
+int coat_n;
+vec3 coat_counts;
+vec2 coat_pass;
+
+// One looked-up direction's share of the coat integral (clamped like any sample).
+vec3 coat_candidate(vec3 wo, vec3 l, vec3 radiance, float pe, float pb) {
+    if (coat_pass.y <= 1.0 + 1e-4) return vec3(0.0);
+    float pc = coat_counts.x * pe + coat_counts.y * pb + float(coat_n) * coat_pdf(wo, l, coat_pass);
+    return pc > 0.0 ? clamp_contribution(coat_eval(l, wo, coat_pass) * l.z * radiance / pc) : vec3(0.0);
+}
+#endif
+
+// Resampled importance sampling of the body (Talbot et al. 2005): ``m`` cheap
+// candidates, half from the environment's CDF and half from the body's lobe,
+// weighted by the target lum(L(l)) x (pdf_body(l) + cos(l) / (4 pi)) (lighting
+// times lobe, no decoder); one is kept with probability proportional to its
+// weight, and the decoder runs at it alone. Returns the kept direction (local;
+// z <= 0: none) and in ``weight`` the radiance over its effective pdf,
+// L(l) x (sum of weights) / (m x target(l)). Every candidate also feeds the
+// coat's balance-heuristic estimator, added to ``coat_sum``.
+float ris_target(vec3 wo, vec3 l, vec3 radiance) {
+    return dot(radiance, vec3(0.2126, 0.7152, 0.0722)) * (pdf_body(wo, l) + max(l.z, 0.0) * (0.25 / PI));
+}
+
+vec3 ris_body_sample(mat3 tbn, vec3 wo, uvec2 px, uint draw, int m, inout vec3 coat_sum, out vec3 weight) {
+    float u = rand3(px, draw, STREAM_PICK, u_seed).x;
+    float wsum = 0.0, target = 0.0;
+    vec3 kept = vec3(0.0, 0.0, -1.0), kept_radiance = vec3(0.0);
+    int half_m = m / 2;
+    for (int i = 0; i < m; ++i) {
+        uint index = draw * uint(half_m) + uint(i / 2);
+        vec3 l;
+        float unused;
+        if (i % 2 == 0) l = transpose(tbn) * sample_env(rand3(px, index, STREAM_ENV, u_seed).xy, unused);
+        else l = sample_body(wo, rand3(px, index, STREAM_LOBE, u_seed));
+        if (l.z <= 0.0) continue;
+        vec3 lw = tbn * l;
+        float pe = pdf_env(lw), pb = pdf_body(wo, l);
+        float q = 0.5 * (pe + pb);  // the candidates' mixture
+        if (q <= 0.0) continue;
+        vec3 radiance = env_radiance(lw) * u_env_intensity;
+#ifdef NB_SPLIT_COAT
+        coat_sum += coat_candidate(wo, l, radiance, pe, pb);
+#endif
+        float g = ris_target(wo, l, radiance);
+        float w = g / q;
+        if (w <= 0.0) continue;
+        wsum += w;
+        // Streaming selection with one uniform: keep candidate i with probability w / wsum,
+        // then rescale u to stay uniform on what is left.
+        float t = w / wsum;
+        if (u < t) {
+            kept = l; kept_radiance = radiance; target = g;
+            u = u / t;
+        } else {
+            u = (u - t) / (1.0 - t);
+        }
+    }
+    weight = target > 0.0 ? kept_radiance * (wsum / (float(m) * target)) : vec3(0.0);
+    return kept;
+}
 
 // ``tbn``: the shading frame (columns tangent, bitangent, normal; world);
 // ``view``: unit vector to the eye; ``world``: the surface point.
@@ -31,33 +136,72 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
     mat3 to_local = transpose(tbn);
     vec3 wo = to_local * view;
     vec3 color = vec3(0.0);
-    int count = u_env_on == 0 ? 1 : u_one_sample != 0 ? 2 : u_strategies;
+    bool ris = u_ris_samples > 0 && u_ris_candidates > 1;
+    int m = ris ? u_ris_candidates - u_ris_candidates % 2 : 0;
+    int count = u_env_on == 0 ? 1 : ris ? 1 + u_ris_samples : u_one_sample != 0 ? 2 : u_strategies;
+    bool cosine = u_strategies > 3 || u_one_sample != 0;
+#ifdef NB_SPLIT_COAT
+    vec2 coat = coat_code();
+    bool coated = u_env_on != 0 && coat_params(coat).y > 1.0 + 1e-4;
+    coat_n = coated ? max(u_coat_samples, 0) : 0;
+    // The coat estimator's sample counts per strategy (environment, body lobe, coat).
+    coat_counts = ris ? vec3(float(m / 2 * u_ris_samples), float(m / 2 * u_ris_samples), float(coat_n))
+                      : vec3(u_one_sample != 0 ? 1.0 / 3.0 : 1.0, 0.0, float(coat_n));
+    coat_pass = coated ? coat : vec2(0.05, 1.0);
+#endif
+    vec3 coat_sum = vec3(0.0);
     // One-sample MIS: the strategy of the single environment sample, chosen uniformly.
-    float pick = u_one_sample != 0 ? rand2(px, pass_index, 4u).x * 3.0 : 0.0;
+    float pick = u_one_sample != 0 ? rand3(px, pass_index, STREAM_PICK, u_seed).x * 3.0 : 0.0;
     for (int k = u_point_on != 0 ? -1 : 0; k < count; ++k) {
         vec3 l;
         float unused;
         vec3 to_point = u_point_pos - world;
-        int s = k == 1 && u_one_sample != 0 ? 1 + min(int(pick), 2) : k;
+        int s = ris && k > 0 ? 4 : k == 1 && u_one_sample != 0 ? 1 + min(int(pick), 2) : k;
+        vec3 ris_weight = vec3(0.0);
         if (s == -1) l = to_local * normalize(to_point);
         else if (s == 0) l = to_local * normalize(u_light_dir);
-        else if (s == 1) l = to_local * sample_env(rand2(px, pass_index, 0u), unused);
-        else if (s == 2) l = sample_lobe(wo, vec3(rand2(px, pass_index, 1u), rand2(px, pass_index, 2u).x));
-        else l = sample_cosine(rand2(px, pass_index, 3u), unused);
+        else if (s == 1) l = to_local * sample_env(rand3(px, pass_index, STREAM_ENV, u_seed).xy, unused);
+        else if (s == 2) l = sample_body(wo, rand3(px, pass_index, STREAM_LOBE, u_seed));
+        else if (s == 3) l = sample_cosine(rand3(px, pass_index, STREAM_COS, u_seed).xy, unused);
+        else l = ris_body_sample(tbn, wo, px, pass_index * uint(u_ris_samples) + uint(k - 1), m, coat_sum, ris_weight);
         if (l.z <= 0.0) continue;
-        vec3 weight;  // radiance over (MIS-weighted) pdf
+        int term = s <= 0 ? TERM_LIGHT : s == 1 || s == 4 ? TERM_ENV_BODY : s == 2 ? TERM_LOBE_BODY : TERM_COS_BODY;
+        vec3 radiance;
+        float p = 1.0;  // the balance heuristic's denominator (1: a light, or the resampled weight)
+        vec3 lw = tbn * l;
         if (k == -1) {
-            weight = u_point_intensity / max(dot(to_point, to_point), 1e-8);
+            radiance = u_point_intensity / max(dot(to_point, to_point), 1e-8);
         } else if (k == 0) {
-            weight = u_light_radiance;
+            radiance = u_light_radiance;
+        } else if (s == 4) {
+            radiance = ris_weight / float(u_ris_samples);  // each resampled sample estimates the whole body
         } else {
-            vec3 lw = tbn * l;
-            float p = pdf_env(lw) + pdf_lobe(wo, l) + (u_strategies > 3 || u_one_sample != 0 ? pdf_cosine(l) : 0.0);
+            float pe = pdf_env(lw);
+            p = pe + pdf_body(wo, l) + (cosine ? pdf_cosine(l) : 0.0);
             if (u_one_sample != 0) p *= 1.0 / 3.0;  // the mixture's pdf
-            if (p <= 0.0) continue;
-            weight = env_radiance(lw) * u_env_intensity / p;
+            radiance = env_radiance(lw) * u_env_intensity;
+#ifdef NB_SPLIT_COAT
+            if (s == 1) coat_sum += coat_candidate(wo, l, radiance, pe, 0.0);
+#endif
         }
-        color += brdf(l, wo) * l.z * weight;
+        bool keep = (u_terms & term) != 0;
+        vec3 f = keep && p > 0.0 ? body_brdf(l, wo) : vec3(0.0);
+#ifdef NB_SPLIT_COAT
+        if (s <= 0 && keep) f += vec3(coat_eval(l, wo, coat));  // the lights see the whole BRDF
+#endif
+        if (p > 0.0) color += s <= 0 ? f * l.z * radiance : clamp_contribution(f * l.z * radiance / p);
     }
+#ifdef NB_SPLIT_COAT
+    // The coat's own samples: its visible normals, several per pass (no decoder).
+    for (int j = 0; j < coat_n; ++j) {
+        vec3 l = coat_sample(wo, rand3(px, pass_index * uint(coat_n) + uint(j), STREAM_COAT, u_seed).xy, coat);
+        if (l.z <= 0.0 || (u_terms & TERM_LOBE_COAT) == 0) continue;
+        vec3 lw = tbn * l;
+        float pc = coat_counts.x * pdf_env(lw) + coat_counts.y * pdf_body(wo, l) + float(coat_n) * coat_pdf(wo, l, coat);
+        if (pc > 0.0)
+            color += clamp_contribution(coat_eval(l, wo, coat) * l.z * env_radiance(lw) * u_env_intensity / pc);
+    }
+    if ((u_terms & TERM_ENV_COAT) != 0) color += coat_sum;
+#endif
     return color;
 }

@@ -14,5 +14,11 @@ uniform vec2 u_coat;  // (roughness, ior); ior 1: no coat
 #define NB_COAT u_coat
 #endif
 vec3 brdf(vec3 wi, vec3 wo) { return nb_decode(wi, wo) + vec3(coat_eval(wi, wo, NB_COAT)); }
+// The split for the lit pass (lit_shade.glsl): body and coat estimated apart.
+#define NB_SPLIT_COAT 1
+vec3 body_brdf(vec3 wi, vec3 wo) { return nb_decode(wi, wo); }
+vec3 sample_body(vec3 wo, vec3 u) { return sample_proxy(wo, u, u_proxy_sigma, u_proxy_w); }
+float pdf_body(vec3 wo, vec3 wi) { return pdf_proxy(wo, wi, u_proxy_sigma, u_proxy_w); }
+vec2 coat_code() { return NB_COAT; }
 vec3 sample_lobe(vec3 wo, vec3 u) { return coated_sample(wo, u, NB_COAT, u_proxy_sigma, u_proxy_w); }
 float pdf_lobe(vec3 wo, vec3 wi) { return coated_pdf(wo, wi, NB_COAT, u_proxy_sigma, u_proxy_w); }
