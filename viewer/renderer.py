@@ -114,15 +114,13 @@ class Renderer:
         self.ctx = ctx
         self.deferred = use_compute(ctx, compute)
         self.strategies = 4
-        """Per pass, the light and the environment strategies: 4 = environment CDF, the
-        BRDF's lobe and the cosine lobe (balance heuristic; the golden images), 3 = without
-        the cosine lobe (the learned proxy's own cosine part covers the diffuse
-        directions): three BRDF evaluations per pass instead of four at the same noise
-        (issue 12 measured 0.68x the time to equal noise; to become the default with
-        regenerated object goldens)."""
+        """With ``sampling.ris_samples`` 0 only (the default resamples, lit_sampling.py):
+        the environment strategies of the balance heuristic, 4 = environment CDF, the
+        BRDF's lobe and the cosine lobe, 3 = without the cosine lobe (issue 12 measured
+        0.68x the time to equal noise)."""
         self.one_sample_mis = False
-        """True: one environment sample per pass from the strategies' mixture (fewer BRDF
-        evaluations, more noise: slower to equal noise than ``strategies`` 3, issue 12)."""
+        """With ``sampling.ris_samples`` 0 only: one environment sample per pass from the
+        strategies' mixture (fewer BRDF evaluations, more noise, issue 12)."""
         self.sampling = LitSampling()
         """The lit pass's sampling: coat samples per pass, firefly clamp, seed (viewer/lit_sampling.py)."""
         self._gbuf: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = {}
