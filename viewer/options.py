@@ -66,8 +66,8 @@ class ViewOptions:
         "parse": parse_size, "metavar": "WxH",
         "shown": "512x512 offscreen; a window opens at its last size, or 80% of the screen"})
     """image or window size in pixels"""
-    spp: int = 16
-    """passes accumulated per pixel"""
+    spp: int = 32
+    """passes accumulated per pixel (32: the default preview's relative noise under 1 %)"""
     exposure: float = 0.0
     """exposure in EV (stops: +1 doubles the brightness)"""
     tonemap: ToneMap = ToneMap.NEUTRAL
