@@ -97,6 +97,7 @@ class App:
             self.close()
             raise NbrdfError(self.lookdev.error or f"{opts.session}: cannot open the session")
         self._drag: tuple[int, float, float] | None = None
+        self._side = self.lookdev.side_by_side  # framed for two halves (compare side by side)
         self.dragging = False
         self.scale = 1.0             # render resolution / window resolution (adaptive)
         self._last_ms: float | None = None
@@ -120,9 +121,11 @@ class App:
             self.panels.visible = not self.panels.visible
 
     def frame(self) -> None:
-        """Fits the object into the 3D view (F, the panel's button, the first frame)."""
+        """Fits the object into the 3D view (F, the panel's button, the first frame),
+        or into each half of it side by side."""
         _, _, w, h = self.viewport()
-        self.lookdev.frame(w / max(h, 1))
+        self._side = self.lookdev.side_by_side
+        self.lookdev.frame((w / 2 if self._side else w) / max(h, 1))
 
     def _mouse(self) -> None:
         io = imgui.get_io()
@@ -173,6 +176,8 @@ class App:
         w, h = self.framebuffer_size()
         w, h = max(w, 1), max(h, 1)
         self.panels.draw(self._window_size())
+        if self.lookdev.side_by_side != self._side:  # entering or leaving side by side: fit the halves
+            self.frame()
         self._mouse()
         self.screen.use()
         self.screen.viewport = (0, 0, w, h)

@@ -434,6 +434,11 @@ class LookDev:
     def _compare_active(self) -> bool:
         return self.compare != CompareMode.OFF and not self.interp.brdf_blend
 
+    @property
+    def side_by_side(self) -> bool:
+        """Whether the view shows two images side by side (each half the view's width)."""
+        return self._compare_active() and self.compare == CompareMode.SIDE
+
     def main_state(self) -> ViewState:
         """The view state of the neural image (compare mode on a stack's lit object:
         the directional light alone, which is what its Monte Carlo reference shows)."""
@@ -453,7 +458,7 @@ class LookDev:
         w, h = max(1, int(size[0] * scale)), max(1, int(size[1] * scale))
         comparing = self._compare_active()
         blending = self.interp.brdf_blend and self.other_brdf is not None
-        vw = max(1, w // 2) if comparing and self.compare == CompareMode.SIDE else w
+        vw = max(1, w // 2) if self.side_by_side else w
         first = self.passes
         n = 0 if first >= MAX_PASSES else min(passes, MAX_PASSES - first)
         view = View.parse(self.state.view)
