@@ -121,26 +121,21 @@ class PackedDecoder:
         lines += ["        y0[o] = nb_act(s0);", "        y1[o] = nb_act(s1);", "    }", "}"]
         return "\n".join(lines)
 
-    def paired_chain(self) -> str:
-        """GLSL statements running hidden layers 2..depth on the pair arrays
-        ``a0``/``a1`` (ping-pong with ``b0``/``b1``); the result ends in ``a0``/``a1``."""
-        lines, src, dst = [], "a", "b"
-        for k in range(1, self.spec.depth):
-            lines.append(f"    nb_hidden2({src}0, {src}1, {dst}0, {dst}1, {self.offsets[f'hidden{k}']});")
-            src, dst = dst, src
-        if src != "a":
-            lines.append("    for (int j = 0; j < NB_WIDTH; ++j) { a0[j] = b0[j]; a1[j] = b1[j]; }")
-        return "\n".join(lines)
-
-    def layer_chain(self) -> str:
+    def layer_chain(self, pairs: int = 1) -> str:
         """GLSL statements that run the hidden layers 2..depth, ping-ponging
-        between the arrays ``a`` and ``b``; the result ends in ``a``."""
+        between the arrays ``a`` and ``b`` (``nb_hidden``); with ``pairs`` 2,
+        between ``a0``/``a1`` and ``b0``/``b1`` (``nb_hidden2``, two (wi, wo)
+        pairs at once). The result ends in ``a`` (``a0``/``a1``)."""
+        names = [""] if pairs == 1 else ["0", "1"]
+        fn = "nb_hidden" if pairs == 1 else "nb_hidden2"
         lines, src, dst = [], "a", "b"
         for k in range(1, self.spec.depth):
-            lines.append(f"    nb_hidden({src}, {dst}, {self.offsets[f'hidden{k}']});")
+            args = ", ".join([src + n for n in names] + [dst + n for n in names])
+            lines.append(f"    {fn}({args}, {self.offsets[f'hidden{k}']});")
             src, dst = dst, src
         if src != "a":
-            lines.append("    for (int j = 0; j < NB_WIDTH; ++j) a[j] = b[j];")
+            copies = " ".join(f"a{n}[j] = b{n}[j];" for n in names)
+            lines.append(f"    for (int j = 0; j < NB_WIDTH; ++j) {{ {copies} }}")
         return "\n".join(lines)
 
 

@@ -108,7 +108,7 @@ class GpuDecoder:
         out = {"nb_layers": self.packed.layer_chain(), "nb_share": "", "nb_net": "",
                "nb_hidden2": "", "nb_chain2": ""}
         if not storage.unrolled:
-            out["nb_hidden2"], out["nb_chain2"] = self.packed.paired_hidden(), self.packed.paired_chain()
+            out["nb_hidden2"], out["nb_chain2"] = self.packed.paired_hidden(), self.packed.layer_chain(pairs=2)
         if storage.unrolled:
             if self._net is None:
                 self._net = self.packed.unrolled_net()

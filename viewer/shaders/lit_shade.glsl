@@ -58,9 +58,11 @@ vec3 sample_body(vec3 wo, vec3 u) { return sample_lobe(wo, u); }
 float pdf_body(vec3 wo, vec3 wi) { return pdf_lobe(wo, wi); }
 #endif
 
+const vec3 LUMA = vec3(0.2126, 0.7152, 0.0722);  // Rec. 709 luminance weights
+
 // A sample's contribution, scaled down to luminance u_clamp at most when the clamp is on.
 vec3 clamp_contribution(vec3 c) {
-    float y = dot(c, vec3(0.2126, 0.7152, 0.0722));
+    float y = dot(c, LUMA);
     return u_clamp > 0.0 && y > u_clamp ? c * (u_clamp / y) : c;
 }
 
@@ -72,10 +74,16 @@ int coat_n;
 vec3 coat_counts;
 vec2 coat_pass;
 
+// The balance heuristic's denominator for a coat direction l: every strategy's
+// sample count times its pdf (environment ``pe``, body lobe ``pb``, coat).
+float coat_mis_pdf(vec3 wo, vec3 l, float pe, float pb) {
+    return coat_counts.x * pe + coat_counts.y * pb + float(coat_n) * coat_pdf(wo, l, coat_pass);
+}
+
 // One looked-up direction's share of the coat integral (clamped like any sample).
 vec3 coat_candidate(vec3 wo, vec3 l, vec3 radiance, float pe, float pb) {
     if (coat_pass.y <= 1.0 + 1e-4) return vec3(0.0);
-    float pc = coat_counts.x * pe + coat_counts.y * pb + float(coat_n) * coat_pdf(wo, l, coat_pass);
+    float pc = coat_mis_pdf(wo, l, pe, pb);
     return pc > 0.0 ? clamp_contribution(coat_eval(l, wo, coat_pass) * l.z * radiance / pc) : vec3(0.0);
 }
 #endif
@@ -89,7 +97,7 @@ vec3 coat_candidate(vec3 wo, vec3 l, vec3 radiance, float pe, float pb) {
 // L(l) x (sum of weights) / (m x target(l)). Every candidate also feeds the
 // coat's balance-heuristic estimator, added to ``coat_sum``.
 float ris_target(vec3 wo, vec3 l, vec3 radiance) {
-    return dot(radiance, vec3(0.2126, 0.7152, 0.0722)) * (pdf_body(wo, l) + max(l.z, 0.0) * (0.25 / PI));
+    return dot(radiance, LUMA) * (pdf_body(wo, l) + max(l.z, 0.0) * (0.25 / PI));
 }
 
 vec3 ris_body_sample(mat3 tbn, vec3 wo, uvec2 px, uint draw, int m, inout vec3 coat_sum, out vec3 weight) {
@@ -193,11 +201,12 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
     }
 #ifdef NB_SPLIT_COAT
     // The coat's own samples: its visible normals, several per pass (no decoder).
-    for (int j = 0; j < coat_n; ++j) {
+    int coat_own = (u_terms & TERM_LOBE_COAT) != 0 ? coat_n : 0;
+    for (int j = 0; j < coat_own; ++j) {
         vec3 l = coat_sample(wo, rand3(px, pass_index * uint(coat_n) + uint(j), STREAM_COAT, u_seed).xy, coat);
-        if (l.z <= 0.0 || (u_terms & TERM_LOBE_COAT) == 0) continue;
+        if (l.z <= 0.0) continue;
         vec3 lw = tbn * l;
-        float pc = coat_counts.x * pdf_env(lw) + coat_counts.y * pdf_body(wo, l) + float(coat_n) * coat_pdf(wo, l, coat);
+        float pc = coat_mis_pdf(wo, l, pdf_env(lw), pdf_body(wo, l));
         if (pc > 0.0)
             color += clamp_contribution(coat_eval(l, wo, coat) * l.z * env_radiance(lw) * u_env_intensity / pc);
     }
