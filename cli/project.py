@@ -37,7 +37,7 @@ class ProjectConfig:
     """samples drawn from the material or table"""
     spp: int = 64
     """Monte Carlo paths per pair for a stack's reference"""
-    steps: int = 200
+    steps: int = 400
     """optimisation steps of the projection"""
     seed: int = 0
     """random seed of the samples and the projection"""

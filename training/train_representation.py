@@ -35,7 +35,8 @@ class TrainConfig:
     decoder and one latent per training BRDF, optimised together."""
 
     data: str
-    """a folder made by `nbrdf data`"""
+    """a folder made by `nbrdf data`, or several joined by commas (trained on together; the first one's
+    validation split is used)"""
     out: str
     """run folder (checkpoint, decoder.safetensors, curves.png)"""
     spec: DecoderSpec = field(default_factory=DecoderSpec)
@@ -84,6 +85,13 @@ def flatten(data: BRDFSet, scale: float) -> _Flat:
     return _Flat(feats, cos_o, loss_target(data.f.reshape(-1), cos_o, scale), torch.arange(K).repeat_interleave(n))
 
 
+def _join(parts: list[_Flat], sizes: list[int]) -> _Flat:
+    """Several flattened sets as one (owners renumbered after each other)."""
+    offsets = [sum(sizes[:i]) for i in range(len(sizes))]
+    return _Flat(*(torch.cat([getattr(p, k) for p in parts]) for k in ("feats", "cos_o", "target")),
+                 torch.cat([p.owner + o for p, o in zip(parts, offsets)]))
+
+
 def validate(dec: Decoder, val: BRDFSet, steps: int = 150, fit_pairs: int | None = None) -> dict:
     """Projects the validation BRDFs on half their pairs and reports the loss
     on the other half, per class and overall."""
@@ -113,16 +121,21 @@ def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None
 
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
-    manifest = load_manifest(cfg.data)
+    folders = [f.strip() for f in cfg.data.split(",") if f.strip()]
+    if not folders:
+        raise NbrdfError("--data: no data folder given")
+    manifests = [load_manifest(f) for f in folders]
+    manifest = manifests[0]
     dev = _device(cfg.device)
     torch.manual_seed(cfg.seed)
-    train_set = load_split(cfg.data, "train")
-    val_set = load_split(cfg.data, "val")
+    train_sets = [load_split(f, "train") for f in folders]
+    val_set = load_split(folders[0], "val")
     if cfg.spec.coat:  # the decoder learns bodies; the coat is closed form (neural.coat)
-        train_set = replace(train_set, f=body_values(train_set))
+        train_sets = [replace(t, f=body_values(t)) for t in train_sets]
         val_set = replace(val_set, f=body_values(val_set))
-    flat = flatten(train_set, cfg.spec.loss_scale)
-    K = len(train_set)
+    flat = _join([flatten(t, cfg.spec.loss_scale) for t in train_sets], [len(t) for t in train_sets])
+    params = torch.cat([t.params for t in train_sets])  # (K, 11): the training BRDFs, in latent order
+    K = params.shape[0]
     dec = Decoder(cfg.spec).to(dev)
     latents = torch.nn.Parameter(torch.randn(K, cfg.spec.latent, device=dev) * 0.01)
     opt = torch.optim.Adam([{"params": dec.parameters(), "lr": cfg.lr},
@@ -133,7 +146,8 @@ def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None
     history: dict[str, list] = {"train": [], "val": [], "val_epoch": []}
     start = 0
     ck = out / "checkpoint.pt"
-    run_key = {"config": json.loads(json.dumps(asdict(cfg), default=str)), "data": manifest["config"]}
+    run_key = {"config": json.loads(json.dumps(asdict(cfg), default=str)),
+               "data": manifest["config"] if len(manifests) == 1 else [m["config"] for m in manifests]}
     if ck.exists():
         state = torch.load(ck, map_location=dev, weights_only=True)
         if json.loads(state["run_key"]) != run_key:
@@ -189,14 +203,15 @@ def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None
         _save_val_curves(history, out / "curves.png")
     bar.close()
     dec = dec.cpu().eval()
-    trained_on = {"data": str(cfg.data), "preset": manifest.get("preset"), "data_config": manifest["config"],
+    trained_on = {"data": str(cfg.data), "preset": ",".join(str(m.get("preset")) for m in manifests),
+                  "data_config": manifest["config"] if len(manifests) == 1 else [m["config"] for m in manifests],
                   "train_brdfs": K, "epochs": cfg.epochs, "seconds_this_run": round(time.perf_counter() - t0, 1),
                   "device": str(dev)}
     metrics = {"train_loss": history["train"][-1] if history["train"] else None,
                "val_loss": history["val"][-1] if history["val"] else None}
     bundle = out / "decoder.safetensors"
     save_decoder(dec, bundle, trained_on=trained_on, accuracy=metrics)
-    _save_latents(out / "latents.safetensors", latents.detach().cpu(), train_set, dec.weights_id())
+    _save_latents(out / "latents.safetensors", latents.detach().cpu(), params, dec.weights_id())
     (out / "metrics.json").write_text(json.dumps({"trained_on": trained_on, "history": history,
                                                    "macs_per_eval": dec.spec.macs(),
                                                    "parameters": dec.spec.parameters()}, indent=1))
@@ -226,8 +241,8 @@ def _save_val_curves(history: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def _save_latents(path: Path, latents: Tensor, data: BRDFSet, decoder_id: str) -> None:
+def _save_latents(path: Path, latents: Tensor, params: Tensor, decoder_id: str) -> None:
     from safetensors.torch import save_file
 
-    save_file({"latents": latents.contiguous(), "params": data.params.contiguous()}, str(path),
+    save_file({"latents": latents.contiguous(), "params": params.contiguous()}, str(path),
               metadata={"format": "nbrdf-latent-table/1", "decoder_id": decoder_id})

@@ -52,3 +52,19 @@ def test_a_checkpoint_of_other_settings_is_refused(data, tmp_path):
     train(cfg, progress=False)
     with pytest.raises(NbrdfError, match="other settings"):
         train(replace(cfg, lr=1e-4), progress=False)
+
+
+def test_several_data_sets_train_one_latent_table(data, tmp_path):
+    other = tmp_path / "other"
+    generate(other, replace(TINY, counts=dict(two_layer=3), val_counts=dict(two_layer=1), pairs=64, seed=5),
+             progress=False)
+    cfg = TrainConfig(data=f"{data},{other}", out=str(tmp_path / "run"), spec=SPEC, epochs=2, batch=256)
+    train(cfg, progress=False)
+    from safetensors.torch import load_file
+
+    from nbrdf.training.dataset import load_split
+
+    table = load_file(str(tmp_path / "run" / "latents.safetensors"))
+    params = torch.cat([load_split(data, "train").params, load_split(other, "train").params])
+    assert table["latents"].shape == (params.shape[0], SPEC.latent)
+    assert torch.equal(table["params"], params)
