@@ -68,9 +68,14 @@ class OpsConfig:
     """layering: final steps that mix in three-layer stacks (recursive layering)"""
     width: int = 0
     """layering: hidden units per layer of the layering network (0: the default, 256)"""
+    depth: int = 0
+    """layering: hidden layers of the layering network (0: the default, 3)"""
     loss: str = "log"
     """layering: log (the decoder's training loss) or mean (``neural.decoder.unbiased_error``: fits the
     Monte Carlo mean, where the log loss fits a geometric mean that skewed noise pulls too dark)"""
+    loss_scale: float = 0.0
+    """layering: s of the loss, below which errors count as absolute (0: the decoder's own); smaller weighs
+    dark bodies (black lacquers) more"""
 
 
 @dataclass
@@ -182,13 +187,15 @@ def _finish(name: str, cfg: OpsConfig, model: NeuralModel, history: dict, extra:
 
 
 def _decoder_loss(model: NeuralModel, z: Tensor, feats: Tensor, cos_o: Tensor, target: Tensor,
-                  f: Tensor | None = None) -> Tensor:
-    """The decoder's training loss for latents z (B, 32) at pairs (B, P, .);
+                  f: Tensor | None = None, scale: float = 0.0) -> Tensor:
+    """The decoder's training loss for latents z (B, 32) at pairs (B, P, .)
+    (``scale``: its s, 0 = the decoder's; ``target`` made with the same s);
     with the values ``f`` themselves, ``neural.decoder.unbiased_error`` instead."""
+    s = scale or model.decoder.spec.loss_scale
     y = model.decoder.log_f(z[:, None, :], feats)
     if f is not None:
-        return unbiased_error(y, f, cos_o, model.decoder.spec.loss_scale).mean()
-    return ((predicted_target(y, cos_o, model.decoder.spec.loss_scale) - target) ** 2).mean()
+        return unbiased_error(y, f, cos_o, s).mean()
+    return ((predicted_target(y, cos_o, s) - target) ** 2).mean()
 
 
 # --- leaf encoders --------------------------------------------------------------------------
@@ -303,14 +310,16 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
     manifests = [load_manifest(f.strip()) for f in cfg.data.split(",") if f.strip()]
     torch.manual_seed(cfg.seed)
     g = torch.Generator().manual_seed(cfg.seed)
-    s_ = model.decoder.spec.loss_scale
+    if cfg.loss_scale < 0:
+        raise NbrdfError(f"--loss-scale: {cfg.loss_scale} is negative")
+    s_ = cfg.loss_scale or model.decoder.spec.loss_scale
     train = _StackData(cfg.data, "train", s_)
     val = _StackData(cfg.data, "val", s_)
     two = train.index_of("two_layer", "diffuse_base")
     three = train.index_of(*THREE_LAYERED)
     if two.numel() == 0:
         raise NbrdfError(f"{cfg.data}: no two-layer or diffuse-base stacks to train the layering network on")
-    net = LayeringNet(layering_spec(width=cfg.width or 256))
+    net = LayeringNet(layering_spec(width=cfg.width or 256, depth=cfg.depth or 3))
     if model.layering is not None and model.layering.spec == net.spec:
         net.load_state_dict(model.layering.state_dict())  # fine-tune the bundle's network
     else:
@@ -324,7 +333,7 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
     def loss_on(data: _StackData, idx: Tensor, pairs: int, fit_mean: bool = cfg.loss == "mean") -> Tensor:
         params, feats, cos_o, target, body = data.batch(idx, pairs, g)
         return _decoder_loss(model, stack_latents(model, params, net), feats, cos_o, target,
-                             body if fit_mean else None)
+                             body if fit_mean else None, s_)
 
     def step(s: int) -> Tensor:
         if s >= cfg.steps - cfg.recursion_steps and three.numel():
