@@ -106,3 +106,15 @@ def test_layering_fits_the_monte_carlo_mean_on_request(bundles):
     assert metrics["history"]["train"][-1] < metrics["history"]["train"][0]
     with pytest.raises(NbrdfError, match="--loss"):
         train_layering(replace(cfg, out=str(root / "lay_bad"), loss="median"), progress=False)
+
+
+def test_layering_shape_and_loss_scale_are_chosen(bundles):
+    """``--depth`` sets the layering network's hidden layers (recorded in the
+    bundle); ``--loss-scale`` must not be negative."""
+    root, leaf, _, _ = bundles
+    cfg = OpsConfig(decoder=str(leaf), out=str(root / "lay_deep"), steps=20, batch=8, pairs=32,
+                    data=str(root / "data"), recursion_steps=10, width=16, depth=5, loss_scale=2e-4)
+    model = load_model(train_layering(cfg, progress=False))
+    assert model.layering.spec.depth == 5 and model.layering.spec.width == 16
+    with pytest.raises(NbrdfError, match="--loss-scale"):
+        train_layering(replace(cfg, out=str(root / "lay_neg"), loss_scale=-1.0), progress=False)
