@@ -80,7 +80,8 @@ class App:
                           background=opts.background != "none", point_light=opts.point_light,
                           point_intensity=opts.point_intensity)
         material, notes = opts.load_material()
-        self.lookdev = LookDev(self.ctx, material, opts.mesh, opts.env, state, opts.backdrop())
+        self.lookdev = LookDev(self.ctx, material, opts.mesh, opts.env, state, opts.backdrop(),
+                               parts=opts.file_materials())
         if notes:
             self.lookdev.notice = "; ".join(notes)
         from imgui_bundle.python_backends.glfw_backend import GlfwRenderer
