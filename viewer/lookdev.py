@@ -274,6 +274,17 @@ class LookDev:
                 raise
         return self._guard(go)
 
+    def pick_material(self, x: int, y: int, size: tuple[int, int]) -> int:
+        """Selects the material seen at pixel (x, y) (top-left origin) of a view of
+        ``size`` (a click in the window); returns its index, -1 off the object or
+        with a single material."""
+        if not self.parts or not (0 <= x < size[0] and 0 <= y < size[1]):
+            return -1
+        k = int(self.renderer.material_ids(self.main_state(), size)[int(y), int(x)])
+        if k >= 0 and k != self.selected and not self.select_material(k):
+            return -1
+        return k
+
     def _part_brdf(self, m: Material) -> GpuBrdf:
         """A non-selected part's BRDF (the decoder at its latent or latent texture), kept per document."""
         key = material_key(m)

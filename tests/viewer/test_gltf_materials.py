@@ -139,7 +139,10 @@ def test_the_editor_edits_the_selected_material_only(gl_ctx):
         ld.state.camera.frame(1.0)
         ids = ld.renderer.material_ids(ld.state, SIZE)
         before = ld.renderer.render_linear(ld.state, SIZE, 1, ld.brdf)
-        assert ld.select_material(1) and ld.material.name == "blue stone"
+        y, x = np.argwhere(ids == 1)[0]  # a click on the plinth selects its material
+        assert ld.pick_material(int(x), int(y), SIZE) == 1 and ld.selected == 1
+        assert ld.pick_material(0, 0, SIZE) == -1 and ld.selected == 1  # off the object: nothing changes
+        assert ld.material.name == "blue stone"
         assert not ld.select_material(2) and "no material 2" in ld.error and ld.selected == 1
         assert ld.set_param(1, "albedo", [0.6, 0.1, 0.05])  # the stone's diffuse base turns orange
         after = ld.renderer.render_linear(ld.state, SIZE, 1, ld.brdf)
