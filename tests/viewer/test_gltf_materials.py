@@ -157,6 +157,10 @@ def test_the_editor_edits_the_selected_material_only(gl_ctx):
                                    rtol=1e-5, atol=1e-7)
         # a mesh that is not glTF: the edited material on the whole mesh, no material list
         assert ld.set_mesh("sphere") and ld.parts == [] and ld.renderer.part_brdfs == [None]
+        # opening the glTF file again (the Scene panel's mesh file) brings its materials back, the first selected
+        assert ld.set_mesh(str(SCENE)) and [p.material.name for p in ld.parts] == ["red car paint", "blue stone"]
+        assert ld.selected == 0 and ld.renderer.part_brdfs[0] is None and ld.renderer.part_brdfs[1] is not None
+        assert not ld.set_mesh(str(SCENE.with_name("missing.glb"))) and ld.error and len(ld.parts) == 2
     finally:
         ld.close()
 
