@@ -133,8 +133,9 @@ class ViewOptions:
 
         groups = self.file_materials()
         if groups is not None:
-            named = len(groups) > 1
-            notes = [f"{self.mesh}: {g.material.name + ': ' if named else ''}{note}" for g in groups for note in g.notes]
+            named = len(groups) > 1  # several materials: each note names its material
+            notes = [f"{self.mesh}: {g.material.name + ': ' if named else ''}{note}"
+                     for g in groups for note in g.notes]
             return groups[0].material, notes
         return load_material(self.material), []
 
