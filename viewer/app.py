@@ -6,9 +6,10 @@ The panels are two fixed side bars; the 3D view is the rest of the window,
 never covered (``viewport``). The window opens at its remembered size, else
 about 80 % of the screen (viewer/session.py ``WindowPrefs``), and frames the
 object for the view's aspect. Mouse: left-drag orbits, right-drag pans, the
-wheel zooms (when the pointer is in the view). Keys: F frames the object, T toggles the turntable,
-H hides the panels, Esc quits. The view renders at the fraction of the
-window that keeps a frame within budget (60 ms while the user drags, 200 ms
+wheel zooms (when the pointer is in the view); a click on a glTF file's
+object selects its material. Keys: F frames the object, T toggles the
+turntable, H hides the panels, Esc quits. The view renders at the fraction
+of the window that keeps a frame within budget (60 ms while the user drags, 200 ms
 when still; software OpenGL ends at 1/8), one pass per frame while dragging,
 and passes accumulate when still (progressive).
 """
@@ -80,7 +81,8 @@ class App:
                           background=opts.background != "none", point_light=opts.point_light,
                           point_intensity=opts.point_intensity)
         material, notes = opts.load_material()
-        self.lookdev = LookDev(self.ctx, material, opts.mesh, opts.env, state, opts.backdrop())
+        self.lookdev = LookDev(self.ctx, material, opts.mesh, opts.env, state, opts.backdrop(),
+                               parts=opts.file_materials())
         if notes:
             self.lookdev.notice = "; ".join(notes)
         from imgui_bundle.python_backends.glfw_backend import GlfwRenderer
@@ -97,6 +99,7 @@ class App:
             self.close()
             raise NbrdfError(self.lookdev.error or f"{opts.session}: cannot open the session")
         self._drag: tuple[int, float, float] | None = None
+        self._click: tuple[float, float, int, int] | None = None  # a left press not yet moved (view coordinates)
         self._side = self.lookdev.side_by_side  # framed for two halves (compare side by side)
         self.dragging = False
         self.scale = 1.0             # render resolution / window resolution (adaptive)
@@ -136,7 +139,10 @@ class App:
         button = next((b for b in (glfw.MOUSE_BUTTON_LEFT, glfw.MOUSE_BUTTON_RIGHT)
                        if glfw.get_mouse_button(self.window, b) == glfw.PRESS), None)
         if button is not None and (self._drag is not None or (inside and not io.want_capture_mouse)):
+            if self._drag is None and button == glfw.MOUSE_BUTTON_LEFT:
+                self._click = (x - vx, y - vy, vw, vh)
             if self._drag is not None and self._drag[0] == button and (x, y) != self._drag[1:]:
+                self._click = None  # a drag, not a click
                 dx, dy = x - self._drag[1], y - self._drag[2]
                 if button == glfw.MOUSE_BUTTON_LEFT:
                     ld.orbit(-dx * 0.3, dy * 0.3)
@@ -144,6 +150,10 @@ class App:
                     ld.pan(dx / max(vh, 1), dy / max(vh, 1))
             self._drag = (button, x, y)
         else:
+            if self._click is not None and button is None and ld.parts and not ld.side_by_side:
+                cx, cy, cw, ch = self._click  # a click on the object selects its material (glTF files)
+                ld.pick_material(int(cx), int(cy), (int(cw), int(ch)))
+            self._click = None
             self._drag = None
         self.dragging = self._drag is not None
         if io.mouse_wheel and inside and not io.want_capture_mouse:

@@ -72,6 +72,25 @@ class ImportedPrimitive(NamedTuple):
     notes: list[str]        #: one line per glTF property without an nbrdf equivalent
 
 
+class MaterialGroup(NamedTuple):
+    """The primitives of a file that share one material: one draw range of the previewer's mesh."""
+
+    material: Material      #: the converted layer stack
+    notes: list[str]        #: its one-line notes (and its primitives' own, each once)
+    meshes: list[Any]       #: the trimesh meshes of its primitives, in file order
+
+
+def material_groups(prims: "list[ImportedPrimitive] | tuple[ImportedPrimitive, ...]") -> list[MaterialGroup]:
+    """Primitives grouped by material, in order of first appearance (the order
+    of the previewer's draw ranges, viewer/mesh.py, and of its material list)."""
+    groups: dict[int, MaterialGroup] = {}
+    for prim in prims:
+        g = groups.setdefault(id(prim.material), MaterialGroup(prim.material, [], []))
+        g.meshes.append(prim.mesh)
+        g.notes.extend(n for n in prim.notes if n not in g.notes)
+    return list(groups.values())
+
+
 class _Bad(Exception):
     """A malformed file; the message is the reason."""
 
@@ -220,7 +239,7 @@ class _Gltf:
         else:  # no scene: every node that is nobody's child
             children = {c for n in self.list("nodes") for c in n.get("children", [])}
             roots = [i for i in range(len(self.list("nodes"))) if i not in children]
-        out, stack = [], [(r, np.eye(4), 0) for r in roots]
+        out, stack = [], [(r, np.eye(4), 0) for r in reversed(roots)]  # depth first, in file order
         if not self.list("nodes"):  # meshes without nodes: each once, untransformed
             return [(i, np.eye(4)) for i in range(len(self.list("meshes")))]
         while stack:
@@ -231,7 +250,7 @@ class _Gltf:
             m = parent @ _node_matrix(node)
             if "mesh" in node:
                 out.append((node["mesh"], m))
-            stack += [(c, m, depth + 1) for c in node.get("children", [])]
+            stack += [(c, m, depth + 1) for c in reversed(node.get("children", []))]
         return out
 
 

@@ -12,7 +12,11 @@ edit into what the one renderer draws with. It delegates each job:
 - viewer/renderer.py: the one renderer that owns programs, mesh and
   environment and draws any ``GpuBrdf``.
 
-A texture-mapped material's latent texture is built in a worker thread. The
+A mesh from a glTF file has one draw range per material (``parts``): the
+stack editor edits the selected one (``select_material``), the others are
+drawn with their own BRDFs (``Renderer.set_part_brdfs``). A texture-mapped
+material's latent texture is built in a worker thread (the selected one; the
+others' once, when the file is opened). The
 window (viewer/app.py), its panels and the tests drive the same methods;
 every method that takes user input reports a bad input in ``error`` and
 leaves the session as it was.
@@ -24,6 +28,7 @@ import threading
 import time
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Sequence
 
 import moderngl
 import numpy as np
@@ -39,6 +44,9 @@ from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, g
 from nbrdf.viewer.renderer import Renderer, ViewState
 from nbrdf.viewer.session import CompareSettings, Interpolation, SessionDoc
 from nbrdf.viewer.ui.stack_editor import StackEditor
+
+if TYPE_CHECKING:
+    from nbrdf.viewer.gltf_import import MaterialGroup
 
 PRESETS_DIR = Path(__file__).parent / "assets" / "materials"
 MAX_PASSES = 1024
@@ -82,6 +90,16 @@ class TurntableCapture:
 
 
 @dataclass
+class PartMaterial:
+    """One material of a multi-material mesh (a glTF file's), as the material list shows it."""
+
+    material: Material
+    """Its layer stack (the selected one's is the editor's, kept here when another is selected)."""
+    notes: list[str] = field(default_factory=list)
+    """One line per glTF property without an equivalent."""
+
+
+@dataclass
 class SvbrdfBuild:
     """A latent texture being built in a worker thread."""
 
@@ -93,7 +111,11 @@ class SvbrdfBuild:
 
 class LookDev:
     def __init__(self, ctx: moderngl.Context, material: Material, mesh: str = "sphere", env: str | None = None,
-                 state: ViewState | None = None, backdrop: BackdropSettings | None = None):
+                 state: ViewState | None = None, backdrop: BackdropSettings | None = None,
+                 parts: "Sequence[MaterialGroup] | None" = None):
+        """``parts``: the materials of the mesh's draw ranges (a glTF file's, from
+        ``gltf_import.material_groups``; the first is edited first); None: ``material``
+        on the whole mesh."""
         self.ctx = ctx
         self.pipeline = MaterialPipeline(ctx)
         self.editor = StackEditor.from_material(material)
@@ -113,7 +135,14 @@ class LookDev:
         self._edit_t0: float | None = None
         self._svbrdf: SvbrdfBuild | None = None
         self._turntable: TurntableCapture | None = None
+        self.parts: list[PartMaterial] = []
+        """The materials of a multi-material mesh (empty: the edited material on the whole mesh)."""
+        self.selected = 0
+        """The index in ``parts`` of the material the stack editor edits."""
+        self._part_brdfs: dict[str, GpuBrdf] = {}
         self.renderer = Renderer(ctx, mesh=mesh, environment=self._read_env(env) if env else None)
+        if parts is not None:
+            self._set_parts(parts, apply=False)  # applied below
         self.compare_part = Compare(ctx, self.renderer)
         self.backdrop = backdrop or BackdropSettings()
         self.backdrop_part = Backdrop(ctx, self.renderer)
@@ -188,13 +217,90 @@ class LookDev:
         return self.open_material(table[name])
 
     def set_mesh(self, mesh: str) -> bool:
+        """A built-in mesh or a file; a .gltf/.glb brings its materials (the first
+        one selected in the stack editor), any other mesh is shown with the edited material."""
         def go():
-            from nbrdf.viewer.mesh import named_mesh
+            from nbrdf.viewer.mesh import GLTF_SUFFIXES, named_mesh
 
-            self.renderer.set_mesh(named_mesh(mesh))
+            new = named_mesh(mesh)
+            groups = None
+            if Path(mesh).suffix.lower() in GLTF_SUFFIXES:
+                from nbrdf.viewer.gltf_import import imported_scene, material_groups
+
+                groups = material_groups(imported_scene(mesh))
+            old = (self.renderer.mesh, self.parts, self.selected, self.editor)
+            self.renderer.set_mesh(new)
+            try:
+                if groups is None:  # the edited material on the whole mesh
+                    self.parts, self.selected = [], 0
+                else:
+                    self._set_parts(groups)
+            except NbrdfError:
+                self.renderer.set_mesh(old[0])
+                self.parts, self.selected, self.editor = old[1:]
+                self._apply_material()
+                raise
             self.mesh = mesh
             self.invalidate()
         return self._guard(go)
+
+    # --- several materials per mesh (a glTF file's) --------------------------------------------
+    def _set_parts(self, groups: "Sequence[MaterialGroup]", apply: bool = True) -> None:
+        """The mesh's materials, one per draw range; the first goes into the editor."""
+        if len(groups) != len(self.renderer.mesh.draw_ranges):
+            raise NbrdfError(f"{self.mesh}: {len(groups)} materials for {len(self.renderer.mesh.draw_ranges)} "
+                             "draw ranges")
+        self.parts = [PartMaterial(g.material, list(g.notes)) for g in groups]
+        self.selected = 0
+        self.editor = StackEditor.from_material(self.parts[0].material)
+        if apply:
+            self._apply_material()
+
+    def select_material(self, index: int) -> bool:
+        """Makes material ``index`` of a multi-material mesh the one the stack editor
+        (and compare, interpolation, save) works on; the others keep their edits."""
+        def go():
+            if not self.parts or not 0 <= int(index) < len(self.parts):
+                raise NbrdfError(f"no material {index} (the mesh has {len(self.parts) or 1})")
+            old = (self.selected, self.editor)
+            self.parts[self.selected].material = self.material
+            self.selected = int(index)
+            self.editor = StackEditor.from_material(self.parts[self.selected].material)
+            try:
+                self._apply_material()
+            except NbrdfError:
+                self.selected, self.editor = old
+                self._apply_material()
+                raise
+        return self._guard(go)
+
+    def pick_material(self, x: int, y: int, size: tuple[int, int]) -> int:
+        """Selects the material seen at pixel (x, y) (top-left origin) of a view of
+        ``size`` (a click in the window); returns its index, -1 off the object or
+        with a single material."""
+        if not self.parts or not (0 <= x < size[0] and 0 <= y < size[1]):
+            return -1
+        k = int(self.renderer.material_ids(self.main_state(), size)[int(y), int(x)])
+        if k >= 0 and k != self.selected and not self.select_material(k):
+            return -1
+        return k
+
+    def _part_brdf(self, m: Material) -> GpuBrdf:
+        """A non-selected part's BRDF (the decoder at its latent or latent texture), kept per document."""
+        key = material_key(m)
+        if key not in self._part_brdfs:
+            self._part_brdfs[key] = self.pipeline.build(m, BrdfMode.NEURAL)
+        return self._part_brdfs[key]
+
+    def _apply_parts(self) -> None:
+        """The renderer's per-range BRDFs: the edited material's (the draw's) on the
+        selected range, each other material's own on the rest."""
+        if not self.parts:
+            self.renderer.set_part_brdfs([None] * len(self.renderer.mesh.draw_ranges))
+            return
+        self.parts[self.selected].material = self.material
+        self.renderer.set_part_brdfs([None if k == self.selected else self._part_brdf(p.material)
+                                      for k, p in enumerate(self.parts)])
 
     def set_environment(self, path: str | None) -> bool:
         def go():
@@ -339,6 +445,7 @@ class LookDev:
         other = self.interp.other_material() if self.interp.brdf_blend else None
         self.other_brdf = None if other is None else self.pipeline.build(other, BrdfMode.NEURAL)
         self.ref_brdf = self.pipeline.build(m, BrdfMode.ANALYTIC) if analytic_capable(m) else None
+        self._apply_parts()
         self.brdf = brdf
         self.timings.latent_ms = (time.perf_counter() - t0) * 1000.0
         self._edit_t0 = t0

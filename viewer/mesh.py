@@ -19,6 +19,14 @@ class Mesh:
     tangents: np.ndarray   # (V, 4)
     uvs: np.ndarray        # (V, 2)
     indices: np.ndarray    # (T*3,) uint32
+    parts: tuple[tuple[int, int], ...] = ()
+    """Draw ranges (first index, index count), one per material of a glTF file,
+    in the order of its material list (``gltf_import.material_groups``); empty: one part."""
+
+    @property
+    def draw_ranges(self) -> tuple[tuple[int, int], ...]:
+        """The (first index, count) of every part (the whole mesh when it has none)."""
+        return self.parts or ((0, len(self.indices)),)
 
     def interleaved(self) -> np.ndarray:
         return np.hstack([self.positions, self.normals, self.tangents, self.uvs]).astype("f4")
@@ -28,7 +36,8 @@ class Mesh:
         lo, hi = self.positions.min(0), self.positions.max(0)
         c = (lo + hi) / 2
         r = float(np.linalg.norm(self.positions - c, axis=1).max()) or 1.0
-        return Mesh(((self.positions - c) / r).astype("f4"), self.normals, self.tangents, self.uvs, self.indices)
+        return Mesh(((self.positions - c) / r).astype("f4"), self.normals, self.tangents, self.uvs, self.indices,
+                    self.parts)
 
 
 def uv_sphere(stacks: int = 96, slices: int = 192) -> Mesh:
@@ -91,17 +100,23 @@ GLTF_SUFFIXES = (".gltf", ".glb")
 
 def load_mesh(path: str | Path) -> Mesh:
     """OBJ/glTF/PLY/... through trimesh (a .gltf/.glb through the project's glTF
-    importer: every primitive, turned z-up, normalised together); normals and
-    tangents computed when missing."""
+    importer: every primitive, turned z-up, normalised together, one draw range
+    per material); normals and tangents computed when missing."""
     import trimesh
 
     p = Path(path)
     if not p.is_file():
         raise NbrdfError(f"--mesh {path}: no such file")
+    parts: tuple[tuple[int, int], ...] = ()
     if p.suffix.lower() in GLTF_SUFFIXES:
-        from nbrdf.viewer.gltf_import import imported_scene
+        from nbrdf.viewer.gltf_import import imported_scene, material_groups
 
-        scene = trimesh.util.concatenate([prim.mesh for prim in imported_scene(p)])
+        groups = material_groups(imported_scene(p))
+        meshes = [m for g in groups for m in g.meshes]
+        scene = trimesh.util.concatenate(meshes)
+        counts = [3 * sum(len(m.faces) for m in g.meshes) for g in groups]
+        if len(groups) > 1:
+            parts = tuple(zip(np.cumsum([0] + counts[:-1]).tolist(), counts))
     else:
         try:
             scene = trimesh.load(p, force="mesh", process=True)
@@ -109,7 +124,9 @@ def load_mesh(path: str | Path) -> Mesh:
             raise NbrdfError(f"--mesh {path}: cannot be read as a mesh ({type(e).__name__}: {str(e)[:80]})") from None
     if not isinstance(scene, trimesh.Trimesh) or len(scene.faces) == 0:
         raise NbrdfError(f"--mesh {path}: holds no triangles")
-    return mesh_from_trimesh(scene).normalized()
+    m = mesh_from_trimesh(scene)
+    m.parts = parts
+    return m.normalized()
 
 
 def mesh_from_trimesh(tm) -> Mesh:

@@ -33,6 +33,7 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     else:
         check_output(out)
     material, notes = opts.load_material()
+    groups = opts.file_materials()  # a glTF file's materials, one per draw range (None: MATERIAL everywhere)
     for note in notes:
         print(f"{PROG}: {note}", file=sys.stderr)
     ctx = offscreen_context()
@@ -49,14 +50,14 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     if opts.session:
         from nbrdf.viewer.lookdev import LookDev
 
-        ld = LookDev(ctx, material, opts.mesh, opts.env, backdrop=opts.backdrop())
+        ld = LookDev(ctx, material, opts.mesh, opts.env, backdrop=opts.backdrop(), parts=groups)
         try:
             if not ld.open_session(opts.session) or not ld.screenshot(out, opts.size, opts.spp):
                 raise NbrdfError(ld.error or f"{opts.session}: cannot render the session")
         finally:
             ld.close()
         return out
-    r = make_renderer(ctx, material, opts)
+    r = make_renderer(ctx, material, opts, [g.material for g in groups[1:]] if groups else ())
     state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap,
                       env_rotation=opts.env_rotation, env_intensity=opts.env_intensity, background=opts.background != "none",
                       point_light=opts.point_light, point_intensity=opts.point_intensity)
@@ -128,8 +129,10 @@ def write_turntable(out: Path, frames: list, exposure: float, tonemap) -> None:
         iio.mimwrite(out, pictures, fps=TURNTABLE_FPS, macro_block_size=2, quality=8)
 
 
-def make_renderer(ctx, material, opts: ViewOptions):
-    """The renderer of ``opts.brdf``: closed form, or the decoder in GLSL."""
+def make_renderer(ctx, material, opts: ViewOptions, others=()):
+    """The renderer of ``opts.brdf``: closed form, or the decoder in GLSL.
+    ``others``: the materials of the mesh's further draw ranges (a glTF file's
+    second, third, ... material); ``material`` shades the first."""
     from nbrdf.viewer.pipeline import MaterialPipeline
     from nbrdf.viewer.renderer import Renderer
 
@@ -138,4 +141,8 @@ def make_renderer(ctx, material, opts: ViewOptions):
         from nbrdf.viewer.env_presets import resolve_environment
 
         env = resolve_environment(str(opts.env))
-    return Renderer(ctx, mesh=opts.mesh, environment=env, brdf=MaterialPipeline(ctx).build(material, opts.brdf))
+    pipeline = MaterialPipeline(ctx)
+    r = Renderer(ctx, mesh=opts.mesh, environment=env, brdf=pipeline.build(material, opts.brdf))
+    if others:
+        r.set_part_brdfs([None] + [pipeline.build(m, opts.brdf) for m in others])
+    return r

@@ -42,6 +42,7 @@ def parse_point(text: str) -> tuple[float, float, float]:
 
 if TYPE_CHECKING:
     from nbrdf.neural.material import Material
+    from nbrdf.viewer.gltf_import import MaterialGroup
 
 
 @dataclass
@@ -51,7 +52,8 @@ class ViewOptions:
     material: Path = field(default=DEFAULT_MATERIAL, metadata={"positional": True, "shown": "varnished copper"})
     """material JSON"""
     mesh: str = "sphere"
-    """sphere, testmesh, or an OBJ/glTF file (a .gltf/.glb also brings its material when no MATERIAL is given)"""
+    """sphere, testmesh, or an OBJ/glTF file (a .gltf/.glb also brings its materials, one per primitive, when no
+    MATERIAL is given)"""
     env: str | None = "studio"
     """environment: a generated preset (studio, sky, softbox) or an equirectangular .hdr/.exr file"""
     view: View = View.OBJECT
@@ -114,16 +116,27 @@ class ViewOptions:
 
         return BackdropSettings(self.background, ground=self.ground)
 
+    def file_materials(self) -> "list[MaterialGroup] | None":
+        """When no MATERIAL is given and --mesh is a glTF file: the file's materials
+        (with their notes), one per draw range of the mesh, in its order; else None."""
+        if self.material == DEFAULT_MATERIAL and Path(self.mesh).suffix.lower() in (".gltf", ".glb"):
+            from nbrdf.viewer.gltf_import import imported_scene, material_groups
+
+            return material_groups(imported_scene(self.mesh))
+        return None
+
     def load_material(self) -> "tuple[Material, list[str]]":
-        """The material to show and one-line notes: the MATERIAL argument, or, when
-        none was given and --mesh is a glTF file, the file's first material."""
+        """The material to show first and one-line notes: the MATERIAL argument, or,
+        when none was given and --mesh is a glTF file, the file's first material
+        (the notes of all its materials, each named when there are several)."""
         from nbrdf.neural.material import load_material
 
-        if self.material == DEFAULT_MATERIAL and Path(self.mesh).suffix.lower() in (".gltf", ".glb"):
-            from nbrdf.viewer.gltf_import import imported_scene
-
-            prim = imported_scene(self.mesh)[0]
-            return prim.material, [f"{self.mesh}: {note}" for note in prim.notes]
+        groups = self.file_materials()
+        if groups is not None:
+            named = len(groups) > 1  # several materials: each note names its material
+            notes = [f"{self.mesh}: {g.material.name + ': ' if named else ''}{note}"
+                     for g in groups for note in g.notes]
+            return groups[0].material, notes
         return load_material(self.material), []
 
     def check(self) -> "ViewOptions":

@@ -19,12 +19,21 @@ accumulation targets -- and draws with the BRDF it is handed per draw (a
 ``GpuBrdf`` from viewer/pipeline.py), so the neural image, its reference and
 a second material share them. A renderer made with a material keeps that
 material's BRDF as its default (the offscreen and test path).
+
+Several materials per mesh (a glTF file's, viewer/gltf_import.py): the mesh's
+draw ranges (``Mesh.parts``, one per material) each get a BRDF
+(``set_part_brdfs``; None: the BRDF of the draw call, i.e. the material being
+edited). The deferred path rasterises every range into one depth-tested
+G-buffer with the range's index in the uv target's z, then runs lit.comp once
+per range over the pixels of that index; the fragment path writes the depth
+of all ranges first, then shades each range with its own program. One range
+(every mesh but a multi-material glTF) is one draw and one dispatch, as before.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Sequence
 
 import moderngl
 import numpy as np
@@ -138,6 +147,8 @@ class Renderer:
         self.brdf: GpuBrdf | None = brdf
         self._owned_tex: "GpuLatentTexture | None" = None
         self._mesh_buffers: tuple[moderngl.Buffer, moderngl.Buffer] | None = None
+        self.part_brdfs: list[GpuBrdf | None] = [None]
+        """The BRDF of each of the mesh's draw ranges (None: the BRDF of the draw call)."""
         self.set_mesh(mesh)
         self.env: GpuEnvironment | None = None
         self.set_environment(environment)
@@ -230,8 +241,10 @@ class Renderer:
 
     # --- scene -------------------------------------------------------------------
     def set_mesh(self, mesh: str | Mesh) -> None:
+        """A new mesh; every draw range is shaded with the draw call's BRDF until ``set_part_brdfs``."""
         m = named_mesh(mesh) if isinstance(mesh, str) else mesh
         self.mesh = m
+        self.part_brdfs = [None] * len(m.draw_ranges)
         old = self._mesh_buffers
         self._mesh_buffers = (self.ctx.buffer(m.interleaved().tobytes()), self.ctx.buffer(m.indices.astype("u4").tobytes()))
         # Vertex arrays hold the old buffers: drop them, they are rebuilt on first use.
@@ -240,6 +253,27 @@ class Renderer:
         self._mesh_vaos.clear()
         for b in old or ():
             b.release()
+
+    def set_part_brdfs(self, brdfs: Sequence[GpuBrdf | None]) -> None:
+        """The BRDF of each of the mesh's draw ranges (``Mesh.draw_ranges``, one per
+        material of a glTF file); None: the BRDF handed to each draw call."""
+        if len(brdfs) != len(self.mesh.draw_ranges):
+            raise NbrdfError(f"the mesh has {len(self.mesh.draw_ranges)} material parts, got {len(brdfs)} BRDFs")
+        self.part_brdfs = list(brdfs)
+
+    def _draws(self, brdf: GpuBrdf) -> list[tuple[int, int, GpuBrdf]]:
+        """(first index, index count, BRDF) of each draw: consecutive ranges with the
+        same BRDF merged, so a mesh of one material is one draw of everything (count -1)."""
+        out: list[tuple[int, int, GpuBrdf]] = []
+        for (start, count), b in zip(self.mesh.draw_ranges, self.part_brdfs):
+            b = brdf if b is None else b
+            if out and out[-1][2] is b:
+                out[-1] = (out[-1][0], out[-1][1] + count, b)
+            else:
+                out.append((start, count, b))
+        if len(out) == 1:
+            return [(0, -1, out[0][2])]
+        return out
 
     def set_environment(self, radiance: np.ndarray | None = None) -> None:
         """A new environment map (None: the default sky), sampling tables included."""
@@ -368,67 +402,85 @@ class Renderer:
                                                    fragment_shader=shaders.source("gbuffer_lit.frag",
                                                                                   version="#version 430 core"))
         g = self._programs[key]
-        vp = self._surface_uniforms(g, state, w, h, brdf.normal_map)
+        draws = self._draws(brdf)
+        vp = self._surface_uniforms(g, state, w, h, draws[0][2].normal_map)
         if first == 0:
             gfbo.use()
             gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             self.ctx.enable(moderngl.DEPTH_TEST)
             self.ctx.disable(moderngl.BLEND)
             self.ctx.depth_func = "<"
-            textured = brdf.latent_texture is not None
-            if textured:
-                brdf.latent_texture.bind(g)
             # A sampler array on unit 0 beside the normal map's 2D sampler would void the draw.
             g["u_nb_share_tex"].value = SHARE_UNIT
-            g["u_textured"].value = int(textured)
-            self._mesh_vao(g).render(moderngl.TRIANGLES)
-        c = self.compute_program(brdf)
-        self._bind_brdf(c, brdf, compute=True)
-        self._lit_uniforms(c, state)
-        c["u_eye"].value = tuple(state.camera.eye())
-        for t, unit, name in zip(gtex, GBUFFER_UNITS, ("u_gb_normal", "u_gb_world", "u_gb_uv")):
-            t.use(unit)
-            if name in c:
-                c[name].value = unit
+            for part, (start, count, b) in enumerate(draws):
+                if part:
+                    self._surface_uniforms(g, state, w, h, b.normal_map)
+                textured = b.latent_texture is not None
+                if textured:
+                    b.latent_texture.bind(g)
+                g["u_textured"].value = int(textured)
+                if "u_material_id" in g:
+                    g["u_material_id"].value = part
+                self._mesh_vao(g).render(moderngl.TRIANGLES, vertices=count, first=start)
         tex = self._target(w, h, slot)[1]
-        tex.bind_to_image(0, read=True, write=True)
-        self.ctx.memory_barrier()
-        for k in range(first, first + passes, LIT_CHUNK):
-            c["u_first_pass"].value = k
-            c["u_passes"].value = min(LIT_CHUNK, first + passes - k)
-            c.run(-(-w // LIT_GROUP), -(-h // LIT_GROUP))
+        for part, (_, _, b) in enumerate(draws):
+            c = self.compute_program(b)
+            self._bind_brdf(c, b, compute=True)
+            self._lit_uniforms(c, state)
+            c["u_eye"].value = tuple(state.camera.eye())
+            if "u_material_id" in c:  # -1: every covered pixel (one material)
+                c["u_material_id"].value = part if len(draws) > 1 else -1
+            for t, unit, name in zip(gtex, GBUFFER_UNITS, ("u_gb_normal", "u_gb_world", "u_gb_uv")):
+                t.use(unit)
+                if name in c:
+                    c[name].value = unit
+            tex.bind_to_image(0, read=True, write=True)
             self.ctx.memory_barrier()
+            for k in range(first, first + passes, LIT_CHUNK):
+                c["u_first_pass"].value = k
+                c["u_passes"].value = min(LIT_CHUNK, first + passes - k)
+                c.run(-(-w // LIT_GROUP), -(-h // LIT_GROUP))
+                self.ctx.memory_barrier()
         self.unbind_textures(*GBUFFER_UNITS)
         return vp
 
     def _fragment_passes(self, state: ViewState, w: int, h: int, first: int, passes: int,
                          brdf: GpuBrdf) -> tuple[np.ndarray, moderngl.Framebuffer]:
         """The fallback lit path: ``passes`` passes of object.frag blended into the
-        bound target; returns the view-projection matrix and that target."""
-        p = self.program("object.frag", brdf, "object.vert")
-        vao = self._mesh_vao(p)
-        self._bind_brdf(p, brdf)
-        vp = self._surface_uniforms(p, state, w, h, brdf.normal_map)
-        self._lit_uniforms(p, state)
+        bound target (per draw range its BRDF's program); returns the
+        view-projection matrix and that target."""
+        draws = [(self.program("object.frag", b, "object.vert"), start, count, b)
+                 for start, count, b in self._draws(brdf)]
         fbo = self.ctx.fbo
+        vp = None
+        for p, _, _, b in draws:
+            self._bind_brdf(p, b)
+            vp = self._surface_uniforms(p, state, w, h, b.normal_map)
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.disable(moderngl.BLEND)
         if first == 0:
-            # Depth pre-pass: the shading passes then add exactly the visible surface.
+            # Depth pre-pass of every range: the shading passes then add exactly the visible surface.
             # (moderngl applies a framebuffer's masks when it is bound, hence use().)
             fbo.color_mask = (False, False, False, False)
             fbo.use()
             self.ctx.depth_func = "<"
-            vao.render(moderngl.TRIANGLES)
+            for p, start, count, _ in draws:
+                self._mesh_vao(p).render(moderngl.TRIANGLES, vertices=count, first=start)
         fbo.color_mask = (True, True, True, True)
         fbo.depth_mask = False
         fbo.use()
         self.ctx.depth_func = "<="
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func = moderngl.ONE, moderngl.ONE
-        for k in range(first, first + passes):
-            p["u_pass"].value = k
-            vao.render(moderngl.TRIANGLES)
+        for p, start, count, b in draws:
+            if len(draws) > 1:  # programs may be shared by two ranges: this range's BRDF
+                self._bind_brdf(p, b)
+                self._surface_uniforms(p, state, w, h, b.normal_map)
+            self._lit_uniforms(p, state)
+            vao = self._mesh_vao(p)
+            for k in range(first, first + passes):
+                p["u_pass"].value = k
+                vao.render(moderngl.TRIANGLES, vertices=count, first=start)
         return vp, fbo
 
     def _lit_uniforms(self, p: moderngl.Program | moderngl.ComputeShader, state: ViewState) -> None:
@@ -513,6 +565,44 @@ class Renderer:
             return np.ascontiguousarray(wi[..., :3]), np.ascontiguousarray(wo[..., :3]), wi[..., 3] > 0.5
         finally:
             for r in (fbo, depth, *targets):
+                r.release()
+
+    def material_ids(self, state: ViewState, size: tuple[int, int]) -> np.ndarray:
+        """(H, W) int array, row 0 at the top: per pixel of the object view the index
+        of the visible draw range (material; ``Mesh.draw_ranges``), -1 off the object
+        (picking a material by clicking, tests). Works on OpenGL 3.3."""
+        w, h = size
+        key = ("object.vert", "gbuffer.frag", None, 0)
+        if key not in self._programs:
+            self._programs[key] = self._build("object.vert", "gbuffer.frag", None)
+        p = self._programs[key]
+        vao = self._mesh_vao(p)
+        target = self.ctx.texture((w, h), 4, dtype="f4")
+        spare = self.ctx.texture((w, h), 4, dtype="f4")
+        depth = self.ctx.depth_renderbuffer((w, h))
+        fbo = self.ctx.framebuffer([target, spare], depth)
+        ids = np.full((h, w), -1, np.int32)
+        try:
+            fbo.use()
+            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            self.ctx.enable(moderngl.DEPTH_TEST)
+            self.ctx.disable(moderngl.BLEND)
+            self.ctx.depth_func = "<"
+            self._surface_uniforms(p, state, w, h, None)
+            vao.render(moderngl.TRIANGLES)  # the depth of the nearest surface
+            fbo.depth_mask = False
+            self.ctx.depth_func = "<="
+            for part, (start, count) in enumerate(self.mesh.draw_ranges):
+                fbo.use()
+                fbo.clear(0.0, 0.0, 0.0, 0.0)
+                vao.render(moderngl.TRIANGLES, vertices=count, first=start)
+                hit = np.frombuffer(target.read(), np.float32).reshape(h, w, 4)[::-1, :, 3] > 0.5
+                ids[hit] = part
+            return ids
+        finally:
+            fbo.depth_mask = True
+            self.ctx.depth_func = "<"
+            for r in (fbo, depth, target, spare):
                 r.release()
 
     def tonemap_to(self, target: moderngl.Framebuffer, tex: moderngl.Texture, passes: int, state: ViewState) -> None:

@@ -11,8 +11,12 @@ metallic car-paint material:
 - KHR_materials_clearcoat: factor 1, clearcoatRoughnessFactor 0.1;
 - KHR_materials_ior: 1.5.
 
-``write_glb`` is the small binary-glTF writer it uses (one mesh, one
-material, embedded PNG images), also used by the tests to make variants.
+It also writes ``meshes/pebble_on_plinth.glb``: the same pebble (coarser)
+resting on a rough blue stone plinth (a second primitive with a second
+material, placed by its node's translation) -- several materials per file.
+
+``write_glb`` / ``write_glb_scene`` are the small binary-glTF writers it uses
+(single-primitive meshes, embedded PNG images), also used by the tests to make variants.
 Deterministic (fixed seed), so the committed file can be rebuilt.
 """
 from __future__ import annotations
@@ -21,11 +25,15 @@ import io
 import json
 import struct
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 HERE = Path(__file__).parent / "meshes"
 NAME = "car_paint_pebble.glb"
+#: The two-material scene: the pebble on a plinth (several materials per file).
+SCENE_NAME = "pebble_on_plinth.glb"
+PLINTH_RADII = (1.35, 0.14, 0.9)
 TEX_SIZE = 64
 
 
@@ -92,10 +100,29 @@ def car_paint_material() -> dict:
     }
 
 
+class Part(NamedTuple):
+    """One node of a written scene: a mesh with one primitive and its material."""
+
+    name: str                 #: the node's and the mesh's name
+    positions: np.ndarray     #: (V, 3) float32, glTF's y-up frame
+    normals: np.ndarray       #: (V, 3) float32
+    uvs: np.ndarray           #: (V, 2) float32
+    indices: np.ndarray       #: (3T,) uint16
+    material: int             #: index into the scene's materials
+    translation: tuple[float, float, float] | None = None  #: the node's translation (None: none)
+
+
 def write_glb(path: str | Path, positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray,
               indices: np.ndarray, material: dict, images: list[bytes]) -> None:
     """One mesh with one primitive and one material; ``images`` are PNG files
     embedded in the binary chunk, texture i sampling image i."""
+    write_glb_scene(path, [Part("pebble", positions, normals, uvs, indices, 0)], [material], images)
+
+
+def write_glb_scene(path: str | Path, parts: list[Part], materials: list[dict], images: list[bytes]) -> None:
+    """A scene of ``parts`` (one node and one single-primitive mesh each) with
+    ``materials``; ``images`` are PNG files embedded in the binary chunk,
+    texture i sampling image i."""
     chunks: list[bytes] = []
     views: list[dict] = []
 
@@ -108,25 +135,35 @@ def write_glb(path: str | Path, positions: np.ndarray, normals: np.ndarray, uvs:
         views.append(view)
         return len(views) - 1
 
-    accessors = [
-        {"bufferView": add(positions.astype("<f4").tobytes(), 34962), "componentType": 5126,
-         "count": len(positions), "type": "VEC3",
-         "min": positions.min(0).tolist(), "max": positions.max(0).tolist()},
-        {"bufferView": add(normals.astype("<f4").tobytes(), 34962), "componentType": 5126,
-         "count": len(normals), "type": "VEC3"},
-        {"bufferView": add(uvs.astype("<f4").tobytes(), 34962), "componentType": 5126,
-         "count": len(uvs), "type": "VEC2"},
-        {"bufferView": add(indices.astype("<u2").tobytes(), 34963), "componentType": 5123,
-         "count": len(indices), "type": "SCALAR"},
-    ]
+    accessors: list[dict] = []
+    nodes: list[dict] = []
+    meshes: list[dict] = []
+    for k, part in enumerate(parts):
+        first = len(accessors)
+        accessors += [
+            {"bufferView": add(part.positions.astype("<f4").tobytes(), 34962), "componentType": 5126,
+             "count": len(part.positions), "type": "VEC3",
+             "min": part.positions.min(0).tolist(), "max": part.positions.max(0).tolist()},
+            {"bufferView": add(part.normals.astype("<f4").tobytes(), 34962), "componentType": 5126,
+             "count": len(part.normals), "type": "VEC3"},
+            {"bufferView": add(part.uvs.astype("<f4").tobytes(), 34962), "componentType": 5126,
+             "count": len(part.uvs), "type": "VEC2"},
+            {"bufferView": add(part.indices.astype("<u2").tobytes(), 34963), "componentType": 5123,
+             "count": len(part.indices), "type": "SCALAR"},
+        ]
+        node: dict = {"mesh": k, "name": part.name}
+        if part.translation is not None:
+            node["translation"] = [float(x) for x in part.translation]
+        nodes.append(node)
+        meshes.append({"name": part.name, "primitives": [
+            {"attributes": {"POSITION": first, "NORMAL": first + 1, "TEXCOORD_0": first + 2},
+             "indices": first + 3, "material": part.material}]})
     image_views = [add(png) for png in images]
-    extensions = sorted(material.get("extensions", {}))
+    extensions = sorted({e for m in materials for e in m.get("extensions", {})})
     doc = {
         "asset": {"version": "2.0", "generator": "nbrdf.viewer.assets.make_gltf"},
-        "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0, "name": "pebble"}],
-        "meshes": [{"name": "pebble", "primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2},
-                                                       "indices": 3, "material": 0}]}],
-        "materials": [material], "accessors": accessors, "bufferViews": views,
+        "scene": 0, "scenes": [{"nodes": list(range(len(parts)))}], "nodes": nodes,
+        "meshes": meshes, "materials": materials, "accessors": accessors, "bufferViews": views,
         "buffers": [{"byteLength": sum(len(c) for c in chunks)}],
     }
     if images:
@@ -145,12 +182,31 @@ def write_glb(path: str | Path, positions: np.ndarray, normals: np.ndarray, uvs:
         f.write(struct.pack("<II", len(binary), 0x004E4942) + binary)
 
 
+def plinth_material() -> dict:
+    """A rough blue-grey dielectric (a glTF dielectric: diffuse under a rough ior 1.5 interface)."""
+    return {"name": "blue stone", "pbrMetallicRoughness": {"baseColorFactor": [0.16, 0.28, 0.55, 1.0],
+                                                           "metallicFactor": 0.0, "roughnessFactor": 0.8}}
+
+
+def write_plinth_scene(out: Path) -> None:
+    """The car-paint pebble (coarser) resting on a blue stone plinth: two
+    primitives, two materials, the plinth placed by its node's translation."""
+    pebble = superellipsoid(48, 28)
+    plinth = superellipsoid(40, 16, radii=PLINTH_RADII, e=0.2)
+    drop = -(0.45 + PLINTH_RADII[1])  # the plinth's top touches the pebble's bottom (glTF y up)
+    write_glb_scene(out, [Part("pebble", *pebble, 0), Part("plinth", *plinth, 1, (0.0, drop, 0.0))],
+                    [car_paint_material(), plinth_material()], [png_bytes(orm_texture())])
+
+
 def main() -> None:
     HERE.mkdir(parents=True, exist_ok=True)
     pos, nrm, uv, ind = superellipsoid()
     out = HERE / NAME
     write_glb(out, pos, nrm, uv, ind, car_paint_material(), [png_bytes(orm_texture())])
     print(f"wrote {out} ({out.stat().st_size / 1024:.0f} KiB)")
+    two = HERE / SCENE_NAME
+    write_plinth_scene(two)
+    print(f"wrote {two} ({two.stat().st_size / 1024:.0f} KiB)")
 
 
 if __name__ == "__main__":

@@ -2,11 +2,13 @@
 // shading normal of shading_frame.glsl (world; normal map applied) with the
 // coverage in w, the world position with the latent texture's mip level in w
 // (what texture() would pick here; the compute pass has no derivatives), and
-// the uv. The shading frame is frame_from_normal of that normal in both paths.
+// the uv with the draw range's (material's) index in z, which lit.comp
+// shades with that material. The shading frame is frame_from_normal of that normal in both paths.
 //@INCLUDE common.glsl
 //@INCLUDE shading_frame.glsl
 uniform sampler2DArray u_nb_share_tex;  // a textured neural material's share (mip level only)
 uniform int u_textured;
+uniform int u_material_id;  // the draw range being rasterised (one per material)
 layout(location = 0) out vec4 out_normal;
 layout(location = 1) out vec4 out_world;
 layout(location = 2) out vec4 out_uv;
@@ -16,5 +18,5 @@ void main() {
     float lod = u_textured != 0 ? textureQueryLod(u_nb_share_tex, v_uv).x : 0.0;
     out_normal = vec4(tbn[2], 1.0);
     out_world = vec4(v_world, lod);
-    out_uv = vec4(v_uv, 0.0, 0.0);
+    out_uv = vec4(v_uv, float(u_material_id), 0.0);
 }

@@ -3,6 +3,7 @@
 // the same BRDF snippet, samplers and random numbers (pixel, pass) as the
 // fragment path object.frag -- and adds their sum to the float accumulation
 // image (alpha counts the passes, as the fragment path's blending does).
+// A mesh of several materials runs it once per material (u_material_id).
 //@INCLUDE common.glsl
 // No derivatives in a compute shader: the latent texture is read at the mip
 // level the G-buffer pass found (textureQueryLod), which is what texture()
@@ -19,7 +20,8 @@ layout(local_size_x = 8, local_size_y = 8) in;
 layout(rgba32f, binding = 0) uniform image2D u_accum;
 uniform sampler2D u_gb_normal;  // shading normal (world), w = coverage
 uniform sampler2D u_gb_world;   // world position, w = latent mip level
-uniform sampler2D u_gb_uv;      // uv
+uniform sampler2D u_gb_uv;      // uv, z = the material (draw range) index
+uniform int u_material_id;      // shade only that material's pixels (-1: every covered pixel)
 uniform vec3 u_eye;
 uniform uint u_first_pass;
 uniform int u_passes;
@@ -29,6 +31,7 @@ void main() {
     if (any(greaterThanEqual(px, imageSize(u_accum)))) return;
     vec4 n = texelFetch(u_gb_normal, px, 0);
     if (n.w < 0.5) return;
+    if (u_material_id >= 0 && int(texelFetch(u_gb_uv, px, 0).z + 0.5) != u_material_id) return;
     vec4 world = texelFetch(u_gb_world, px, 0);
     mat3 tbn = frame_from_normal(n.xyz);
     vec3 view = normalize(u_eye - world.xyz);

@@ -11,6 +11,8 @@ light, camera and field of view, exposure in EV, tone mapping) and Files
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from imgui_bundle import imgui, implot
 
@@ -94,6 +96,8 @@ class Panels:
     # --- material ---------------------------------------------------------------------------
     def _material(self) -> None:
         ld = self.ld
+        if ld.parts:
+            self._part_list()
         names = list(presets())
         if imgui.begin_combo("preset", "choose..."):
             for n in names:
@@ -149,6 +153,23 @@ class Panels:
         imgui.same_line()
         if imgui.button("save material"):
             ld.save_material(self.material_path)
+
+    def _part_list(self) -> None:
+        """The materials of a multi-material mesh (a glTF file's) with their notes;
+        the selected one is what the editor below edits (a click selects another)."""
+        ld = self.ld
+        imgui.text(f"materials of {Path(ld.mesh).name}")
+        for k, part in enumerate(ld.parts):
+            name = ld.material.name if k == ld.selected else part.material.name
+            clicked = imgui.selectable(f"{k}: {name}##part{k}", k == ld.selected)[0]
+            if clicked and k != ld.selected:
+                ld.select_material(k)
+            imgui.push_style_color(imgui.Col_.text, DIM)
+            for note in part.notes:
+                imgui.text_wrapped(f"  {note}")
+            imgui.pop_style_color()
+        imgui.separator()
+        imgui.text(f"editing material {ld.selected}:")
 
     def _param(self, i: int, key: str, value) -> None:
         ld = self.ld
