@@ -330,6 +330,35 @@ def _top_reflect(wx, wy, wz, a, eta, u0, u1, u2, lam, wide, a_wide, ox, oy, oz):
 
 
 @njit(**_JIT)
+def _top_reflect_vndf(wx, wy, wz, a, eta, u0, u1, u2, lam, aw):
+    """``_top_reflect`` without the guide: the facet from VNDF(a) with
+    probability lam, else from VNDF(aw) (aw > a; lam = 1: the plain forced
+    reflection). The sampled facet is the half vector, so f and the mixture
+    pdf share D(m) and G1(w) instead of recomputing them (``_top_eval``)."""
+    a_s = a if (u2 < lam or aw <= a) else aw
+    sg = -1.0 if wz < 0.0 else 1.0  # w mirrored up for the VNDF
+    vx, vy, vz = _norm3(sg * a_s * wx, sg * a_s * wy, sg * wz)
+    mx, my, mz = _vndf_std(vx, vy, vz, a_s, u0, u1)
+    wm = sg * (wx * mx + wy * my + wz * mz)
+    dx, dy, dz = _reflect(wx, wy, wz, mx, my, mz)
+    if wz * dz <= 0.0 or wm <= 0.0:
+        return dx, dy, dz, 0.0, 0.0
+    d_a = _ggx_d(mx, my, mz, a)
+    g1a = _g1_dir(wx, wy, wz, a)
+    iz4 = 1.0 / (4.0 * abs(wz))
+    pa = g1a * d_a * iz4
+    p = pa
+    if lam < 1.0:
+        alt = _g1_dir(wx, wy, wz, aw) * _ggx_d(mx, my, mz, aw) * iz4 if aw > a else pa
+        p = lam * pa + (1.0 - lam) * alt
+    if not p > 0.0:
+        return dx, dy, dz, 0.0, 0.0
+    F = _fresnel(wm, eta if wz > 0.0 else 1.0 / eta)
+    g1d = _g1_dir(dx, dy, dz, a) if (dx * mx + dy * my + dz * mz) * dz > 0.0 else 0.0
+    return dx, dy, dz, F * d_a * g1a * g1d * iz4 / p, p
+
+
+@njit(**_JIT)
 def _top_eval(wx, wy, wz, dx, dy, dz, a, eta, lam, wide, a_wide, ox, oy, oz):
     """(f_r(w, d) |d_z|, the density ``_top_reflect`` draws d with) for the
     internal reflection at the top seen from below."""
@@ -413,6 +442,28 @@ def _ft_core(sx, sy, sz, g1w, a, er, wx, wy, wz, u0, u1):
 
 # --- conductor base: geometric part (F = 1); Schlick per channel applied by the caller -----
 @njit(**_JIT)
+def _schlick5(c):
+    """Schlick's (1 - |c|)^5."""
+    t = 1.0 - min(abs(c), 1.0)
+    t2 = t * t
+    return t2 * t2 * t
+
+
+@njit(**_JIT)
+def _cond_eval(ix, iy, iz, ox, oy, oz, a, g1i):
+    """``_cond_geo`` given G1(i) (shared by the base's next-event evaluation
+    and its own sample at one vertex)."""
+    if iz <= 0.0 or oz <= 0.0:
+        return 0.0, 0.0, 0.0
+    hx, hy, hz = _norm3(ix + ox, iy + oy, iz + oz)
+    ih = ix * hx + iy * hy + iz * hz
+    if ih <= 0.0:
+        return 0.0, 0.0, 0.0
+    p = g1i * _ggx_d(hx, hy, hz, a) / (4.0 * iz)
+    return p * _g1_dir(ox, oy, oz, a) / oz, p, _schlick5(ih)
+
+
+@njit(**_JIT)
 def _cond_geo(ix, iy, iz, ox, oy, oz, a):
     """(f with F = 1, pdf, Schlick's (1 - |i.h|)^5)."""
     if iz <= 0.0 or oz <= 0.0:
@@ -422,8 +473,7 @@ def _cond_geo(ix, iy, iz, ox, oy, oz, a):
     f = (_ggx_d(hx, hy, hz, a) * _g1(ix, iy, iz, hx, hy, hz, a) * _g1(ox, oy, oz, hx, hy, hz, a)
          / max(4.0 * iz * oz, 1e-30))
     p = _vndf_pdf(ix, iy, iz, hx, hy, hz, a) / (4.0 * abs(ih)) if ih != 0.0 else 0.0
-    x = (1.0 - min(abs(ih), 1.0)) ** 5
-    return f, p, x
+    return f, p, _schlick5(ih)
 
 
 @njit(**_JIT)
@@ -601,8 +651,14 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                         lm, wide = (1.0 if conn else lam if tau0 == 0.0 else 1.0), False
                     else:
                         lm, wide = lam_w, True
-                    nx, ny, nz, wgt, p = _top_reflect(wx, wy, wz, a0, e0, _uniform(key, ctr), _uniform(key, ctr + 1),
-                                                      _uniform(key, ctr + 2), lm, wide, a_wide, ox, oy, oz)
+                    if wide or lm >= 1.0:
+                        nx, ny, nz, wgt, p = _top_reflect_vndf(wx, wy, wz, a0, e0, _uniform(key, ctr),
+                                                               _uniform(key, ctr + 1), _uniform(key, ctr + 2), lm,
+                                                               max(a0, a_wide) if wide else a0)
+                    else:
+                        nx, ny, nz, wgt, p = _top_reflect(wx, wy, wz, a0, e0, _uniform(key, ctr),
+                                                          _uniform(key, ctr + 1), _uniform(key, ctr + 2), lm, wide,
+                                                          a_wide, ox, oy, oz)
                     if conn:
                         k, x = _mirror_connection(wx, wy, wz, a0, e0, b_rough[q], lm, wide, a_wide, ox, oy, oz,
                                                   _uniform(key, ctr + 3), _uniform(key, ctr + 4),
@@ -649,16 +705,20 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 ctr += 2
                 ba = b_rough[q]
                 if base == 0:
+                    g1w = _g1_dir(wx, wy, wz, ba)
                     if sc > 0.0:
-                        f, pb, x = _cond_geo(wx, wy, wz, vx, vy, vz, ba)
+                        f, pb, x = _cond_eval(wx, wy, wz, vx, vy, vz, ba, g1w)
                         k = f * abs(vz) * sc * pm * pn / (pm * pn + pm * pb + pg * pb)
                         for c in range(C):
                             out[c] += beta[c] * k * (x + b_r0[q, c] * (1.0 - x))
                     mx, my, mz = _sample_vndf(wx, wy, wz, ba, _uniform(key, ctr), _uniform(key, ctr + 1))
                     nx, ny, nz = _reflect(wx, wy, wz, mx, my, mz)
-                    f, p, x = _cond_geo(wx, wy, wz, nx, ny, nz, ba)
-                    alive = p > 0.0 and f > 0.0
-                    wgt = f * nz / p if alive else 0.0
+                    # the sampled facet is the half vector: f nz / p = G1(n) (VNDF), p = G1(w) D / (4 wz)
+                    wm = wx * mx + wy * my + wz * mz
+                    p = g1w * _ggx_d(mx, my, mz, ba) / (4.0 * wz) if wz > 0.0 and nz > 0.0 and wm > 0.0 else 0.0
+                    wgt = _g1_dir(nx, ny, nz, ba) if p > 0.0 else 0.0
+                    alive = p > 0.0 and wgt > 0.0
+                    x = _schlick5(wm)
                     for c in range(C):
                         beta[c] *= wgt * (x + b_r0[q, c] * (1.0 - x))
                 elif base == 1:
