@@ -148,7 +148,7 @@ def _g1(wx, wy, wz, mx, my, mz, a):
 
 @njit(**_JIT)
 def _sample_vndf(wx, wy, wz, a, u1, u2):
-    """Heitz 2018; w may lie below (it is mirrored up)."""
+    """A VNDF facet normal for w (which may lie below: it is mirrored up)."""
     if wz < 0.0:
         wx, wy, wz = -wx, -wy, -wz
     vx, vy, vz = _norm3(a * wx, a * wy, wz)
@@ -158,25 +158,13 @@ def _sample_vndf(wx, wy, wz, a, u1, u2):
 @njit(**_JIT)
 def _vndf_std(vx, vy, vz, a, u1, u2):
     """A VNDF facet normal from the stretched, normalised view direction
-    (a wx, a wy, wz) / |.| (vz >= 0); per pair for next-event estimation."""
-    lensq = vx * vx + vy * vy
-    if lensq > 1e-14:
-        il = 1.0 / math.sqrt(lensq)
-        t1x, t1y = -vy * il, vx * il
-    else:
-        t1x, t1y = 1.0, 0.0
-    t2x, t2y, t2z = -vz * t1y, vz * t1x, vx * t1y - vy * t1x
-    r = math.sqrt(u1)
+    v = (a wx, a wy, wz) / |.| (vz >= 0; per pair for next-event estimation):
+    Dupuy and Benyoub 2023 (exact; a point of the spherical cap below v, one
+    square root fewer than Heitz's disk mapping and no frame)."""
     cph, sph = _cos_sin_2pi(u2)
-    p1 = r * cph
-    p2 = r * sph
-    s = 0.5 * (1.0 + vz)
-    p2 = (1.0 - s) * math.sqrt(max(1.0 - p1 * p1, 0.0)) + s * p2
-    p3 = math.sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0))
-    nx = p1 * t1x + p2 * t2x + p3 * vx
-    ny = p1 * t1y + p2 * t2y + p3 * vy
-    nz = p2 * t2z + p3 * vz
-    return _norm3(a * nx, a * ny, max(nz, 1e-12))
+    z = (1.0 - u1) * (1.0 + vz) - vz
+    st = math.sqrt(max(1.0 - z * z, 0.0))
+    return _norm3(a * (st * cph + vx), a * (st * sph + vy), max(z + vz, 1e-12))
 
 
 @njit(**_JIT)
