@@ -318,11 +318,12 @@ def _top_reflect(wx, wy, wz, a, eta, u0, u1, u2, lam, wide, a_wide, ox, oy, oz):
 
 
 @njit(**_JIT)
-def _top_reflect_vndf(wx, wy, wz, a, eta, u0, u1, u2, lam, aw):
+def _top_reflect_vndf(wx, wy, wz, a, eta, u0, u1, u2, lam, aw, g1a):
     """``_top_reflect`` without the guide: the facet from VNDF(a) with
     probability lam, else from VNDF(aw) (aw > a; lam = 1: the plain forced
     reflection). The sampled facet is the half vector, so f and the mixture
-    pdf share D(m) and G1(w) instead of recomputing them (``_top_eval``)."""
+    pdf share D(m) and G1(w) (g1a, for roughness a) instead of recomputing
+    them (``_top_eval``)."""
     a_s = a if (u2 < lam or aw <= a) else aw
     sg = -1.0 if wz < 0.0 else 1.0  # w mirrored up for the VNDF
     vx, vy, vz = _norm3(sg * a_s * wx, sg * a_s * wy, sg * wz)
@@ -332,7 +333,6 @@ def _top_reflect_vndf(wx, wy, wz, a, eta, u0, u1, u2, lam, aw):
     if wz * dz <= 0.0 or wm <= 0.0:
         return dx, dy, dz, 0.0, 0.0
     d_a = _ggx_d(mx, my, mz, a)
-    g1a = _g1_dir(wx, wy, wz, a)
     iz4 = 1.0 / (4.0 * abs(wz))
     pa = g1a * d_a * iz4
     p = pa
@@ -518,10 +518,11 @@ def _nee(z, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, u0, u1):
 
 
 @njit(**_JIT)
-def _exit_eval(wx, wy, wz, ox, oy, oz, g1o, a, eta):
+def _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a, eta):
     """At the top seen from below (w points down into the stack): (f(w, wo) of
     the transmission toward wo, the density ``_ft_pdf`` gives w when sampled
-    from wo); the two share the half vector, D and G1(wo) (g1o, per pair)."""
+    from wo); the two share the half vector, D and G1(wo) (g1o, per pair;
+    g1w = G1(w), shared with the reflection sampled at the same vertex)."""
     if wz == 0.0 or oz == 0.0:
         return 0.0, 0.0
     hx, hy, hz = _norm3(-(eta * wx + ox), -(eta * wy + oy), -(eta * wz + oz))
@@ -536,7 +537,7 @@ def _exit_eval(wx, wy, wz, ox, oy, oz, g1o, a, eta):
         return 0.0, 0.0
     F = _fresnel(ih, 1.0 / eta)
     common = g1o * oh * _ggx_d(hx, hy, hz, a) * abs(ih) / (oz * den * den)
-    return common * (1.0 - F) * _g1_dir(wx, wy, wz, a) / abs(wz), common * eta * eta
+    return common * (1.0 - F) * g1w / abs(wz), common * eta * eta
 
 
 @njit(**_JIT)
@@ -628,7 +629,8 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
             wx, wy, wz = -dx, -dy, -dz  # toward where the light came from
             if k_if == 0:
                 # the top from below: exit toward wo in closed form, MIS vs NEE
-                f, pn = _exit_eval(wx, wy, wz, ox, oy, oz, g1o, a0, e0)
+                g1w = _g1_dir(wx, wy, wz, a0)
+                f, pn = _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a0, e0)
                 if f > 0.0:
                     k = f * pm * pdf_last / (pm * pdf_last + pm * pn + pg * pdf_last)
                     for c in range(C):
@@ -642,7 +644,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                     if wide or lm >= 1.0:
                         nx, ny, nz, wgt, p = _top_reflect_vndf(wx, wy, wz, a0, e0, _uniform(key, ctr),
                                                                _uniform(key, ctr + 1), _uniform(key, ctr + 2), lm,
-                                                               max(a0, a_wide) if wide else a0)
+                                                               max(a0, a_wide) if wide else a0, g1w)
                     else:
                         nx, ny, nz, wgt, p = _top_reflect(wx, wy, wz, a0, e0, _uniform(key, ctr),
                                                           _uniform(key, ctr + 1), _uniform(key, ctr + 2), lm, wide,
