@@ -39,6 +39,18 @@ Two more changes for that light:
   (wi, wo) (a stack reflects into the air it is lit from), whose light
   refracts nearer the critical angle, so the trapped state is reached often
   (on the benchmark's stack this also lowers variance x vertices by 15 %).
+
+Speed: a vertex costs chains of square roots and divisions, not
+transcendentals (libm was ~15 % of the time), so the hot kernels are fused
+where the sampled facet is known: next-event estimation's f_top / pdf is
+(1 - F) G1(t) / (eta^2 |t_z|) in closed form (D, G1(wo) and the Jacobian
+cancel) with wo's stretched view direction and G1 computed once per path;
+the exit toward wo and its next-event pdf share one half vector; the top's
+mixture reflection and the conductor base evaluate f and pdf from the sampled
+facet; VNDF facets come from spherical caps (Dupuy and Benyoub 2023, exact);
+(cos, sin)(2 pi u) is a polynomial. Each fused kernel equals the generic one
+it replaces (tests/training/test_walk_kernels.py); 2.1x paths per
+CPU-second on the benchmark's stack (docs/RESULTS.md, "Walk speed").
 """
 from __future__ import annotations
 
