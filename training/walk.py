@@ -48,9 +48,10 @@ cancel) with wo's stretched view direction and G1 computed once per path;
 the exit toward wo and its next-event pdf share one half vector; the top's
 mixture reflection and the conductor base evaluate f and pdf from the sampled
 facet; VNDF facets come from spherical caps (Dupuy and Benyoub 2023, exact);
-(cos, sin)(2 pi u) is a polynomial. Each fused kernel equals the generic one
-it replaces (tests/training/test_walk_kernels.py); 2.1x paths per
-CPU-second on the benchmark's stack (docs/RESULTS.md, "Walk speed").
+(cos, sin)(2 pi u) is a polynomial; the free flight uses log(1 - u). Each
+fused kernel equals the generic one it replaces
+(tests/training/test_walk_kernels.py); 2.2x paths per CPU-second on the
+benchmark's stack (docs/RESULTS.md, "Walk speed").
 """
 from __future__ import annotations
 
