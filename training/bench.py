@@ -43,7 +43,9 @@ def bench_reference(quick: bool = False) -> dict:
     """Paths per second (one path = one sample of one pair, RGB together)
     of the compiled walk after warm-up (reported under both historical keys
     ``paths_per_second_eager`` and ``paths_per_second_compiled``: there is one
-    walk now), and seconds to converged 64 x 64 lobes at theta_i = 30
+    walk now), the same per CPU-second of this process (``paths_per_cpu_second``:
+    the figure to compare on a shared machine, where wall time depends on the
+    load), and seconds to converged 64 x 64 lobes at theta_i = 30
     degrees (as ``nbrdf lobe`` computes them): to 50 dB of noise PSNR
     (``lobe_*``) and, unless ``quick``, to 60 dB (``lobe60_*``)."""
     mat = parse_material(STANDARD_STACK)
@@ -58,8 +60,11 @@ def bench_reference(quick: bool = False) -> dict:
            "paths": n_pairs * spp}
     simulate(stack_params(mat, 64), d[0, :64], d[1, :64], spp=16, seed=0)  # warm-up: loads the compiled walk
     st = SimStats()
+    cpu0 = time.process_time()
     simulate(sp, d[0], d[1], spp=spp, seed=1, stats=st)
+    cpu = time.process_time() - cpu0
     out["paths_per_second_eager"] = out["paths_per_second_compiled"] = round(st.paths / st.seconds)
+    out["paths_per_cpu_second"] = round(st.paths / max(cpu, 1e-9))
     out["vertices_per_path"] = round(st.vertices / st.paths, 2)
     t0 = time.perf_counter()
     img, se, spp_used = converged_lobe(mat, 30.0, target_noise_psnr=20.0 if quick else CONVERGED_NOISE_PSNR)

@@ -39,6 +39,19 @@ Two more changes for that light:
   (wi, wo) (a stack reflects into the air it is lit from), whose light
   refracts nearer the critical angle, so the trapped state is reached often
   (on the benchmark's stack this also lowers variance x vertices by 15 %).
+
+Speed: a vertex costs chains of square roots and divisions, not
+transcendentals (libm was ~15 % of the time), so the hot kernels are fused
+where the sampled facet is known: next-event estimation's f_top / pdf is
+(1 - F) G1(t) / (eta^2 |t_z|) in closed form (D, G1(wo) and the Jacobian
+cancel) with wo's stretched view direction and G1 computed once per path;
+the exit toward wo and its next-event pdf share one half vector; the top's
+mixture reflection and the conductor base evaluate f and pdf from the sampled
+facet; VNDF facets come from spherical caps (Dupuy and Benyoub 2023, exact);
+(cos, sin)(2 pi u) is a polynomial; the free flight uses log(1 - u). Each
+fused kernel equals the generic one it replaces
+(tests/training/test_walk_kernels.py); 2.2x paths per CPU-second on the
+benchmark's stack (docs/RESULTS.md, "Walk speed").
 """
 from __future__ import annotations
 
@@ -66,7 +79,10 @@ GUIDE_LAM = 0.8
 BLOCK = 32
 BASE_CODES = {"conductor": 0, "diffuse": 1, "dielectric": 2}
 
-_JIT = dict(cache=True, fastmath=False, nogil=True)
+#: Compiler flags: fastmath without "nnan" / "ninf" (the non-finite checks
+#: stay valid); contraction into FMAs and reassociation change results only by
+#: rounding, identically on every thread (8 % faster, docs/RESULTS.md).
+_JIT = dict(cache=True, fastmath={"contract", "arcp", "nsz", "reassoc"}, nogil=True)
 
 
 # --- counter-based random numbers ---------------------------------------------------------
@@ -93,11 +109,33 @@ def _uniform(key, counter):
 
 # --- microfacet building blocks (scalar twins of training.microfacet) ----------------------
 @njit(**_JIT)
+def _cos_sin_2pi(u):
+    """(cos 2 pi u, sin 2 pi u) for u in [0, 1]: reduction to a quarter turn
+    (exact in binary) and Taylor polynomials; absolute error < 1e-15, about
+    2.5x cheaper than libm's sincos (one pair per sampled direction)."""
+    q = math.floor(4.0 * u + 0.5)
+    x = TWO_PI * (u - 0.25 * q)  # [-pi/4, pi/4]
+    x2 = x * x
+    s = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362880.0 + x2 * (
+        -1.0 / 39916800.0 + x2 * (1.0 / 6227020800.0 + x2 * (-1.0 / 1307674368000.0))))))))
+    c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0 + x2 * (
+        -1.0 / 3628800.0 + x2 * (1.0 / 479001600.0 + x2 * (-1.0 / 87178291200.0 + x2 * (1.0 / 20922789888000.0))))))))
+    qi = int(q) & 3
+    odd = (qi & 1) == 1
+    cc = s if odd else c
+    ss = c if odd else s
+    if qi == 1 or qi == 2:
+        cc = -cc
+    if qi >= 2:
+        ss = -ss
+    return cc, ss
+
+
+@njit(**_JIT)
 def _norm3(x, y, z):
     n = math.sqrt(x * x + y * y + z * z)
-    if n < 1e-30:
-        n = 1e-30
-    return x / n, y / n, z / n
+    inv = 1.0 / max(n, 1e-30)
+    return x * inv, y * inv, z * inv
 
 
 @njit(**_JIT)
@@ -111,9 +149,10 @@ def _ggx_d(mx, my, mz, a):
 
 @njit(**_JIT)
 def _g1_dir(wx, wy, wz, a):
-    z2 = max(wz * wz, 1e-30)
-    tan2 = (wx * wx + wy * wy) / z2
-    return 2.0 / (1.0 + math.sqrt(1.0 + a * a * tan2))
+    """Smith G1 = 2 / (1 + sqrt(1 + a^2 tan^2)), written with one division."""
+    z = abs(wz)
+    den = z + math.sqrt(wz * wz + a * a * (wx * wx + wy * wy))
+    return 2.0 * z / den if den > 0.0 else 0.0
 
 
 @njit(**_JIT)
@@ -125,28 +164,23 @@ def _g1(wx, wy, wz, mx, my, mz, a):
 
 @njit(**_JIT)
 def _sample_vndf(wx, wy, wz, a, u1, u2):
-    """Heitz 2018; w may lie below (it is mirrored up)."""
+    """A VNDF facet normal for w (which may lie below: it is mirrored up)."""
     if wz < 0.0:
         wx, wy, wz = -wx, -wy, -wz
     vx, vy, vz = _norm3(a * wx, a * wy, wz)
-    lensq = vx * vx + vy * vy
-    if lensq > 1e-14:
-        il = 1.0 / math.sqrt(lensq)
-        t1x, t1y = -vy * il, vx * il
-    else:
-        t1x, t1y = 1.0, 0.0
-    t2x, t2y, t2z = -vz * t1y, vz * t1x, vx * t1y - vy * t1x
-    r = math.sqrt(u1)
-    phi = TWO_PI * u2
-    p1 = r * math.cos(phi)
-    p2 = r * math.sin(phi)
-    s = 0.5 * (1.0 + vz)
-    p2 = (1.0 - s) * math.sqrt(max(1.0 - p1 * p1, 0.0)) + s * p2
-    p3 = math.sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0))
-    nx = p1 * t1x + p2 * t2x + p3 * vx
-    ny = p1 * t1y + p2 * t2y + p3 * vy
-    nz = p2 * t2z + p3 * vz
-    return _norm3(a * nx, a * ny, max(nz, 1e-12))
+    return _vndf_std(vx, vy, vz, a, u1, u2)
+
+
+@njit(**_JIT)
+def _vndf_std(vx, vy, vz, a, u1, u2):
+    """A VNDF facet normal from the stretched, normalised view direction
+    v = (a wx, a wy, wz) / |.| (vz >= 0; per pair for next-event estimation):
+    Dupuy and Benyoub 2023 (exact; a point of the spherical cap below v, one
+    square root fewer than Heitz's disk mapping and no frame)."""
+    cph, sph = _cos_sin_2pi(u2)
+    z = (1.0 - u1) * (1.0 + vz) - vz
+    st = math.sqrt(max(1.0 - z * z, 0.0))
+    return _norm3(a * (st * cph + vx), a * (st * sph + vy), max(z + vz, 1e-12))
 
 
 @njit(**_JIT)
@@ -300,6 +334,35 @@ def _top_reflect(wx, wy, wz, a, eta, u0, u1, u2, lam, wide, a_wide, ox, oy, oz):
 
 
 @njit(**_JIT)
+def _top_reflect_vndf(wx, wy, wz, a, eta, u0, u1, u2, lam, aw, g1a):
+    """``_top_reflect`` without the guide: the facet from VNDF(a) with
+    probability lam, else from VNDF(aw) (aw > a; lam = 1: the plain forced
+    reflection). The sampled facet is the half vector, so f and the mixture
+    pdf share D(m) and G1(w) (g1a, for roughness a) instead of recomputing
+    them (``_top_eval``)."""
+    a_s = a if (u2 < lam or aw <= a) else aw
+    sg = -1.0 if wz < 0.0 else 1.0  # w mirrored up for the VNDF
+    vx, vy, vz = _norm3(sg * a_s * wx, sg * a_s * wy, sg * wz)
+    mx, my, mz = _vndf_std(vx, vy, vz, a_s, u0, u1)
+    wm = sg * (wx * mx + wy * my + wz * mz)
+    dx, dy, dz = _reflect(wx, wy, wz, mx, my, mz)
+    if wz * dz <= 0.0 or wm <= 0.0:
+        return dx, dy, dz, 0.0, 0.0
+    d_a = _ggx_d(mx, my, mz, a)
+    iz4 = 1.0 / (4.0 * abs(wz))
+    pa = g1a * d_a * iz4
+    p = pa
+    if lam < 1.0:
+        alt = _g1_dir(wx, wy, wz, aw) * _ggx_d(mx, my, mz, aw) * iz4 if aw > a else pa
+        p = lam * pa + (1.0 - lam) * alt
+    if not p > 0.0:
+        return dx, dy, dz, 0.0, 0.0
+    F = _fresnel(wm, eta if wz > 0.0 else 1.0 / eta)
+    g1d = _g1_dir(dx, dy, dz, a) if (dx * mx + dy * my + dz * mz) * dz > 0.0 else 0.0
+    return dx, dy, dz, F * d_a * g1a * g1d * iz4 / p, p
+
+
+@njit(**_JIT)
 def _top_eval(wx, wy, wz, dx, dy, dz, a, eta, lam, wide, a_wide, ox, oy, oz):
     """(f_r(w, d) |d_z|, the density ``_top_reflect`` draws d with) for the
     internal reflection at the top seen from below."""
@@ -345,19 +408,65 @@ def _ft_pdf(a, er, wx, wy, wz, tx, ty, tz):
 
 @njit(**_JIT)
 def _ft_sample(a, er, wx, wy, wz, u0, u1):
-    """Forced refraction of w: (tx, ty, tz, weight = (1 - F) G1(t), pdf)."""
-    mx, my, mz = _sample_vndf(wx, wy, wz, a, u0, u1)
-    tx, ty, tz, ok = _refract(wx, wy, wz, mx, my, mz, 1.0 / er)
-    if not ok or wz * tz >= 0.0:
+    """Forced refraction of w (above the interface): (tx, ty, tz, weight =
+    (1 - F) G1(t), pdf)."""
+    sx, sy, sz = _norm3(a * wx, a * wy, abs(wz))
+    return _ft_core(sx, sy, sz, _g1_dir(wx, wy, wz, a), a, er, wx, wy, wz, u0, u1)
+
+
+@njit(**_JIT)
+def _ft_core(sx, sy, sz, g1w, a, er, wx, wy, wz, u0, u1):
+    """``_ft_sample`` given w's stretched view direction (sx, sy, sz) and
+    G1(w) (constant per pair for next-event estimation). The facet m is
+    known, so the Fresnel factor reuses the refraction's cos_t and the pdf
+    (that of ``_ft_pdf``) is written with m instead of a recomputed half
+    vector."""
+    mx, my, mz = _vndf_std(sx, sy, sz, a, u0, u1)
+    c = wx * mx + wy * my + wz * mz
+    ei = 1.0 / er
+    k = 1.0 - ei * ei * (1.0 - c * c)
+    if c <= 0.0 or k <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0
+    ct = math.sqrt(k)
+    f = ei * c - ct
+    tx, ty, tz = f * mx - ei * wx, f * my - ei * wy, f * mz - ei * wz
+    th = tx * mx + ty * my + tz * mz
+    den = c + er * th
+    if wz * tz >= 0.0 or th >= 0.0 or abs(den) <= 1e-12:
         return tx, ty, tz, 0.0, 0.0
-    F = _fresnel(wx * mx + wy * my + wz * mz, er)
-    p = _ft_pdf(a, er, wx, wy, wz, tx, ty, tz)
-    if p <= 0.0:
+    p = g1w * c * _ggx_d(mx, my, mz, a) / abs(wz) * er * er * (-th) / (den * den)
+    if not p > 0.0:
         return tx, ty, tz, 0.0, 0.0
-    return tx, ty, tz, (1.0 - F) * _g1(tx, ty, tz, mx, my, mz, a), p
+    rs = (c - er * ct) / (c + er * ct)
+    rp = (er * c - ct) / (er * c + ct)
+    F = 0.5 * (rs * rs + rp * rp)
+    g1t = _g1_dir(tx, ty, tz, a) if th * tz > 0.0 else 0.0
+    return tx, ty, tz, (1.0 - F) * g1t, p
 
 
 # --- conductor base: geometric part (F = 1); Schlick per channel applied by the caller -----
+@njit(**_JIT)
+def _schlick5(c):
+    """Schlick's (1 - |c|)^5."""
+    t = 1.0 - min(abs(c), 1.0)
+    t2 = t * t
+    return t2 * t2 * t
+
+
+@njit(**_JIT)
+def _cond_eval(ix, iy, iz, ox, oy, oz, a, g1i):
+    """``_cond_geo`` given G1(i) (shared by the base's next-event evaluation
+    and its own sample at one vertex)."""
+    if iz <= 0.0 or oz <= 0.0:
+        return 0.0, 0.0, 0.0
+    hx, hy, hz = _norm3(ix + ox, iy + oy, iz + oz)
+    ih = ix * hx + iy * hy + iz * hz
+    if ih <= 0.0:
+        return 0.0, 0.0, 0.0
+    p = g1i * _ggx_d(hx, hy, hz, a) / (4.0 * iz)
+    return p * _g1_dir(ox, oy, oz, a) / oz, p, _schlick5(ih)
+
+
 @njit(**_JIT)
 def _cond_geo(ix, iy, iz, ox, oy, oz, a):
     """(f with F = 1, pdf, Schlick's (1 - |i.h|)^5)."""
@@ -368,8 +477,7 @@ def _cond_geo(ix, iy, iz, ox, oy, oz, a):
     f = (_ggx_d(hx, hy, hz, a) * _g1(ix, iy, iz, hx, hy, hz, a) * _g1(ox, oy, oz, hx, hy, hz, a)
          / max(4.0 * iz * oz, 1e-30))
     p = _vndf_pdf(ix, iy, iz, hx, hy, hz, a) / (4.0 * abs(ih)) if ih != 0.0 else 0.0
-    x = (1.0 - min(abs(ih), 1.0)) ** 5
-    return f, p, x
+    return f, p, _schlick5(ih)
 
 
 @njit(**_JIT)
@@ -411,16 +519,41 @@ def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, ox, oy, oz, u0
 
 # --- the walk -----------------------------------------------------------------------------
 @njit(**_JIT)
-def _nee(z, ox, oy, oz, a0, e0, tau0, u0, u1):
+def _nee(z, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, u0, u1):
     """Samples the top interface from wo (forced transmission): the direction
-    v = (vx, vy, vz) leaving the vertex upward, Tr f_top(-v, wo) / pdf and pdf."""
-    tx, ty, tz, w, p = _ft_sample(a0, e0, ox, oy, oz, u0, u1)
-    if p <= 0.0:
+    v = (vx, vy, vz) leaving the vertex upward, Tr f_top(-v, wo) / pdf and pdf.
+    (sx, sy, sz), g1o: wo's stretched view direction and G1 (per pair).
+    f_top(t, wo) / pdf = (1 - F) G1(t) / (eta^2 |t_z|) in closed form (the
+    facet's D, G1(wo) and Jacobian cancel)."""
+    tx, ty, tz, w, p = _ft_core(sx, sy, sz, g1o, a0, e0, ox, oy, oz, u0, u1)
+    if p <= 0.0 or w <= 0.0:
         return 0.0, 0.0, 1.0, 0.0, 0.0
-    f, _ = _diel_eval_pdf(tx, ty, tz, ox, oy, oz, a0, e0)
     vz = -tz
     tr = math.exp(-tau0 * z / max(vz, 1e-12)) if tau0 > 0.0 else 1.0
-    return -tx, -ty, vz, tr * f / p, p
+    return -tx, -ty, vz, tr * w / (e0 * e0 * vz), p
+
+
+@njit(**_JIT)
+def _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a, eta):
+    """At the top seen from below (w points down into the stack): (f(w, wo) of
+    the transmission toward wo, the density ``_ft_pdf`` gives w when sampled
+    from wo); the two share the half vector, D and G1(wo) (g1o, per pair;
+    g1w = G1(w), shared with the reflection sampled at the same vertex)."""
+    if wz == 0.0 or oz == 0.0:
+        return 0.0, 0.0
+    hx, hy, hz = _norm3(-(eta * wx + ox), -(eta * wy + oy), -(eta * wz + oz))
+    if hz < 0.0:
+        hx, hy, hz = -hx, -hy, -hz
+    ih = wx * hx + wy * hy + wz * hz
+    oh = ox * hx + oy * hy + oz * hz
+    if ih * oh >= 0.0 or oh <= 0.0 or ih * wz <= 0.0:
+        return 0.0, 0.0
+    den = eta * ih + oh
+    if abs(den) <= 1e-12:
+        return 0.0, 0.0
+    F = _fresnel(ih, 1.0 / eta)
+    common = g1o * oh * _ggx_d(hx, hy, hz, a) * abs(ih) / (oz * den * den)
+    return common * (1.0 - F) * g1w / abs(wz), common * eta * eta
 
 
 @njit(**_JIT)
@@ -435,6 +568,9 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
     ix, iy, iz = wi[q, 0], wi[q, 1], wi[q, 2]
     ox, oy, oz = wo[q, 0], wo[q, 1], wo[q, 2]
     a0, e0, tau0 = rough[q, 0], ior[q, 0], sigma[q, 0]
+    # wo's stretched view direction and G1 for the top: next-event estimation samples from wo at every vertex
+    sx, sy, sz = _norm3(a0 * ox, a0 * oy, oz)
+    g1o = _g1_dir(ox, oy, oz, a0)
     u0 = (s + _uniform(key, 0)) / spp
     u1 = _uniform(key, 1)
     ctr = 2
@@ -481,14 +617,14 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
         ctr += 1
         scatter = False
         if tau > 0.0:
-            t = -math.log1p(-u) / tau
+            t = -math.log(1.0 - u) / tau  # 1 - u is exact (u: a multiple of 2^-53); log is 2.5x cheaper than log1p
             if t < dist_b:
                 scatter = True
                 depth = depth - t * dz
         alive = True
         if scatter:
             if slab == 0:
-                vx, vy, vz, sc, pn = _nee(depth, ox, oy, oz, a0, e0, tau0, _uniform(key, ctr), _uniform(key, ctr + 1))
+                vx, vy, vz, sc, pn = _nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, _uniform(key, ctr), _uniform(key, ctr + 1))
                 if sc > 0.0:
                     k = INV_4PI * sc * pn / (pn + INV_4PI)
                     for c in range(C):
@@ -497,10 +633,11 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
             for c in range(C):
                 beta[c] *= alb[q, slab, c]
             zz = 1.0 - 2.0 * _uniform(key, ctr)
-            ph = TWO_PI * _uniform(key, ctr + 1)
+            ph = _uniform(key, ctr + 1)
             ctr += 2
             r = math.sqrt(max(1.0 - zz * zz, 0.0))
-            dx, dy, dz = r * math.cos(ph), r * math.sin(ph), zz
+            cph, sph = _cos_sin_2pi(ph)
+            dx, dy, dz = r * cph, r * sph, zz
             pdf_last = INV_4PI
         else:
             k_if = slab + 1 if down else slab
@@ -508,9 +645,9 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
             wx, wy, wz = -dx, -dy, -dz  # toward where the light came from
             if k_if == 0:
                 # the top from below: exit toward wo in closed form, MIS vs NEE
-                f, _ = _diel_eval_pdf(wx, wy, wz, ox, oy, oz, a0, e0)
+                g1w = _g1_dir(wx, wy, wz, a0)
+                f, pn = _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a0, e0)
                 if f > 0.0:
-                    pn = _ft_pdf(a0, e0, ox, oy, oz, wx, wy, wz)
                     k = f * pm * pdf_last / (pm * pdf_last + pm * pn + pg * pdf_last)
                     for c in range(C):
                         out[c] += beta[c] * k
@@ -520,8 +657,14 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                         lm, wide = (1.0 if conn else lam if tau0 == 0.0 else 1.0), False
                     else:
                         lm, wide = lam_w, True
-                    nx, ny, nz, wgt, p = _top_reflect(wx, wy, wz, a0, e0, _uniform(key, ctr), _uniform(key, ctr + 1),
-                                                      _uniform(key, ctr + 2), lm, wide, a_wide, ox, oy, oz)
+                    if wide or lm >= 1.0:
+                        nx, ny, nz, wgt, p = _top_reflect_vndf(wx, wy, wz, a0, e0, _uniform(key, ctr),
+                                                               _uniform(key, ctr + 1), _uniform(key, ctr + 2), lm,
+                                                               max(a0, a_wide) if wide else a0, g1w)
+                    else:
+                        nx, ny, nz, wgt, p = _top_reflect(wx, wy, wz, a0, e0, _uniform(key, ctr),
+                                                          _uniform(key, ctr + 1), _uniform(key, ctr + 2), lm, wide,
+                                                          a_wide, ox, oy, oz)
                     if conn:
                         k, x = _mirror_connection(wx, wy, wz, a0, e0, b_rough[q], lm, wide, a_wide, ox, oy, oz,
                                                   _uniform(key, ctr + 3), _uniform(key, ctr + 4),
@@ -542,7 +685,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
             elif k_if < L:
                 a, e = rough[q, k_if], ior[q, k_if]
                 if k_if == 1:
-                    vx, vy, vz, sc, pn = _nee(1.0, ox, oy, oz, a0, e0, tau0, _uniform(key, ctr),
+                    vx, vy, vz, sc, pn = _nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, _uniform(key, ctr),
                                               _uniform(key, ctr + 1))
                     if sc > 0.0:
                         f, pb = _diel_eval_pdf(wx, wy, wz, vx, vy, vz, a, e)
@@ -561,23 +704,27 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
             else:
                 nee_on = L == 1
                 if nee_on:
-                    vx, vy, vz, sc, pn = _nee(1.0, ox, oy, oz, a0, e0, tau0, _uniform(key, ctr),
+                    vx, vy, vz, sc, pn = _nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, _uniform(key, ctr),
                                               _uniform(key, ctr + 1))
                 else:
                     sc = 0.0
                 ctr += 2
                 ba = b_rough[q]
                 if base == 0:
+                    g1w = _g1_dir(wx, wy, wz, ba)
                     if sc > 0.0:
-                        f, pb, x = _cond_geo(wx, wy, wz, vx, vy, vz, ba)
+                        f, pb, x = _cond_eval(wx, wy, wz, vx, vy, vz, ba, g1w)
                         k = f * abs(vz) * sc * pm * pn / (pm * pn + pm * pb + pg * pb)
                         for c in range(C):
                             out[c] += beta[c] * k * (x + b_r0[q, c] * (1.0 - x))
                     mx, my, mz = _sample_vndf(wx, wy, wz, ba, _uniform(key, ctr), _uniform(key, ctr + 1))
                     nx, ny, nz = _reflect(wx, wy, wz, mx, my, mz)
-                    f, p, x = _cond_geo(wx, wy, wz, nx, ny, nz, ba)
-                    alive = p > 0.0 and f > 0.0
-                    wgt = f * nz / p if alive else 0.0
+                    # the sampled facet is the half vector: f nz / p = G1(n) (VNDF), p = G1(w) D / (4 wz)
+                    wm = wx * mx + wy * my + wz * mz
+                    p = g1w * _ggx_d(mx, my, mz, ba) / (4.0 * wz) if wz > 0.0 and nz > 0.0 and wm > 0.0 else 0.0
+                    wgt = _g1_dir(nx, ny, nz, ba) if p > 0.0 else 0.0
+                    alive = p > 0.0 and wgt > 0.0
+                    x = _schlick5(wm)
                     for c in range(C):
                         beta[c] *= wgt * (x + b_r0[q, c] * (1.0 - x))
                 elif base == 1:
@@ -587,7 +734,8 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                             out[c] += beta[c] * b_alb[q, c] * k
                     u0, u1 = _uniform(key, ctr), _uniform(key, ctr + 1)
                     r = math.sqrt(u0)
-                    nx, ny, nz = r * math.cos(TWO_PI * u1), r * math.sin(TWO_PI * u1), math.sqrt(max(1.0 - u0, 0.0))
+                    cph, sph = _cos_sin_2pi(u1)
+                    nx, ny, nz = r * cph, r * sph, math.sqrt(max(1.0 - u0, 0.0))
                     p = nz * INV_PI
                     alive = wz > 0.0 and p > 0.0
                     for c in range(C):

@@ -1,0 +1,150 @@
+"""The compiled walk's fused kernels (issue 14, speed): each fused
+evaluation equals the generic one it replaces, the polynomial sincos matches
+libm, and the spherical-cap VNDF sampler draws facets with the VNDF density
+(chi-square at a fixed seed)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from numba import njit
+from scipy import stats
+
+from nbrdf.training import walk as W
+
+
+def _rand_dir(rng, upper: bool, lo: float = 0.02):
+    z = rng.uniform(lo, 1.0)
+    ph = rng.uniform(0.0, 2 * math.pi)
+    r = math.sqrt(1 - z * z)
+    return r * math.cos(ph), r * math.sin(ph), z if upper else -z
+
+
+def test_polynomial_sincos_matches_libm():
+    u = np.concatenate([np.random.default_rng(0).random(20000), np.arange(9) / 8.0, [1 - 2.0 ** -53]])
+    err = max(max(abs(c - math.cos(2 * math.pi * x)), abs(s - math.sin(2 * math.pi * x)))
+              for x in u for c, s in [W._cos_sin_2pi(x)])
+    assert err < 2e-15, err
+
+
+@pytest.mark.parametrize("a,eta", [(0.1, 1.5), (0.45, 1.3), (0.05, 1.9), (0.3, 1.1)])
+def test_fused_next_event_equals_the_generic_evaluation(a, eta):
+    """f_top(t, wo) / pdf in closed form = the full evaluation / ``_ft_pdf``."""
+    rng = np.random.default_rng(1)
+    checked = 0
+    for _ in range(400):
+        ox, oy, oz = _rand_dir(rng, True)
+        sx, sy, sz = W._norm3(a * ox, a * oy, oz)
+        g1o = W._g1_dir(ox, oy, oz, a)
+        vx, vy, vz, sc, pn = W._nee(0.0, sx, sy, sz, g1o, ox, oy, oz, a, eta, 0.0, rng.random(), rng.random())
+        if sc <= 0.0:
+            continue
+        tx, ty, tz = -vx, -vy, -vz
+        f, _ = W._diel_eval_pdf(tx, ty, tz, ox, oy, oz, a, eta)
+        p = W._ft_pdf(a, eta, ox, oy, oz, tx, ty, tz)
+        assert pn == pytest.approx(p, rel=1e-9)
+        assert sc == pytest.approx(f / p, rel=1e-9)
+        checked += 1
+    assert checked > 300
+
+
+@pytest.mark.parametrize("a,eta", [(0.1, 1.5), (0.45, 1.3), (0.3, 1.1)])
+def test_fused_exit_equals_the_generic_evaluation(a, eta):
+    rng = np.random.default_rng(2)
+    nonzero = 0
+    for i in range(400):
+        ox, oy, oz = _rand_dir(rng, True)
+        wx, wy, wz = _rand_dir(rng, False)
+        if i % 2:  # a direction refracted from wo: inside the exit lobe
+            tx, ty, tz, _, p = W._ft_sample(a, eta, ox, oy, oz, rng.random(), rng.random())
+            if p > 0.0:
+                wx, wy, wz = tx, ty, tz
+        f, pn = W._exit_eval(wx, wy, wz, ox, oy, oz, W._g1_dir(wx, wy, wz, a), W._g1_dir(ox, oy, oz, a), a, eta)
+        f_ref, _ = W._diel_eval_pdf(wx, wy, wz, ox, oy, oz, a, eta)
+        assert f == pytest.approx(f_ref, rel=1e-9, abs=1e-300)
+        if f_ref > 0.0:
+            assert pn == pytest.approx(W._ft_pdf(a, eta, ox, oy, oz, wx, wy, wz), rel=1e-9)
+            nonzero += 1
+    assert nonzero > 150
+
+
+@pytest.mark.parametrize("lam,wide", [(1.0, False), (0.5, True), (0.8, True)])
+def test_fused_top_reflection_equals_the_generic_one(lam, wide):
+    """Same direction, weight f |cos| / p_mix and mixture pdf as ``_top_reflect``."""
+    rng = np.random.default_rng(3)
+    a, eta, a_wide = 0.12, 1.5, 0.4
+    ox, oy, oz = _rand_dir(rng, True)
+    alive = 0
+    for _ in range(400):
+        wx, wy, wz = _rand_dir(rng, False)
+        u = rng.random(3)
+        got = W._top_reflect_vndf(wx, wy, wz, a, eta, u[0], u[1], u[2], lam, max(a, a_wide) if wide else a,
+                                  W._g1_dir(wx, wy, wz, a))
+        ref = W._top_reflect(wx, wy, wz, a, eta, u[0], u[1], u[2], lam, wide, a_wide, ox, oy, oz)
+        np.testing.assert_allclose(got[:3], ref[:3], rtol=1e-9, atol=1e-12)
+        assert got[3] == pytest.approx(ref[3], rel=1e-9, abs=1e-300)
+        assert got[4] == pytest.approx(ref[4], rel=1e-9, abs=1e-300)
+        alive += got[3] > 0.0
+    assert alive > 300
+
+
+def test_fused_conductor_evaluation_equals_the_generic_one():
+    rng = np.random.default_rng(4)
+    for a in (0.02, 0.3, 0.8):
+        for _ in range(300):
+            ix, iy, iz = _rand_dir(rng, True)
+            ox, oy, oz = _rand_dir(rng, True)
+            got = W._cond_eval(ix, iy, iz, ox, oy, oz, a, W._g1_dir(ix, iy, iz, a))
+            ref = W._cond_geo(ix, iy, iz, ox, oy, oz, a)
+            np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-300)
+
+
+@njit(cache=False)
+def _sample_bins(wx, wy, wz, a, n, nt, nphi, seed):
+    """Counts of n VNDF facets in (cos theta_m, phi_m) bins."""
+    counts = np.zeros((nt, nphi))
+    key = W._lane_key(seed, 0)
+    for i in range(n):
+        mx, my, mz = W._sample_vndf(wx, wy, wz, a, W._uniform(key, 2 * i), W._uniform(key, 2 * i + 1))
+        ph = math.atan2(my, mx) % (2 * math.pi)
+        it = min(int(mz * nt), nt - 1)
+        ip = min(int(ph / (2 * math.pi) * nphi), nphi - 1)
+        counts[it, ip] += 1
+    return counts
+
+
+@njit(cache=False)
+def _bin_probs(wx, wy, wz, a, nt, nphi, sub):
+    """The VNDF density integrated over the same bins (midpoint rule, sub x sub per bin)."""
+    probs = np.zeros((nt, nphi))
+    for it in range(nt):
+        for ip in range(nphi):
+            acc = 0.0
+            for j in range(sub):
+                z = (it + (j + 0.5) / sub) / nt
+                r = math.sqrt(max(1 - z * z, 0.0))
+                for k in range(sub):
+                    ph = (ip + (k + 0.5) / sub) / nphi * 2 * math.pi
+                    acc += W._vndf_pdf(wx, wy, wz, r * math.cos(ph), r * math.sin(ph), z, a)
+            probs[it, ip] = acc * (1.0 / nt) * (2 * math.pi / nphi) / (sub * sub)
+    return probs
+
+
+@pytest.mark.parametrize("theta,a,below", [(30.0, 0.4, False), (75.0, 0.8, False), (60.0, 0.5, True)])
+def test_spherical_cap_vndf_sampler_draws_the_vndf(theta, a, below):
+    """Chi-square of sampled facets against the VNDF density (bins with an
+    expected count of at least 20)."""
+    t = math.radians(theta)
+    w = (math.sin(t) * math.cos(0.7), math.sin(t) * math.sin(0.7), math.cos(t) * (-1 if below else 1))
+    n, nt, nphi = 200_000, 10, 12
+    counts = _sample_bins(*w, a, n, nt, nphi, 7)
+    probs = _bin_probs(*w, a, nt, nphi, 24)
+    assert abs(probs.sum() - 1.0) < 2e-3
+    exp = probs * n
+    keep = exp >= 20
+    obs, e = counts[keep], exp[keep]
+    e = e * obs.sum() / e.sum()
+    chi2 = float(((obs - e) ** 2 / e).sum())
+    assert stats.chi2.sf(chi2, keep.sum() - 1) > 1e-3, chi2
+    assert counts[keep].sum() > 0.99 * n
