@@ -292,21 +292,6 @@ def _diel_sample(wx, wy, wz, a, eta, u0, u1, u2):
 
 
 @njit(**_JIT)
-def _diel_reflect_forced(wx, wy, wz, a, eta, u0, u1):
-    """Reflection only (no Fresnel choice): (ox, oy, oz, weight F G1, pdf)."""
-    mx, my, mz = _sample_vndf(wx, wy, wz, a, u0, u1)
-    above = wz > 0.0
-    eta_rel = eta if above else 1.0 / eta
-    wm = wx * mx + wy * my + wz * mz
-    F = _fresnel(wm, eta_rel)
-    ox, oy, oz = _reflect(wx, wy, wz, mx, my, mz)
-    if wz * oz <= 0.0 or wm == 0.0:
-        return ox, oy, oz, 0.0, 0.0
-    p = _vndf_pdf(wx, wy, wz, mx, my, mz, a) / (4.0 * abs(wm))
-    return ox, oy, oz, F * _g1(ox, oy, oz, mx, my, mz, a), p
-
-
-@njit(**_JIT)
 def _top_reflect(wx, wy, wz, a, eta, u0, u1, u2, lam, wide, a_wide, ox, oy, oz):
     """Internal reflection at the top (no Fresnel choice: F goes into the
     weight), the direction drawn from the one-sample mixture
