@@ -72,7 +72,7 @@ def cmd_project(a: argparse.Namespace) -> int:
         raise NbrdfError("--coat: only with --samples (a material's coat is its top layer; a MERL table has none)")
     if c.finetune and not c.merl:
         raise NbrdfError("--finetune: only for measured (--merl) files")
-    lat, secs = pj.project_to_latent(dec, s, source, ProjectionConfig(steps=c.steps, seed=c.seed))
+    lat, secs = pj.project_to_latent(dec, s, source, ProjectionConfig(steps=c.steps))
     report = {"out": str(out), "decoder_id": lat.decoder_id, "sample_seconds": round(s.seconds, 3),
               "projection_seconds": round(secs, 3)}
     if c.finetune:

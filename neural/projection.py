@@ -32,8 +32,6 @@ class ProjectionConfig:
     """Adam learning rate of the latents (decays to 2 % of it)"""
     latent_reg: float = 1e-4
     """weight of the latents' squared-norm penalty (the training's prior on latents)"""
-    seed: int = 0
-    """random seed (kept for reproducible records; the fit itself starts from the training latents' mean)"""
     unbiased_share: float = 0.5
     """final share of the steps on ``decoder.unbiased_error`` (fits the noisy mean)"""
 
