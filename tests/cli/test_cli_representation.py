@@ -24,10 +24,11 @@ def decoder_file(tmp_path_factory):
 
 
 def test_data_then_train_tiny(tmp_path, capsys):
-    code, out, err = run(["data", "--preset", "tiny", "--out", tmp_path / "ds"], capsys)
+    code, out, err = run(["data", "--preset", "tiny", "--out", tmp_path / "ds", "--spp", 4], capsys)
     assert code == 0, err
     man = json.loads((tmp_path / "ds" / "manifest.json").read_text())
     assert man["preset"] == "tiny" and all((tmp_path / "ds" / s["file"]).exists() for s in man["shards"])
+    assert man["config"]["spp"] == 4
     code, out, err = run(["train", "representation", "--data", tmp_path / "ds", "--out", tmp_path / "run",
                           "--epochs", 2, "--width", 16, "--depth", 2, "--batch", 1024], capsys)
     assert code == 0, err
@@ -36,6 +37,7 @@ def test_data_then_train_tiny(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv,needle", [
     (["data", "--preset", "huge", "--out", "X"], "--preset"),
+    (["data", "--preset", "tiny", "--out", "X", "--spp", "0"], "--spp"),
     (["train", "representation", "--data", "/nonexistent", "--out", "R"], "manifest"),
     (["train", "representation", "--data", "D", "--out", "R", "--epochs", "0"], "--epochs"),
     (["project", "--out", "z.safetensors"], "exactly one"),
