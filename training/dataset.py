@@ -284,6 +284,14 @@ def body_values(data: "BRDFSet") -> Tensor:
     return (data.f - coat_eval(c, data.wi.to(data.f.dtype), data.wo.to(data.f.dtype))).clamp_min(0.0)
 
 
+def data_folders(spec: str) -> list[str]:
+    """The folders of a ``--data`` value: one data set, or several joined by commas."""
+    folders = [f.strip() for f in str(spec).split(",") if f.strip()]
+    if not folders:
+        raise NbrdfError("--data: no data folder given")
+    return folders
+
+
 def load_manifest(folder: str | Path) -> dict:
     man = Path(folder) / "manifest.json"
     if not man.is_file():

@@ -37,7 +37,7 @@ from nbrdf.neural.model import NeuralModel, layered_latents, load_model, save_mo
 from nbrdf.neural.sampling import SamplerNet, lambert_pdf, proxy_pdf, proxy_sample
 from nbrdf.training.analytic import GGXConductor, Lambertian
 from nbrdf.neural.stack import CLASSES, THREE_LAYERED, P, params_to_stack
-from nbrdf.training.dataset import body_values, load_manifest, load_split, sample_pairs
+from nbrdf.training.dataset import body_values, data_folders, load_manifest, load_split, sample_pairs
 from nbrdf.training.distributions import mixed_params, random_leaf_params  # noqa: F401 (random_leaf_params re-exported)
 
 Tensor = torch.Tensor
@@ -186,12 +186,11 @@ def _finish(name: str, cfg: OpsConfig, model: NeuralModel, history: dict, extra:
     return bundle
 
 
-def _decoder_loss(model: NeuralModel, z: Tensor, feats: Tensor, cos_o: Tensor, target: Tensor,
-                  f: Tensor | None = None, scale: float = 0.0) -> Tensor:
-    """The decoder's training loss for latents z (B, 32) at pairs (B, P, .)
-    (``scale``: its s, 0 = the decoder's; ``target`` made with the same s);
-    with the values ``f`` themselves, ``neural.decoder.unbiased_error`` instead."""
-    s = scale or model.decoder.spec.loss_scale
+def _decoder_loss(model: NeuralModel, z: Tensor, feats: Tensor, cos_o: Tensor, target: Tensor, s: float,
+                  f: Tensor | None = None) -> Tensor:
+    """The decoder's training loss with scale ``s`` (``target`` made with the same s)
+    for latents z (B, 32) at pairs (B, P, .); with the values ``f`` themselves,
+    ``neural.decoder.unbiased_error`` instead."""
     y = model.decoder.log_f(z[:, None, :], feats)
     if f is not None:
         return unbiased_error(y, f, cos_o, s).mean()
@@ -239,7 +238,7 @@ def train_leaf(cfg: OpsConfig, progress: bool = True) -> Path:
     def loss_of(kind: str, params: Tensor, wi: Tensor, wo: Tensor, feats: Tensor) -> Tensor:
         cos_o = wo[..., 2]
         target = loss_target(leaf_values(kind, params, wi, wo), cos_o, s_)
-        return _decoder_loss(model, leaf.encode(kind, params), feats, cos_o, target)
+        return _decoder_loss(model, leaf.encode(kind, params), feats, cos_o, target, s_)
 
     def step(_s: int) -> Tensor:
         return sum(loss_of(k, random_leaf_params(k, cfg.batch, g), *pool.draw(cfg.batch, cfg.pairs, g))
@@ -280,7 +279,7 @@ class _StackData:
 
     def __init__(self, folders: str, split: str, scale: float):
         """``folders``: one data set, or several joined by commas (same pairs per stack)."""
-        parts = [load_split(f.strip(), split) for f in folders.split(",") if f.strip()]
+        parts = [load_split(f, split) for f in data_folders(folders)]
         if len({p.wi.shape[1] for p in parts}) != 1:
             raise NbrdfError(f"--data: {folders}: the data sets have different numbers of pairs per stack")
         self.params = torch.cat([d.params for d in parts])
@@ -307,7 +306,7 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
         raise NbrdfError("--data: the layering network trains on a stack data set (nbrdf data --preset layering)")
     model = load_model(cfg.decoder)
     model.require("leaf")
-    manifests = [load_manifest(f.strip()) for f in cfg.data.split(",") if f.strip()]
+    manifests = [load_manifest(f) for f in data_folders(cfg.data)]
     torch.manual_seed(cfg.seed)
     g = torch.Generator().manual_seed(cfg.seed)
     if cfg.loss_scale < 0:
@@ -332,8 +331,8 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
 
     def loss_on(data: _StackData, idx: Tensor, pairs: int, fit_mean: bool = cfg.loss == "mean") -> Tensor:
         params, feats, cos_o, target, body = data.batch(idx, pairs, g)
-        return _decoder_loss(model, stack_latents(model, params, net), feats, cos_o, target,
-                             body if fit_mean else None, s_)
+        return _decoder_loss(model, stack_latents(model, params, net), feats, cos_o, target, s_,
+                             body if fit_mean else None)
 
     def step(s: int) -> Tensor:
         if s >= cfg.steps - cfg.recursion_steps and three.numel():

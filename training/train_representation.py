@@ -24,7 +24,7 @@ import torch
 from nbrdf.neural.decoder import Decoder, DecoderSpec, encode, loss_target, predicted_target, save_decoder
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.projection import ProjectionConfig, project
-from nbrdf.training.dataset import CLASSES, BRDFSet, body_values, load_manifest, load_split
+from nbrdf.training.dataset import CLASSES, BRDFSet, body_values, data_folders, load_manifest, load_split
 
 Tensor = torch.Tensor
 
@@ -121,11 +121,9 @@ def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None
 
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
-    folders = [f.strip() for f in cfg.data.split(",") if f.strip()]
-    if not folders:
-        raise NbrdfError("--data: no data folder given")
+    folders = data_folders(cfg.data)
     manifests = [load_manifest(f) for f in folders]
-    manifest = manifests[0]
+    data_config = manifests[0]["config"] if len(manifests) == 1 else [m["config"] for m in manifests]
     dev = _device(cfg.device)
     torch.manual_seed(cfg.seed)
     train_sets = [load_split(f, "train") for f in folders]
@@ -146,8 +144,7 @@ def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None
     history: dict[str, list] = {"train": [], "val": [], "val_epoch": []}
     start = 0
     ck = out / "checkpoint.pt"
-    run_key = {"config": json.loads(json.dumps(asdict(cfg), default=str)),
-               "data": manifest["config"] if len(manifests) == 1 else [m["config"] for m in manifests]}
+    run_key = {"config": json.loads(json.dumps(asdict(cfg), default=str)), "data": data_config}
     if ck.exists():
         state = torch.load(ck, map_location=dev, weights_only=True)
         if json.loads(state["run_key"]) != run_key:
@@ -204,7 +201,7 @@ def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None
     bar.close()
     dec = dec.cpu().eval()
     trained_on = {"data": str(cfg.data), "preset": ",".join(str(m.get("preset")) for m in manifests),
-                  "data_config": manifest["config"] if len(manifests) == 1 else [m["config"] for m in manifests],
+                  "data_config": data_config,
                   "train_brdfs": K, "epochs": cfg.epochs, "seconds_this_run": round(time.perf_counter() - t0, 1),
                   "device": str(dev)}
     metrics = {"train_loss": history["train"][-1] if history["train"] else None,
