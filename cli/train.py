@@ -13,7 +13,7 @@ from nbrdf.cli.config import Parser, add_arguments, build, values
 from nbrdf.neural.errors import NbrdfError
 
 #: Operation-only fields that the leaf and sampler commands do not take.
-LAYERING_ONLY = ("data", "recursion_steps", "width", "depth", "loss", "loss_scale")
+LAYERING_ONLY = ("data", "recursion_steps", "width", "depth", "loss", "loss_scale", "relative_scale")
 #: The decoder architecture fields set from the command line, with their help
 #: (``DecoderSpec`` lives in the library; its other fields are fixed).
 SPEC_HELP = {"width": "hidden units per decoder layer", "depth": "hidden layers of the decoder",

@@ -173,7 +173,7 @@ class Decoder(nn.Module):
         return h.hexdigest()[:16]
 
 
-def loss_target(f: Tensor, cos_o: Tensor, scale: float) -> Tensor:
+def loss_target(f: Tensor, cos_o: Tensor, scale: float | Tensor) -> Tensor:
     """What the loss compares: log(1 + f cos(theta_o) / s). Above s it is a
     log (relative) error, so sharp peaks and their tails share one loss; below
     s it fades to an absolute error, so dark regions and Monte Carlo noise
@@ -181,12 +181,14 @@ def loss_target(f: Tensor, cos_o: Tensor, scale: float) -> Tensor:
     return torch.log1p(f.clamp_min(0.0) * cos_o / scale)
 
 
-def predicted_target(y: Tensor, cos_o: Tensor, scale: float) -> Tensor:
-    """log(1 + exp(y) cos / s) = softplus(y + log cos - log s), stable for any y."""
-    return nn.functional.softplus(y + torch.log(cos_o.clamp_min(1e-6)) - math.log(scale))
+def predicted_target(y: Tensor, cos_o: Tensor, scale: float | Tensor) -> Tensor:
+    """log(1 + exp(y) cos / s) = softplus(y + log cos - log s), stable for any y
+    (``scale``: a number, or a tensor that broadcasts against y)."""
+    log_s = torch.log(scale) if isinstance(scale, Tensor) else math.log(scale)
+    return nn.functional.softplus(y + torch.log(cos_o.clamp_min(1e-6)) - log_s)
 
 
-def unbiased_error(y: Tensor, f: Tensor, cos_o: Tensor, scale: float) -> Tensor:
+def unbiased_error(y: Tensor, f: Tensor, cos_o: Tensor, scale: float | Tensor) -> Tensor:
     """Squared error of the prediction p = exp(y) against a Monte Carlo
     estimate f, relative to the prediction: ((p - f) cos / (s + p cos))^2 with
     the denominator held constant. Its expectation over the noise of f is

@@ -76,6 +76,13 @@ class OpsConfig:
     loss_scale: float = 0.0
     """layering: s of the loss, below which errors count as absolute (0: the decoder's own); smaller weighs
     dark bodies (black lacquers) more"""
+    relative_scale: float = 0.0
+    """layering: when > 0, each stack's loss scale is this times the stack's mean body value f cos (an
+    exposure-adapted loss, as HDR-FLIP adapts to each image: a dark material's relative errors weigh like a
+    bright one's); 0: the fixed loss scale"""
+    ema: float = 0.0
+    """decay of an exponential moving average of the weights, validated and shipped instead of the last
+    step's (0: off; 0.999 averages about the last 1,000 steps, smoothing minibatch and Monte Carlo noise)"""
 
 
 @dataclass
@@ -113,14 +120,21 @@ class SamplerConfig(OpsConfig):
 
 # --- a small resumable loop ---------------------------------------------------------------
 def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], total: int,
-              step: Callable[[int], Tensor], validate: Callable[[], float], progress: bool) -> dict:
+              step: Callable[[int], Tensor], validate: Callable[[], float], progress: bool,
+              rng: torch.Generator | None = None) -> dict:
     """Adam with a cosine schedule; checkpoints every 250 steps into
-    ``<out>/<name>.ckpt.pt`` and resumes from it; returns the history."""
+    ``<out>/<name>.ckpt.pt`` and resumes from it (with the batches' generator
+    ``rng``, so a resumed run equals one that ran through); returns the history. With
+    ``cfg.ema`` the modules end with (and are validated at) the moving
+    average of their weights."""
     from tqdm import tqdm
 
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
     params = [p for m in modules.values() for p in m.parameters()]
+    if not 0.0 <= cfg.ema < 1.0:
+        raise NbrdfError(f"--ema: {cfg.ema} must lie in [0, 1)")
+    ema = [p.detach().clone() for p in params] if cfg.ema else []
     opt = torch.optim.Adam(params, lr=cfg.lr)
     sched = torch.optim.lr_scheduler.LambdaLR(
         opt, lambda s: 0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(s, total) / total)))
@@ -138,6 +152,10 @@ def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], to
         sched.load_state_dict(state["sched"])
         history, start = json.loads(state["history"]), int(state["step"])
         torch.set_rng_state(state["rng"])
+        for e, v in zip(ema, state.get("ema", [])):
+            e.copy_(v)
+        if rng is not None and "batch_rng" in state:
+            rng.set_state(state["batch_rng"])
     bar = tqdm(total=total, initial=start, desc=f"train {name}", unit="step", file=sys.stderr,
                disable=not progress or None)
     run = []
@@ -149,6 +167,11 @@ def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], to
         loss.backward()
         opt.step()
         sched.step()
+        if ema:  # warm-up: a plain mean of the steps so far while that is shorter than the window
+            d = min(cfg.ema, (s + 1) / (s + 2))
+            with torch.no_grad():
+                for e, p in zip(ema, params):
+                    e.lerp_(p, 1.0 - d)
         run.append(loss.item())
         bar.update(1)
         if (s + 1) % 50 == 0:
@@ -158,20 +181,34 @@ def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], to
         if (s + 1) % 250 == 0 or s + 1 == total:
             for m in modules.values():
                 m.eval()
+            state = {k: m.state_dict() for k, m in modules.items()}  # the raw weights: training resumes from them
             with torch.no_grad():
+                _swap(params, ema)
                 history["val"].append(validate())
+                _swap(params, ema)
             history["val_step"].append(s + 1)
-            state = {k: m.state_dict() for k, m in modules.items()}
             state.update(opt=opt.state_dict(), sched=sched.state_dict(), history=json.dumps(history), step=s + 1,
-                         rng=torch.get_rng_state(), key=key)
+                         rng=torch.get_rng_state(), key=key, ema=ema)
+            if rng is not None:
+                state["batch_rng"] = rng.get_state()
             torch.save(state, out / f"{name}.ckpt.tmp")
             (out / f"{name}.ckpt.tmp").replace(ck)
     bar.close()
+    with torch.no_grad():
+        _swap(params, ema)
     for m in modules.values():
         m.eval()
         for p in m.parameters():
             p.requires_grad_(False)
     return history
+
+
+def _swap(params: list[Tensor], ema: list[Tensor]) -> None:
+    """Exchanges the weights with their moving average in place (no-op without one)."""
+    for e, p in zip(ema, params):
+        t = p.detach().clone()
+        p.copy_(e)
+        e.copy_(t)
 
 
 def _finish(name: str, cfg: OpsConfig, model: NeuralModel, history: dict, extra: dict) -> Path:
@@ -186,9 +223,9 @@ def _finish(name: str, cfg: OpsConfig, model: NeuralModel, history: dict, extra:
     return bundle
 
 
-def _decoder_loss(model: NeuralModel, z: Tensor, feats: Tensor, cos_o: Tensor, target: Tensor, s: float,
+def _decoder_loss(model: NeuralModel, z: Tensor, feats: Tensor, cos_o: Tensor, target: Tensor, s: float | Tensor,
                   f: Tensor | None = None) -> Tensor:
-    """The decoder's training loss with scale ``s`` (``target`` made with the same s)
+    """The decoder's training loss with scale ``s`` (a number or per BRDF (B, 1); ``target`` made with the same s)
     for latents z (B, 32) at pairs (B, P, .); with the values ``f`` themselves,
     ``neural.decoder.unbiased_error`` instead."""
     y = model.decoder.log_f(z[:, None, :], feats)
@@ -248,7 +285,7 @@ def train_leaf(cfg: OpsConfig, progress: bool = True) -> Path:
         return {k: loss_of(k, *val[k]).item() for k in LEAF_PARAMS}
 
     t0 = time.perf_counter()
-    history = _run_loop("leaf", cfg, {"leaf": leaf}, cfg.steps, step, validate, progress)
+    history = _run_loop("leaf", cfg, {"leaf": leaf}, cfg.steps, step, validate, progress, rng=g)
     model.leaf = leaf
     model.layering = model.sampler = None  # trained on the old leaf latents: retrain them on these
     for stale in ("layering", "sampler"):
@@ -277,8 +314,9 @@ class _StackData:
     """A data set's stacks in memory with decoder features and loss targets
     (of the bodies: the codes' coats are exact, ``neural.coat``)."""
 
-    def __init__(self, folders: str, split: str, scale: float):
-        """``folders``: one data set, or several joined by commas (same pairs per stack)."""
+    def __init__(self, folders: str, split: str, scale: float, relative: float = 0.0):
+        """``folders``: one data set, or several joined by commas (same pairs per
+        stack); ``relative`` > 0: per-stack loss scales (``OpsConfig.relative_scale``)."""
         parts = [load_split(f, split) for f in data_folders(folders)]
         if len({p.wi.shape[1] for p in parts}) != 1:
             raise NbrdfError(f"--data: {folders}: the data sets have different numbers of pairs per stack")
@@ -286,7 +324,9 @@ class _StackData:
         self.feats = torch.cat([encode(d.wi, d.wo) for d in parts])
         self.cos_o = torch.cat([d.wo[..., 2] for d in parts])
         self.body = torch.cat([body_values(d) for d in parts])
-        self.target = loss_target(self.body, self.cos_o, scale)
+        level = (self.body * self.cos_o).mean(1)
+        self.scale = ((relative * level).clamp_min(1e-6) if relative > 0 else torch.full_like(level, scale))[:, None]
+        self.target = loss_target(self.body, self.cos_o, self.scale)
         self.cls = torch.tensor([CLASSES.index(c) for d in parts for c in d.classes])
 
     def index_of(self, *names: str) -> Tensor:
@@ -298,7 +338,7 @@ class _StackData:
             torch.arange(n).expand(idx.numel(), n)
         rows = idx[:, None].expand_as(cols)
         return (self.params[idx], self.feats[rows, cols], self.cos_o[rows, cols], self.target[rows, cols],
-                self.body[rows, cols])
+                self.body[rows, cols], self.scale[idx])
 
 
 def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
@@ -309,11 +349,12 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
     manifests = [load_manifest(f) for f in data_folders(cfg.data)]
     torch.manual_seed(cfg.seed)
     g = torch.Generator().manual_seed(cfg.seed)
-    if cfg.loss_scale < 0:
-        raise NbrdfError(f"--loss-scale: {cfg.loss_scale} is negative")
+    for flag, v in (("--loss-scale", cfg.loss_scale), ("--relative-scale", cfg.relative_scale)):
+        if not v >= 0:
+            raise NbrdfError(f"{flag}: {v} is negative")
     s_ = cfg.loss_scale or model.decoder.spec.loss_scale
-    train = _StackData(cfg.data, "train", s_)
-    val = _StackData(cfg.data, "val", s_)
+    train = _StackData(cfg.data, "train", s_, cfg.relative_scale)
+    val = _StackData(cfg.data, "val", s_, cfg.relative_scale)
     two = train.index_of("two_layer", "diffuse_base")
     three = train.index_of(*THREE_LAYERED)
     if two.numel() == 0:
@@ -330,8 +371,8 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
         raise NbrdfError(f"--loss: {cfg.loss!r} is not one of log, mean")
 
     def loss_on(data: _StackData, idx: Tensor, pairs: int, fit_mean: bool = cfg.loss == "mean") -> Tensor:
-        params, feats, cos_o, target, body = data.batch(idx, pairs, g)
-        return _decoder_loss(model, stack_latents(model, params, net), feats, cos_o, target, s_,
+        params, feats, cos_o, target, body, scale = data.batch(idx, pairs, g)
+        return _decoder_loss(model, stack_latents(model, params, net), feats, cos_o, target, scale,
                              body if fit_mean else None)
 
     def step(s: int) -> Tensor:
@@ -351,7 +392,7 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
         return out
 
     t0 = time.perf_counter()
-    history = _run_loop("layering", cfg, {"layering": net}, cfg.steps, step, validate, progress)
+    history = _run_loop("layering", cfg, {"layering": net}, cfg.steps, step, validate, progress, rng=g)
     model.layering = net
     model.sampler = None  # trained on the old layered latents: retrain it on these
     model.trained_on.pop("sampler", None)
@@ -423,7 +464,7 @@ def train_sampler(cfg: OpsConfig, progress: bool = True) -> Path:
         return cross_entropy(z_val, vwi, vwo, vw).item()
 
     t0 = time.perf_counter()
-    history = _run_loop("sampler", cfg, {"sampler": net}, cfg.steps, step, validate, progress)
+    history = _run_loop("sampler", cfg, {"sampler": net}, cfg.steps, step, validate, progress, rng=g)
     model.sampler = net
     return _finish("sampler", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
                                                     "val_cross_entropy": history["val"][-1]})

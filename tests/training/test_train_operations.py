@@ -118,3 +118,59 @@ def test_layering_shape_and_loss_scale_are_chosen(bundles):
     assert model.layering.spec.depth == 5 and model.layering.spec.width == 16
     with pytest.raises(NbrdfError, match="--loss-scale"):
         train_layering(replace(cfg, out=str(root / "lay_neg"), loss_scale=-1.0), progress=False)
+
+
+def test_moving_average_of_weights_is_shipped_and_survives_a_resume(bundles, monkeypatch):
+    """``--ema``: the bundle holds the average of the weights, not the last
+    step's; a run stopped at a checkpoint and resumed ends with the same
+    average as one that ran through; a decay outside [0, 1) is one line."""
+    root, _, lay, _ = bundles
+    cfg = OpsConfig(decoder=str(lay), out=str(root / "smp_ema"), steps=500, batch=8, pairs=16, ema=0.99)
+    through = load_model(train_sampler(cfg, progress=False)).sampler.state_dict()
+    plain = load_model(train_sampler(replace(cfg, out=str(root / "smp_plain"), ema=0.0), progress=False))
+    diff = max((through[k] - v).abs().max().item() for k, v in plain.sampler.state_dict().items())
+    assert diff > 1e-4  # the average is not the last step's weights
+
+    import nbrdf.training.train_operations as to
+
+    real = to._run_loop
+
+    def stop_at_260(name, c, modules, total, step, validate, progress, rng=None):
+        def failing(s):
+            if s == 260:  # after the checkpoint at 250: steps 250-259 are lost and redone
+                raise KeyboardInterrupt
+            return step(s)
+        return real(name, c, modules, total, failing, validate, progress, rng=rng)
+
+    resumed = replace(cfg, out=str(root / "smp_ema_resumed"))
+    monkeypatch.setattr(to, "_run_loop", stop_at_260)
+    with pytest.raises(KeyboardInterrupt):
+        train_sampler(resumed, progress=False)
+    monkeypatch.setattr(to, "_run_loop", real)
+    again = load_model(train_sampler(resumed, progress=False)).sampler.state_dict()
+    for k, v in through.items():
+        assert torch.allclose(again[k], v, atol=1e-6), k
+    with pytest.raises(NbrdfError, match="--ema"):
+        train_sampler(replace(cfg, out=str(root / "smp_bad"), ema=1.0), progress=False)
+
+
+def test_relative_loss_scale_follows_each_stack_brightness(bundles):
+    """``--relative-scale k``: a stack's loss scale is k times its mean body
+    value f cos (darker stacks get smaller scales, so their relative errors
+    count); the run trains and a negative value is one line."""
+    from nbrdf.training.train_operations import _StackData
+
+    root, leaf, _, _ = bundles
+    data = _StackData(str(root / "data"), "train", 1e-3, relative=0.05)
+    level = (data.body * data.cos_o).mean(1)
+    assert torch.allclose(data.scale[:, 0], (0.05 * level).clamp_min(1e-6))
+    order = level.argsort()
+    assert data.scale[order[0], 0] < data.scale[order[-1], 0]
+    fixed = _StackData(str(root / "data"), "train", 1e-3)
+    assert torch.all(fixed.scale == 1e-3) and not torch.allclose(fixed.target, data.target)
+    cfg = OpsConfig(decoder=str(leaf), out=str(root / "lay_rel"), steps=40, batch=8, pairs=32,
+                    data=str(root / "data"), recursion_steps=20, width=16, relative_scale=0.05, loss="mean")
+    metrics = json.loads((train_layering(cfg, progress=False).parent / "layering_metrics.json").read_text())
+    assert all(math.isfinite(v) for v in metrics["val_loss"].values())
+    with pytest.raises(NbrdfError, match="--relative-scale"):
+        train_layering(replace(cfg, out=str(root / "lay_rel_bad"), relative_scale=-0.1), progress=False)
