@@ -31,10 +31,13 @@ Two more changes for that light:
 - for an empty top slab over a conductor, a two-bounce connection at the entry and at every internal reflection at
   the top: the reflected direction is drawn from the exit lobe toward wo
   mirrored about the plane, the base's from its VNDF, and the exit is
-  evaluated in closed form; it is one of three strategies (walk, next-event
-  at the base, connection) for the same three-vertex path, combined by the
-  balance heuristic, so the product of the coat's exit lobe and a
-  near-mirror base is no longer found by chance;
+  evaluated in closed form (C); a fourth strategy (D) draws the reflected
+  direction from a wider copy of that lobe and connects at the base by
+  next-event estimation, where the base's GGX tail bridges the ring around
+  the exit lobe; the four (walk, next-event at the base, C, D) sample the
+  same three-vertex path and are combined by the balance heuristic, so the
+  product of the coat's exit lobe and a near-mirror base is no longer found
+  by chance;
 - on every stack, reciprocity: the walk starts from the more grazing of
   (wi, wo) (a stack reflects into the air it is lit from), whose light
   refracts nearer the critical angle, so the trapped state is reached often
@@ -75,11 +78,12 @@ WIDE_LAM = 0.5
 #: Beyond the critical angle (trapped light, only without a medium in the top
 #: slab): VNDF(a) with probability GUIDE_LAM, else the mirror guide toward wo.
 GUIDE_LAM = 0.8
-#: Roughness of the wide guide (strategies D and E of the connection, empty
-#: top slab over a conductor): the exit lobe toward wo of a rougher copy of the
-#: coat, mirrored. It covers the ring around the narrow guide's lobe, where the
-#: near-mirror base's GGX tail bridges to the exit lobe; the walk found those
-#: directions by chance and they carried its heaviest contributions.
+#: Roughness of the wide guide (strategy D of the connection, empty top slab
+#: over a conductor): the exit lobe toward wo of a rougher copy of the coat,
+#: mirrored. It covers the ring around the narrow guide's lobe, where the
+#: near-mirror base's GGX tail bridges to the exit lobe (next-event estimation
+#: at the base); the walk found those directions by chance and they carried
+#: its heaviest contributions (docs/RESULTS.md, Ground truth v2).
 WIDE_GUIDE_ROUGHNESS = 0.5
 #: Paths per work item (a block of one pair's paths run by one thread).
 BLOCK = 32
@@ -481,8 +485,8 @@ def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, o
     f_r |g_z| / p_g * f_c u_z / p_c * f_exit * MIS weight, Schlick's x at the
     base); the MIS weight is C's share of the balance heuristic over A (walk:
     p_mix(g) p_c(u)), B (next-event at the base: p_mix(g) p_n(u)), C
-    (p_g(g) p_c(u)) and the wide guide's D and E (p_w(g) (p_n(u) + p_c(u)),
-    ``_wide_connection``; agw: its roughness). ``entry``: w is wi above the
+    (p_g(g) p_c(u)) and D (the wide guide and next-event estimation:
+    p_w(g) p_n(u), ``_wide_connection``; agw: its roughness). ``entry``: w is wi above the
     stack and the first vertex is the forced refraction into it instead of the
     internal reflection."""
     tx, ty, tz, _, pg = _ft_sample(a0, e0, ox, oy, oz, u0, u1)
@@ -507,26 +511,25 @@ def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, o
         return 0.0, 0.0
     pn = _ft_pdf(a0, e0, ox, oy, oz, -ux, -uy, -uz)
     pw = _ft_pdf(agw, e0, ox, oy, oz, -gx, -gy, gz)
-    w = pg * pc / (pm * pc + pm * pn + pg * pc + pw * (pc + pn))
+    w = pg * pc / (pm * pc + pm * pn + pg * pc + pw * pn)
     return fr / pg * fc * uz / pc * fe * w, x
 
 
 @njit(**_JIT)
-def _wide_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, sx, sy, sz, g1o,
-                     u0, u1, u2, u3, u4, u5, entry):
-    """Strategies D and E of the two-bounce connection (same path as
+def _wide_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, sx, sy, sz, g1o, u0, u1, u2, u3,
+                     entry):
+    """Strategy D of the two-bounce connection (the path of
     ``_mirror_connection``): the reflected direction g from the wide guide
-    (the exit lobe toward wo of a coat of roughness agw, mirrored), then at
-    the base either (E) the base's VNDF and the exit in closed form or (D)
-    next-event estimation toward wo and the base's BRDF (its GGX tail bridges
-    the ring around the exit lobe). Both share g; each is one sample of its
-    own strategy, weighted by the balance heuristic over all five
-    (A p_mix p_c, B p_mix p_n, C p_g p_c, D p_w p_n, E p_w p_c). Returns
-    (value of E, its Schlick x, value of D, its Schlick x), per unit beta and
-    without the base's Fresnel."""
+    (the exit lobe toward wo of a coat of roughness agw, mirrored about the
+    plane), next-event estimation toward wo at the base, and the base's BRDF
+    evaluated: its GGX tail bridges the ring around the exit lobe that neither
+    the narrow guide (C) nor the walk's own reflection samples well. Weighted
+    by the balance heuristic over A (p_mix p_c), B (p_mix p_n), C (p_g p_c)
+    and D (p_w p_n). Returns (value per unit beta without the base's Fresnel,
+    Schlick's x at the base)."""
     tx, ty, tz, _, pw = _ft_sample(agw, e0, ox, oy, oz, u0, u1)
     if pw <= 0.0:
-        return 0.0, 0.0, 0.0, 0.0
+        return 0.0, 0.0
     gx, gy, gz = -tx, -ty, tz
     if entry:
         fr, _ = _diel_eval_pdf(wx, wy, wz, gx, gy, gz, a0, e0)
@@ -535,27 +538,15 @@ def _wide_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz,
     else:
         fr, pm = _top_eval(wx, wy, wz, gx, gy, gz, a0, e0, lam, wide, a_wide, ox, oy, oz)
     if fr <= 0.0:
-        return 0.0, 0.0, 0.0, 0.0
+        return 0.0, 0.0
+    vx, vy, vz, sc, pn = _nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, 0.0, u2, u3)
+    if sc <= 0.0:
+        return 0.0, 0.0
+    fc, pb, x = _cond_geo(-gx, -gy, -gz, vx, vy, vz, ba)
+    if fc <= 0.0:
+        return 0.0, 0.0
     pg = _ft_pdf(a0, e0, ox, oy, oz, -gx, -gy, gz)
-    ke = xe = kd = xd = 0.0
-    # E: the base's VNDF, the exit in closed form
-    mx, my, mz = _sample_vndf(-gx, -gy, -gz, ba, u2, u3)
-    ux, uy, uz = _reflect(-gx, -gy, -gz, mx, my, mz)
-    fc, pc, x = _cond_geo(-gx, -gy, -gz, ux, uy, uz, ba)
-    if fc > 0.0 and pc > 0.0:
-        fe, _ = _diel_eval_pdf(-ux, -uy, -uz, ox, oy, oz, a0, e0)
-        if fe > 0.0:
-            pn = _ft_pdf(a0, e0, ox, oy, oz, -ux, -uy, -uz)
-            ke = fr * fc * uz * fe / (pm * pc + pm * pn + pg * pc + pw * (pc + pn))
-            xe = x
-    # D: next-event estimation toward wo at the base
-    vx, vy, vz, sc, pn = _nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, 0.0, u4, u5)
-    if sc > 0.0:
-        fc, pb, x = _cond_geo(-gx, -gy, -gz, vx, vy, vz, ba)
-        if fc > 0.0:
-            kd = fr * fc * vz * sc * pn / (pm * pb + pm * pn + pg * pb + pw * (pb + pn))
-            xd = x
-    return ke, xe, kd, xd
+    return fr * fc * vz * sc * pn / (pm * pb + pm * pn + pg * pb + pw * pn), x
 
 
 # --- the walk -----------------------------------------------------------------------------
@@ -619,15 +610,14 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
     for c in range(C):
         out[c] = 0.0
     conn = forced and L == 1 and base == 0 and tau0 == 0.0
-    if conn:  # strategies C, D, E from the entry (independent of the walk's first sample)
+    if conn:  # strategies C and D from the entry (independent of the walk's first sample)
         k, x = _mirror_connection(ix, iy, iz, a0, e0, b_rough[q], 1.0, False, a_wide, agw, ox, oy, oz,
                                   _uniform(key, 2), _uniform(key, 3), _uniform(key, 4), _uniform(key, 5), True)
-        ke, xe, kd, xd = _wide_connection(ix, iy, iz, a0, e0, b_rough[q], 1.0, False, a_wide, agw, ox, oy, oz,
-                                          sx, sy, sz, g1o, _uniform(key, 6), _uniform(key, 7), _uniform(key, 8),
-                                          _uniform(key, 9), _uniform(key, 10), _uniform(key, 11), True)
+        kd, xd = _wide_connection(ix, iy, iz, a0, e0, b_rough[q], 1.0, False, a_wide, agw, ox, oy, oz, sx, sy, sz,
+                                  g1o, _uniform(key, 6), _uniform(key, 7), _uniform(key, 8), _uniform(key, 9), True)
         for c in range(C):
             r0 = b_r0[q, c]
-            out[c] += k * (x + r0 * (1.0 - x)) + ke * (xe + r0 * (1.0 - xe)) + kd * (xd + r0 * (1.0 - xd))
+            out[c] += k * (x + r0 * (1.0 - x)) + kd * (xd + r0 * (1.0 - xd))
     if w_entry <= 0.0:
         return 0
     for c in range(C):
@@ -639,12 +629,13 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
     bounces = 0
     vx = vy = vz = pn = p = 0.0
     nx, ny, nz = dx, dy, dz
-    # the two-bounce connection (strategy C) is on for an empty top slab over
-    # a conductor; (pm, pg): densities of the current downward direction from
-    # the walk's mixture and from the guide (pg = 0: no top vertex before it)
+    # the two-bounce connection (strategies C and D) is on for an empty top
+    # slab over a conductor; (pm, pg, pw): densities of the current downward
+    # direction from the walk's mixture, the guide and the wide guide (pg = pw
+    # = 0: no top vertex before it)
     pm, pg, pw = 1.0, 0.0, 0.0
     if conn:
-        ctr = 12
+        ctr = 10
         pm = _ft_pdf(a0, e0, ix, iy, iz, dx, dy, dz)
         pg = _ft_pdf(a0, e0, ox, oy, oz, -dx, -dy, dz)
         pw = _ft_pdf(agw, e0, ox, oy, oz, -dx, -dy, dz)
@@ -693,7 +684,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 g1w = _g1_dir(wx, wy, wz, a0)
                 f, pn = _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a0, e0)
                 if f > 0.0:
-                    k = f * pm * pdf_last / (pm * pdf_last + pm * pn + pg * pdf_last + pw * (pdf_last + pn))
+                    k = f * pm * pdf_last / (pm * pdf_last + pm * pn + pg * pdf_last + pw * pn)
                     for c in range(C):
                         out[c] += beta[c] * k
                 if forced:
@@ -714,16 +705,13 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                         k, x = _mirror_connection(wx, wy, wz, a0, e0, b_rough[q], lm, wide, a_wide, agw, ox, oy,
                                                   oz, _uniform(key, ctr + 3), _uniform(key, ctr + 4),
                                                   _uniform(key, ctr + 5), _uniform(key, ctr + 6), False)
-                        ke, xe, kd, xd = _wide_connection(wx, wy, wz, a0, e0, b_rough[q], lm, wide, a_wide, agw, ox,
-                                                          oy, oz, sx, sy, sz, g1o, _uniform(key, ctr + 7),
-                                                          _uniform(key, ctr + 8), _uniform(key, ctr + 9),
-                                                          _uniform(key, ctr + 10), _uniform(key, ctr + 11),
-                                                          _uniform(key, ctr + 12), False)
+                        kd, xd = _wide_connection(wx, wy, wz, a0, e0, b_rough[q], lm, wide, a_wide, agw, ox, oy, oz,
+                                                  sx, sy, sz, g1o, _uniform(key, ctr + 7), _uniform(key, ctr + 8),
+                                                  _uniform(key, ctr + 9), _uniform(key, ctr + 10), False)
                         for c in range(C):
                             r0 = b_r0[q, c]
-                            out[c] += beta[c] * (k * (x + r0 * (1.0 - x)) + ke * (xe + r0 * (1.0 - xe))
-                                                 + kd * (xd + r0 * (1.0 - xd)))
-                        ctr += 10
+                            out[c] += beta[c] * (k * (x + r0 * (1.0 - x)) + kd * (xd + r0 * (1.0 - xd)))
+                        ctr += 8
                         pm = p
                         pg = _ft_pdf(a0, e0, ox, oy, oz, -nx, -ny, nz) if p > 0.0 else 0.0
                         pw = _ft_pdf(agw, e0, ox, oy, oz, -nx, -ny, nz) if p > 0.0 else 0.0
@@ -766,7 +754,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                     g1w = _g1_dir(wx, wy, wz, ba)
                     if sc > 0.0:
                         f, pb, x = _cond_eval(wx, wy, wz, vx, vy, vz, ba, g1w)
-                        k = f * abs(vz) * sc * pm * pn / (pm * pn + pm * pb + pg * pb + pw * (pb + pn))
+                        k = f * abs(vz) * sc * pm * pn / (pm * pn + pm * pb + pg * pb + pw * pn)
                         for c in range(C):
                             out[c] += beta[c] * k * (x + b_r0[q, c] * (1.0 - x))
                     mx, my, mz = _sample_vndf(wx, wy, wz, ba, _uniform(key, ctr), _uniform(key, ctr + 1))
