@@ -486,9 +486,9 @@ def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, o
     base); the MIS weight is C's share of the balance heuristic over A (walk:
     p_mix(g) p_c(u)), B (next-event at the base: p_mix(g) p_n(u)), C
     (p_g(g) p_c(u)) and D (the wide guide and next-event estimation:
-    p_w(g) p_n(u), ``_wide_connection``; agw: its roughness). ``entry``: w is wi above the
-    stack and the first vertex is the forced refraction into it instead of the
-    internal reflection."""
+    p_w(g) p_n(u), ``_wide_connection``; agw: its roughness). ``entry``: w
+    is wi above the stack and the first vertex is the forced refraction into
+    it instead of the internal reflection."""
     tx, ty, tz, _, pg = _ft_sample(a0, e0, ox, oy, oz, u0, u1)
     if pg <= 0.0:
         return 0.0, 0.0
