@@ -31,10 +31,13 @@ Two more changes for that light:
 - for an empty top slab over a conductor, a two-bounce connection at the entry and at every internal reflection at
   the top: the reflected direction is drawn from the exit lobe toward wo
   mirrored about the plane, the base's from its VNDF, and the exit is
-  evaluated in closed form; it is one of three strategies (walk, next-event
-  at the base, connection) for the same three-vertex path, combined by the
-  balance heuristic, so the product of the coat's exit lobe and a
-  near-mirror base is no longer found by chance;
+  evaluated in closed form (C); a fourth strategy (D) draws the reflected
+  direction from a wider copy of that lobe and connects at the base by
+  next-event estimation, where the base's GGX tail bridges the ring around
+  the exit lobe; the four (walk, next-event at the base, C, D) sample the
+  same three-vertex path and are combined by the balance heuristic, so the
+  product of the coat's exit lobe and a near-mirror base is no longer found
+  by chance;
 - on every stack, reciprocity: the walk starts from the more grazing of
   (wi, wo) (a stack reflects into the air it is lit from), whose light
   refracts nearer the critical angle, so the trapped state is reached often
@@ -75,6 +78,13 @@ WIDE_LAM = 0.5
 #: Beyond the critical angle (trapped light, only without a medium in the top
 #: slab): VNDF(a) with probability GUIDE_LAM, else the mirror guide toward wo.
 GUIDE_LAM = 0.8
+#: Roughness of the wide guide (strategy D of the connection, empty top slab
+#: over a conductor): the exit lobe toward wo of a rougher copy of the coat,
+#: mirrored. It covers the ring around the narrow guide's lobe, where the
+#: near-mirror base's GGX tail bridges to the exit lobe (next-event estimation
+#: at the base); the walk found those directions by chance and they carried
+#: its heaviest contributions (docs/RESULTS.md, Ground truth v2).
+WIDE_GUIDE_ROUGHNESS = 0.5
 #: Paths per work item (a block of one pair's paths run by one thread).
 BLOCK = 32
 BASE_CODES = {"conductor": 0, "diffuse": 1, "dielectric": 2}
@@ -466,7 +476,7 @@ def _cond_geo(ix, iy, iz, ox, oy, oz, a):
 
 
 @njit(**_JIT)
-def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, ox, oy, oz, u0, u1, u2, u3, entry):
+def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, u0, u1, u2, u3, entry):
     """Strategy C of the two-bounce connection (top reflection -> base ->
     exit toward wo) for an empty top slab over a conductor: draws the
     reflected direction g from the exit lobe toward wo mirrored about the
@@ -474,9 +484,11 @@ def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, ox, oy, oz, u0
     the exit in closed form. Returns (value without Fresnel and beta:
     f_r |g_z| / p_g * f_c u_z / p_c * f_exit * MIS weight, Schlick's x at the
     base); the MIS weight is C's share of the balance heuristic over A (walk:
-    p_mix(g) p_c(u)), B (next-event at the base: p_mix(g) p_n(u)) and C
-    (p_g(g) p_c(u)). ``entry``: w is wi above the stack and the first vertex
-    is the forced refraction into it instead of the internal reflection."""
+    p_mix(g) p_c(u)), B (next-event at the base: p_mix(g) p_n(u)), C
+    (p_g(g) p_c(u)) and D (the wide guide and next-event estimation:
+    p_w(g) p_n(u), ``_wide_connection``; agw: its roughness). ``entry``: w
+    is wi above the stack and the first vertex is the forced refraction into
+    it instead of the internal reflection."""
     tx, ty, tz, _, pg = _ft_sample(a0, e0, ox, oy, oz, u0, u1)
     if pg <= 0.0:
         return 0.0, 0.0
@@ -498,8 +510,43 @@ def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, ox, oy, oz, u0
     if fe <= 0.0:
         return 0.0, 0.0
     pn = _ft_pdf(a0, e0, ox, oy, oz, -ux, -uy, -uz)
-    w = pg * pc / (pm * pc + pm * pn + pg * pc)
+    pw = _ft_pdf(agw, e0, ox, oy, oz, -gx, -gy, gz)
+    w = pg * pc / (pm * pc + pm * pn + pg * pc + pw * pn)
     return fr / pg * fc * uz / pc * fe * w, x
+
+
+@njit(**_JIT)
+def _wide_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, sx, sy, sz, g1o, u0, u1, u2, u3,
+                     entry):
+    """Strategy D of the two-bounce connection (the path of
+    ``_mirror_connection``): the reflected direction g from the wide guide
+    (the exit lobe toward wo of a coat of roughness agw, mirrored about the
+    plane), next-event estimation toward wo at the base, and the base's BRDF
+    evaluated: its GGX tail bridges the ring around the exit lobe that neither
+    the narrow guide (C) nor the walk's own reflection samples well. Weighted
+    by the balance heuristic over A (p_mix p_c), B (p_mix p_n), C (p_g p_c)
+    and D (p_w p_n). Returns (value per unit beta without the base's Fresnel,
+    Schlick's x at the base)."""
+    tx, ty, tz, _, pw = _ft_sample(agw, e0, ox, oy, oz, u0, u1)
+    if pw <= 0.0:
+        return 0.0, 0.0
+    gx, gy, gz = -tx, -ty, tz
+    if entry:
+        fr, _ = _diel_eval_pdf(wx, wy, wz, gx, gy, gz, a0, e0)
+        fr *= abs(gz)
+        pm = _ft_pdf(a0, e0, wx, wy, wz, gx, gy, gz)
+    else:
+        fr, pm = _top_eval(wx, wy, wz, gx, gy, gz, a0, e0, lam, wide, a_wide, ox, oy, oz)
+    if fr <= 0.0:
+        return 0.0, 0.0
+    vx, vy, vz, sc, pn = _nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, 0.0, u2, u3)
+    if sc <= 0.0:
+        return 0.0, 0.0
+    fc, pb, x = _cond_geo(-gx, -gy, -gz, vx, vy, vz, ba)
+    if fc <= 0.0:
+        return 0.0, 0.0
+    pg = _ft_pdf(a0, e0, ox, oy, oz, -gx, -gy, gz)
+    return fr * fc * vz * sc * pn / (pm * pb + pm * pn + pg * pb + pw * pn), x
 
 
 # --- the walk -----------------------------------------------------------------------------
@@ -543,7 +590,7 @@ def _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a, eta):
 
 @njit(**_JIT)
 def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, b_alb,
-          rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, out, beta):
+          rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, agw, out, beta):
     """One path; writes its contribution per channel to ``out`` and returns
     the number of vertices (``beta``: scratch of C weights)."""
     C = out.shape[0]
@@ -563,12 +610,14 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
     for c in range(C):
         out[c] = 0.0
     conn = forced and L == 1 and base == 0 and tau0 == 0.0
-    if conn:  # strategy C from the entry (independent of the walk's first sample)
-        k, x = _mirror_connection(ix, iy, iz, a0, e0, b_rough[q], 1.0, False, a_wide, ox, oy, oz,
+    if conn:  # strategies C and D from the entry (independent of the walk's first sample)
+        k, x = _mirror_connection(ix, iy, iz, a0, e0, b_rough[q], 1.0, False, a_wide, agw, ox, oy, oz,
                                   _uniform(key, 2), _uniform(key, 3), _uniform(key, 4), _uniform(key, 5), True)
-        if k > 0.0:
-            for c in range(C):
-                out[c] += k * (x + b_r0[q, c] * (1.0 - x))
+        kd, xd = _wide_connection(ix, iy, iz, a0, e0, b_rough[q], 1.0, False, a_wide, agw, ox, oy, oz, sx, sy, sz,
+                                  g1o, _uniform(key, 6), _uniform(key, 7), _uniform(key, 8), _uniform(key, 9), True)
+        for c in range(C):
+            r0 = b_r0[q, c]
+            out[c] += k * (x + r0 * (1.0 - x)) + kd * (xd + r0 * (1.0 - xd))
     if w_entry <= 0.0:
         return 0
     for c in range(C):
@@ -580,14 +629,16 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
     bounces = 0
     vx = vy = vz = pn = p = 0.0
     nx, ny, nz = dx, dy, dz
-    # the two-bounce connection (strategy C) is on for an empty top slab over
-    # a conductor; (pm, pg): densities of the current downward direction from
-    # the walk's mixture and from the guide (pg = 0: no top vertex before it)
-    pm, pg = 1.0, 0.0
+    # the two-bounce connection (strategies C and D) is on for an empty top
+    # slab over a conductor; (pm, pg, pw): densities of the current downward
+    # direction from the walk's mixture, the guide and the wide guide (pg = pw
+    # = 0: no top vertex before it)
+    pm, pg, pw = 1.0, 0.0, 0.0
     if conn:
-        ctr = 6
+        ctr = 10
         pm = _ft_pdf(a0, e0, ix, iy, iz, dx, dy, dz)
         pg = _ft_pdf(a0, e0, ox, oy, oz, -dx, -dy, dz)
+        pw = _ft_pdf(agw, e0, ox, oy, oz, -dx, -dy, dz)
     while bounces < max_depth:
         bounces += 1
         vertices += 1
@@ -633,7 +684,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 g1w = _g1_dir(wx, wy, wz, a0)
                 f, pn = _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a0, e0)
                 if f > 0.0:
-                    k = f * pm * pdf_last / (pm * pdf_last + pm * pn + pg * pdf_last)
+                    k = f * pm * pdf_last / (pm * pdf_last + pm * pn + pg * pdf_last + pw * pn)
                     for c in range(C):
                         out[c] += beta[c] * k
                 if forced:
@@ -651,15 +702,19 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                                                           _uniform(key, ctr + 1), _uniform(key, ctr + 2), lm, wide,
                                                           a_wide, ox, oy, oz)
                     if conn:
-                        k, x = _mirror_connection(wx, wy, wz, a0, e0, b_rough[q], lm, wide, a_wide, ox, oy, oz,
-                                                  _uniform(key, ctr + 3), _uniform(key, ctr + 4),
+                        k, x = _mirror_connection(wx, wy, wz, a0, e0, b_rough[q], lm, wide, a_wide, agw, ox, oy,
+                                                  oz, _uniform(key, ctr + 3), _uniform(key, ctr + 4),
                                                   _uniform(key, ctr + 5), _uniform(key, ctr + 6), False)
-                        if k > 0.0:
-                            for c in range(C):
-                                out[c] += beta[c] * k * (x + b_r0[q, c] * (1.0 - x))
-                        ctr += 4
+                        kd, xd = _wide_connection(wx, wy, wz, a0, e0, b_rough[q], lm, wide, a_wide, agw, ox, oy, oz,
+                                                  sx, sy, sz, g1o, _uniform(key, ctr + 7), _uniform(key, ctr + 8),
+                                                  _uniform(key, ctr + 9), _uniform(key, ctr + 10), False)
+                        for c in range(C):
+                            r0 = b_r0[q, c]
+                            out[c] += beta[c] * (k * (x + r0 * (1.0 - x)) + kd * (xd + r0 * (1.0 - xd)))
+                        ctr += 8
                         pm = p
                         pg = _ft_pdf(a0, e0, ox, oy, oz, -nx, -ny, nz) if p > 0.0 else 0.0
+                        pw = _ft_pdf(agw, e0, ox, oy, oz, -nx, -ny, nz) if p > 0.0 else 0.0
                 else:
                     nx, ny, nz, wgt, p = _diel_sample(wx, wy, wz, a0, e0, _uniform(key, ctr), _uniform(key, ctr + 1),
                                                       _uniform(key, ctr + 2))
@@ -699,7 +754,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                     g1w = _g1_dir(wx, wy, wz, ba)
                     if sc > 0.0:
                         f, pb, x = _cond_eval(wx, wy, wz, vx, vy, vz, ba, g1w)
-                        k = f * abs(vz) * sc * pm * pn / (pm * pn + pm * pb + pg * pb)
+                        k = f * abs(vz) * sc * pm * pn / (pm * pn + pm * pb + pg * pb + pw * pn)
                         for c in range(C):
                             out[c] += beta[c] * k * (x + b_r0[q, c] * (1.0 - x))
                     mx, my, mz = _sample_vndf(wx, wy, wz, ba, _uniform(key, ctr), _uniform(key, ctr + 1))
@@ -762,7 +817,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
 
 @njit(parallel=True, **_JIT)
 def _run(wi, wo, spp, seed, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, b_alb, rr_depth, max_depth,
-         forced, rr_weight, a_wide, lam, lam_w, block):
+         forced, rr_weight, a_wide, lam, lam_w, agw, block):
     """Per work item (pair, block of ``block`` paths): the sum and the sum of
     squares of the path contributions per channel, the number of vertices and
     of dropped (non-finite) paths."""
@@ -781,7 +836,7 @@ def _run(wi, wo, spp, seed, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, 
         beta = np.empty(C)
         for s in range(b * block, min(spp, (b + 1) * block)):
             verts[it] += _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, b_alb,
-                               rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, out, beta)
+                               rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, agw, out, beta)
             finite = True
             for c in range(C):
                 if not math.isfinite(out[c]):
@@ -816,7 +871,8 @@ def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndar
     C = alb.shape[2]
     s1, s2, verts, dropped = _run(f64(wi), f64(wo), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, f64(rough), f64(ior),
                                   f64(sigma), f64(alb), BASE_CODES[base], f64(b_rough), f64(b_r0), f64(b_ior),
-                                  f64(b_alb), int(rr_depth), int(max_depth), bool(forced), RR_WEIGHT, WIDE_ROUGHNESS, GUIDE_LAM, WIDE_LAM, BLOCK)
+                                  f64(b_alb), int(rr_depth), int(max_depth), bool(forced), RR_WEIGHT, WIDE_ROUGHNESS, GUIDE_LAM, WIDE_LAM,
+                                  WIDE_GUIDE_ROUGHNESS, BLOCK)
     nb = s1.shape[0] // max(N, 1)
     blocks = s1.reshape(N, nb, C)
     return blocks.sum(1), s2.reshape(N, nb, C).sum(1), blocks, int(verts.sum()), int(dropped.sum())
