@@ -121,7 +121,7 @@ class SamplerConfig(OpsConfig):
 # --- a small resumable loop ---------------------------------------------------------------
 def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], total: int,
               step: Callable[[int], Tensor], validate: Callable[[], float], progress: bool,
-              rng: torch.Generator | None = None) -> dict:
+              rng: torch.Generator) -> dict:
     """Adam with a cosine schedule; checkpoints every 250 steps into
     ``<out>/<name>.ckpt.pt`` and resumes from it (with the batches' generator
     ``rng``, so a resumed run equals one that ran through); returns the history. With
@@ -152,10 +152,9 @@ def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], to
         sched.load_state_dict(state["sched"])
         history, start = json.loads(state["history"]), int(state["step"])
         torch.set_rng_state(state["rng"])
-        for e, v in zip(ema, state.get("ema", [])):
+        for e, v in zip(ema, state["ema"]):  # the key matched: written by this loop
             e.copy_(v)
-        if rng is not None and "batch_rng" in state:
-            rng.set_state(state["batch_rng"])
+        rng.set_state(state["batch_rng"])
     bar = tqdm(total=total, initial=start, desc=f"train {name}", unit="step", file=sys.stderr,
                disable=not progress or None)
     run = []
@@ -188,9 +187,7 @@ def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], to
                 _swap(params, ema)
             history["val_step"].append(s + 1)
             state.update(opt=opt.state_dict(), sched=sched.state_dict(), history=json.dumps(history), step=s + 1,
-                         rng=torch.get_rng_state(), key=key, ema=ema)
-            if rng is not None:
-                state["batch_rng"] = rng.get_state()
+                         rng=torch.get_rng_state(), batch_rng=rng.get_state(), key=key, ema=ema)
             torch.save(state, out / f"{name}.ckpt.tmp")
             (out / f"{name}.ckpt.tmp").replace(ck)
     bar.close()

@@ -476,6 +476,18 @@ def _cond_geo(ix, iy, iz, ox, oy, oz, a):
 
 
 @njit(**_JIT)
+def _first_vertex(wx, wy, wz, gx, gy, gz, a0, e0, lam, wide, a_wide, ox, oy, oz, entry):
+    """The top vertex of the two-bounce connection toward the downward g: (its
+    f |g_z|, the walk's density of g there). ``entry``: w is wi above the
+    stack and the vertex is the forced refraction into it; else the internal
+    reflection with the walk's mixture (lam, wide, a_wide)."""
+    if entry:
+        fr, _ = _diel_eval_pdf(wx, wy, wz, gx, gy, gz, a0, e0)
+        return fr * abs(gz), _ft_pdf(a0, e0, wx, wy, wz, gx, gy, gz)
+    return _top_eval(wx, wy, wz, gx, gy, gz, a0, e0, lam, wide, a_wide, ox, oy, oz)
+
+
+@njit(**_JIT)
 def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, u0, u1, u2, u3, entry):
     """Strategy C of the two-bounce connection (top reflection -> base ->
     exit toward wo) for an empty top slab over a conductor: draws the
@@ -493,12 +505,7 @@ def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, o
     if pg <= 0.0:
         return 0.0, 0.0
     gx, gy, gz = -tx, -ty, tz
-    if entry:
-        fr, _ = _diel_eval_pdf(wx, wy, wz, gx, gy, gz, a0, e0)
-        fr *= abs(gz)
-        pm = _ft_pdf(a0, e0, wx, wy, wz, gx, gy, gz)
-    else:
-        fr, pm = _top_eval(wx, wy, wz, gx, gy, gz, a0, e0, lam, wide, a_wide, ox, oy, oz)
+    fr, pm = _first_vertex(wx, wy, wz, gx, gy, gz, a0, e0, lam, wide, a_wide, ox, oy, oz, entry)
     if fr <= 0.0:
         return 0.0, 0.0
     mx, my, mz = _sample_vndf(-gx, -gy, -gz, ba, u2, u3)
@@ -531,12 +538,7 @@ def _wide_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz,
     if pw <= 0.0:
         return 0.0, 0.0
     gx, gy, gz = -tx, -ty, tz
-    if entry:
-        fr, _ = _diel_eval_pdf(wx, wy, wz, gx, gy, gz, a0, e0)
-        fr *= abs(gz)
-        pm = _ft_pdf(a0, e0, wx, wy, wz, gx, gy, gz)
-    else:
-        fr, pm = _top_eval(wx, wy, wz, gx, gy, gz, a0, e0, lam, wide, a_wide, ox, oy, oz)
+    fr, pm = _first_vertex(wx, wy, wz, gx, gy, gz, a0, e0, lam, wide, a_wide, ox, oy, oz, entry)
     if fr <= 0.0:
         return 0.0, 0.0
     vx, vy, vz, sc, pn = _nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, 0.0, u2, u3)

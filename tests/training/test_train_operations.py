@@ -135,7 +135,7 @@ def test_moving_average_of_weights_is_shipped_and_survives_a_resume(bundles, mon
 
     real = to._run_loop
 
-    def stop_at_260(name, c, modules, total, step, validate, progress, rng=None):
+    def stop_at_260(name, c, modules, total, step, validate, progress, rng):
         def failing(s):
             if s == 260:  # after the checkpoint at 250: steps 250-259 are lost and redone
                 raise KeyboardInterrupt
