@@ -17,7 +17,10 @@ LAYERING_ONLY = ("data", "recursion_steps", "width", "depth", "loss", "loss_scal
 #: The decoder architecture fields set from the command line, with their help
 #: (``DecoderSpec`` lives in the library; its other fields are fixed).
 SPEC_HELP = {"width": "hidden units per decoder layer", "depth": "hidden layers of the decoder",
-             "activation": "hidden-layer activation", "loss_scale": "s in the loss log(1 + f cos / s)",
+             "activation": "hidden-layer activation",
+             "encoding": "direction features (rusink5: five of the Rusinkiewicz angles; lobes11: and GGX-like bumps "
+                         "of the half vector, outside and inside a coat)",
+             "loss_scale": "s in the loss log(1 + f cos / s)",
              "coat": "the coat split (--no-coat: decode whole BRDFs, not bodies under the top interface's closed-form reflection; neural.coat)"}
 
 
@@ -60,12 +63,13 @@ def cmd_train_operation(a: argparse.Namespace) -> int:
 
 
 def _representation_flags(p: Parser) -> None:
-    from nbrdf.neural.decoder import ACTIVATIONS, DecoderSpec
+    from nbrdf.neural.decoder import ACTIVATIONS, ENCODINGS, DecoderSpec
     from nbrdf.training.train_representation import TrainConfig
 
     p.description = TrainConfig.__doc__
     add_arguments(p, TrainConfig, exclude=("spec",), choices={"device": ("auto", "cpu", "cuda")})
-    add_arguments(p, DecoderSpec, only=SPEC_HELP, help=SPEC_HELP, choices={"activation": tuple(ACTIVATIONS)})
+    add_arguments(p, DecoderSpec, only=SPEC_HELP, help=SPEC_HELP, choices={"activation": tuple(ACTIVATIONS),
+                                                                            "encoding": tuple(ENCODINGS)})
     add_arguments(p, RunArgs)
 
 

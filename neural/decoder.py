@@ -30,7 +30,12 @@ Tensor = torch.Tensor
 
 FORMAT = "nbrdf-decoder/1"
 LATENT = 32
-ENCODINGS = {"rusink5": 5}  # name -> number of direction features
+#: name -> number of direction features (``encode``).
+ENCODINGS = {"rusink5": 5, "lobes11": 11}
+#: GGX-like widths of the "lobes11" bumps in the half vector and in the half
+#: vector of the directions refracted into an ior-1.5 coat.
+LOBE_ALPHAS = (0.03, 0.1, 0.3)
+LOBE_IOR = 1.5
 ACTIVATIONS = ("relu", "silu")
 
 
@@ -77,7 +82,7 @@ class DecoderSpec:
         return (self.latent + self.features + 1) * w + (self.depth - 1) * (w * w + w) + w + 1
 
 
-def encode(wi: Tensor, wo: Tensor) -> Tensor:
+def rusink5(wi: Tensor, wo: Tensor) -> Tensor:
     """Direction features (..., 5): sqrt(2 theta_h / pi), 2 theta_d / pi,
     cos(2 phi_d), cos(theta_i) cos(theta_o), (cos(theta_i) + cos(theta_o)) / 2.
 
@@ -105,6 +110,40 @@ def encode(wi: Tensor, wo: Tensor) -> Tensor:
                         0.5 * (ci + co)], -1)
 
 
+def _bumps(h: Tensor) -> list[Tensor]:
+    """alpha^2 cos^2 / (alpha^2 cos^2 + sin^2) of the unit half vector h per
+    width in LOBE_ALPHAS: 1 at the peak, a Cauchy bump in tan(theta_h) whose
+    square has the GGX shape of that roughness."""
+    c2 = h[..., 2] ** 2
+    s2 = (h[..., 0] ** 2 + h[..., 1] ** 2)
+    return [a * a * c2 / (a * a * c2 + s2).clamp_min(1e-30) for a in LOBE_ALPHAS]
+
+
+def lobes11(wi: Tensor, wo: Tensor) -> Tensor:
+    """rusink5's features, then bumps of three widths in the half vector and in
+    the half vector of wi, wo refracted into an ior-1.5 layer (where the body of
+    a coated material has its lobe): sharp lobes become a few linear pieces for
+    the first layer. Reciprocal and isotropic like rusink5."""
+    def inside(w: Tensor) -> Tensor:
+        t = w[..., :2] / LOBE_IOR
+        return torch.cat([t, torch.sqrt((1.0 - (t * t).sum(-1, keepdim=True)).clamp_min(0.0))], -1)
+
+    def half(a: Tensor, b: Tensor) -> Tensor:
+        h = a + b
+        return h / h.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+
+    return torch.cat([rusink5(wi, wo), torch.stack(_bumps(half(wi, wo)) + _bumps(half(inside(wi), inside(wo))), -1)],
+                     -1)
+
+
+_ENCODERS = {"rusink5": rusink5, "lobes11": lobes11}
+
+
+def encode(wi: Tensor, wo: Tensor, encoding: str = "rusink5") -> Tensor:
+    """Direction features (..., ENCODINGS[encoding]) of the pairs (wi, wo)."""
+    return _ENCODERS[encoding](wi, wo)
+
+
 class Decoder(nn.Module):
     """MLP over [latent, features] -> y = log f (one channel)."""
 
@@ -118,6 +157,10 @@ class Decoder(nn.Module):
         self.register_buffer("latent_mean", torch.zeros(spec.latent))  # a neutral start for projection
 
     # -- the network -------------------------------------------------------------------
+    def encode(self, wi: Tensor, wo: Tensor) -> Tensor:
+        """The direction features this decoder was trained on (``encode``)."""
+        return encode(wi, wo, self.spec.encoding)
+
     def latent_share(self, z: Tensor) -> Tensor:
         """The latent's part of the first layer's pre-activation, (..., width);
         z may be a latent or a whole material code (its coat is not decoded)."""
@@ -146,14 +189,14 @@ class Decoder(nn.Module):
     def forward(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
         """f >= 0 (...,) for one channel: the decoded body, plus the coat when
         z is a material code; directions below the horizon give 0."""
-        f = torch.exp(self.log_f(z, encode(wi, wo)).clamp(max=80.0))
+        f = torch.exp(self.log_f(z, self.encode(wi, wo)).clamp(max=80.0))
         f = torch.where((wi[..., 2] > 0) & (wo[..., 2] > 0), f, torch.zeros_like(f))
         c = self.coat(z, wi, wo)
         return f if c is None else f + c.to(f.dtype)
 
     def eval_rgb(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
         """RGB values (N, 3) of a material code (or bare latents) z (3, code) at N pairs."""
-        feats = encode(wi, wo)
+        feats = self.encode(wi, wo)
         share = self.latent_share(z.to(feats.dtype))  # (3, W)
         y = self.log_f_from_share(share[None, :, :], feats[:, None, :])
         f = torch.exp(y.clamp(max=80.0))

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from nbrdf.neural.decoder import Decoder, DecoderSpec
+from nbrdf.neural.decoder import ENCODINGS, LOBE_ALPHAS, LOBE_IOR, Decoder, DecoderSpec
 from nbrdf.neural.errors import NbrdfError
 
 TEXTURE_WIDTH = 256  # texels per row of the weight texture
@@ -60,7 +60,15 @@ class PackedDecoder:
         return {"NB_WIDTH": s.width, "NB_WIDTH4": s.width // 4, "NB_DEPTH": s.depth,
                 "NB_FEATS4": -(-s.features // 4), "NB_ACT": 0 if s.activation == "relu" else 1,
                 "NB_TEX_W": TEXTURE_WIDTH, "NB_STORAGE": storage, "NB_COUNT": self.stream.shape[0],
-                "NB_OFF_OUT": self.offsets["out"], "NB_UNROLLED": int(unrolled)}
+                "NB_OFF_OUT": self.offsets["out"], "NB_UNROLLED": int(unrolled), **self.encoding_defines()}
+
+    def encoding_defines(self) -> dict[str, object]:
+        """``NB_ENCODING`` (the index in ``ENCODINGS``) and the lobe encoding's constants."""
+        out: dict[str, object] = {"NB_ENCODING": tuple(ENCODINGS).index(self.spec.encoding)}
+        if self.spec.encoding == "lobes11":
+            out["NB_LOBE_IOR"] = _glsl_float(np.float32(LOBE_IOR))
+            out.update({f"NB_LOBE_A{k}": _glsl_float(np.float32(a)) for k, a in enumerate(LOBE_ALPHAS)})
+        return out
 
     def unrolled_net(self) -> str:
         """The whole network after the encoding as straight-line GLSL with every

@@ -63,7 +63,7 @@ def project(dec: Decoder, wi: Tensor, wo: Tensor, f: Tensor, cfg: ProjectionConf
         coat = torch.as_tensor(coat, dtype=torch.float32).reshape(-1, COAT_PARAMS).expand(wi.shape[0], -1)
         f = (f.float() - coat_eval(coat[:, None, :], wi.float(), wo.float())).clamp_min(0.0)
     up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
-    feats = encode(wi.float(), wo.float())
+    feats = dec.encode(wi.float(), wo.float())
     cos_o = wo[..., 2].float().clamp_min(0.0)
     target = loss_target(f.float(), cos_o, dec.spec.loss_scale)
     w = up.float() if weight is None else weight.float() * up.float()

@@ -32,7 +32,8 @@ from nbrdf.neural.geometry import cosine_hemisphere
 # (neural.stack), the paper's distributions to training.distributions; re-exported here.
 from nbrdf.neural.stack import (CLASSES, DIFFUSE_BASED, PARAM_NAMES, THREE_LAYERED, P,  # noqa: F401
                                 params_coats, params_to_material, params_to_stack)
-from nbrdf.training.distributions import clear_top_slabs, sample_params, sharpen_coats  # noqa: F401
+from nbrdf.training.distributions import (clear_top_slabs, darken_top_slabs, sample_params,  # noqa: F401
+                                          sharpen_coats)
 
 Tensor = torch.Tensor
 
@@ -51,6 +52,7 @@ class DataConfig:
     sharp_coats: float = 0.0  # share of stacks redrawn with a coat of roughness 0.01-0.06 over a bright base
     bright_bases: float = 1.0  # share of those sharp-coated stacks whose base is redrawn bright (the rest keep theirs)
     clear_top_slabs: float = 0.0  # share of stacks whose top slab is redrawn clear (sigma_t 0, or U(0, 0.3))
+    dark_top_slabs: float = 0.0  # share of stacks whose top slab is redrawn dark and thick (darken_top_slabs)
 
 
 PRESETS: dict[str, DataConfig] = {
@@ -78,6 +80,15 @@ PRESETS: dict[str, DataConfig] = {
                         val_counts=dict(conductor=0, dielectric=0, two_layer=32, three_layer=32, diffuse_base=16,
                                         three_layer_diffuse=16),
                         pairs=768, spp=32, seed=2, sharp_coats=0.7, bright_bases=0.6, clear_top_slabs=0.8),
+    # the same look-development range with more dark, thick coloured coatings
+    # (black and tinted lacquers) and cleaner values, for the layering network's
+    # last stage
+    "lacquers": DataConfig(counts=dict(conductor=0, dielectric=0, two_layer=512, three_layer=256, diffuse_base=512,
+                                       three_layer_diffuse=256),
+                           val_counts=dict(conductor=0, dielectric=0, two_layer=32, three_layer=16, diffuse_base=32,
+                                           three_layer_diffuse=16),
+                           pairs=768, spp=128, seed=5, sharp_coats=0.7, bright_bases=0.5, clear_top_slabs=0.4,
+                           dark_top_slabs=0.4),
     "paper": DataConfig(counts=dict(conductor=300, dielectric=300, two_layer=12720, three_layer=1800,
                                     diffuse_base=1200),
                         val_counts=dict(conductor=32, dielectric=32, two_layer=128, three_layer=64, diffuse_base=32),
@@ -191,6 +202,9 @@ def make_shard(cfg: DataConfig, shard: Shard) -> dict[str, np.ndarray]:
     if cfg.clear_top_slabs > 0:
         gm = torch.Generator().manual_seed(_stream_seed(cfg.seed, "slabs", shard.split, shard.cls, shard.index))
         clear_top_slabs(params, cfg.clear_top_slabs, gm)
+    if cfg.dark_top_slabs > 0:
+        gd = torch.Generator().manual_seed(_stream_seed(cfg.seed, "dark", shard.split, shard.cls, shard.index))
+        darken_top_slabs(params, cfg.dark_top_slabs, gd)
     wi, wo = zip(*(sample_pairs(cfg.pairs, g, cfg.peak_fraction) for _ in range(shard.count)))
     wi, wo = torch.stack(wi), torch.stack(wo)
     f, se = tabulate(params, wi, wo, cfg.spp, seed=_stream_seed(cfg.seed, "mc", shard.split, shard.cls, shard.index)

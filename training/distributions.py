@@ -131,6 +131,20 @@ def clear_top_slabs(p: Tensor, share: float, g: torch.Generator) -> Tensor:
     return p
 
 
+def darken_top_slabs(p: Tensor, share: float, g: torch.Generator) -> Tensor:
+    """Redraws the top slab of a ``share`` of the stacks in ``p`` (in place;
+    returned) as a dark, thick coloured coating: albedo U(0, 0.3), sigma_t
+    U(2, 5) -- black and tinted lacquers, whose bodies are a few per cent of
+    a bright one's; the paper's mostly bright media (albedo 1 - U^2) give
+    such a slab to one stack in ten, a black one (albedo <= 0.1, sigma_t >= 3)
+    to one in fifty. Single interfaces are left alone; a fixed number of
+    uniforms per row."""
+    u, pick = _pick_stacks(p, share, g)
+    p[pick, P["albedo_1"]] = 0.3 * u[pick, 1]
+    p[pick, P["sigma_t_1"]] = 2.0 + 3.0 * u[pick, 2]
+    return p
+
+
 def mixed_params(n: int, g: torch.Generator) -> Tensor:
     """n parameter vectors over every class (even shares, the rest two-layer)."""
     per = [n // len(CLASSES)] * len(CLASSES)

@@ -112,7 +112,7 @@ def finetune(dec: Decoder, s: Samples, z: Tensor, steps: int = 300, lr: float = 
         from nbrdf.neural.coat import coat_eval
 
         f = (f - coat_eval(s.coat, wi, wo)).clamp_min(0.0)
-    feats, cos_o = encode(wi, wo), wo[..., 2]
+    feats, cos_o = dec.encode(wi, wo), wo[..., 2]
     target = loss_target(f, cos_o, dec.spec.loss_scale)
     tuned = copy.deepcopy(dec)
     for p in tuned.parameters():

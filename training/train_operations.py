@@ -246,10 +246,10 @@ class _PairPool:
     """A large fixed pool of direction pairs (the data set's distribution),
     with their decoder features, drawn from at random each step."""
 
-    def __init__(self, n: int, g: torch.Generator):
+    def __init__(self, n: int, g: torch.Generator, encoding: str):
         wi, wo = sample_pairs(n, g)
         self.wi, self.wo = wi.float(), wo.float()
-        self.feats = encode(self.wi, self.wo)
+        self.feats = encode(self.wi, self.wo, encoding)
 
     def draw(self, b: int, p: int, g: torch.Generator):
         idx = torch.randint(0, self.wi.shape[0], (b, p), generator=g)
@@ -260,7 +260,7 @@ def train_leaf(cfg: OpsConfig, progress: bool = True) -> Path:
     model = load_model(cfg.decoder)
     torch.manual_seed(cfg.seed)
     g = torch.Generator().manual_seed(cfg.seed)
-    pool = _PairPool(1 << 18, g)
+    pool = _PairPool(1 << 18, g, model.decoder.spec.encoding)
     leaf = LeafEncoders()
     with torch.no_grad():  # start every encoder at the training latents' mean
         for net in leaf.nets.values():
@@ -311,14 +311,15 @@ class _StackData:
     """A data set's stacks in memory with decoder features and loss targets
     (of the bodies: the codes' coats are exact, ``neural.coat``)."""
 
-    def __init__(self, folders: str, split: str, scale: float, relative: float = 0.0):
+    def __init__(self, folders: str, split: str, scale: float, encoding: str, relative: float = 0.0):
         """``folders``: one data set, or several joined by commas (same pairs per
-        stack); ``relative`` > 0: per-stack loss scales (``OpsConfig.relative_scale``)."""
+        stack); ``encoding``: the decoder's direction features; ``relative`` > 0:
+        per-stack loss scales (``OpsConfig.relative_scale``)."""
         parts = [load_split(f, split) for f in data_folders(folders)]
         if len({p.wi.shape[1] for p in parts}) != 1:
             raise NbrdfError(f"--data: {folders}: the data sets have different numbers of pairs per stack")
         self.params = torch.cat([d.params for d in parts])
-        self.feats = torch.cat([encode(d.wi, d.wo) for d in parts])
+        self.feats = torch.cat([encode(d.wi, d.wo, encoding) for d in parts])
         self.cos_o = torch.cat([d.wo[..., 2] for d in parts])
         self.body = torch.cat([body_values(d) for d in parts])
         level = (self.body * self.cos_o).mean(1)
@@ -350,8 +351,9 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
         if not v >= 0:
             raise NbrdfError(f"{flag}: {v} is negative")
     s_ = cfg.loss_scale or model.decoder.spec.loss_scale
-    train = _StackData(cfg.data, "train", s_, cfg.relative_scale)
-    val = _StackData(cfg.data, "val", s_, cfg.relative_scale)
+    enc = model.decoder.spec.encoding
+    train = _StackData(cfg.data, "train", s_, enc, cfg.relative_scale)
+    val = _StackData(cfg.data, "val", s_, enc, cfg.relative_scale)
     two = train.index_of("two_layer", "diffuse_base")
     three = train.index_of(*THREE_LAYERED)
     if two.numel() == 0:

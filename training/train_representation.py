@@ -78,9 +78,9 @@ class _Flat:
     owner: Tensor
 
 
-def flatten(data: BRDFSet, scale: float) -> _Flat:
+def flatten(data: BRDFSet, scale: float, encoding: str) -> _Flat:
     K, n = data.f.shape
-    feats = encode(data.wi.reshape(-1, 3), data.wo.reshape(-1, 3))
+    feats = encode(data.wi.reshape(-1, 3), data.wo.reshape(-1, 3), encoding)
     cos_o = data.wo[..., 2].reshape(-1)
     return _Flat(feats, cos_o, loss_target(data.f.reshape(-1), cos_o, scale), torch.arange(K).repeat_interleave(n))
 
@@ -101,7 +101,7 @@ def validate(dec: Decoder, val: BRDFSet, steps: int = 150, fit_pairs: int | None
         z = project(dec, val.wi[:, :half], val.wo[:, :half], val.f[:, :half], ProjectionConfig(steps=steps))
     wi, wo, f = val.wi[:, half:], val.wo[:, half:], val.f[:, half:]
     with torch.no_grad():
-        y = dec.log_f(z[:, None, :], encode(wi, wo))
+        y = dec.log_f(z[:, None, :], dec.encode(wi, wo))
         cos_o = wo[..., 2]
         s = dec.spec.loss_scale
         err = ((predicted_target(y, cos_o, s) - loss_target(f, cos_o, s)) ** 2).mean(-1)
@@ -131,7 +131,7 @@ def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None
     if cfg.spec.coat:  # the decoder learns bodies; the coat is closed form (neural.coat)
         train_sets = [replace(t, f=body_values(t)) for t in train_sets]
         val_set = replace(val_set, f=body_values(val_set))
-    flat = _join([flatten(t, cfg.spec.loss_scale) for t in train_sets], [len(t) for t in train_sets])
+    flat = _join([flatten(t, cfg.spec.loss_scale, cfg.spec.encoding) for t in train_sets], [len(t) for t in train_sets])
     params = torch.cat([t.params for t in train_sets])  # (K, 11): the training BRDFs, in latent order
     K = params.shape[0]
     dec = Decoder(cfg.spec).to(dev)

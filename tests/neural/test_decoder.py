@@ -8,7 +8,8 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from nbrdf.neural.decoder import (Decoder, DecoderSpec, encode, load_decoder, read_bundle, save_decoder)
+from nbrdf.neural.decoder import (ENCODINGS, LOBE_ALPHAS, LOBE_IOR, Decoder, DecoderSpec, encode, load_decoder,
+                                  read_bundle, save_decoder)
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.training.merl import angles
 
@@ -36,9 +37,10 @@ def test_encoding_matches_rusinkiewicz_angles():
     torch.testing.assert_close(e[:, 3], wi[:, 2] * wo[:, 2])
 
 
-def test_decoder_is_reciprocal_isotropic_and_nonnegative():
+@pytest.mark.parametrize("encoding", sorted(ENCODINGS))
+def test_decoder_is_reciprocal_isotropic_and_nonnegative(encoding):
     torch.manual_seed(0)
-    dec = Decoder(DecoderSpec()).double()
+    dec = Decoder(DecoderSpec(encoding=encoding)).double()
     z = torch.randn(500, 32, dtype=torch.float64)
     wi, wo = rand_dirs(500, 3), rand_dirs(500, 4)
     f = dec(z, wi, wo)
@@ -49,6 +51,29 @@ def test_decoder_is_reciprocal_isotropic_and_nonnegative():
     torch.testing.assert_close(dec(z, wi * mirror, wo * mirror), f, rtol=1e-9, atol=0)
     below = wo * torch.tensor([1.0, 1.0, -1.0], dtype=torch.float64)
     assert (dec(z, wi, below) == 0).all()
+
+
+def test_lobe_features_peak_on_the_half_vectors_outside_and_inside_a_coat():
+    """lobes11: rusink5, then 1 / (1 + tan^2 / alpha^2) of the half vector
+    and of the half vector of the directions refracted into ior 1.5."""
+    wi, wo = rand_dirs(3000, 7), rand_dirs(3000, 8)
+    e = encode(wi, wo, "lobes11")
+    assert e.shape == (3000, ENCODINGS["lobes11"])
+    torch.testing.assert_close(e[:, :5], encode(wi, wo))
+    th, _, _ = angles(wi, wo)
+    for k, a in enumerate(LOBE_ALPHAS):
+        torch.testing.assert_close(e[:, 5 + k], 1 / (1 + torch.tan(th) ** 2 / a ** 2), atol=1e-6, rtol=1e-5)
+
+    def inside(w):
+        t = w[:, :2] / LOBE_IOR
+        return torch.cat([t, (1 - (t * t).sum(-1, keepdim=True)).sqrt()], -1)
+
+    th_in, _, _ = angles(inside(wi), inside(wo))
+    for k, a in enumerate(LOBE_ALPHAS):
+        torch.testing.assert_close(e[:, 8 + k], 1 / (1 + torch.tan(th_in) ** 2 / a ** 2), atol=1e-6, rtol=1e-5)
+    # the mirror pair peaks at 1 in every bump, inside and out
+    mirror = encode(wi[:5], wi[:5] * torch.tensor([-1.0, -1.0, 1.0]), "lobes11")
+    torch.testing.assert_close(mirror[:, 5:], torch.ones(5, 6, dtype=mirror.dtype), atol=1e-9, rtol=0)
 
 
 @pytest.mark.parametrize("width,depth", [(64, 3), (32, 2), (48, 4)])

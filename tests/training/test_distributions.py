@@ -63,3 +63,28 @@ def test_look_development_redraws_stay_legal_and_touch_stacks_only():
     assert float(stacks[:, P["top_roughness"]].min()) >= lo
     assert float(stacks[:, P["base_value"]].max()) <= 1.0 and float(stacks[:, P["sigma_t_1"]].min()) >= 0
     assert CLASSES.index("conductor") == 0 and CLASSES.index("dielectric") == 1
+
+
+def test_dark_top_slabs_are_a_share_of_the_stacks_and_stay_legal():
+    """darken_top_slabs: about its share of the stacks gets a dark (albedo
+    <= 0.3), thick (sigma_t 2-5) top slab; single interfaces untouched; the
+    paper's media alone give such a slab to about one stack in ten."""
+    from nbrdf.neural.stack import P, params_to_material
+
+    g = torch.Generator().manual_seed(6)
+    p = torch.cat([D.sample_params(c, 3000, g) for c in ("conductor", "two_layer", "diffuse_base")])
+    singles = p[:, P["class"]] < 2
+
+    def dark_share(q):
+        s = q[~singles]
+        return ((s[:, P["albedo_1"]] <= 0.3) & (s[:, P["sigma_t_1"]] >= 2.0)).double().mean()
+
+    assert 0.08 < dark_share(p) < 0.12  # P(1 - U^2 <= 0.3) P(U(0, 5) >= 2) = 0.163 x 0.6
+    a = D.darken_top_slabs(p.clone(), 0.4, torch.Generator().manual_seed(7))
+    assert torch.equal(a, D.darken_top_slabs(p.clone(), 0.4, torch.Generator().manual_seed(7)))
+    assert torch.equal(a[singles], p[singles])
+    assert 0.43 < dark_share(a) < 0.49  # 40 % redrawn + 60 % x 0.098 already dark
+    s = a[~singles]
+    assert float(s[:, P["albedo_1"]].min()) >= 0 and float(s[:, P["sigma_t_1"]].max()) <= 5.0
+    for row in s[::211]:
+        assert params_to_material(row).layers

@@ -161,12 +161,12 @@ def test_relative_loss_scale_follows_each_stack_brightness(bundles):
     from nbrdf.training.train_operations import _StackData
 
     root, leaf, _, _ = bundles
-    data = _StackData(str(root / "data"), "train", 1e-3, relative=0.05)
+    data = _StackData(str(root / "data"), "train", 1e-3, "rusink5", relative=0.05)
     level = (data.body * data.cos_o).mean(1)
     assert torch.allclose(data.scale[:, 0], (0.05 * level).clamp_min(1e-6))
     order = level.argsort()
     assert data.scale[order[0], 0] < data.scale[order[-1], 0]
-    fixed = _StackData(str(root / "data"), "train", 1e-3)
+    fixed = _StackData(str(root / "data"), "train", 1e-3, "rusink5")
     assert torch.all(fixed.scale == 1e-3) and not torch.allclose(fixed.target, data.target)
     cfg = OpsConfig(decoder=str(leaf), out=str(root / "lay_rel"), steps=40, batch=8, pairs=32,
                     data=str(root / "data"), recursion_steps=20, width=16, relative_scale=0.05, loss="mean")

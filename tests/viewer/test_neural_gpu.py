@@ -32,6 +32,7 @@ def decoders():
     torch.manual_seed(3)
     yield "relu-64x3", Decoder(DecoderSpec())
     yield "silu-32x2", Decoder(DecoderSpec(width=32, depth=2, activation="silu"))
+    yield "lobes-64x3", Decoder(DecoderSpec(encoding="lobes11"))
     if DEFAULT_WEIGHTS.is_file():
         yield "shipped", load_decoder(DEFAULT_WEIGHTS)
 
@@ -54,7 +55,7 @@ def test_compute_decoder_matches_torch(gl_ctx, storage):
         pytest.skip("no OpenGL 4.3 here")
     torch.manual_seed(4)
     # literals: a smaller network (LLVM takes ~35 s to compile the 64 x 3 one, once per weights)
-    spec = DecoderSpec(width=32, depth=2) if storage == WeightStorage.CONST else DecoderSpec()
+    spec = DecoderSpec(width=32, depth=2, encoding="lobes11") if storage == WeightStorage.CONST else DecoderSpec()
     dec = Decoder(spec).eval()
     z = torch.randn(3, 32)
     wi, wo = pairs(1000, 2)

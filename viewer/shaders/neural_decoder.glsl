@@ -6,6 +6,7 @@
 // fetched once per pixel and used for R, G and B.
 //
 // Needs: PI (common.glsl); NB_WIDTH, NB_WIDTH4, NB_DEPTH, NB_FEATS4, NB_ACT,
+// NB_ENCODING (and for lobes11 NB_LOBE_IOR, NB_LOBE_A0..2),
 // NB_TEX_W, NB_STORAGE, NB_COUNT, NB_OFF_OUT, NB_UNROLLED; the chain of hidden
 // layers (snippet nb_layers) or, unrolled, the whole network (snippet nb_net,
 // straight-line code from neural/gpu_pack.py); and NB_SHARE(j), the latent's
@@ -42,7 +43,21 @@ vec3 nb_act(vec3 v) {
 }
 
 // Direction features, as neural/decoder.py encode(): sqrt(2 theta_h / pi),
-// 2 theta_d / pi, cos(2 phi_d), cos_i cos_o, (cos_i + cos_o) / 2.
+// 2 theta_d / pi, cos(2 phi_d), cos_i cos_o, (cos_i + cos_o) / 2 (rusink5,
+// NB_ENCODING 0); lobes11 (NB_ENCODING 1) adds bumps 1 / (1 + tan^2 / a^2) of
+// the half vector and of the half vector of the directions refracted into ior
+// NB_LOBE_IOR, for a in NB_LOBE_A0..2.
+#if NB_ENCODING == 1
+float nb_bump(vec3 h, float a) {
+    float c2 = a * a * h.z * h.z;
+    return c2 / max(c2 + dot(h.xy, h.xy), 1e-30);
+}
+vec3 nb_inside(vec3 w) {
+    vec2 t = w.xy * (1.0 / NB_LOBE_IOR);
+    return vec3(t, sqrt(max(1.0 - dot(t, t), 0.0)));
+}
+#endif
+
 void nb_encode(vec3 wi, vec3 wo, out vec4 e[NB_FEATS4]) {
     vec3 h = wi + wo;
     h = h / max(length(h), 1e-12);
@@ -57,7 +72,14 @@ void nb_encode(vec3 wi, vec3 wo, out vec4 e[NB_FEATS4]) {
     float ty = dot(t, b);
     float cos2 = tn2 > 1e-14 ? 1.0 - 2.0 * ty * ty / max(tn2, 1e-30) : 1.0;
     e[0] = vec4(sqrt(theta_h * (2.0 / PI)), theta_d * (2.0 / PI), cos2, wi.z * wo.z);
+#if NB_ENCODING == 1
+    vec3 hi = nb_inside(wi) + nb_inside(wo);
+    hi = hi / max(length(hi), 1e-12);
+    e[1] = vec4(0.5 * (wi.z + wo.z), nb_bump(h, NB_LOBE_A0), nb_bump(h, NB_LOBE_A1), nb_bump(h, NB_LOBE_A2));
+    e[2] = vec4(nb_bump(hi, NB_LOBE_A0), nb_bump(hi, NB_LOBE_A1), nb_bump(hi, NB_LOBE_A2), 0.0);
+#else
     e[1] = vec4(0.5 * (wi.z + wo.z), 0.0, 0.0, 0.0);
+#endif
 }
 
 #if !NB_UNROLLED
