@@ -133,7 +133,7 @@ def test_64_path_estimates_are_no_longer_low_where_trapped_light_leaves():
     assert median.min() > 0.9, median
 
 
-def _back_scatter_dirs(n: int, seed: int):
+def _back_scatter_dirs(n: int, seed: int) -> torch.Tensor:
     """Directions 45-70 degrees from the normal within 60 degrees of wi's
     azimuth: the trapped light must turn back to leave there (the worst
     64-path z-scores of the trapping stack, docs/RESULTS.md, Estimator v5)."""
