@@ -38,6 +38,14 @@ Two more changes for that light:
   same three-vertex path and are combined by the balance heuristic, so the
   product of the coat's exit lobe and a near-mirror base is no longer found
   by chance;
+- for the same stacks, splitting by exit importance (estimator v5): at the
+  top seen from below a path's level is its weight times the coat's
+  reflection density from its state toward the centre of the mirrored exit
+  lobe; each time the level doubles against the one the path started at,
+  the path splits into copies of weight beta / k (at most ``SPLIT_MAX`` per
+  path; roulette keeps using the unsplit weight), so the paths that drift
+  toward the states that feed the exit are followed more often with less
+  weight (unbiased: a split divides the weight by the number of copies);
 - on every stack, reciprocity: the walk starts from the more grazing of
   (wi, wo) (a stack reflects into the air it is lit from), whose light
   refracts nearer the critical angle, so the trapped state is reached often
@@ -85,6 +93,18 @@ GUIDE_LAM = 0.8
 #: at the base); the walk found those directions by chance and they carried
 #: its heaviest contributions (docs/RESULTS.md, Ground truth v2).
 WIDE_GUIDE_ROUGHNESS = 0.5
+#: Splitting by exit importance (estimator v5; empty top slab over a conductor,
+#: the connection's stacks): at the top seen from below a path's importance is
+#: its weight times I(w), the coat's reflection density from its state w
+#: toward the centre of the mirrored exit lobe (where the two-bounce
+#: connection gathers its value). Each time it doubles against the level the
+#: path started at, the path is split (copies of weight beta / k), at most
+#: SPLIT_STEP ways per vertex and SPLIT_MAX copies per path in all (1: off).
+SPLIT_MAX = 8
+SPLIT_STEP = 2
+#: Floor of I(w) as a fraction of its peak (a state's future value is never
+#: only its immediate connection value: trapped light drifts).
+SPLIT_FLOOR = 1e-3
 #: Paths per work item (a block of one pair's paths run by one thread).
 BLOCK = 32
 BASE_CODES = {"conductor": 0, "diffuse": 1, "dielectric": 2}
@@ -591,13 +611,21 @@ def _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a, eta):
 
 
 @njit(**_JIT)
+def _split_key(key0, copy):
+    """The random-number key of copy ``copy`` (>= 1) of a split path."""
+    return _mix64(key0 ^ (np.uint64(copy) * np.uint64(0xD1B54A32D192ED03)))
+
+
+@njit(**_JIT)
 def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, b_alb,
-          rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, agw, out, beta):
+          rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, agw, kmax, kstep, ifloor, out, beta, stk):
     """One path; writes its contribution per channel to ``out`` and returns
-    the number of vertices (``beta``: scratch of C weights)."""
+    the number of vertices (``beta``: scratch of C weights; ``stk``: scratch
+    of the pending copies of a split path, (kmax - 1, 7 + C))."""
     C = out.shape[0]
     L = rough.shape[1]
     key = _lane_key(seed, q * spp + s)
+    key0 = key
     ctr = 0
     ix, iy, iz = wi[q, 0], wi[q, 1], wi[q, 2]
     ox, oy, oz = wo[q, 0], wo[q, 1], wo[q, 2]
@@ -641,7 +669,30 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
         pm = _ft_pdf(a0, e0, ix, iy, iz, dx, dy, dz)
         pg = _ft_pdf(a0, e0, ox, oy, oz, -dx, -dy, dz)
         pw = _ft_pdf(agw, e0, ox, oy, oz, -dx, -dy, dz)
-    while bounces < max_depth:
+    # splitting by exit importance (v5): g* = centre of the mirrored exit lobe,
+    # i_peak = I of the state a flat facet turns into g*; kscale = product of
+    # the split factors (beta * kscale = the unsplit weight), lref = the
+    # importance level (unsplit weight x I) the path started at x kscale
+    split = conn and kmax > 1
+    gsx = gsy = gsz = i_peak = lref = 0.0
+    kscale = 1.0
+    ntot = 1
+    nstk = 0
+    resume = False  # a popped copy: its vertex was evaluated, only its reflection is left to sample
+    if split:
+        gsx, gsy = ox / e0, oy / e0
+        gsz = -math.sqrt(max(1.0 - gsx * gsx - gsy * gsy, 0.0))
+        i_peak, _ = _top_eval(-gsx, -gsy, gsz, gsx, gsy, gsz, a0, e0, 1.0, False, a_wide, ox, oy, oz)
+    while True:
+        if bounces >= max_depth:
+            if nstk == 0:
+                break
+            nstk -= 1
+            dx, dy, dz = -stk[nstk, 0], -stk[nstk, 1], -stk[nstk, 2]
+            bounces, kscale, lref = int(stk[nstk, 3]), stk[nstk, 4], stk[nstk, 5]
+            key, ctr, resume, slab, depth = _split_key(key0, int(stk[nstk, 6])), 0, True, 0, 0.0
+            for c in range(C):
+                beta[c] = stk[nstk, 7 + c]
         bounces += 1
         vertices += 1
         # free flight in the current slab
@@ -685,7 +736,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 # the top from below: exit toward wo in closed form, MIS vs NEE
                 g1w = _g1_dir(wx, wy, wz, a0)
                 f, pn = _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a0, e0)
-                if f > 0.0:
+                if f > 0.0 and not resume:
                     k = f * pm * pdf_last / (pm * pdf_last + pm * pn + pg * pdf_last + pw * pn)
                     for c in range(C):
                         out[c] += beta[c] * k
@@ -703,7 +754,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                         nx, ny, nz, wgt, p = _top_reflect(wx, wy, wz, a0, e0, _uniform(key, ctr),
                                                           _uniform(key, ctr + 1), _uniform(key, ctr + 2), lm, wide,
                                                           a_wide, ox, oy, oz)
-                    if conn:
+                    if conn and not resume:
                         k, x = _mirror_connection(wx, wy, wz, a0, e0, b_rough[q], lm, wide, a_wide, agw, ox, oy,
                                                   oz, _uniform(key, ctr + 3), _uniform(key, ctr + 4),
                                                   _uniform(key, ctr + 5), _uniform(key, ctr + 6), False)
@@ -713,6 +764,28 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                         for c in range(C):
                             r0 = b_r0[q, c]
                             out[c] += beta[c] * (k * (x + r0 * (1.0 - x)) + kd * (xd + r0 * (1.0 - xd)))
+                        if split:
+                            iv, _ = _top_eval(wx, wy, wz, gsx, gsy, gsz, a0, e0, 1.0, False, a_wide, ox, oy, oz)
+                            bmax = 0.0
+                            for c in range(C):
+                                bmax = max(bmax, beta[c])
+                            lv = bmax * kscale * max(iv, ifloor * i_peak)
+                            if lref <= 0.0:
+                                lref = lv
+                            elif lv >= 2.0 * lref and ntot < kmax:
+                                ks = min(int(lv / lref), kstep, kmax - ntot + 1)
+                                kscale *= ks
+                                lref *= ks
+                                for j in range(ks - 1):  # pending copies: this vertex, before its reflection
+                                    stk[nstk, 0], stk[nstk, 1], stk[nstk, 2] = wx, wy, wz
+                                    stk[nstk, 3], stk[nstk, 4], stk[nstk, 5], stk[nstk, 6] = bounces - 1, kscale, lref, ntot
+                                    for c in range(C):
+                                        stk[nstk, 7 + c] = beta[c] / ks
+                                    nstk += 1
+                                    ntot += 1
+                                for c in range(C):
+                                    beta[c] /= ks
+                    if conn:
                         ctr += 8
                         pm = p
                         pg = _ft_pdf(a0, e0, ox, oy, oz, -nx, -ny, nz) if p > 0.0 else 0.0
@@ -806,20 +879,24 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
             if not bmax > 0.0:
                 stop = True
             elif bounces >= rr_depth:
-                qs = min(bmax / rr_weight, 1.0) if forced else min(bmax, 0.95)
+                qs = min(bmax * kscale / rr_weight, 1.0) if forced else min(bmax, 0.95)
                 if u >= qs:
                     stop = True
                 else:
                     for c in range(C):
                         beta[c] /= qs
         if stop:
-            break
+            if nstk == 0:
+                break
+            bounces = max_depth  # the next pending copy of a split path
+        else:
+            resume = False
     return vertices
 
 
 @njit(parallel=True, **_JIT)
 def _run(wi, wo, spp, seed, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, b_alb, rr_depth, max_depth,
-         forced, rr_weight, a_wide, lam, lam_w, agw, block):
+         forced, rr_weight, a_wide, lam, lam_w, agw, kmax, kstep, ifloor, block):
     """Per work item (pair, block of ``block`` paths): the sum and the sum of
     squares of the path contributions per channel, the number of vertices and
     of dropped (non-finite) paths."""
@@ -836,9 +913,11 @@ def _run(wi, wo, spp, seed, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, 
         b = it - q * nb
         out = np.empty(C)
         beta = np.empty(C)
+        stk = np.empty((max(kmax - 1, 1), 7 + C))
         for s in range(b * block, min(spp, (b + 1) * block)):
             verts[it] += _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, b_alb,
-                               rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, agw, out, beta)
+                               rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, agw, kmax, kstep, ifloor,
+                               out, beta, stk)
             finite = True
             for c in range(C):
                 if not math.isfinite(out[c]):
@@ -874,7 +953,7 @@ def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndar
     s1, s2, verts, dropped = _run(f64(wi), f64(wo), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, f64(rough), f64(ior),
                                   f64(sigma), f64(alb), BASE_CODES[base], f64(b_rough), f64(b_r0), f64(b_ior),
                                   f64(b_alb), int(rr_depth), int(max_depth), bool(forced), RR_WEIGHT, WIDE_ROUGHNESS, GUIDE_LAM, WIDE_LAM,
-                                  WIDE_GUIDE_ROUGHNESS, BLOCK)
+                                  WIDE_GUIDE_ROUGHNESS, int(SPLIT_MAX), int(SPLIT_STEP), float(SPLIT_FLOOR), BLOCK)
     nb = s1.shape[0] // max(N, 1)
     blocks = s1.reshape(N, nb, C)
     return blocks.sum(1), s2.reshape(N, nb, C).sum(1), blocks, int(verts.sum()), int(dropped.sum())

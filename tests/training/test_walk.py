@@ -2,7 +2,9 @@
 input it cannot simulate in one line, agrees with the v1 estimator (exit
 sampled at the top) while wasting less work on the total-internal-reflection
 stack, and its 64-path standard errors hold (z-scores against long runs are
-standard normal by a Kolmogorov-Smirnov test) on the standard stack."""
+standard normal by a Kolmogorov-Smirnov test) on the standard stack and,
+narrowly since estimator v5 (splitting by exit importance), on the trapping
+stack."""
 from __future__ import annotations
 
 import math
@@ -50,18 +52,21 @@ def _wi(n: int, deg: float = 20.0):
     return torch.tensor([math.sin(math.radians(deg)), 0.0, math.cos(math.radians(deg))], dtype=D).expand(n, 3)
 
 
-def test_results_do_not_depend_on_the_thread_count():
+@pytest.mark.parametrize("stack_fn", [standard_stack, trap_stack])
+def test_results_do_not_depend_on_the_thread_count(stack_fn):
+    """Also on the trapping stack, where split paths' copies draw their own
+    random streams (estimator v5)."""
     wo = _dirs(40, 1)
     before = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        a = simulate(standard_stack(40), _wi(40), wo, spp=96, seed=3, dtype=D)
+        a = simulate(stack_fn(40), _wi(40), wo, spp=96, seed=3, dtype=D)
         numba.set_num_threads(max(2, before))
-        b = simulate(standard_stack(40), _wi(40), wo, spp=96, seed=3, dtype=D)
+        b = simulate(stack_fn(40), _wi(40), wo, spp=96, seed=3, dtype=D)
     finally:
         numba.set_num_threads(before)
     assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
-    c = simulate(standard_stack(40), _wi(40), wo, spp=96, seed=4, dtype=D)
+    c = simulate(stack_fn(40), _wi(40), wo, spp=96, seed=4, dtype=D)
     assert not torch.equal(a[0], c[0])
 
 
@@ -128,9 +133,56 @@ def test_64_path_estimates_are_no_longer_low_where_trapped_light_leaves():
     assert median.min() > 0.9, median
 
 
-@pytest.mark.xfail(strict=True, reason="issue 14 open: light trapped at grazing angles still gives heavy tails at 64 "
-                                       "paths (KS p 5e-4, z mean -0.33, sd 1.17 over 480 directions; other seeds "
-                                       "p 2e-5 ... 3e-3; docs/RESULTS.md, Ground truth v2)")
+def _back_scatter_dirs(n: int, seed: int) -> torch.Tensor:
+    """Directions 45-70 degrees from the normal within 60 degrees of wi's
+    azimuth: the trapped light must turn back to leave there (the worst
+    64-path z-scores of the trapping stack, docs/RESULTS.md, Estimator v5)."""
+    g = torch.Generator().manual_seed(seed)
+    u = torch.rand(n, 2, generator=g, dtype=D)
+    t = torch.deg2rad(45.0 + 25.0 * u[:, 0])
+    p = torch.deg2rad(-60.0 + 120.0 * u[:, 1])
+    return torch.stack([t.sin() * p.cos(), t.sin() * p.sin(), t.cos()], -1)
+
+
+def test_importance_splitting_keeps_the_estimate_and_lowers_the_variance(monkeypatch):
+    """Estimator v5 (splitting by exit importance, empty top slab over a
+    conductor): long runs agree with the estimator without it (z-scores,
+    Bonferroni) and the per-path relative variance is lower where the trapped
+    light must turn back (here 11 % lower, max |z| 2.2 against a limit of 4.3;
+    17-27 % in single directions, docs/RESULTS.md; asserted >= 5 %)."""
+    from nbrdf.training import walk
+
+    n = 16
+    wo = _back_scatter_dirs(n, 8)
+    s1, s2 = SimStats(), SimStats()
+    m2, e2 = simulate(trap_stack(n), _wi(n), wo, spp=40_000, seed=14, dtype=D, include_top_reflection=False,
+                      stats=s2)
+    monkeypatch.setattr(walk, "SPLIT_MAX", 1)
+    m1, e1 = simulate(trap_stack(n), _wi(n), wo, spp=40_000, seed=13, dtype=D, include_top_reflection=False,
+                      stats=s1)
+    z = (m1 - m2) / (e1 ** 2 + e2 ** 2).sqrt()
+    assert z.abs().max() < z_threshold(1e-3, z.numel()), z
+    rv1 = ((e1[:, 0] / m1[:, 0]) ** 2).mean()
+    rv2 = ((e2[:, 0] / m2[:, 0]) ** 2).mean()
+    assert rv2 < 0.95 * rv1, (float(rv1), float(rv2))
+
+
+def test_importance_splitting_leaves_other_stacks_unchanged(monkeypatch):
+    """The splitting applies only to the connection's stacks: the standard
+    stack's estimates are bit-identical with it switched off."""
+    from nbrdf.training import walk
+
+    wo = _dirs(24, 9)
+    a = simulate(standard_stack(24), _wi(24, 30.0), wo, spp=64, seed=5, dtype=D)
+    monkeypatch.setattr(walk, "SPLIT_MAX", 1)
+    b = simulate(standard_stack(24), _wi(24, 30.0), wo, spp=64, seed=5, dtype=D)
+    assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
+
+
 def test_64_path_errors_hold_on_the_trapping_stack():
+    """Issue 14's requirement on the trapping stack (480 directions, 64 paths
+    against 8192). Passes since estimator v5, narrowly: KS p 2.8e-3 at this
+    seed (z mean -0.30, sd 1.14); seeds 41 / 51 / 61 / 71 give 4.9e-3 /
+    2.1e-2 / 3.9e-2 / 5.5e-5 (docs/RESULTS.md, Estimator v5)."""
     z = _z_scores(trap_stack, 480, 31)
     assert stats.kstest(z, "norm").pvalue > 1e-3, (z.mean(), z.std())
