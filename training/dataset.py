@@ -196,15 +196,13 @@ def plan(cfg: DataConfig) -> list[Shard]:
 def make_shard(cfg: DataConfig, shard: Shard) -> dict[str, np.ndarray]:
     g = torch.Generator().manual_seed(_stream_seed(cfg.seed, shard.split, shard.cls, shard.index))
     params = sample_params(shard.cls, shard.count, g)
-    if cfg.sharp_coats > 0:
-        gc = torch.Generator().manual_seed(_stream_seed(cfg.seed, "coats", shard.split, shard.cls, shard.index))
-        sharpen_coats(params, cfg.sharp_coats, gc, cfg.bright_bases)
-    if cfg.clear_top_slabs > 0:
-        gm = torch.Generator().manual_seed(_stream_seed(cfg.seed, "slabs", shard.split, shard.cls, shard.index))
-        clear_top_slabs(params, cfg.clear_top_slabs, gm)
-    if cfg.dark_top_slabs > 0:
-        gd = torch.Generator().manual_seed(_stream_seed(cfg.seed, "dark", shard.split, shard.cls, shard.index))
-        darken_top_slabs(params, cfg.dark_top_slabs, gd)
+    # the look-development redraws, in this order, each from its own stream
+    redraws = (("coats", cfg.sharp_coats, lambda p, share, g: sharpen_coats(p, share, g, cfg.bright_bases)),
+               ("slabs", cfg.clear_top_slabs, clear_top_slabs), ("dark", cfg.dark_top_slabs, darken_top_slabs))
+    for stream, share, redraw in redraws:
+        if share > 0:
+            redraw(params, share, torch.Generator().manual_seed(
+                _stream_seed(cfg.seed, stream, shard.split, shard.cls, shard.index)))
     wi, wo = zip(*(sample_pairs(cfg.pairs, g, cfg.peak_fraction) for _ in range(shard.count)))
     wi, wo = torch.stack(wi), torch.stack(wo)
     f, se = tabulate(params, wi, wo, cfg.spp, seed=_stream_seed(cfg.seed, "mc", shard.split, shard.cls, shard.index)
