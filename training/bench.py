@@ -31,11 +31,11 @@ V2_NOISE_PSNR = 60.0
 
 
 def machine() -> dict:
-    from nbrdf.training.walk import threads
+    from nbrdf.training.walk import threads, walk_device
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     return {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-            "torch_threads": torch.get_num_threads(), "torch": torch.__version__, "walk": "numba",
+            "torch_threads": torch.get_num_threads(), "torch": torch.__version__, "walk": f"numba-{walk_device()}",
             "walk_threads": threads(), "load_average_1min": load}
 
 

@@ -127,7 +127,7 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
              dtype: torch.dtype = torch.float32, rr_depth: int = 4, max_depth: int = 100_000,
              include_top_reflection: bool = True, compile: bool | None = None,
              stats: SimStats | None = None, error: str = "paths", forced_top_reflection: bool = True,
-             ) -> tuple[Tensor, Tensor]:
+             device: str | None = None) -> tuple[Tensor, Tensor]:
     """Mean and standard error of the stack's BRDF f(wi, wo) per pair.
 
     ``wi``, ``wo``: (N, 3) upper-hemisphere unit vectors; ``spp`` paths per
@@ -139,7 +139,9 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     independent, so both estimate the same quantity; neither can see a tail
     the paths missed (docs/RESULTS.md, "Ground truth v2"). ``forced_top_reflection=False`` restores v1's sampled exit at the
     top (kept for the analysis and its test only). ``compile`` is accepted for
-    compatibility and ignored (the walk is compiled by Numba). Returns
+    compatibility and ignored (the walk is compiled by Numba). ``device``:
+    "cpu" or "cuda" (the same paths, up to rounding: ``training.walk_cuda``);
+    None follows ``NBRDF_WALK_DEVICE`` (default auto: CUDA when present). Returns
     tensors (N, C) (or (N,) for single-channel input without a channel dim)
     in ``dtype``, computed in float64. Deterministic for a given seed and
     batch, whatever the number of threads. Raises ``NbrdfError`` (one line)
@@ -162,7 +164,7 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     s1, s2, blocks, verts, dropped = run_walk(
         npy(wi), npy(wo), spp, seed, npy(p.roughness), npy(p.ior), npy(p.sigma_t), npy(p.albedo), p.base,
         npy(p.base_roughness), npy(p.base_r0), npy(p.base_ior), npy(p.base_albedo), rr_depth=rr_depth,
-        max_depth=max_depth, forced=forced_top_reflection)
+        max_depth=max_depth, forced=forced_top_reflection, device=device)
     mean = s1 / spp
     if spp > 1:
         var_paths = np.maximum(s2 / spp - mean * mean, 0.0) * spp / (spp - 1)

@@ -934,11 +934,12 @@ def _run(wi, wo, spp, seed, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, 
 def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndarray, ior: np.ndarray,
              sigma: np.ndarray, alb: np.ndarray, base: str, b_rough: np.ndarray, b_r0: np.ndarray,
              b_ior: np.ndarray, b_alb: np.ndarray, rr_depth: int = 4, max_depth: int = 100_000,
-             forced: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+             forced: bool = True, device: str | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
     """Runs the walk for N pairs (float64 arrays, shapes as ``StackParams``
-    with explicit channels). Returns per pair the sum and sum of squares of
-    the path contributions (N, C), the per-block sums (N, n_blocks, C) for
-    batch means, the vertex count and the number of dropped paths."""
+    with explicit channels) on ``device`` ("cpu", "cuda"; None: ``walk_device()``).
+    Returns per pair the sum and sum of squares of the path contributions
+    (N, C), the per-block sums (N, n_blocks, C) for batch means, the vertex
+    count and the number of dropped paths."""
     f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)
     if forced:
         # reciprocity (both directions lie above the stack): walk from the
@@ -950,13 +951,41 @@ def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndar
         wi, wo = np.where(swap, wo, wi), np.where(swap, wi, wo)
     N = wi.shape[0]
     C = alb.shape[2]
-    s1, s2, verts, dropped = _run(f64(wi), f64(wo), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, f64(rough), f64(ior),
-                                  f64(sigma), f64(alb), BASE_CODES[base], f64(b_rough), f64(b_r0), f64(b_ior),
-                                  f64(b_alb), int(rr_depth), int(max_depth), bool(forced), RR_WEIGHT, WIDE_ROUGHNESS, GUIDE_LAM, WIDE_LAM,
-                                  WIDE_GUIDE_ROUGHNESS, int(SPLIT_MAX), int(SPLIT_STEP), float(SPLIT_FLOOR), BLOCK)
+    args = (f64(wi), f64(wo), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, f64(rough), f64(ior), f64(sigma), f64(alb),
+            BASE_CODES[base], f64(b_rough), f64(b_r0), f64(b_ior), f64(b_alb), int(rr_depth), int(max_depth),
+            bool(forced), RR_WEIGHT, WIDE_ROUGHNESS, GUIDE_LAM, WIDE_LAM, WIDE_GUIDE_ROUGHNESS, int(SPLIT_MAX),
+            int(SPLIT_STEP), float(SPLIT_FLOOR), BLOCK)
+    if (device or walk_device()) == "cuda":
+        from nbrdf.training.walk_cuda import run_items
+
+        s1, s2, verts, dropped = run_items(*args)
+    else:
+        s1, s2, verts, dropped = _run(*args)
     nb = s1.shape[0] // max(N, 1)
     blocks = s1.reshape(N, nb, C)
     return blocks.sum(1), s2.reshape(N, nb, C).sum(1), blocks, int(verts.sum()), int(dropped.sum())
+
+
+def walk_device() -> str:
+    """Where the walk runs: ``NBRDF_WALK_DEVICE`` = cpu or cuda, or auto (the
+    default): CUDA when Numba finds a device, else the CPU. One line
+    (``NbrdfError``) for an unknown value or for cuda without a device."""
+    import os
+
+    from nbrdf.neural.errors import NbrdfError
+
+    want = os.environ.get("NBRDF_WALK_DEVICE", "auto").strip().lower() or "auto"
+    if want not in ("auto", "cpu", "cuda"):
+        raise NbrdfError(f"NBRDF_WALK_DEVICE must be auto, cpu or cuda (got {want!r})")
+    if want == "cpu":
+        return "cpu"
+    from nbrdf.training.walk_cuda import available
+
+    if available():
+        return "cuda"
+    if want == "cuda":
+        raise NbrdfError("NBRDF_WALK_DEVICE=cuda, but Numba finds no CUDA device")
+    return "cpu"
 
 
 def threads() -> int:
@@ -966,4 +995,4 @@ def threads() -> int:
     return numba.get_num_threads()
 
 
-__all__ = ["run_walk", "threads", "RR_WEIGHT", "BLOCK"]
+__all__ = ["run_walk", "walk_device", "threads", "RR_WEIGHT", "BLOCK"]

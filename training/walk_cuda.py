@@ -1,0 +1,120 @@
+"""The compiled walk on a CUDA device: the same per-path code, one GPU thread
+per work item.
+
+``training.walk._path`` is ordinary ``@njit`` code; Numba's CUDA target
+compiles a CPU dispatcher called from a kernel into a device function from
+the same Python source, so the GPU walk has no second copy of the physics.
+A work item is the CPU walk's (pair, block of ``walk.BLOCK`` paths), and each
+path's random numbers depend only on (seed, pair, path), so the CPU and the
+GPU trace the same paths: per-pair results differ only by floating-point
+rounding (FMA contraction, the device's libm), never by the launch shape.
+
+Chosen by ``training.walk.walk_device``: ``NBRDF_WALK_DEVICE`` = auto (the
+default: CUDA when Numba finds a device), cpu or cuda. The test suite never
+needs a device: it runs this kernel in Numba's CUDA simulator
+(tests/training/test_walk_cuda.py) and compiles it to PTX where NVVM is
+installed.
+"""
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+from numba import cuda, float64
+
+from nbrdf.training.walk import SPLIT_MAX, _path
+
+#: Colour channels a GPU path can carry (per-thread scratch is a fixed-size
+#: local array); stacks with more channels run on the CPU walk.
+MAX_CHANNELS = 4
+#: Threads per CUDA block.
+THREADS_PER_BLOCK = 128
+_STK_ROWS = max(SPLIT_MAX - 1, 1)
+_STK_COLS = 7 + MAX_CHANNELS
+
+
+@functools.lru_cache(maxsize=1)
+def available() -> bool:
+    """Whether Numba finds a usable CUDA device (False, never an error, on a
+    machine without a driver)."""
+    try:
+        return bool(cuda.is_available())
+    except Exception:  # noqa: BLE001 - a broken driver install means "no device"
+        return False
+
+
+@cuda.jit(cache=True)
+def _run_kernel(wi, wo, spp, seed, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, b_alb, rr_depth, max_depth,
+                forced, rr_weight, a_wide, lam, lam_w, agw, kmax, kstep, ifloor, block, s1, s2, verts, dropped):
+    """One thread per work item (pair, block of paths): ``training.walk._run``'s
+    loop body with per-thread scratch in local memory."""
+    it = cuda.grid(1)
+    C = alb.shape[2]
+    nb = (spp + block - 1) // block
+    if it >= wi.shape[0] * nb:
+        return
+    q = it // nb
+    b = it - q * nb
+    out_l = cuda.local.array(MAX_CHANNELS, float64)
+    beta_l = cuda.local.array(MAX_CHANNELS, float64)
+    stk = cuda.local.array((_STK_ROWS, _STK_COLS), float64)
+    out = out_l[:C]
+    beta = beta_l[:C]
+    n_verts = 0
+    n_dropped = 0
+    for c in range(C):
+        s1[it, c] = 0.0
+        s2[it, c] = 0.0
+    for s in range(b * block, min(spp, (b + 1) * block)):
+        n_verts += _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, b_alb,
+                         rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, agw, kmax, kstep, ifloor,
+                         out, beta, stk)
+        finite = True
+        for c in range(C):
+            if not math.isfinite(out[c]):
+                finite = False
+        if not finite:
+            n_dropped += 1
+            continue
+        for c in range(C):
+            s1[it, c] += out[c]
+            s2[it, c] += out[c] * out[c]
+    verts[it] = n_verts
+    dropped[it] = n_dropped
+
+
+def run_items(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndarray, ior: np.ndarray,
+              sigma: np.ndarray, alb: np.ndarray, base: int, b_rough: np.ndarray, b_r0: np.ndarray,
+              b_ior: np.ndarray, b_alb: np.ndarray, rr_depth: int, max_depth: int, forced: bool,
+              rr_weight: float, a_wide: float, lam: float, lam_w: float, agw: float, kmax: int, kstep: int,
+              ifloor: float, block: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``training.walk._run`` on the CUDA device: per work item the sum and the
+    sum of squares of the path contributions per channel, the vertex count
+    and the dropped paths (arrays on the host)."""
+    if alb.shape[2] > MAX_CHANNELS:
+        raise ValueError(f"the CUDA walk carries at most {MAX_CHANNELS} channels (got {alb.shape[2]})")
+    if kmax - 1 > _STK_ROWS:
+        raise ValueError(f"the CUDA walk keeps at most {_STK_ROWS + 1} copies of a split path (got {kmax})")
+    N, C = wi.shape[0], alb.shape[2]
+    items = N * ((spp + block - 1) // block)
+    if items == 0:
+        z = np.zeros((0, C))
+        return z, z.copy(), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    dev = [cuda.to_device(np.ascontiguousarray(a)) for a in (wi, wo, rough, ior, sigma, alb, b_rough, b_r0, b_ior,
+                                                             b_alb)]
+    s1 = cuda.device_array((items, C), np.float64)
+    s2 = cuda.device_array((items, C), np.float64)
+    verts = cuda.device_array(items, np.int64)
+    dropped = cuda.device_array(items, np.int64)
+    grid = (items + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
+    d_wi, d_wo, d_rough, d_ior, d_sigma, d_alb, d_brough, d_br0, d_bior, d_balb = dev
+    _run_kernel[grid, THREADS_PER_BLOCK](
+        d_wi, d_wo, spp, seed, d_rough, d_ior, d_sigma, d_alb, base, d_brough, d_br0, d_bior, d_balb,
+        rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, agw, kmax, kstep, ifloor, block,
+        s1, s2, verts, dropped)
+    cuda.synchronize()
+    return s1.copy_to_host(), s2.copy_to_host(), verts.copy_to_host(), dropped.copy_to_host()
+
+
+__all__ = ["available", "run_items", "MAX_CHANNELS"]
