@@ -1,12 +1,12 @@
 """The compiled walk on a CUDA device: the same per-path code, one GPU thread
-per work item.
+per ``PATHS_PER_THREAD`` paths of a pair.
 
 ``training.walk._path`` is ordinary ``@njit`` code; Numba's CUDA target
 compiles a CPU dispatcher called from a kernel into a device function from
 the same Python source, so the GPU walk has no second copy of the physics.
-A work item is the CPU walk's (pair, block of ``walk.BLOCK`` paths), and each
-path's random numbers depend only on (seed, pair, path), so the CPU and the
-GPU trace the same paths: per-pair results differ only by floating-point
+The threads' sums are added back into the CPU walk's work items (pair, block
+of ``walk.BLOCK`` paths), and each path's random numbers depend only on
+(seed, pair, path), so the CPU and the GPU trace the same paths: per-pair results differ only by floating-point
 rounding (FMA contraction, the device's libm), never by the launch shape.
 
 Chosen by ``training.walk.walk_device``: ``NBRDF_WALK_DEVICE`` = auto (the
@@ -30,6 +30,11 @@ from nbrdf.training.walk import SPLIT_MAX, _path
 MAX_CHANNELS = 4
 #: Threads per CUDA block.
 THREADS_PER_BLOCK = 128
+#: Paths per GPU thread: a CPU work item's ``walk.BLOCK`` paths are split over
+#: ``BLOCK / PATHS_PER_THREAD`` threads (more threads in flight: a 4096-pair,
+#: 64-path lobe is 32k threads instead of 8k) and summed back into the CPU's
+#: blocks on the host, so batch means see the same blocks.
+PATHS_PER_THREAD = 8
 _STK_ROWS = max(SPLIT_MAX - 1, 1)
 _STK_COLS = 7 + MAX_CHANNELS
 
@@ -47,8 +52,8 @@ def available() -> bool:
 @cuda.jit(cache=True)
 def _run_kernel(wi, wo, spp, seed, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, b_alb, rr_depth, max_depth,
                 forced, rr_weight, a_wide, lam, lam_w, agw, kmax, kstep, ifloor, block, s1, s2, verts, dropped):
-    """One thread per work item (pair, block of paths): ``training.walk._run``'s
-    loop body with per-thread scratch in local memory."""
+    """One thread per (pair, ``block`` paths): ``training.walk._run``'s loop
+    body with per-thread scratch in local memory."""
     it = cuda.grid(1)
     C = alb.shape[2]
     nb = (spp + block - 1) // block
@@ -96,11 +101,16 @@ def run_items(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.nda
         raise ValueError(f"the CUDA walk carries at most {MAX_CHANNELS} channels (got {alb.shape[2]})")
     if kmax - 1 > _STK_ROWS:
         raise ValueError(f"the CUDA walk keeps at most {_STK_ROWS + 1} copies of a split path (got {kmax})")
+    if block % PATHS_PER_THREAD:
+        raise ValueError(f"the walk's block ({block}) must be a multiple of {PATHS_PER_THREAD}")
     N, C = wi.shape[0], alb.shape[2]
-    items = N * ((spp + block - 1) // block)
-    if items == 0:
+    nb = (spp + block - 1) // block
+    if N * nb == 0:
         z = np.zeros((0, C))
         return z, z.copy(), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    fine = PATHS_PER_THREAD
+    nf = (spp + fine - 1) // fine
+    items = N * nf
     dev = [cuda.to_device(np.ascontiguousarray(a)) for a in (wi, wo, rough, ior, sigma, alb, b_rough, b_r0, b_ior,
                                                              b_alb)]
     s1 = cuda.device_array((items, C), np.float64)
@@ -111,10 +121,12 @@ def run_items(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.nda
     d_wi, d_wo, d_rough, d_ior, d_sigma, d_alb, d_brough, d_br0, d_bior, d_balb = dev
     _run_kernel[grid, THREADS_PER_BLOCK](
         d_wi, d_wo, spp, seed, d_rough, d_ior, d_sigma, d_alb, base, d_brough, d_br0, d_bior, d_balb,
-        rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, agw, kmax, kstep, ifloor, block,
+        rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, agw, kmax, kstep, ifloor, fine,
         s1, s2, verts, dropped)
     cuda.synchronize()
-    return s1.copy_to_host(), s2.copy_to_host(), verts.copy_to_host(), dropped.copy_to_host()
+    # the CPU's items: block // fine consecutive threads of a pair make one block
+    first = (np.arange(N)[:, None] * nf + np.arange(0, nf, block // fine)[None, :]).ravel()
+    return tuple(np.add.reduceat(a.copy_to_host(), first, axis=0) for a in (s1, s2, verts, dropped))
 
 
 __all__ = ["available", "run_items", "MAX_CHANNELS"]
