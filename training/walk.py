@@ -955,7 +955,7 @@ def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndar
             BASE_CODES[base], f64(b_rough), f64(b_r0), f64(b_ior), f64(b_alb), int(rr_depth), int(max_depth),
             bool(forced), RR_WEIGHT, WIDE_ROUGHNESS, GUIDE_LAM, WIDE_LAM, WIDE_GUIDE_ROUGHNESS, int(SPLIT_MAX),
             int(SPLIT_STEP), float(SPLIT_FLOOR), BLOCK)
-    if (device or walk_device()) == "cuda":
+    if walk_device(device) == "cuda":
         from nbrdf.training.walk_cuda import run_items
 
         s1, s2, verts, dropped = run_items(*args)
@@ -966,17 +966,20 @@ def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndar
     return blocks.sum(1), s2.reshape(N, nb, C).sum(1), blocks, int(verts.sum()), int(dropped.sum())
 
 
-def walk_device() -> str:
-    """Where the walk runs: ``NBRDF_WALK_DEVICE`` = cpu or cuda, or auto (the
-    default): CUDA when Numba finds a device, else the CPU. One line
-    (``NbrdfError``) for an unknown value or for cuda without a device."""
+def walk_device(requested: str | None = None) -> str:
+    """Where the walk runs: ``requested``, else ``NBRDF_WALK_DEVICE``: cpu,
+    cuda, or auto (the default): CUDA when Numba finds a device, else the
+    CPU. One line (``NbrdfError``) for an unknown value or for cuda without a
+    device."""
     import os
 
     from nbrdf.neural.errors import NbrdfError
 
-    want = os.environ.get("NBRDF_WALK_DEVICE", "auto").strip().lower() or "auto"
+    source = "device" if requested is not None else "NBRDF_WALK_DEVICE"
+    want = requested if requested is not None else os.environ.get("NBRDF_WALK_DEVICE", "auto")
+    want = want.strip().lower() or "auto"
     if want not in ("auto", "cpu", "cuda"):
-        raise NbrdfError(f"NBRDF_WALK_DEVICE must be auto, cpu or cuda (got {want!r})")
+        raise NbrdfError(f"{source} must be auto, cpu or cuda (got {want!r})")
     if want == "cpu":
         return "cpu"
     from nbrdf.training.walk_cuda import available
@@ -984,7 +987,7 @@ def walk_device() -> str:
     if available():
         return "cuda"
     if want == "cuda":
-        raise NbrdfError("NBRDF_WALK_DEVICE=cuda, but Numba finds no CUDA device")
+        raise NbrdfError(f"{source}=cuda, but Numba finds no CUDA device (install the cuda extra on a machine with one)")
     return "cpu"
 
 

@@ -91,6 +91,9 @@ def test_walk_device_is_chosen_by_the_environment(monkeypatch):
         walk_device()
     monkeypatch.setenv("NBRDF_WALK_DEVICE", "auto")
     assert walk_device() == "cpu"
+    assert walk_device("cpu") == "cpu"
+    with pytest.raises(NbrdfError, match="device must be auto, cpu or cuda"):
+        simulate(_stacks()["standard"], torch.from_numpy(_dirs(1)), torch.from_numpy(_dirs(2)), spp=4, device="gpu")
     monkeypatch.setattr(walk_cuda, "available", lambda: True)
     assert walk_device() == "cuda"
 
