@@ -8,8 +8,13 @@ with MIS, the reciprocal start, Russian roulette as a weight window, and the
 same counter-based random numbers (SplitMix64 of (seed, pair * spp + sample,
 counter)). The fused kernels of "Walk speed" (docs/RESULTS.md) are ported as
 they are, so the two walks run the same arithmetic and can be compared path
-for path (they differ only by rounding: Numba contracts and reassociates,
-Warp contracts only).
+for path (they differ only by rounding: the compilers contract and
+reassociate differently). The port is built with Numba's fast-math set
+(``NUMBA_LIKE_FLAGS``) and, for comparison, with Warp's default flags. To
+separate the library from the specialisation, the same specialised walk is
+also written in Numba (``_path_std``, the "twin"): library against library
+is twin against Warp; ``training.walk.run_walk`` (every stack class) is the
+production figure.
 
 Run (not part of the test suite; warp-lang is not a project dependency:
 ``.venv/bin/pip install warp-lang`` into the virtual environment first):
@@ -19,7 +24,7 @@ Run (not part of the test suite; warp-lang is not a project dependency:
 It prints one JSON: the compile times (cold: a fresh kernel cache; cached),
 the agreement with ``simulate`` (same seed: per-pair relative difference;
 other seed: z-test per pair with a Bonferroni limit), the thread count of
-each backend, and the alternated speed runs (Numba, Warp, Numba, Warp, ...)
+each backend, and the alternated speed runs (every variant once per round)
 on the inputs of ``nbrdf bench reference`` (4,096 pairs x 256 paths, seed 1),
 wall and CPU time of this process. Without Warp it says so in one line and
 exits with status 2.
@@ -426,8 +431,7 @@ def path(q: wp.int32, s: wp.int32, spp: wp.int32, seed: wp.uint64, wi: wp.vec3d,
     return out, vertices
 
 
-@wp.kernel
-def run_kernel(wi: wp.array(dtype=wp.vec3d), wo: wp.array(dtype=wp.vec3d), a0: wp.array(dtype=D),
+def _run_items(wi: wp.array(dtype=wp.vec3d), wo: wp.array(dtype=wp.vec3d), a0: wp.array(dtype=D),
                e0: wp.array(dtype=D), tau0: wp.array(dtype=D), alb: wp.array(dtype=wp.vec3d),
                ba: wp.array(dtype=D), r0: wp.array(dtype=wp.vec3d), spp: wp.int32, seed: wp.uint64,
                block: wp.int32, nb: wp.int32, rr_depth: wp.int32, max_depth: wp.int32, rr_weight: D, a_wide: D,
@@ -456,6 +460,15 @@ def run_kernel(wi: wp.array(dtype=wp.vec3d), wo: wp.array(dtype=wp.vec3d), a0: w
     s2[it] = acc2
     verts[it] = nv
     dropped[it] = nd
+
+
+#: Numba's fast-math flags (``training.walk._JIT``: contract, arcp, nsz,
+#: reassoc) as clang cc1 options, added to Warp's default CPU flags: the like
+#: for like build. Warp's own default contracts within an expression only.
+NUMBA_LIKE_FLAGS = " -ffp-contract=fast -freciprocal-math -fno-signed-zeros -mreassociate"
+run_kernel = wp.kernel(_run_items, name="walk_numba_flags", module="unique", enable_backward=False,
+                       module_options={"cpu_compiler_flags": wp.config.cpu_compiler_flags + NUMBA_LIKE_FLAGS})
+run_kernel_default = wp.kernel(_run_items, name="walk_default_flags", module="unique", enable_backward=False)
 
 
 # --- the same specialised walk in Numba (like for like with the port) -----------------------
@@ -663,12 +676,14 @@ def numba_walk(wi, wo, spp: int, seed: int, st: dict):
     return s1, s2, verts, dropped
 
 
-def warp_walk(wi, wo, spp: int, seed: int, st: dict, launches: int = 1):
+def warp_walk(wi, wo, spp: int, seed: int, st: dict, launches: int = 1, default_flags: bool = False):
     """The Warp port on the same inputs as ``numba_walk`` (benchmark stack
     class only: one interface, a medium slab, a conductor base, RGB).
     ``launches`` > 1 splits the work items into that many slices launched
     from as many Python threads (Warp's CPU backend runs a launch on the
-    calling thread). Returns (s1, s2, vertices, dropped)."""
+    calling thread). ``default_flags``: the kernel built with Warp's default
+    CPU flags instead of Numba's fast-math set. Returns (s1, s2, vertices,
+    dropped)."""
     from concurrent.futures import ThreadPoolExecutor
 
     from nbrdf.training.walk import BLOCK, RR_WEIGHT, WIDE_LAM, WIDE_ROUGHNESS
@@ -694,7 +709,7 @@ def warp_walk(wi, wo, spp: int, seed: int, st: dict, launches: int = 1):
     cuts = [items * i // launches for i in range(launches + 1)]
 
     def launch(i: int) -> None:
-        wp.launch(run_kernel, dim=cuts[i + 1] - cuts[i], inputs=args + [cuts[i]], device=dev)
+        wp.launch(run_kernel_default if default_flags else run_kernel, dim=cuts[i + 1] - cuts[i], inputs=args + [cuts[i]], device=dev)
 
     if launches == 1:
         launch(0)
@@ -810,9 +825,24 @@ def compile_times() -> dict:
     return out
 
 
+def cuda_ptx(arch: int = 90) -> dict:
+    """The same kernel source compiled for CUDA (NVRTC, to PTX for compute
+    capability ``arch``; 90 = H100) ahead of time: needs no GPU or driver,
+    proves the port builds for ``device="cuda"`` (it is not run here)."""
+    with tempfile.TemporaryDirectory() as d:
+        t0 = time.perf_counter()
+        try:
+            paths = wp.compile_aot_module(run_kernel.module, arch=arch, module_dir=d, use_ptx=True)
+        except Exception as e:  # reported, not fatal: the CPU figures stand alone
+            return {"arch": arch, "error": f"{type(e).__name__}: {e}"[:300]}
+        return {"arch": arch, "seconds": round(time.perf_counter() - t0, 3),
+                "ptx_bytes": sum(os.path.getsize(p) for p in paths)}
+
+
 def speed(rounds: int, n_pairs: int, spp: int, numba_threads: list[int]) -> dict:
     """Alternated runs (``training.walk`` and its specialised twin at each
-    thread count, the Warp port in one launch and in two launch threads) on the benchmark's inputs (seed 1), after a warm-up:
+    thread count, the Warp port in one launch, in two launch threads, and
+    built with Warp's default flags) on the benchmark's inputs (seed 1), after a warm-up:
     RGB paths per second (wall) and per CPU-second of this process."""
     import numba
 
@@ -820,6 +850,7 @@ def speed(rounds: int, n_pairs: int, spp: int, numba_threads: list[int]) -> dict
     numba_walk(wi[:64], wo[:64], 16, 0, st_slice(st, 64))
     numba_twin_walk(wi[:64], wo[:64], 16, 0, st_slice(st, 64))
     warp_walk(wi[:64], wo[:64], 16, 0, st_slice(st, 64))
+    warp_walk(wi[:64], wo[:64], 16, 0, st_slice(st, 64), default_flags=True)
     nt0 = numba.get_num_threads()
     variants = [(f"numba_{n}_threads", lambda n=n: (numba.set_num_threads(n), numba_walk(wi, wo, spp, 1, st))[1])
                 for n in numba_threads]
@@ -827,7 +858,8 @@ def speed(rounds: int, n_pairs: int, spp: int, numba_threads: list[int]) -> dict
                   lambda n=n: (numba.set_num_threads(n), numba_twin_walk(wi, wo, spp, 1, st))[1])
                  for n in numba_threads]
     variants += [("warp_1_launch", lambda: warp_walk(wi, wo, spp, 1, st, 1)),
-                 ("warp_2_launch_threads", lambda: warp_walk(wi, wo, spp, 1, st, 2))]
+                 ("warp_2_launch_threads", lambda: warp_walk(wi, wo, spp, 1, st, 2)),
+                 ("warp_default_flags_1_launch", lambda: warp_walk(wi, wo, spp, 1, st, 1, default_flags=True))]
     runs = []
     paths = n_pairs * spp
     try:
@@ -860,7 +892,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="small sizes (a smoke run, figures not meaningful)")
     ap.add_argument("--rounds", type=int, default=2, help="A/B rounds (each runs every variant once)")
-    ap.add_argument("--skip", default="", help="comma list of parts to skip: compile,agreement,threads,speed")
+    ap.add_argument("--skip", default="", help="comma list of parts to skip: compile,agreement,threads,cuda,speed")
     ap.add_argument("--probe", choices=("numba", "numba_twin", "warp"), help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.probe:
@@ -879,6 +911,8 @@ def main(argv=None) -> int:
         res["agreement"] = agreement(*((32, 512) if a.quick else (256, 4096)))
     if "threads" not in skip:
         res["thread_independence"] = thread_independence(*((16, 64) if a.quick else (256, 256)))
+    if "cuda" not in skip:
+        res["cuda_ptx"] = cuda_ptx()
     if "speed" not in skip:
         nt = numba.get_num_threads()
         res["speed"] = speed(a.rounds, *((256, 64) if a.quick else (4096, 256)), sorted({1, nt}))
