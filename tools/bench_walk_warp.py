@@ -630,19 +630,32 @@ def numba_twin_walk(wi, wo, spp: int, seed: int, st: dict):
     """The specialised Numba twin on the inputs of ``warp_walk``: (s1, s2, vertices, dropped)."""
     from nbrdf.training.walk import BLOCK, RR_WEIGHT, WIDE_LAM, WIDE_ROUGHNESS
 
+    check_class(st)
     swap = (wo[:, 2] < wi[:, 2])[:, None]
     wi, wo = np.where(swap, wo, wi), np.where(swap, wi, wo)
     c = lambda x: np.ascontiguousarray(x, dtype=np.float64)
     N = wi.shape[0]
     s1, s2, verts, dropped = _run_std(c(wi), c(wo), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF,
                                       c(st["roughness"][:, 0]), c(st["ior"][:, 0]), c(st["sigma_t"][:, 0]),
-                                      c(st["albedo"][:, 0, :]), c(st["base_roughness"]), c(st["base_r0"]), 4,
-                                      100_000, RR_WEIGHT, WIDE_ROUGHNESS, WIDE_LAM, BLOCK)
+                                      c(st["albedo"][:, 0, :]), c(st["base_roughness"]), c(st["base_r0"]), RR_DEPTH,
+                                      MAX_DEPTH, RR_WEIGHT, WIDE_ROUGHNESS, WIDE_LAM, BLOCK)
     nb = s1.shape[0] // N
     return s1.reshape(N, nb, 3).sum(1), s2.reshape(N, nb, 3).sum(1), int(verts.sum()), int(dropped.sum())
 
 
 # --- driver ---------------------------------------------------------------------------------
+#: ``run_walk``'s defaults (as ``simulate`` calls it): roulette from the 4th vertex, no depth cap in practice.
+RR_DEPTH = 4
+MAX_DEPTH = 100_000
+
+
+def check_class(st: dict) -> None:
+    """The ports cover the benchmark's stack class only."""
+    if st["base"] != "conductor" or st["roughness"].shape[1] != 1 or st["albedo"].shape[2] != 3 \
+            or not bool((st["sigma_t"][:, 0] > 0).all()):
+        raise ValueError("the ports cover one interface over a medium slab and a conductor base, RGB")
+
+
 def standard_inputs(n_pairs: int):
     """The benchmark's pairs (``training.bench.bench_reference``: torch
     generator seed 0, cosine-distributed wi and wo) and its standard stack,
@@ -689,9 +702,7 @@ def warp_walk(wi, wo, spp: int, seed: int, st: dict, launches: int = 1, default_
     from nbrdf.training.walk import BLOCK, RR_WEIGHT, WIDE_LAM, WIDE_ROUGHNESS
 
     N = wi.shape[0]
-    if st["base"] != "conductor" or st["roughness"].shape[1] != 1 or st["albedo"].shape[2] != 3 \
-            or not bool((st["sigma_t"][:, 0] > 0).all()):
-        raise ValueError("the Warp port covers one interface over a medium slab and a conductor base, RGB")
+    check_class(st)
     swap = (wo[:, 2] < wi[:, 2])[:, None]  # the reciprocal start of run_walk
     wi, wo = np.where(swap, wo, wi), np.where(swap, wi, wo)
     dev = "cpu"
@@ -704,12 +715,13 @@ def warp_walk(wi, wo, spp: int, seed: int, st: dict, launches: int = 1, default_
     dropped = wp.zeros(items, dtype=wp.int32, device=dev)
     args = [arr(wi, wp.vec3d), arr(wo, wp.vec3d), arr(st["roughness"][:, 0], D), arr(st["ior"][:, 0], D),
             arr(st["sigma_t"][:, 0], D), arr(st["albedo"][:, 0, :], wp.vec3d), arr(st["base_roughness"], D),
-            arr(st["base_r0"], wp.vec3d), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, BLOCK, nb, 4, 100_000,
+            arr(st["base_r0"], wp.vec3d), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, BLOCK, nb, RR_DEPTH, MAX_DEPTH,
             RR_WEIGHT, WIDE_ROUGHNESS, WIDE_LAM, s1, s2, verts, dropped]
     cuts = [items * i // launches for i in range(launches + 1)]
 
     def launch(i: int) -> None:
-        wp.launch(run_kernel_default if default_flags else run_kernel, dim=cuts[i + 1] - cuts[i], inputs=args + [cuts[i]], device=dev)
+        kernel = run_kernel_default if default_flags else run_kernel
+        wp.launch(kernel, dim=cuts[i + 1] - cuts[i], inputs=args + [cuts[i]], device=dev)
 
     if launches == 1:
         launch(0)
@@ -739,7 +751,7 @@ def agreement(n_pairs: int, spp: int) -> dict:
 
     rng = np.random.default_rng(7)
     # random pairs over the hemisphere (cosine-distributed), the standard stack
-    wi_all, wo_all, st = standard_inputs(n_pairs)
+    _, _, st = standard_inputs(n_pairs)
     u = rng.random((2, n_pairs, 2))
     r = np.sqrt(u[..., 0])
     d = np.stack([r * np.cos(2 * np.pi * u[..., 1]), r * np.sin(2 * np.pi * u[..., 1]), np.sqrt(1 - u[..., 0])], -1)
@@ -812,7 +824,10 @@ def compile_times() -> dict:
     initialisation at import, the call)."""
     import subprocess
 
+    from tqdm import tqdm
+
     out = {}
+    bar = tqdm(total=6, desc="compile probes", file=sys.stderr)
     for lib in ("numba", "numba_twin", "warp"):
         with tempfile.TemporaryDirectory() as cache:
             env = dict(os.environ, NUMBA_CACHE_DIR=cache, WARP_CACHE_PATH=cache)
@@ -822,6 +837,8 @@ def compile_times() -> dict:
                                    text=True, check=True)
                 out[f"{lib}_{kind}"] = json.loads(r.stdout.strip().splitlines()[-1])
                 out[f"{lib}_{kind}"]["process_s"] = round(time.perf_counter() - t0, 3)
+                bar.update()
+    bar.close()
     return out
 
 
@@ -862,10 +879,8 @@ def speed(rounds: int, n_pairs: int, spp: int, numba_threads: list[int]) -> dict
                  ("warp_default_flags_1_launch", lambda: warp_walk(wi, wo, spp, 1, st, 1, default_flags=True))]
     runs = []
     paths = n_pairs * spp
-    try:
-        from tqdm import tqdm
-    except ImportError:  # pragma: no cover
-        tqdm = lambda x, **k: x
+    from tqdm import tqdm
+
     for r in tqdm(range(rounds), desc="A/B rounds", file=sys.stderr):
         for name, fn in variants:
             load = os.getloadavg()[0]
