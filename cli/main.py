@@ -40,7 +40,9 @@ def run_guarded(prog: str, fn: Callable[[], int]) -> int:
 
 def build_parser() -> Parser:
     """The whole ``nbrdf`` parser: every family's subcommands."""
-    p = Parser(prog=PROG, description="Neural layered BRDFs: ground truth, representation, operations.")
+    p = Parser(prog=PROG, description="Neural layered BRDFs: ground truth, representation, operations.",
+               epilog="environment: NBRDF_WALK_DEVICE=auto|cpu|cuda chooses where the Monte Carlo walk runs "
+                      "(auto: an NVIDIA GPU when the cuda extra finds one); NBRDF_DEBUG=1 shows tracebacks")
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     for family in FAMILIES:
         family.register(sub)
