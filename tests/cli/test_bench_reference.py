@@ -11,3 +11,11 @@ def test_bench_reference_quick(capsys):
     assert out["lobe_noise_psnr_db"] >= out["lobe_target_noise_psnr_db"]
     assert 1 < out["vertices_per_path"] < 50
     assert out["paths_per_cpu_second"] > 1000
+    assert out["machine"]["walk"] in ("numba-cpu", "numba-cuda")
+
+
+def test_an_unknown_walk_device_is_one_line(capsys, monkeypatch):
+    monkeypatch.setenv("NBRDF_WALK_DEVICE", "tpu")
+    assert nbrdf_main(["bench", "reference", "--quick"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["nbrdf: NBRDF_WALK_DEVICE must be auto, cpu or cuda (got 'tpu')"]
