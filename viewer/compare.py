@@ -150,7 +150,10 @@ class Compare:
         if r is not None and r.error:
             return f"reference failed: {r.error}"
         where = "directional light only, " if View.parse(view) == View.OBJECT else ""
-        return f"reference: Monte Carlo, {where}{r.spp if r else 0} paths per pixel{'' if r and r.done else '...'}"
+        noise = r.noise if r is not None else None
+        level = f", noise {100 * noise:.1f} %" if noise is not None else ""
+        return (f"reference: Monte Carlo, {where}{r.spp if r else 0} paths per pixel{level}"
+                f"{'' if r and r.done else '...'}")
 
     def plane_curve(self, material: Material, theta_i: float, wi: torch.Tensor, wo: torch.Tensor,
                     n: int) -> np.ndarray | None:

@@ -86,6 +86,19 @@ class ReferenceImage:
     """The job reached its ``max_spp`` (or failed)."""
     error: str | None = None
     """One line when the simulation failed."""
+    stderr: np.ndarray | None = None
+    """(H, W, 3) the image's standard error per pixel (the walk's, pooled over
+    the rounds like the paths)."""
+
+    @property
+    def noise(self) -> float | None:
+        """Relative noise of the image: RMS standard error over the mean
+        absolute value of the pixels that carry light (None before any path)."""
+        if self.stderr is None or self.spp == 0:
+            return None
+        lit = np.abs(self.image).sum(-1) > 0
+        level = float(np.abs(self.image[lit]).mean()) if lit.any() else 0.0
+        return float(np.sqrt(np.mean(self.stderr[lit].astype(np.float64) ** 2)) / level) if level > 0 else None
 
 
 def lobe_job(material: Material, key: str, theta_i: float) -> ReferenceJob:
@@ -160,15 +173,19 @@ def _serve(requests, results, threads: int) -> None:
             material = parse_material(job.material, job.material_dir)
             wi, wo = torch.from_numpy(job.wi), torch.from_numpy(job.wo)
             weight = torch.from_numpy(job.weight).double()
-            total, acc, spp, k = paused.pop(job.key, (0, None, job.start_spp, 0))
+            total, acc, var, spp, k = paused.pop(job.key, (0, None, None, job.start_spp, 0))
             while True:
-                m, _ = reference_eval(material, wi, wo, spp=spp, seed=7919 * k)
+                m, e = reference_eval(material, wi, wo, spp=spp, seed=7919 * k)
+                # pooled like one run: the sum of the rounds' path sums, its variance the sum of theirs
                 acc = m.double() * spp if acc is None else acc + m.double() * spp
+                var = (e.double() * spp) ** 2 if var is None else var + (e.double() * spp) ** 2
                 total += spp
                 img = np.zeros((*job.mask.shape, 3), np.float32)
                 img[job.mask] = (acc / total * weight).numpy()
+                se = np.zeros_like(img)
+                se[job.mask] = (var.sqrt() / total * weight.abs()).numpy()
                 done = total >= job.max_spp
-                results.put((job.key, img, total, done, None))
+                results.put((job.key, img, total, done, None, se))
                 if done:
                     job = None
                     break
@@ -179,14 +196,14 @@ def _serve(requests, results, threads: int) -> None:
                     return
                 if newer is not None:
                     if newer.key != job.key:
-                        paused[job.key] = (total, acc, spp, k)
+                        paused[job.key] = (total, acc, var, spp, k)
                         while len(paused) > PAUSED_JOBS:
                             paused.pop(next(iter(paused)))
                         job = newer
                         break
         except Exception as e:  # noqa: BLE001 - shown in the UI, the worker keeps serving
             msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-            results.put((job.key, np.zeros((*job.mask.shape, 3), np.float32), 0, True, msg))
+            results.put((job.key, np.zeros((*job.mask.shape, 3), np.float32), 0, True, msg, None))
             job = None
 
 
@@ -252,10 +269,10 @@ class ReferenceWorker:
             return
         while True:
             try:
-                key, img, spp, done, err = self._results.get_nowait()
+                key, img, spp, done, err, se = self._results.get_nowait()
             except (queue.Empty, OSError, ValueError):
                 return
-            self._cache[key] = ReferenceImage(img, spp, done, err)
+            self._cache[key] = ReferenceImage(img, spp, done, err, se)
             if key == self._current and (done or err):
                 self._current = None
 

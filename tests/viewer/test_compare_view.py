@@ -114,3 +114,23 @@ def test_flip_view_shows_the_hdr_flip_of_neural_against_reference(gl_ctx):
         assert np.abs(other.astype(int) - shown).mean() > 5  # a different view, not the same picture
     finally:
         ld.close()
+
+
+def test_the_status_line_states_the_references_noise(gl_ctx):
+    """The compare view tells how far its Monte Carlo reference can be
+    trusted: paths per pixel and the relative noise of the image."""
+    from nbrdf.neural.material import parse_material
+    from nbrdf.training.bench import STANDARD_STACK
+    from nbrdf.viewer.compare import Compare
+    from nbrdf.viewer.reference import ReferenceImage, ReferenceWorker
+
+    w = ReferenceWorker()
+    c = Compare(gl_ctx, None, worker=w)  # the status line needs no renderer
+    img = np.zeros((2, 2, 3), np.float32)
+    img[0] = 0.5  # two lit pixels at 0.5, two dark ones that must not dilute the figure
+    se = np.where(img > 0, 0.01, 0.0).astype(np.float32)
+    w._cache["k"] = ReferenceImage(img, 512, False, None, se)
+    c._job = "k"
+    assert c.status(parse_material(STANDARD_STACK), "lobe") == "reference: Monte Carlo, 512 paths per pixel, noise 2.0 %..."
+    w._cache["k"] = ReferenceImage(img, 4096, True, None, se / 4)
+    assert c.status(parse_material(STANDARD_STACK), "object").endswith("directional light only, 4096 paths per pixel, noise 0.5 %")

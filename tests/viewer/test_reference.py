@@ -3,6 +3,7 @@ its slice and lit-object jobs against the GPU views."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from nbrdf.neural.material import load_material, parse_material
@@ -31,9 +32,45 @@ def test_worker_pools_rounds_like_one_long_run():
     finally:
         w.close()
     assert r is not None and r.done and r.spp == 24 and r.error is None
-    rounds = [reference_eval(m, job.wi, job.wo, spp=8, seed=7919 * k)[0] for k in range(3)]
-    expected = (sum(rounds) / 3 * job.weight).numpy()
+    rounds = [reference_eval(m, job.wi, job.wo, spp=8, seed=7919 * k) for k in range(3)]
+    expected = (sum(mk for mk, _ in rounds) / 3 * job.weight).numpy()
     np.testing.assert_allclose(r.image[job.mask], expected, rtol=1e-5, atol=1e-7)
+    # the standard error pools like the paths: sqrt(sum of the rounds' (spp se)^2) / total
+    se = (sum((ek.double() * 8) ** 2 for _, ek in rounds).sqrt() / 24 * job.weight).numpy()
+    assert (se > 0).any()
+    np.testing.assert_allclose(r.stderr[job.mask], se, rtol=1e-5, atol=1e-9)
+    assert r.noise == pytest.approx(np.sqrt(np.mean(se ** 2)) / np.abs(expected[np.abs(expected).sum(-1) > 0]).mean(),
+                                    rel=1e-4)
+
+
+def test_the_reported_noise_is_the_error_against_an_independent_run():
+    """Standard errors that hold in the compare view: the worker's image (its
+    rounds pooled, 256 paths) against an independent 4096-path run of the
+    benchmark's stack, red channel: the sum of z^2 over 480 pixels is
+    chi-square with one degree per pixel (two-sided 0.1 % limits: a noise
+    figure 25 % too small or too large fails)."""
+    from scipy import stats
+
+    from nbrdf.training.bench import STANDARD_STACK
+
+    m = parse_material(STANDARD_STACK)
+    job = _subset(lobe_job(m, "std", 30.0), 480, 256)
+    w = ReferenceWorker(start_spp=32, round_spp=64, threads=1)
+    try:
+        w.request(job)
+        r = w.wait("std", 256, timeout=300)
+    finally:
+        w.close()
+    assert r is not None and r.done and r.spp == 256
+    mi, ei = reference_eval(m, job.wi, job.wo, spp=4096, seed=424242)
+    a, sa = r.image[job.mask][:, 0], r.stderr[job.mask][:, 0]
+    b, sb = (mi * job.weight).numpy()[:, 0], (ei * job.weight.abs()).numpy()[:, 0]
+    keep = (sa > 0) & (sb > 0)
+    assert keep.sum() >= 400
+    chi2 = float((((a - b) / np.sqrt(sa ** 2 + sb ** 2))[keep] ** 2).sum())
+    n = int(keep.sum())
+    assert stats.chi2.ppf(0.0005, n) < chi2 < stats.chi2.ppf(0.9995, n), (chi2, n)
+    assert 0 < r.noise < 0.05
 
 
 def test_worker_reports_errors_and_keeps_working():
