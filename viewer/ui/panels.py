@@ -212,7 +212,9 @@ class Panels:
         if changed:
             ld.set_compare(modes[k])
         if ld.compare != CompareMode.OFF:
-            imgui.text_colored(DIM, ld.reference_status())
+            imgui.push_style_color(imgui.Col_.text, DIM)
+            imgui.text_wrapped(ld.reference_status())  # wrapped: the paths and the noise stay readable
+            imgui.pop_style_color()
             if ld.compare == CompareMode.WIPE:
                 changed, x = imgui.slider_float("wipe", ld.wipe, 0.0, 1.0)
                 if changed:
