@@ -4,7 +4,8 @@ sampled at the top) while wasting less work on the total-internal-reflection
 stack, and its 64-path standard errors hold (z-scores against long runs are
 standard normal by a Kolmogorov-Smirnov test) on the standard stack and,
 narrowly since estimator v5 (splitting by exit importance), on the trapping
-stack."""
+stack; not yet on the held-out stacks with sharp lobes in series (a strict
+xfail states that target)."""
 from __future__ import annotations
 
 import math
@@ -186,3 +187,37 @@ def test_64_path_errors_hold_on_the_trapping_stack():
     2.1e-2 / 3.9e-2 / 5.5e-5 (docs/RESULTS.md, Estimator v5)."""
     z = _z_scores(trap_stack, 480, 31)
     assert stats.kstest(z, "norm").pvalue > 1e-3, (z.mean(), z.std())
+
+
+#: Held-out stacks (the paper's distribution) whose 64-path errors do not hold
+#: (docs/RESULTS.md, "How far the errors hold: the held-out stacks"): the
+#: exit through a sharp top after a near-index-matched interior interface or
+#: a near-mirror base (products of two sharp lobes, each strategy sampling one).
+HEAVY_TAILED_HELDOUT = ("three_layer-014", "three_layer-012", "two_layer-032")
+
+
+@pytest.mark.xfail(strict=True, reason="issue 14, open: 20 of the 80 held-out stacks fail this at 64 paths "
+                   "(z mean -0.4 ... -1.9), 12 still at 1024 paths (docs/RESULTS.md); the three here are among "
+                   "the worst. Remove the marker when it passes.")
+def test_64_path_errors_hold_on_heavy_tailed_heldout_stacks():
+    """The issue's target on every stack, not only the trapping one: on 160
+    cosine-distributed pairs per stack, 64-path estimates against 4096-path
+    runs give standard normal z-scores in every channel (KS, Bonferroni over 3
+    stacks x 3 channels at 1e-3)."""
+    from nbrdf.training.evaluate import heldout_set
+    from nbrdf.training.reference import stack_params
+
+    worst = []
+    for k, (cls, m) in enumerate(heldout_set()):
+        if m.name not in HEAVY_TAILED_HELDOUT:
+            continue
+        wi, wo = _dirs(160, 300 + k, 0.0, 90.0), _dirs(160, 600 + k, 0.0, 90.0)
+        sp = stack_params(m, 160)
+        lm, le = simulate(sp, wi, wo, spp=4096, seed=2 * k + 1, dtype=D, include_top_reflection=False)
+        sm, se = simulate(sp, wi, wo, spp=64, seed=2 * k + 2, dtype=D, include_top_reflection=False)
+        for c in range(3):
+            ok = (le[:, c] > 0) & (se[:, c] > 0)
+            z = ((sm[ok, c] - lm[ok, c]) / (se[ok, c] ** 2 + le[ok, c] ** 2).sqrt()).numpy()
+            worst.append((stats.kstest(z, "norm").pvalue, m.name, c, float(z.mean()), float(z.std())))
+    assert len(worst) == 9
+    assert min(worst)[0] > 1e-3 / 9, min(worst)
