@@ -46,6 +46,14 @@ Two more changes for that light:
   path; roulette keeps using the unsplit weight), so the paths that drift
   toward the states that feed the exit are followed more often with less
   weight (unbiased: a split divides the weight by the number of copies);
+- for two-interface stacks, next-event estimation through the stack
+  (estimator v6): a vertex in slab 1 (a scattering or the base) connects to
+  wo through both interfaces (v0 drawn from wo through the top, d1 from v0
+  through the interior interface), and the segment (d1, v0) is weighted by
+  the balance heuristic over the three strategies that make it (the walk
+  with the closed-form exit, next-event estimation at the interior interface,
+  the chain), so a sharp top over a near-index-matched interior interface
+  (two sharp lobes in series) is no longer met by chance;
 - on every stack, reciprocity: the walk starts from the more grazing of
   (wi, wo) (a stack reflects into the air it is lit from), whose light
   refracts nearer the critical angle, so the trapped state is reached often
@@ -588,6 +596,30 @@ def _nee(z, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, u0, u1):
 
 
 @njit(**_JIT)
+def _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, a1, e1, tau1, u0, u1, u2, u3):
+    """Next-event estimation through the stack for a vertex in slab 1 (at
+    ``depth`` in [1, 2]) of a two-interface stack: v0 in slab 0 by forced
+    refraction from wo through the top (as ``_nee``), then d1 in slab 1 by
+    forced refraction of v0 down through interface 1. Returns d1 (up, from
+    the vertex), g = Tr1 f_if(-d1, v0) |v0_z| Tr0 f_top(v0, wo) / (pn p1) and
+    the three strategies' densities of the segment (d1, v0) without the
+    vertex's own density: pn (v0 from wo), p1 (d1 given v0), p_if (v0 given
+    d1, the walk's sampling at interface 1)."""
+    v0x, v0y, v0z, sc0, pn = _nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, u0, u1)
+    if sc0 <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    tx, ty, tz, w1, p1 = _ft_sample(a1, e1, v0x, v0y, v0z, u2, u3)
+    if p1 <= 0.0 or w1 <= 0.0 or tz >= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    f_if, p_if = _diel_eval_pdf(tx, ty, tz, v0x, v0y, v0z, a1, e1)
+    if f_if <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    d1z = -tz
+    tr1 = math.exp(-tau1 * (depth - 1.0) / max(d1z, 1e-12)) if tau1 > 0.0 else 1.0
+    return -tx, -ty, d1z, tr1 * f_if * v0z * sc0 / p1, pn, p1, p_if
+
+
+@njit(**_JIT)
 def _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a, eta):
     """At the top seen from below (w points down into the stack): (f(w, wo) of
     the transmission toward wo, the density ``_ft_pdf`` gives w when sampled
@@ -674,6 +706,13 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
     # the split factors (beta * kscale = the unsplit weight), lref = the
     # importance level (unsplit weight x I) the path started at x kscale
     split = conn and kmax > 1
+    # next-event estimation through the stack (two interfaces): at vertices in
+    # slab 1, with MIS over the segment (d1, v0) against the walk (exit in
+    # closed form at the top) and next-event estimation at interface 1;
+    # (chx, chy, chz, chp): d1 and its density while the walk's segment is on
+    chain = forced and L == 2
+    ch_on = False
+    chx = chy = chz = chp = 0.0
     gsx = gsy = gsz = i_peak = lref = 0.0
     kscale = 1.0
     ntot = 1
@@ -711,6 +750,8 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 scatter = True
                 depth = depth - t * dz
         alive = True
+        ch_prev = ch_on  # the walk's segment (d1, v0) reaches the top only without a vertex between
+        ch_on = False
         if scatter:
             if slab == 0:
                 vx, vy, vz, sc, pn = _nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, _uniform(key, ctr), _uniform(key, ctr + 1))
@@ -718,6 +759,15 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                     k = INV_4PI * sc * pn / (pn + INV_4PI)
                     for c in range(C):
                         out[c] += beta[c] * alb[q, slab, c] * k
+            elif chain and slab == 1:
+                _, _, _, g, pn, p1, p_if = _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, rough[q, 1],
+                                                      ior[q, 1], sigma[q, 1], _uniform(key, ctr), _uniform(key, ctr + 1),
+                                                      _uniform(key, ctr + 2), _uniform(key, ctr + 3))
+                if g > 0.0:
+                    k = INV_4PI * g * pn * p1 / (INV_4PI * p_if + INV_4PI * pn + pn * p1)
+                    for c in range(C):
+                        out[c] += beta[c] * alb[q, slab, c] * k
+                ctr += 2
             ctr += 2
             for c in range(C):
                 beta[c] *= alb[q, slab, c]
@@ -737,7 +787,11 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 g1w = _g1_dir(wx, wy, wz, a0)
                 f, pn = _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a0, e0)
                 if f > 0.0 and not resume:
-                    k = f * pm * pdf_last / (pm * pdf_last + pm * pn + pg * pdf_last + pw * pn)
+                    if ch_prev:  # the segment from slab 1: three strategies (walk, NEE at interface 1, the chain)
+                        p1 = _ft_pdf(rough[q, 1], ior[q, 1], -wx, -wy, -wz, -chx, -chy, -chz)
+                        k = f * chp * pdf_last / (chp * pdf_last + chp * pn + pn * p1)
+                    else:
+                        k = f * pm * pdf_last / (pm * pdf_last + pm * pn + pg * pdf_last + pw * pn)
                     for c in range(C):
                         out[c] += beta[c] * k
                 if forced:
@@ -804,7 +858,11 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                                               _uniform(key, ctr + 1))
                     if sc > 0.0:
                         f, pb = _diel_eval_pdf(wx, wy, wz, vx, vy, vz, a, e)
-                        k = f * abs(vz) * sc * pn / (pn + pb)
+                        if chain and wz < 0.0:  # from slab 1: the chain's density of d1 = -w enters the weight
+                            p1 = _ft_pdf(a, e, vx, vy, vz, wx, wy, wz)
+                            k = f * abs(vz) * sc * pdf_last * pn / (pdf_last * pb + pdf_last * pn + pn * p1)
+                        else:
+                            k = f * abs(vz) * sc * pn / (pn + pb)
                         for c in range(C):
                             out[c] += beta[c] * k
                 ctr += 2
@@ -812,6 +870,8 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                                                   _uniform(key, ctr + 2))
                 ctr += 3
                 alive = p > 0.0 and wgt > 0.0
+                if chain and alive and wz < 0.0 and nz > 0.0:  # up through interface 1: the segment starts
+                    ch_on, chx, chy, chz, chp = True, -wx, -wy, -wz, pdf_last
                 if alive and wz * nz < 0.0:  # crossed: down into slab k, up into slab k - 1
                     slab = k_if if dz < 0.0 else k_if - 1
                 for c in range(C):
@@ -823,8 +883,27 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                                               _uniform(key, ctr + 1))
                 else:
                     sc = 0.0
-                ctr += 2
                 ba = b_rough[q]
+                if chain and wz > 0.0:  # the base under slab 1: next-event estimation through the stack
+                    d1x, d1y, d1z, g, pn, p1, p_if = _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0,
+                                                                rough[q, 1], ior[q, 1], sigma[q, 1], _uniform(key, ctr),
+                                                                _uniform(key, ctr + 1), _uniform(key, ctr + 2),
+                                                                _uniform(key, ctr + 3))
+                    if g > 0.0:
+                        if base == 0:
+                            fb, pb, x = _cond_eval(wx, wy, wz, d1x, d1y, d1z, ba, _g1_dir(wx, wy, wz, ba))
+                        elif base == 1:
+                            fb, pb, x = INV_PI, d1z * INV_PI, 0.0
+                        else:
+                            fb, pb = _diel_eval_pdf(wx, wy, wz, d1x, d1y, d1z, ba, b_ior[q])
+                            x = 0.0
+                        if fb > 0.0:
+                            k = fb * d1z * g * pn * p1 / (pb * p_if + pb * pn + pn * p1)
+                            for c in range(C):
+                                col = (x + b_r0[q, c] * (1.0 - x)) if base == 0 else (b_alb[q, c] if base == 1 else 1.0)
+                                out[c] += beta[c] * k * col
+                    ctr += 2
+                ctr += 2
                 if base == 0:
                     g1w = _g1_dir(wx, wy, wz, ba)
                     if sc > 0.0:

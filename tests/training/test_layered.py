@@ -25,7 +25,11 @@ CONFIGS = (
        # empty top slabs over conductors: the two-bounce connection and the
        # reversed walk (light trapped by total internal reflection, issue 14)
        ([(0.15, 1.5, 0.0, 0.0)], ("conductor", 0.02, 1.0)),
-       ([(0.3, 1.3, 0.0, 0.0)], ("conductor", 0.2, 0.7))]
+       ([(0.3, 1.3, 0.0, 0.0)], ("conductor", 0.2, 0.7)),
+       # sharp lobes in series (held-out three_layer-004, red; three_layer-012, green): next-event
+       # estimation through the stack (issue 14)
+       ([(0.059, 1.218, 0.901, 0.099), (0.117, 1.096, 0.282, 3.245)], ("conductor", 0.069, 0.156)),
+       ([(0.054, 1.093, 0.524, 0.836), (0.134, 1.142, 0.166, 0.714)], ("conductor", 0.640, 0.103))]
 )
 Z_LIMIT = z_threshold(1e-3, len(CONFIGS) * N_THETA * N_PHI)
 
