@@ -53,7 +53,11 @@ Two more changes for that light:
   the balance heuristic over the three strategies that make it (the walk
   with the closed-form exit, next-event estimation at the interior interface,
   the chain), so a sharp top over a near-index-matched interior interface
-  (two sharp lobes in series) is no longer met by chance;
+  (two sharp lobes in series) is no longer met by chance; likewise, for one
+  interface over a medium and a sharp conductor base, a scattering connects
+  to wo by way of the base (v0 drawn from wo through the top, the direction
+  down to the base from the base's reflection of v0), weighted against the
+  walk and the base's next-event estimation;
 - on every stack, reciprocity: the walk starts from the more grazing of
   (wi, wo) (a stack reflects into the air it is lit from), whose light
   refracts nearer the critical angle, so the trapped state is reached often
@@ -113,6 +117,11 @@ SPLIT_STEP = 2
 #: Floor of I(w) as a fraction of its peak (a state's future value is never
 #: only its immediate connection value: trapped light drifts).
 SPLIT_FLOOR = 1e-3
+#: Next-event estimation by way of the base (estimator v6) for one interface
+#: over a medium and a conductor base sharper than this roughness (rougher
+#: bases: the walk's own sampling of the base lobe suffices, and the benchmark's
+#: stack, base 0.3, keeps its estimates and speed).
+MIRROR_CHAIN_ROUGHNESS = 0.1
 #: Paths per work item (a block of one pair's paths run by one thread).
 BLOCK = 32
 BASE_CODES = {"conductor": 0, "diffuse": 1, "dielectric": 2}
@@ -620,6 +629,29 @@ def _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, a1, e1, tau1, u
 
 
 @njit(**_JIT)
+def _mirror_chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, ba, u0, u1, u2, u3):
+    """Next-event estimation by way of a sharp conductor base for a
+    scattering in slab 0 (one interface): v0 by forced refraction from wo
+    through the top, then u (= -d, d the direction down to the base) by the
+    base's VNDF reflection of v0. Returns g = Tr(d) f_base(u, v0) |v0_z| Tr0
+    f_top(v0, wo) / pn (F = 1; Schlick's x for the caller), pn, pb (the walk's
+    density of v0 given u), p_rev (the chain's density of u given v0), x."""
+    v0x, v0y, v0z, sc0, pn = _nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, u0, u1)
+    if sc0 <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0
+    mx, my, mz = _sample_vndf(v0x, v0y, v0z, ba, u2, u3)
+    ux, uy, uz = _reflect(v0x, v0y, v0z, mx, my, mz)
+    if uz <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0
+    f, pb, x = _cond_eval(ux, uy, uz, v0x, v0y, v0z, ba, _g1_dir(ux, uy, uz, ba))
+    _, p_rev, _ = _cond_eval(v0x, v0y, v0z, ux, uy, uz, ba, _g1_dir(v0x, v0y, v0z, ba))
+    if f <= 0.0 or p_rev <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0
+    tr = math.exp(-tau0 * (1.0 - depth) / uz)
+    return tr * f * v0z * sc0 / p_rev, pn, pb, p_rev, x
+
+
+@njit(**_JIT)
 def _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a, eta):
     """At the top seen from below (w points down into the stack): (f(w, wo) of
     the transmission toward wo, the density ``_ft_pdf`` gives w when sampled
@@ -711,6 +743,12 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
     # closed form at the top) and next-event estimation at interface 1;
     # (chx, chy, chz, chp): d1 and its density while the walk's segment is on
     chain = forced and L == 2
+    # the same through the base for one interface over a medium and a sharp
+    # conductor (roughness < MIRROR_CHAIN_ROUGHNESS): a scattering in slab 0
+    # connects to wo by way of the base's reflection (segment (d, v0): d down
+    # to the base, v0 up to the top)
+    mirror = forced and L == 1 and base == 0 and tau0 > 0.0 and b_rough[q] < MIRROR_CHAIN_ROUGHNESS
+    scat = False
     ch_on = False
     chx = chy = chz = chp = 0.0
     gsx = gsy = gsz = i_peak = lref = 0.0
@@ -752,6 +790,8 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
         alive = True
         ch_prev = ch_on  # the walk's segment (d1, v0) reaches the top only without a vertex between
         ch_on = False
+        scat_prev = scat  # the vertex before this one was a scattering
+        scat = scatter
         if scatter:
             if slab == 0:
                 vx, vy, vz, sc, pn = _nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, _uniform(key, ctr), _uniform(key, ctr + 1))
@@ -759,6 +799,15 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                     k = INV_4PI * sc * pn / (pn + INV_4PI)
                     for c in range(C):
                         out[c] += beta[c] * alb[q, slab, c] * k
+                if mirror:
+                    g, pn, pb, p_rev, x = _mirror_chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, b_rough[q],
+                                                            _uniform(key, ctr + 2), _uniform(key, ctr + 3),
+                                                            _uniform(key, ctr + 4), _uniform(key, ctr + 5))
+                    if g > 0.0:
+                        k = INV_4PI * g * pn * p_rev / (INV_4PI * pb + INV_4PI * pn + pn * p_rev)
+                        for c in range(C):
+                            out[c] += beta[c] * alb[q, slab, c] * k * (x + b_r0[q, c] * (1.0 - x))
+                    ctr += 4
             elif chain and slab == 1:
                 _, _, _, g, pn, p1, p_if = _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, rough[q, 1],
                                                       ior[q, 1], sigma[q, 1], _uniform(key, ctr), _uniform(key, ctr + 1),
@@ -787,7 +836,10 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 g1w = _g1_dir(wx, wy, wz, a0)
                 f, pn = _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a0, e0)
                 if f > 0.0 and not resume:
-                    if ch_prev:  # the segment from slab 1: three strategies (walk, NEE at interface 1, the chain)
+                    if ch_prev and mirror:  # the segment by way of the base: (walk, NEE at the base, the chain)
+                        _, p_rev, _ = _cond_eval(-wx, -wy, -wz, chx, chy, chz, b_rough[q], _g1_dir(-wx, -wy, -wz, b_rough[q]))
+                        k = f * chp * pdf_last / (chp * pdf_last + chp * pn + pn * p_rev)
+                    elif ch_prev:  # the segment from slab 1: three strategies (walk, NEE at interface 1, the chain)
                         p1 = _ft_pdf(rough[q, 1], ior[q, 1], -wx, -wy, -wz, -chx, -chy, -chz)
                         k = f * chp * pdf_last / (chp * pdf_last + chp * pn + pn * p1)
                     else:
@@ -906,9 +958,14 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 ctr += 2
                 if base == 0:
                     g1w = _g1_dir(wx, wy, wz, ba)
+                    seg = mirror and scat_prev and wz > 0.0  # from a scattering: the chain made this segment too
                     if sc > 0.0:
                         f, pb, x = _cond_eval(wx, wy, wz, vx, vy, vz, ba, g1w)
-                        k = f * abs(vz) * sc * pm * pn / (pm * pn + pm * pb + pg * pb + pw * pn)
+                        if seg:
+                            _, p_rev, _ = _cond_eval(vx, vy, vz, wx, wy, wz, ba, _g1_dir(vx, vy, vz, ba))
+                            k = f * abs(vz) * sc * pdf_last * pn / (pdf_last * pb + pdf_last * pn + pn * p_rev)
+                        else:
+                            k = f * abs(vz) * sc * pm * pn / (pm * pn + pm * pb + pg * pb + pw * pn)
                         for c in range(C):
                             out[c] += beta[c] * k * (x + b_r0[q, c] * (1.0 - x))
                     mx, my, mz = _sample_vndf(wx, wy, wz, ba, _uniform(key, ctr), _uniform(key, ctr + 1))
@@ -921,6 +978,8 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                     x = _schlick5(wm)
                     for c in range(C):
                         beta[c] *= wgt * (x + b_r0[q, c] * (1.0 - x))
+                    if seg and alive:  # the walk's segment (d, v0) starts: keep u = -d and d's density
+                        ch_on, chx, chy, chz, chp = True, wx, wy, wz, pdf_last
                 elif base == 1:
                     if sc > 0.0 and wz > 0.0:
                         k = max(vz, 0.0) * INV_PI * sc * pn / (pn + max(vz, 0.0) * INV_PI)

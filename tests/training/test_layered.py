@@ -29,7 +29,10 @@ CONFIGS = (
        # sharp lobes in series (held-out three_layer-004, red; three_layer-012, green): next-event
        # estimation through the stack (issue 14)
        ([(0.059, 1.218, 0.901, 0.099), (0.117, 1.096, 0.282, 3.245)], ("conductor", 0.069, 0.156)),
-       ([(0.054, 1.093, 0.524, 0.836), (0.134, 1.142, 0.166, 0.714)], ("conductor", 0.640, 0.103))]
+       ([(0.054, 1.093, 0.524, 0.836), (0.134, 1.142, 0.166, 0.714)], ("conductor", 0.640, 0.103)),
+       # a sharp coat over a medium and a near-mirror base (held-out two_layer-014, green): next-event
+       # estimation by way of the base
+       ([(0.0146, 1.616, 0.950, 1.888)], ("conductor", 0.0115, 0.945))]
 )
 Z_LIMIT = z_threshold(1e-3, len(CONFIGS) * N_THETA * N_PHI)
 
