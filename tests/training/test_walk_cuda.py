@@ -32,7 +32,9 @@ def _dirs(seed: int) -> np.ndarray:
 
 def _stacks() -> dict[str, StackParams]:
     """The benchmark's stack (medium, RGB), the trapping stack (the two-bounce
-    connection and splitting, RGB) and a one-channel diffuse-base stack."""
+    connection and splitting, RGB), a one-channel two-interface diffuse-base
+    stack (next-event estimation through the stack) and a medium over a sharp
+    base (by way of the base)."""
     f = lambda v, *shape: torch.full(shape, float(v), dtype=torch.float64)
     return {
         "standard": StackParams(f(0.1, N, 1), f(1.5, N, 1), f(0.9, N, 1, 3), f(1.0, N, 1), "conductor", f(0.3, N),
@@ -41,6 +43,8 @@ def _stacks() -> dict[str, StackParams]:
                                 base_r0=torch.tensor([[1.0, 0.7, 0.4]], dtype=torch.float64).expand(N, 3)),
         "diffuse": StackParams(f(0.3, N, 2), f(1.4, N, 2), f(0.7, N, 2), f(0.5, N, 2), "diffuse", f(1.0, N),
                                base_albedo=f(0.6, N)),
+        "sharp_base": StackParams(f(0.05, N, 1), f(1.5, N, 1), f(0.9, N, 1, 3), f(1.0, N, 1), "conductor", f(0.02, N),
+                                  base_r0=f(0.9, N, 3)),
     }
 
 
@@ -55,7 +59,7 @@ def _run_all(device: str) -> dict[str, list]:
 
 def test_the_simulated_cuda_kernel_traces_the_cpu_walks_paths():
     """Same seeds, same paths: the kernel (in the simulator, each path in plain
-    Python) and the compiled CPU walk agree to rounding on three stack kinds,
+    Python) and the compiled CPU walk agree to rounding on four stack kinds,
     means and standard errors (a wrong index, a lost block or channel, or a
     scratch array shared between threads would change them at the percent level)."""
     code = textwrap.dedent("""
