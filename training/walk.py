@@ -122,6 +122,9 @@ SPLIT_FLOOR = 1e-3
 #: bases: the walk's own sampling of the base lobe suffices, and the benchmark's
 #: stack, base 0.3, keeps its estimates and speed).
 MIRROR_CHAIN_ROUGHNESS = 0.1
+#: Probability that a scattering draws that chain (its contribution divided by
+#: it, its density times it in the MIS weights): half the cost per scattering.
+MIRROR_CHAIN_P = 0.5
 #: Paths per work item (a block of one pair's paths run by one thread).
 BLOCK = 32
 BASE_CODES = {"conductor": 0, "diffuse": 1, "dielectric": 2}
@@ -799,15 +802,16 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                     k = INV_4PI * sc * pn / (pn + INV_4PI)
                     for c in range(C):
                         out[c] += beta[c] * alb[q, slab, c] * k
-                if mirror:
+                if mirror and _uniform(key, ctr + 6) < MIRROR_CHAIN_P:
                     g, pn, pb, p_rev, x = _mirror_chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, b_rough[q],
                                                             _uniform(key, ctr + 2), _uniform(key, ctr + 3),
                                                             _uniform(key, ctr + 4), _uniform(key, ctr + 5))
                     if g > 0.0:
-                        k = INV_4PI * g * pn * p_rev / (INV_4PI * pb + INV_4PI * pn + pn * p_rev)
+                        k = INV_4PI * g * pn * p_rev / (INV_4PI * pb + INV_4PI * pn + MIRROR_CHAIN_P * pn * p_rev)
                         for c in range(C):
                             out[c] += beta[c] * alb[q, slab, c] * k * (x + b_r0[q, c] * (1.0 - x))
-                    ctr += 4
+                if mirror:
+                    ctr += 5
             elif chain and slab == 1:
                 _, _, _, g, pn, p1, p_if = _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, rough[q, 1],
                                                       ior[q, 1], sigma[q, 1], _uniform(key, ctr), _uniform(key, ctr + 1),
@@ -838,7 +842,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 if f > 0.0 and not resume:
                     if ch_prev and mirror:  # the segment by way of the base: (walk, NEE at the base, the chain)
                         _, p_rev, _ = _cond_eval(-wx, -wy, -wz, chx, chy, chz, b_rough[q], _g1_dir(-wx, -wy, -wz, b_rough[q]))
-                        k = f * chp * pdf_last / (chp * pdf_last + chp * pn + pn * p_rev)
+                        k = f * chp * pdf_last / (chp * pdf_last + chp * pn + MIRROR_CHAIN_P * pn * p_rev)
                     elif ch_prev:  # the segment from slab 1: three strategies (walk, NEE at interface 1, the chain)
                         p1 = _ft_pdf(rough[q, 1], ior[q, 1], -wx, -wy, -wz, -chx, -chy, -chz)
                         k = f * chp * pdf_last / (chp * pdf_last + chp * pn + pn * p1)
@@ -963,7 +967,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                         f, pb, x = _cond_eval(wx, wy, wz, vx, vy, vz, ba, g1w)
                         if seg:
                             _, p_rev, _ = _cond_eval(vx, vy, vz, wx, wy, wz, ba, _g1_dir(vx, vy, vz, ba))
-                            k = f * abs(vz) * sc * pdf_last * pn / (pdf_last * pb + pdf_last * pn + pn * p_rev)
+                            k = f * abs(vz) * sc * pdf_last * pn / (pdf_last * pb + pdf_last * pn + MIRROR_CHAIN_P * pn * p_rev)
                         else:
                             k = f * abs(vz) * sc * pm * pn / (pm * pn + pm * pb + pg * pb + pw * pn)
                         for c in range(C):
