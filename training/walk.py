@@ -503,6 +503,13 @@ def _cond_eval(ix, iy, iz, ox, oy, oz, a, g1i):
 
 
 @njit(**_JIT)
+def _cond_pdf(ix, iy, iz, ox, oy, oz, a):
+    """The density with which the base's VNDF sampling from i gives o (the
+    reversed-chain densities of estimator v6)."""
+    return _cond_eval(ix, iy, iz, ox, oy, oz, a, _g1_dir(ix, iy, iz, a))[1]
+
+
+@njit(**_JIT)
 def _cond_geo(ix, iy, iz, ox, oy, oz, a):
     """(f with F = 1, pdf, Schlick's (1 - |i.h|)^5)."""
     if iz <= 0.0 or oz <= 0.0:
@@ -647,7 +654,7 @@ def _mirror_chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, ba, u0, 
     if uz <= 0.0:
         return 0.0, 0.0, 0.0, 0.0, 0.0
     f, pb, x = _cond_eval(ux, uy, uz, v0x, v0y, v0z, ba, _g1_dir(ux, uy, uz, ba))
-    _, p_rev, _ = _cond_eval(v0x, v0y, v0z, ux, uy, uz, ba, _g1_dir(v0x, v0y, v0z, ba))
+    p_rev = _cond_pdf(v0x, v0y, v0z, ux, uy, uz, ba)
     if f <= 0.0 or p_rev <= 0.0:
         return 0.0, 0.0, 0.0, 0.0, 0.0
     tr = math.exp(-tau0 * (1.0 - depth) / uz)
@@ -841,7 +848,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 f, pn = _exit_eval(wx, wy, wz, ox, oy, oz, g1w, g1o, a0, e0)
                 if f > 0.0 and not resume:
                     if ch_prev and mirror:  # the segment by way of the base: (walk, NEE at the base, the chain)
-                        _, p_rev, _ = _cond_eval(-wx, -wy, -wz, chx, chy, chz, b_rough[q], _g1_dir(-wx, -wy, -wz, b_rough[q]))
+                        p_rev = _cond_pdf(-wx, -wy, -wz, chx, chy, chz, b_rough[q])
                         k = f * chp * pdf_last / (chp * pdf_last + chp * pn + MIRROR_CHAIN_P * pn * p_rev)
                     elif ch_prev:  # the segment from slab 1: three strategies (walk, NEE at interface 1, the chain)
                         p1 = _ft_pdf(rough[q, 1], ior[q, 1], -wx, -wy, -wz, -chx, -chy, -chz)
@@ -940,6 +947,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 else:
                     sc = 0.0
                 ba = b_rough[q]
+                g1w = _g1_dir(wx, wy, wz, ba) if base == 0 else 0.0
                 if chain and wz > 0.0:  # the base under slab 1: next-event estimation through the stack
                     d1x, d1y, d1z, g, pn, p1, p_if = _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0,
                                                                 rough[q, 1], ior[q, 1], sigma[q, 1], _uniform(key, ctr),
@@ -947,7 +955,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                                                                 _uniform(key, ctr + 3))
                     if g > 0.0:
                         if base == 0:
-                            fb, pb, x = _cond_eval(wx, wy, wz, d1x, d1y, d1z, ba, _g1_dir(wx, wy, wz, ba))
+                            fb, pb, x = _cond_eval(wx, wy, wz, d1x, d1y, d1z, ba, g1w)
                         elif base == 1:
                             fb, pb, x = INV_PI, d1z * INV_PI, 0.0
                         else:
@@ -961,12 +969,11 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                     ctr += 2
                 ctr += 2
                 if base == 0:
-                    g1w = _g1_dir(wx, wy, wz, ba)
                     seg = mirror and scat_prev and wz > 0.0  # from a scattering: the chain made this segment too
                     if sc > 0.0:
                         f, pb, x = _cond_eval(wx, wy, wz, vx, vy, vz, ba, g1w)
                         if seg:
-                            _, p_rev, _ = _cond_eval(vx, vy, vz, wx, wy, wz, ba, _g1_dir(vx, vy, vz, ba))
+                            p_rev = _cond_pdf(vx, vy, vz, wx, wy, wz, ba)
                             k = f * abs(vz) * sc * pdf_last * pn / (pdf_last * pb + pdf_last * pn + MIRROR_CHAIN_P * pn * p_rev)
                         else:
                             k = f * abs(vz) * sc * pm * pn / (pm * pn + pm * pb + pg * pb + pw * pn)

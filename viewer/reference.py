@@ -17,6 +17,7 @@ a material or a view shows its reference at once. The process ends with
 from __future__ import annotations
 
 import atexit
+import functools
 import multiprocessing as mp
 import os
 import queue
@@ -90,10 +91,11 @@ class ReferenceImage:
     """(H, W, 3) the image's standard error per pixel (the walk's, pooled over
     the rounds like the paths)."""
 
-    @property
+    @functools.cached_property
     def noise(self) -> float | None:
         """Relative noise of the image: RMS standard error over the mean
-        absolute value of the pixels that carry light (None before any path)."""
+        absolute value of the pixels that carry light (None before any path);
+        computed once per result, not per drawn frame."""
         if self.stderr is None or self.spp == 0:
             return None
         lit = np.abs(self.image).sum(-1) > 0
