@@ -535,7 +535,7 @@ def _first_vertex(wx, wy, wz, gx, gy, gz, a0, e0, lam, wide, a_wide, ox, oy, oz,
 
 
 @njit(**_JIT)
-def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, u0, u1, u2, u3, entry):
+def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, u0, u1, u2, u3, entry, tau0):
     """Strategy C of the two-bounce connection (top reflection -> base ->
     exit toward wo) for an empty top slab over a conductor: draws the
     reflected direction g from the exit lobe toward wo mirrored about the
@@ -547,7 +547,8 @@ def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, o
     (p_g(g) p_c(u)) and D (the wide guide and next-event estimation:
     p_w(g) p_n(u), ``_wide_connection``; agw: its roughness). ``entry``: w
     is wi above the stack and the first vertex is the forced refraction into
-    it instead of the internal reflection."""
+    it instead of the internal reflection. tau0: the top slab's optical
+    thickness (the path crosses it twice unscattered)."""
     tx, ty, tz, _, pg = _ft_sample(a0, e0, ox, oy, oz, u0, u1)
     if pg <= 0.0:
         return 0.0, 0.0
@@ -565,13 +566,15 @@ def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, o
         return 0.0, 0.0
     pn = _ft_pdf(a0, e0, ox, oy, oz, -ux, -uy, -uz)
     pw = _ft_pdf(agw, e0, ox, oy, oz, -gx, -gy, gz)
-    w = pg * pc / (pm * pc + pm * pn + pg * pc + pw * pn)
-    return fr / pg * fc * uz / pc * fe * w, x
+    tg = math.exp(tau0 / gz) if tau0 > 0.0 else 1.0
+    tu = math.exp(-tau0 / uz) if tau0 > 0.0 else 1.0
+    w = pg * pc / (pm * tg * tu * pc + pm * tg * pn + pg * pc + pw * pn)
+    return fr / pg * fc * uz / pc * fe * w * tg * tu, x
 
 
 @njit(**_JIT)
 def _wide_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, sx, sy, sz, g1o, u0, u1, u2, u3,
-                     entry):
+                     entry, tau0):
     """Strategy D of the two-bounce connection (the path of
     ``_mirror_connection``): the reflected direction g from the wide guide
     (the exit lobe toward wo of a coat of roughness agw, mirrored about the
@@ -588,14 +591,16 @@ def _wide_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz,
     fr, pm = _first_vertex(wx, wy, wz, gx, gy, gz, a0, e0, lam, wide, a_wide, ox, oy, oz, entry)
     if fr <= 0.0:
         return 0.0, 0.0
-    vx, vy, vz, sc, pn = _nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, 0.0, u2, u3)
+    vx, vy, vz, sc, pn = _nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, u2, u3)
     if sc <= 0.0:
         return 0.0, 0.0
     fc, pb, x = _cond_geo(-gx, -gy, -gz, vx, vy, vz, ba)
     if fc <= 0.0:
         return 0.0, 0.0
     pg = _ft_pdf(a0, e0, ox, oy, oz, -gx, -gy, gz)
-    return fr * fc * vz * sc * pn / (pm * pb + pm * pn + pg * pb + pw * pn), x
+    tg = math.exp(tau0 / gz) if tau0 > 0.0 else 1.0  # the flight down (gz < 0); sc has the one up
+    tv = math.exp(-tau0 / vz) if tau0 > 0.0 else 1.0
+    return fr * fc * vz * sc * pn * tg / (pm * tg * tv * pb + pm * tg * pn + pg * pb + pw * pn), x
 
 
 # --- the walk -----------------------------------------------------------------------------
@@ -623,19 +628,21 @@ def _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, a1, e1, tau1, u
     the vertex), g = Tr1 f_if(-d1, v0) |v0_z| Tr0 f_top(v0, wo) / (pn p1) and
     the three strategies' densities of the segment (d1, v0) without the
     vertex's own density: pn (v0 from wo), p1 (d1 given v0), p_if (v0 given
-    d1, the walk's sampling at interface 1)."""
+    d1, the walk's sampling at interface 1), and Tr1, Tr0: the flights'
+    survival, which the walk's own densities carry in the MIS weights."""
     v0x, v0y, v0z, sc0, pn = _nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, u0, u1)
     if sc0 <= 0.0:
-        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0
     tx, ty, tz, w1, p1 = _ft_sample(a1, e1, v0x, v0y, v0z, u2, u3)
     if p1 <= 0.0 or w1 <= 0.0 or tz >= 0.0:
-        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0
     f_if, p_if = _diel_eval_pdf(tx, ty, tz, v0x, v0y, v0z, a1, e1)
     if f_if <= 0.0:
-        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0
     d1z = -tz
     tr1 = math.exp(-tau1 * (depth - 1.0) / max(d1z, 1e-12)) if tau1 > 0.0 else 1.0
-    return -tx, -ty, d1z, tr1 * f_if * v0z * sc0 / p1, pn, p1, p_if
+    tr0 = math.exp(-tau0 / v0z) if tau0 > 0.0 else 1.0
+    return -tx, -ty, d1z, tr1 * f_if * v0z * sc0 / p1, pn, p1, p_if, tr1, tr0
 
 
 @njit(**_JIT)
@@ -713,12 +720,14 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
     dx, dy, dz, w_entry, _ = _ft_sample(a0, e0, ix, iy, iz, u0, u1)
     for c in range(C):
         out[c] = 0.0
-    conn = forced and L == 1 and base == 0 and tau0 == 0.0
+    # the same through a medium over a sharp conductor (roughness < MIRROR_CHAIN_ROUGHNESS): the
+    # unscattered chain top -> base -> exit joins two lobes through a near-mirror (estimator v7)
+    conn = forced and L == 1 and base == 0 and (tau0 == 0.0 or b_rough[q] < MIRROR_CHAIN_ROUGHNESS)
     if conn:  # strategies C and D from the entry (independent of the walk's first sample)
         k, x = _mirror_connection(ix, iy, iz, a0, e0, b_rough[q], 1.0, False, a_wide, agw, ox, oy, oz,
-                                  _uniform(key, 2), _uniform(key, 3), _uniform(key, 4), _uniform(key, 5), True)
+                                  _uniform(key, 2), _uniform(key, 3), _uniform(key, 4), _uniform(key, 5), True, tau0)
         kd, xd = _wide_connection(ix, iy, iz, a0, e0, b_rough[q], 1.0, False, a_wide, agw, ox, oy, oz, sx, sy, sz,
-                                  g1o, _uniform(key, 6), _uniform(key, 7), _uniform(key, 8), _uniform(key, 9), True)
+                                  g1o, _uniform(key, 6), _uniform(key, 7), _uniform(key, 8), _uniform(key, 9), True, tau0)
         for c in range(C):
             r0 = b_r0[q, c]
             out[c] += k * (x + r0 * (1.0 - x)) + kd * (xd + r0 * (1.0 - xd))
@@ -737,17 +746,18 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
     # slab over a conductor; (pm, pg, pw): densities of the current downward
     # direction from the walk's mixture, the guide and the wide guide (pg = pw
     # = 0: no top vertex before it)
-    pm, pg, pw = 1.0, 0.0, 0.0
+    pm, pg, pw, tg = 1.0, 0.0, 0.0, 1.0
     if conn:
         ctr = 10
         pm = _ft_pdf(a0, e0, ix, iy, iz, dx, dy, dz)
+        tg = math.exp(tau0 / dz) if tau0 > 0.0 else 1.0
         pg = _ft_pdf(a0, e0, ox, oy, oz, -dx, -dy, dz)
         pw = _ft_pdf(agw, e0, ox, oy, oz, -dx, -dy, dz)
     # splitting by exit importance (v5): g* = centre of the mirrored exit lobe,
     # i_peak = I of the state a flat facet turns into g*; kscale = product of
     # the split factors (beta * kscale = the unsplit weight), lref = the
     # importance level (unsplit weight x I) the path started at x kscale
-    split = conn and kmax > 1
+    split = conn and kmax > 1 and tau0 == 0.0
     # next-event estimation through the stack (two interfaces): at vertices in
     # slab 1, with MIS over the segment (d1, v0) against the walk (exit in
     # closed form at the top) and next-event estimation at interface 1;
@@ -761,6 +771,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
     scat = False
     ch_on = False
     chx = chy = chz = chp = 0.0
+    cht1 = 1.0  # the survival of the walk's flight d1 in slab 1
     gsx = gsy = gsz = i_peak = lref = 0.0
     kscale = 1.0
     ntot = 1
@@ -782,6 +793,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 beta[c] = stk[nstk, 7 + c]
         bounces += 1
         vertices += 1
+        z0 = depth  # where the flight starts
         # free flight in the current slab
         tau = sigma[q, slab]
         down = dz < 0.0
@@ -803,6 +815,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
         scat_prev = scat  # the vertex before this one was a scattering
         scat = scatter
         if scatter:
+            pm, pg, pw, tg = 1.0, 0.0, 0.0, 1.0  # the connection makes only unscattered segments
             if slab == 0:
                 vx, vy, vz, sc, pn = _nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, _uniform(key, ctr), _uniform(key, ctr + 1))
                 if sc > 0.0:
@@ -820,11 +833,12 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 if mirror:
                     ctr += 5
             elif chain and slab == 1:
-                _, _, _, g, pn, p1, p_if = _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, rough[q, 1],
+                _, _, _, g, pn, p1, p_if, t1, t0 = _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, rough[q, 1],
                                                       ior[q, 1], sigma[q, 1], _uniform(key, ctr), _uniform(key, ctr + 1),
                                                       _uniform(key, ctr + 2), _uniform(key, ctr + 3))
                 if g > 0.0:
-                    k = INV_4PI * g * pn * p1 / (INV_4PI * p_if + INV_4PI * pn + pn * p1)
+                    # the walk passes the flights by chance: its densities carry their survival (t1, t0)
+                    k = INV_4PI * g * pn * p1 / (INV_4PI * t1 * t0 * p_if + INV_4PI * t1 * pn + pn * p1)
                     for c in range(C):
                         out[c] += beta[c] * alb[q, slab, c] * k
                 ctr += 2
@@ -852,9 +866,13 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                         k = f * chp * pdf_last / (chp * pdf_last + chp * pn + MIRROR_CHAIN_P * pn * p_rev)
                     elif ch_prev:  # the segment from slab 1: three strategies (walk, NEE at interface 1, the chain)
                         p1 = _ft_pdf(rough[q, 1], ior[q, 1], -wx, -wy, -wz, -chx, -chy, -chz)
-                        k = f * chp * pdf_last / (chp * pdf_last + chp * pn + pn * p1)
+                        t0 = math.exp(tau0 / wz) if tau0 > 0.0 else 1.0  # the walk's densities carry survival
+                        k = f * chp * cht1 * t0 * pdf_last / (chp * cht1 * t0 * pdf_last + chp * cht1 * pn + pn * p1)
                     else:
-                        k = f * pm * pdf_last / (pm * pdf_last + pm * pn + pg * pdf_last + pw * pn)
+                        # through a medium the walk's densities carry the flights' survival (tg, tu): the
+                        # connection evaluates them, the walk passes them by chance
+                        tu = math.exp(tau0 / wz) if conn and tau0 > 0.0 and not scat_prev else 1.0
+                        k = f * pm * tg * tu * pdf_last / (pm * tg * tu * pdf_last + pm * tg * pn + pg * pdf_last + pw * pn)
                     for c in range(C):
                         out[c] += beta[c] * k
                 if forced:
@@ -874,10 +892,10 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                     if conn and not resume:
                         k, x = _mirror_connection(wx, wy, wz, a0, e0, b_rough[q], lm, wide, a_wide, agw, ox, oy,
                                                   oz, _uniform(key, ctr + 3), _uniform(key, ctr + 4),
-                                                  _uniform(key, ctr + 5), _uniform(key, ctr + 6), False)
+                                                  _uniform(key, ctr + 5), _uniform(key, ctr + 6), False, tau0)
                         kd, xd = _wide_connection(wx, wy, wz, a0, e0, b_rough[q], lm, wide, a_wide, agw, ox, oy, oz,
                                                   sx, sy, sz, g1o, _uniform(key, ctr + 7), _uniform(key, ctr + 8),
-                                                  _uniform(key, ctr + 9), _uniform(key, ctr + 10), False)
+                                                  _uniform(key, ctr + 9), _uniform(key, ctr + 10), False, tau0)
                         for c in range(C):
                             r0 = b_r0[q, c]
                             out[c] += beta[c] * (k * (x + r0 * (1.0 - x)) + kd * (xd + r0 * (1.0 - xd)))
@@ -905,6 +923,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                     if conn:
                         ctr += 8
                         pm = p
+                        tg = math.exp(tau0 / nz) if tau0 > 0.0 and p > 0.0 else 1.0
                         pg = _ft_pdf(a0, e0, ox, oy, oz, -nx, -ny, nz) if p > 0.0 else 0.0
                         pw = _ft_pdf(agw, e0, ox, oy, oz, -nx, -ny, nz) if p > 0.0 else 0.0
                 else:
@@ -923,7 +942,10 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                         f, pb = _diel_eval_pdf(wx, wy, wz, vx, vy, vz, a, e)
                         if chain and wz < 0.0:  # from slab 1: the chain's density of d1 = -w enters the weight
                             p1 = _ft_pdf(a, e, vx, vy, vz, wx, wy, wz)
-                            k = f * abs(vz) * sc * pdf_last * pn / (pdf_last * pb + pdf_last * pn + pn * p1)
+                            t1 = math.exp(-sigma[q, 1] * (z0 - 1.0) / dz) if sigma[q, 1] > 0.0 else 1.0
+                            t0 = math.exp(-tau0 / vz) if tau0 > 0.0 else 1.0
+                            pw1 = pdf_last * t1  # the walk's density of d1 and its survival
+                            k = f * abs(vz) * sc * pw1 * pn / (pw1 * t0 * pb + pw1 * pn + pn * p1)
                         else:
                             k = f * abs(vz) * sc * pn / (pn + pb)
                         for c in range(C):
@@ -935,6 +957,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 alive = p > 0.0 and wgt > 0.0
                 if chain and alive and wz < 0.0 and nz > 0.0:  # up through interface 1: the segment starts
                     ch_on, chx, chy, chz, chp = True, -wx, -wy, -wz, pdf_last
+                    cht1 = math.exp(-sigma[q, 1] * (z0 - 1.0) / dz) if sigma[q, 1] > 0.0 else 1.0
                 if alive and wz * nz < 0.0:  # crossed: down into slab k, up into slab k - 1
                     slab = k_if if dz < 0.0 else k_if - 1
                 for c in range(C):
@@ -949,7 +972,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 ba = b_rough[q]
                 g1w = _g1_dir(wx, wy, wz, ba) if base == 0 else 0.0
                 if chain and wz > 0.0:  # the base under slab 1: next-event estimation through the stack
-                    d1x, d1y, d1z, g, pn, p1, p_if = _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0,
+                    d1x, d1y, d1z, g, pn, p1, p_if, t1, t0 = _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0,
                                                                 rough[q, 1], ior[q, 1], sigma[q, 1], _uniform(key, ctr),
                                                                 _uniform(key, ctr + 1), _uniform(key, ctr + 2),
                                                                 _uniform(key, ctr + 3))
@@ -962,7 +985,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                             fb, pb = _diel_eval_pdf(wx, wy, wz, d1x, d1y, d1z, ba, b_ior[q])
                             x = 0.0
                         if fb > 0.0:
-                            k = fb * d1z * g * pn * p1 / (pb * p_if + pb * pn + pn * p1)
+                            k = fb * d1z * g * pn * p1 / (pb * t1 * t0 * p_if + pb * t1 * pn + pn * p1)
                             for c in range(C):
                                 col = (x + b_r0[q, c] * (1.0 - x)) if base == 0 else (b_alb[q, c] if base == 1 else 1.0)
                                 out[c] += beta[c] * k * col
@@ -976,7 +999,8 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                             p_rev = _cond_pdf(vx, vy, vz, wx, wy, wz, ba)
                             k = f * abs(vz) * sc * pdf_last * pn / (pdf_last * pb + pdf_last * pn + MIRROR_CHAIN_P * pn * p_rev)
                         else:
-                            k = f * abs(vz) * sc * pm * pn / (pm * pn + pm * pb + pg * pb + pw * pn)
+                            tv = math.exp(-tau0 / vz) if conn and tau0 > 0.0 else 1.0
+                            k = f * abs(vz) * sc * pm * tg * pn / (pm * tg * pn + pm * tg * tv * pb + pg * pb + pw * pn)
                         for c in range(C):
                             out[c] += beta[c] * k * (x + b_r0[q, c] * (1.0 - x))
                     mx, my, mz = _sample_vndf(wx, wy, wz, ba, _uniform(key, ctr), _uniform(key, ctr + 1))

@@ -210,9 +210,9 @@ def _three_vertex_estimates(w, o, a0, e0, ba, lam, wide, a_wide, agw, n, seed):
                     pn = W._ft_pdf(a0, e0, ox, oy, oz, -ux, -uy, -uz)
                     ref += fr * fc * uz * fe / (pm * pc + pm * pn + pg * pc)
         k, _ = W._mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, u[11], u[12], u[13],
-                                    u[14], False)
+                                    u[14], False, 0.0)
         kd, _ = W._wide_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, sx, sy, sz, g1o,
-                                   u[15], u[16], u[17], u[18], False)
+                                   u[15], u[16], u[17], u[18], False, 0.0)
         new += k + kd
         s[0] += ref
         s[1] += ref * ref
