@@ -58,6 +58,15 @@ Two more changes for that light:
   to wo by way of the base (v0 drawn from wo through the top, the direction
   down to the base from the base's reflection of v0), weighted against the
   walk and the base's next-event estimation;
+- estimator v7, for one interface over a medium and a conductor sharper
+  than ``MIRROR_CHAIN_ROUGHNESS``: the two-bounce connection (C, D) also runs
+  through the medium, its flights' transmittance in closed form, because the
+  unscattered chain coat -> base -> coat carries the base's sharp reflection
+  and the walk passed the medium twice only by chance (1 % at the worst
+  pairs of a thick slab); in the MIS weights of that connection and of the
+  chain through a two-interface stack, the walk's densities carry its
+  flights' survival probability (the other strategies evaluate it), so where
+  a flight is unlikely to pass the strategies that evaluate it take over;
 - on every stack, reciprocity: the walk starts from the more grazing of
   (wi, wo) (a stack reflects into the air it is lit from), whose light
   refracts nearer the critical angle, so the trapped state is reached often
