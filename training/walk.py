@@ -736,7 +736,8 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
         k, x = _mirror_connection(ix, iy, iz, a0, e0, b_rough[q], 1.0, False, a_wide, agw, ox, oy, oz,
                                   _uniform(key, 2), _uniform(key, 3), _uniform(key, 4), _uniform(key, 5), True, tau0)
         kd, xd = _wide_connection(ix, iy, iz, a0, e0, b_rough[q], 1.0, False, a_wide, agw, ox, oy, oz, sx, sy, sz,
-                                  g1o, _uniform(key, 6), _uniform(key, 7), _uniform(key, 8), _uniform(key, 9), True, tau0)
+                                  g1o, _uniform(key, 6), _uniform(key, 7), _uniform(key, 8), _uniform(key, 9), True,
+                                  tau0)
         for c in range(C):
             r0 = b_r0[q, c]
             out[c] += k * (x + r0 * (1.0 - x)) + kd * (xd + r0 * (1.0 - xd))
@@ -842,9 +843,10 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 if mirror:
                     ctr += 5
             elif chain and slab == 1:
-                _, _, _, g, pn, p1, p_if, t1, t0 = _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, rough[q, 1],
-                                                      ior[q, 1], sigma[q, 1], _uniform(key, ctr), _uniform(key, ctr + 1),
-                                                      _uniform(key, ctr + 2), _uniform(key, ctr + 3))
+                _, _, _, g, pn, p1, p_if, t1, t0 = _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0,
+                                                              rough[q, 1], ior[q, 1], sigma[q, 1], _uniform(key, ctr),
+                                                              _uniform(key, ctr + 1), _uniform(key, ctr + 2),
+                                                              _uniform(key, ctr + 3))
                 if g > 0.0:
                     # the walk passes the flights by chance: its densities carry their survival (t1, t0)
                     k = INV_4PI * g * pn * p1 / (INV_4PI * t1 * t0 * p_if + INV_4PI * t1 * pn + pn * p1)
@@ -881,7 +883,8 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                         # through a medium the walk's densities carry the flights' survival (tg, tu): the
                         # connection evaluates them, the walk passes them by chance
                         tu = math.exp(tau0 / wz) if conn and tau0 > 0.0 and not scat_prev else 1.0
-                        k = f * pm * tg * tu * pdf_last / (pm * tg * tu * pdf_last + pm * tg * pn + pg * pdf_last + pw * pn)
+                        pa = pm * tg * tu * pdf_last
+                        k = f * pa / (pa + pm * tg * pn + pg * pdf_last + pw * pn)
                     for c in range(C):
                         out[c] += beta[c] * k
                 if forced:
@@ -981,10 +984,10 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 ba = b_rough[q]
                 g1w = _g1_dir(wx, wy, wz, ba) if base == 0 else 0.0
                 if chain and wz > 0.0:  # the base under slab 1: next-event estimation through the stack
-                    d1x, d1y, d1z, g, pn, p1, p_if, t1, t0 = _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0,
-                                                                rough[q, 1], ior[q, 1], sigma[q, 1], _uniform(key, ctr),
-                                                                _uniform(key, ctr + 1), _uniform(key, ctr + 2),
-                                                                _uniform(key, ctr + 3))
+                    d1x, d1y, d1z, g, pn, p1, p_if, t1, t0 = _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0,
+                                                                        tau0, rough[q, 1], ior[q, 1], sigma[q, 1],
+                                                                        _uniform(key, ctr), _uniform(key, ctr + 1),
+                                                                        _uniform(key, ctr + 2), _uniform(key, ctr + 3))
                     if g > 0.0:
                         if base == 0:
                             fb, pb, x = _cond_eval(wx, wy, wz, d1x, d1y, d1z, ba, g1w)
