@@ -575,8 +575,7 @@ def _mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, o
         return 0.0, 0.0
     pn = _ft_pdf(a0, e0, ox, oy, oz, -ux, -uy, -uz)
     pw = _ft_pdf(agw, e0, ox, oy, oz, -gx, -gy, gz)
-    tg = math.exp(tau0 / gz) if tau0 > 0.0 else 1.0
-    tu = math.exp(-tau0 / uz) if tau0 > 0.0 else 1.0
+    tg, tu = _survival(tau0, 1.0, gz), _survival(tau0, 1.0, uz)
     w = pg * pc / (pm * tg * tu * pc + pm * tg * pn + pg * pc + pw * pn)
     return fr / pg * fc * uz / pc * fe * w * tg * tu, x
 
@@ -607,12 +606,20 @@ def _wide_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz,
     if fc <= 0.0:
         return 0.0, 0.0
     pg = _ft_pdf(a0, e0, ox, oy, oz, -gx, -gy, gz)
-    tg = math.exp(tau0 / gz) if tau0 > 0.0 else 1.0  # the flight down (gz < 0); sc has the one up
-    tv = math.exp(-tau0 / vz) if tau0 > 0.0 else 1.0
+    tg, tv = _survival(tau0, 1.0, gz), _survival(tau0, 1.0, vz)  # the flights down and up; sc has the one up
     return fr * fc * vz * sc * pn * tg / (pm * tg * tv * pb + pm * tg * pn + pg * pb + pw * pn), x
 
 
 # --- the walk -----------------------------------------------------------------------------
+@njit(**_JIT)
+def _survival(tau, length, cz):
+    """Tr = exp(-tau length / |cz|): the probability that a flight through
+    ``length`` (in slab thicknesses) of a slab of optical thickness ``tau``
+    along a direction of z component ``cz`` passes unscattered; 1 for an
+    empty slab."""
+    return math.exp(-tau * length / max(abs(cz), 1e-12)) if tau > 0.0 else 1.0
+
+
 @njit(**_JIT)
 def _nee(z, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, u0, u1):
     """Samples the top interface from wo (forced transmission): the direction
@@ -624,7 +631,7 @@ def _nee(z, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, u0, u1):
     if p <= 0.0 or w <= 0.0:
         return 0.0, 0.0, 1.0, 0.0, 0.0
     vz = -tz
-    tr = math.exp(-tau0 * z / max(vz, 1e-12)) if tau0 > 0.0 else 1.0
+    tr = _survival(tau0, z, vz)
     return -tx, -ty, vz, tr * w / (e0 * e0 * vz), p
 
 
@@ -649,8 +656,7 @@ def _chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, a1, e1, tau1, u
     if f_if <= 0.0:
         return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0
     d1z = -tz
-    tr1 = math.exp(-tau1 * (depth - 1.0) / max(d1z, 1e-12)) if tau1 > 0.0 else 1.0
-    tr0 = math.exp(-tau0 / v0z) if tau0 > 0.0 else 1.0
+    tr1, tr0 = _survival(tau1, depth - 1.0, d1z), _survival(tau0, 1.0, v0z)
     return -tx, -ty, d1z, tr1 * f_if * v0z * sc0 / p1, pn, p1, p_if, tr1, tr0
 
 
@@ -673,7 +679,7 @@ def _mirror_chain_nee(depth, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, ba, u0, 
     p_rev = _cond_pdf(v0x, v0y, v0z, ux, uy, uz, ba)
     if f <= 0.0 or p_rev <= 0.0:
         return 0.0, 0.0, 0.0, 0.0, 0.0
-    tr = math.exp(-tau0 * (1.0 - depth) / uz)
+    tr = _survival(tau0, 1.0 - depth, uz)
     return tr * f * v0z * sc0 / p_rev, pn, pb, p_rev, x
 
 
@@ -760,7 +766,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
     if conn:
         ctr = 10
         pm = _ft_pdf(a0, e0, ix, iy, iz, dx, dy, dz)
-        tg = math.exp(tau0 / dz) if tau0 > 0.0 else 1.0
+        tg = _survival(tau0, 1.0, dz)
         pg = _ft_pdf(a0, e0, ox, oy, oz, -dx, -dy, dz)
         pw = _ft_pdf(agw, e0, ox, oy, oz, -dx, -dy, dz)
     # splitting by exit importance (v5): g* = centre of the mirrored exit lobe,
@@ -877,12 +883,12 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                         k = f * chp * pdf_last / (chp * pdf_last + chp * pn + MIRROR_CHAIN_P * pn * p_rev)
                     elif ch_prev:  # the segment from slab 1: three strategies (walk, NEE at interface 1, the chain)
                         p1 = _ft_pdf(rough[q, 1], ior[q, 1], -wx, -wy, -wz, -chx, -chy, -chz)
-                        t0 = math.exp(tau0 / wz) if tau0 > 0.0 else 1.0  # the walk's densities carry survival
+                        t0 = _survival(tau0, 1.0, wz)  # the walk's densities carry survival
                         k = f * chp * cht1 * t0 * pdf_last / (chp * cht1 * t0 * pdf_last + chp * cht1 * pn + pn * p1)
                     else:
                         # through a medium the walk's densities carry the flights' survival (tg, tu): the
                         # connection evaluates them, the walk passes them by chance
-                        tu = math.exp(tau0 / wz) if conn and tau0 > 0.0 and not scat_prev else 1.0
+                        tu = _survival(tau0, 1.0, wz) if conn and not scat_prev else 1.0
                         pa = pm * tg * tu * pdf_last
                         k = f * pa / (pa + pm * tg * pn + pg * pdf_last + pw * pn)
                     for c in range(C):
@@ -935,7 +941,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                     if conn:
                         ctr += 8
                         pm = p
-                        tg = math.exp(tau0 / nz) if tau0 > 0.0 and p > 0.0 else 1.0
+                        tg = _survival(tau0, 1.0, nz) if p > 0.0 else 1.0
                         pg = _ft_pdf(a0, e0, ox, oy, oz, -nx, -ny, nz) if p > 0.0 else 0.0
                         pw = _ft_pdf(agw, e0, ox, oy, oz, -nx, -ny, nz) if p > 0.0 else 0.0
                 else:
@@ -948,16 +954,16 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
             elif k_if < L:
                 a, e = rough[q, k_if], ior[q, k_if]
                 if k_if == 1:
+                    # from slab 1: the survival of the walk's flight d1 (its MIS density and the segment's)
+                    t1 = _survival(sigma[q, 1], z0 - 1.0, dz) if chain and wz < 0.0 else 1.0
                     vx, vy, vz, sc, pn = _nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, tau0, _uniform(key, ctr),
                                               _uniform(key, ctr + 1))
                     if sc > 0.0:
                         f, pb = _diel_eval_pdf(wx, wy, wz, vx, vy, vz, a, e)
                         if chain and wz < 0.0:  # from slab 1: the chain's density of d1 = -w enters the weight
                             p1 = _ft_pdf(a, e, vx, vy, vz, wx, wy, wz)
-                            t1 = math.exp(-sigma[q, 1] * (z0 - 1.0) / dz) if sigma[q, 1] > 0.0 else 1.0
-                            t0 = math.exp(-tau0 / vz) if tau0 > 0.0 else 1.0
                             pw1 = pdf_last * t1  # the walk's density of d1 and its survival
-                            k = f * abs(vz) * sc * pw1 * pn / (pw1 * t0 * pb + pw1 * pn + pn * p1)
+                            k = f * abs(vz) * sc * pw1 * pn / (pw1 * _survival(tau0, 1.0, vz) * pb + pw1 * pn + pn * p1)
                         else:
                             k = f * abs(vz) * sc * pn / (pn + pb)
                         for c in range(C):
@@ -969,7 +975,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                 alive = p > 0.0 and wgt > 0.0
                 if chain and alive and wz < 0.0 and nz > 0.0:  # up through interface 1: the segment starts
                     ch_on, chx, chy, chz, chp = True, -wx, -wy, -wz, pdf_last
-                    cht1 = math.exp(-sigma[q, 1] * (z0 - 1.0) / dz) if sigma[q, 1] > 0.0 else 1.0
+                    cht1 = t1
                 if alive and wz * nz < 0.0:  # crossed: down into slab k, up into slab k - 1
                     slab = k_if if dz < 0.0 else k_if - 1
                 for c in range(C):
@@ -1011,7 +1017,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                             p_rev = _cond_pdf(vx, vy, vz, wx, wy, wz, ba)
                             k = f * abs(vz) * sc * pdf_last * pn / (pdf_last * pb + pdf_last * pn + MIRROR_CHAIN_P * pn * p_rev)
                         else:
-                            tv = math.exp(-tau0 / vz) if conn and tau0 > 0.0 else 1.0
+                            tv = _survival(tau0, 1.0, vz) if conn else 1.0
                             k = f * abs(vz) * sc * pm * tg * pn / (pm * tg * pn + pm * tg * tv * pb + pg * pb + pw * pn)
                         for c in range(C):
                             out[c] += beta[c] * k * (x + b_r0[q, c] * (1.0 - x))
