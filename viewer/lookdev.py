@@ -26,7 +26,8 @@ from __future__ import annotations
 import math
 import threading
 import time
-from dataclasses import dataclass, field, fields, replace
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
@@ -39,9 +40,11 @@ from nbrdf.neural.latent_texture import LatentTexture, blend
 from nbrdf.neural.material import Material, load_material, material_to_dict, save_material
 from nbrdf.viewer.backdrop import Backdrop, BackdropSettings
 from nbrdf.viewer.compare import Compare, reference_state
+from nbrdf.viewer.history import History
 from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, ToneMap, View
 from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, gpu_brdf, material_key
 from nbrdf.viewer.renderer import Renderer, ViewState
+from nbrdf.viewer.screenshot import SHOT_LINEAR_SLOT, SHOT_SLOTS, ScreenshotJob, TileCamera, write_display_png
 from nbrdf.viewer.session import CompareSettings, Interpolation, SessionDoc
 from nbrdf.viewer.ui.stack_editor import StackEditor
 
@@ -50,6 +53,13 @@ if TYPE_CHECKING:
 
 PRESETS_DIR = Path(__file__).parent / "assets" / "materials"
 MAX_PASSES = 1024
+#: The accumulation slots of the window's view: the image, the second image of a BRDF blend.
+VIEW_SLOTS = ("main", "other")
+#: Drop targets by file suffix (``open_file``).
+ENV_SUFFIXES = (".hdr", ".exr")
+MESH_SUFFIXES = (".glb", ".gltf", ".obj")
+#: The time one step of a screenshot may take (ms): the window stays responsive.
+SHOT_STEP_MS = 150.0
 #: View-state fields that change only the display transform (no new accumulation).
 DISPLAY_FIELDS = ("exposure", "tonemap")
 
@@ -66,9 +76,11 @@ class Timings:
     latent_ms: float = 0.0
     """Leaf encoders + layering + GPU resources of the last edit."""
     frame_ms: float = 0.0
-    """The last ``render`` call."""
+    """The mean interval between frames presented by the window (1000 / ``fps``)."""
     fps: float = 0.0
-    """Smoothed frames per second."""
+    """Frames presented per second of wall time, over the window's last frames."""
+    render_ms: float = 0.0
+    """The last ``render`` call (the 3D view alone)."""
     edit_to_frame_ms: float = 0.0
     """From an edit to the end of the first frame showing it."""
 
@@ -140,6 +152,18 @@ class LookDev:
         self.selected = 0
         """The index in ``parts`` of the material the stack editor edits."""
         self._part_brdfs: dict[str, GpuBrdf] = {}
+        self._accum_key: tuple | None = None  # the (size, view) the accumulation is for
+        self._view_tex: dict[str, moderngl.Texture] = {}  # the lobe / slice image of each slot
+        self._shot: ScreenshotJob | None = None
+        self._shot_fbos: dict[tuple[int, int], moderngl.Framebuffer] = {}
+        self.shot_texture: moderngl.Texture | None = None
+        """The screenshot being rendered as far as it is (RGBA8, row 0 at the bottom), for the window to show."""
+        self._ms_per_pixel_pass: float | None = None  # measured by the view's frames
+        self.history = History()
+        """Undo / redo over the session's snapshots (``undo``, ``redo``)."""
+        self._group: str | None = None  # the coalescing group of the edits being made (a slider drag)
+        self._restoring = False
+        self._depth = 0  # nested guarded edits (one undo step for the outermost)
         self.renderer = Renderer(ctx, mesh=mesh, environment=self._read_env(env) if env else None)
         if parts is not None:
             self._set_parts(parts, apply=False)  # applied below
@@ -147,6 +171,7 @@ class LookDev:
         self.backdrop = backdrop or BackdropSettings()
         self.backdrop_part = Backdrop(ctx, self.renderer)
         self._apply_material()
+        self.history.reset(self.snapshot())
 
     @property
     def model(self):
@@ -159,7 +184,10 @@ class LookDev:
 
     # --- guarded user actions -----------------------------------------------------------
     def _guard(self, fn, *args) -> bool:
-        """Runs an edit; a bad input becomes ``error`` (one line) and changes nothing."""
+        """Runs an edit; a bad input becomes ``error`` (one line) and changes nothing.
+        A change it made is one undo step (``history``; an edit made of edits, such
+        as opening a session, is one step)."""
+        self._depth += 1
         try:
             fn(*args)
         except NbrdfError as e:
@@ -168,8 +196,60 @@ class LookDev:
         except (OSError, ValueError, KeyError, TypeError) as e:
             self.error = f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
             return False
+        finally:
+            self._depth -= 1
         self.error = None
+        if not self._restoring and self._depth == 0:
+            self.history.commit(self.snapshot(), self._group)
         return True
+
+    # --- undo / redo ------------------------------------------------------------------------
+    def snapshot(self) -> dict:
+        """The session as the undo history keeps it: the document less the camera's
+        place (orbit, pan and zoom are navigation, not edits; the field of view is kept)."""
+        d = self.document().to_dict()
+        d["camera"] = {"fov": d["camera"]["fov"]}
+        return d
+
+    @contextmanager
+    def coalescing(self, group: str | None):
+        """Edits made inside join the open step of ``group`` (one slider drag is one
+        undo step); the panels close it with ``end_group`` when the widget is let go."""
+        old, self._group = self._group, group
+        try:
+            yield
+        finally:
+            self._group = old
+
+    def end_group(self) -> None:
+        """The next edit is a new undo step."""
+        self.history.close_group()
+
+    def undo(self) -> bool:
+        """Goes back one edit (False: nothing to undo)."""
+        return self._travel(self.history.undo, "undo")
+
+    def redo(self) -> bool:
+        """Makes the edit undone last again (False: nothing to redo)."""
+        return self._travel(self.history.redo, "redo")
+
+    def _travel(self, step, what: str) -> bool:
+        snap = step()
+        if snap is None:
+            self.notice = f"nothing to {what}"
+            return False
+        camera = self.state.camera
+        doc = SessionDoc.parse({**snap, "camera": asdict(camera)}, what)
+        self._restoring = True
+        try:
+            ok = self._guard(lambda: self.restore(doc))
+        finally:
+            self._restoring = False
+        if ok:
+            self.state.camera.set_fov(float(snap["camera"]["fov"]))
+            self.history.current = self.snapshot()  # as restored (the same document)
+            self.notice = f"{what}: {len(self.history.undo_stack)} steps back, {len(self.history.redo_stack)} ahead"
+        return ok
 
     @property
     def material(self) -> Material:
@@ -205,6 +285,42 @@ class LookDev:
             self.editor = StackEditor.from_material(m)
             self._apply_material()
         return self._guard(go)
+
+    def open_file(self, path: str | Path) -> bool:
+        """Opens a file dropped on the window by its kind: a material or a session
+        .json (told apart by content), an .hdr/.exr environment, a .glb/.gltf/.obj mesh."""
+        p = Path(path)
+        suffix = p.suffix.lower()
+        if suffix == ".json":
+            def go():
+                import json
+
+                from nbrdf.viewer.session import SESSION_FORMAT
+
+                if not p.is_file():
+                    raise NbrdfError(f"{p}: no such file")
+                try:
+                    data = json.loads(p.read_text())
+                except (json.JSONDecodeError, UnicodeDecodeError) as e:
+                    raise NbrdfError(f"{p}: not JSON ({getattr(e, 'msg', e)})") from None
+                if isinstance(data, dict) and data.get("format") == SESSION_FORMAT:
+                    self.restore(SessionDoc.parse(data, str(p)))
+                else:
+                    m = load_material(p)
+                    self.editor = StackEditor.from_material(m)
+                    self._apply_material()
+            ok = self._guard(go)
+        elif suffix in ENV_SUFFIXES:
+            ok = self.set_environment(str(p))
+        elif suffix in MESH_SUFFIXES:
+            ok = self.set_mesh(str(p))
+        else:
+            self.error = (f"{p.name}: cannot open a {suffix or 'file without a suffix'} (a material or session "
+                          f".json, an {'/'.join(ENV_SUFFIXES)} environment, a {'/'.join(MESH_SUFFIXES)} mesh)")
+            return False
+        if ok:
+            self.notice = f"opened {p.name}"
+        return ok
 
     def save_material(self, path: str | Path) -> bool:
         return self._guard(lambda: save_material(self.material, path))
@@ -365,14 +481,14 @@ class LookDev:
         return self._guard(go)
 
     def set_compare(self, mode: CompareMode | str) -> bool:
-        try:
-            mode = CompareMode.parse(mode, "compare mode")
-        except ValueError as e:
-            self.error = str(e)
-            return False
-        self.compare_settings.mode = mode
-        self.invalidate()
-        return True
+        def go():
+            try:
+                parsed = CompareMode.parse(mode, "compare mode")
+            except ValueError as e:
+                raise NbrdfError(str(e)) from None
+            self.compare_settings = CompareSettings(parsed, self.wipe, self.err_scale)
+            self.invalidate()
+        return self._guard(go)
 
     def set_wipe(self, x: float) -> bool:
         return self._guard(lambda: setattr(self, "compare_settings",
@@ -382,11 +498,13 @@ class LookDev:
         return self._guard(lambda: setattr(self, "compare_settings",
                                            CompareSettings(self.compare, self.wipe, scale)))
 
-    def set_mipmapping(self, on: bool) -> None:
-        self.mipmapping = on
-        if self.brdf is not None and self.brdf.latent_texture is not None:
-            self.brdf.latent_texture.set_mipmapped(on)
-        self.invalidate()
+    def set_mipmapping(self, on: bool) -> bool:
+        def go():
+            self.mipmapping = bool(on)
+            if self.brdf is not None and self.brdf.latent_texture is not None:
+                self.brdf.latent_texture.set_mipmapped(self.mipmapping)
+            self.invalidate()
+        return self._guard(go)
 
     def set_interpolation(self, other: str | Path | None = None, t: float | None = None,
                           mode: str | None = None) -> bool:
@@ -409,13 +527,18 @@ class LookDev:
                 raise
         return self._guard(go)
 
-    def clear_interpolation(self) -> None:
-        self.interp = Interpolation()
-        self._apply_material()
+    def clear_interpolation(self) -> bool:
+        def go():
+            self.interp = Interpolation()
+            self._apply_material()
+        return self._guard(go)
 
     def invalidate(self) -> None:
-        """Starts the progressive accumulation over."""
+        """Starts the progressive accumulation over (and a screenshot being rendered:
+        it shows the session as it is when it ends)."""
         self.passes = 0
+        if self._shot is not None:
+            self._shot.restart()
 
     # --- material -> latents -> GPU -------------------------------------------------------
     def latent(self) -> torch.Tensor:
@@ -555,7 +678,8 @@ class LookDev:
                scale: float = 1.0) -> None:
         """Adds ``passes`` to the accumulation (up to MAX_PASSES) and draws the
         view -- or the compare / BRDF-blend composite -- into ``target``; ``scale``
-        < 1 renders fewer pixels while the user drags."""
+        < 1 renders fewer pixels. Any change of the rendered size (window,
+        panels shown or hidden, scale) or of the view starts the accumulation over."""
         t0 = time.perf_counter()
         self.poll()
         if self.brdf is None:  # the first material's latent texture is still building
@@ -563,42 +687,70 @@ class LookDev:
             target.clear(0.0, 0.0, 0.0, 1.0)
             return
         w, h = max(1, int(size[0] * scale)), max(1, int(size[1] * scale))
+        key = (w, h, View.parse(self.state.view), self.side_by_side)
+        if key != self._accum_key:  # what is accumulated was for another viewport
+            self._accum_key = key
+            self.passes = 0
+        before = self.passes
+        self.passes = self._draw(target, w, h, self.passes, passes, VIEW_SLOTS)
+        self.timings.render_ms = (time.perf_counter() - t0) * 1000.0
+        if View.parse(self.state.view) == View.OBJECT and self.passes > before:
+            self._ms_per_pixel_pass = self.timings.render_ms / (w * h * (self.passes - before))
+
+    def _draw(self, target: moderngl.Framebuffer, w: int, h: int, first: int, passes: int,
+              slots: tuple[str, str], camera=None) -> int:
+        """Adds up to ``passes`` passes after ``first`` into the accumulation
+        ``slots`` (the image, the second image of a blend) at (w, h) and draws
+        the composite into ``target``; returns the passes accumulated. The
+        lobe and slice views are drawn once (``first`` 0) and shown from then on.
+        ``camera``: another camera than the view's (a screenshot's tile)."""
         comparing = self._compare_active()
         blending = self.interp.brdf_blend and self.other_brdf is not None
         vw = max(1, w // 2) if self.side_by_side else w
-        first = self.passes
         n = 0 if first >= MAX_PASSES else min(passes, MAX_PASSES - first)
         view = View.parse(self.state.view)
         if view != View.OBJECT:
             n, first = (1, 0) if first == 0 else (0, first)
         state = self.main_state()
+        if camera is not None:
+            state = replace(state, camera=camera)
         lit = replace(state, background=False)  # the backdrop pass draws what is behind the object
-        r = self.renderer
-        a = r.accumulate(lit, vw, h, first, n, self.brdf) if n else r.frame_texture(view, vw, h)
-        self.passes = first + n if view == View.OBJECT else 1
-        pa = float(self.passes)
+        a = self._accumulated(view, lit, vw, h, first, n, self.brdf, slots[0])
+        done = first + n if view == View.OBJECT else 1
+        pa = float(done)
         b, pb, weight = None, pa, None
         if comparing:
+            # The lobe and slice views are not accumulated: their reference is drawn with them each frame.
+            rf, rn = (first, n) if view == View.OBJECT else (0, 1)
             b, pb = self.compare_part.reference(self.material, self.ref_brdf, self.brdf, lit, self.mesh,
-                                                vw, h, first, n, self.passes)
+                                                vw, h, rf, rn, done)
         elif blending:
-            b = (r.accumulate(lit, vw, h, first, n, self.other_brdf, "other") if n
-                 else r.frame_texture(view, vw, h, "other"))
+            b = self._accumulated(view, lit, vw, h, first, n, self.other_brdf, slots[1])
             weight = self.interp.t
         s = self.compare_settings
         if comparing and s.mode == CompareMode.FLIP:
             self.compare_part.update_flip(a, pa, b, pb)
         if view == View.OBJECT and not (comparing and s.mode in (CompareMode.ERROR, CompareMode.FLIP)):
             # The backdrop on what is shown (the error views score the object alone).
-            a, pa = self.backdrop_part.apply(a, pa, state, self.backdrop), 1.0
+            a, pa = self.backdrop_part.apply(a, pa, state, self.backdrop, slots[0]), 1.0
             if b is not None and (blending or (comparing and self.ref_brdf is not None)):
-                b, pb = self.backdrop_part.apply(b, pb, state, self.backdrop, "other"), 1.0
+                b, pb = self.backdrop_part.apply(b, pb, state, self.backdrop, slots[1]), 1.0
         if b is None:
             b, pb = a, pa
         self.compare_part.composite(target, a, pa, b, pb, s.mode if comparing else CompareMode.OFF, weight,
                                     s.wipe, s.error_scale, self.state.exposure, self.state.tonemap)
-        self.timings.frame_ms = (time.perf_counter() - t0) * 1000.0
-        self.timings.fps = 0.9 * self.timings.fps + 0.1 * (1000.0 / max(self.timings.frame_ms, 1e-3))
+        return done
+
+    def _accumulated(self, view: View, state: ViewState, w: int, h: int, first: int, n: int, brdf: GpuBrdf,
+                     slot: str) -> moderngl.Texture:
+        """The accumulation of ``slot`` after adding ``n`` passes (none: as it is)."""
+        if n:
+            tex = self.renderer.accumulate(state, w, h, first, n, brdf, slot)
+            self._view_tex[slot] = tex  # the lobe and slice views are shown from it until redrawn
+            return tex
+        if view != View.OBJECT and slot in self._view_tex:
+            return self._view_tex[slot]
+        return self.renderer.frame_texture(view, w, h, slot)
 
     def frame_done(self) -> None:
         """Call once the frame is on screen: closes the edit-to-frame measurement."""
@@ -723,6 +875,110 @@ class LookDev:
                 self.invalidate()
             self.notice = f"wrote {p}"
         return self._guard(go)
+
+    # --- screenshots rendered in steps (the window's button) -----------------------------------
+    def start_screenshot(self, path: str | Path, size: tuple[int, int], passes: int = 16,
+                         budget_ms: float = SHOT_STEP_MS) -> bool:
+        """Starts a screenshot that ``step_screenshot`` renders a step per frame: the
+        same file ``screenshot`` writes at once. Where a whole pass would not fit
+        ``budget_ms`` (software OpenGL), the object view is rendered tile by tile."""
+        def go():
+            if self.brdf is None:
+                raise NbrdfError("the latent texture is still building")
+            from nbrdf.viewer.image_io import check_output
+
+            job = ScreenshotJob(Path(path), size, passes)
+            check_output(job.path)
+            rate = self._ms_per_pixel_pass
+            whole_ms = None if rate is None else rate * job.size[0] * job.size[1]
+            if (View.parse(self.state.view) == View.OBJECT and not self._compare_active()
+                    and (whole_ms is None or whole_ms > budget_ms)):
+                job = ScreenshotJob(job.path, job.size, job.passes, tiled=True)
+            job.ms_per_pixel_pass = rate
+            if self.shot_texture is not None:
+                self.shot_texture.release()
+            self.shot_texture = self.ctx.texture(job.size, 4)
+            self._shot = job
+            self.notice = f"rendering {job.path.name}..."
+        return self._guard(go)
+
+    def screenshot_progress(self) -> float | None:
+        """The share of the screenshot being rendered that is done (None: none running)."""
+        return None if self._shot is None else self._shot.progress
+
+    def cancel_screenshot(self) -> None:
+        self._shot = None
+        self.notice = "screenshot cancelled"
+
+    def step_screenshot(self, budget_ms: float = SHOT_STEP_MS) -> None:
+        """Renders the next step of the screenshot being rendered (passes of one tile
+        within ``budget_ms``, or one whole pass) and writes the file after the last."""
+        job = self._shot
+        if job is None:
+            return
+        self.poll()
+        if self.brdf is None or self._shot is None:
+            return
+        try:
+            self._shot_step(job, budget_ms)
+        except (NbrdfError, OSError, ValueError, moderngl.Error) as e:
+            self._shot = None
+            self.error = f"screenshot: {str(e).splitlines()[0] if str(e) else type(e).__name__}"
+            return
+        if job.finished:
+            self._shot = None
+            if job.linear:
+                from nbrdf.viewer.image_io import write_image
+
+                write_image(job.path, job.image, self.state.exposure, ToneMap.parse(self.state.tonemap).value)
+            else:
+                write_display_png(job.path, job.image)
+            self.notice = f"wrote {job.path}"
+            self.invalidate()  # the view's reference and accumulation slots may have been used
+
+    def _shot_step(self, job: ScreenshotJob, budget_ms: float) -> None:
+        from nbrdf.viewer.image_io import tonemap
+
+        k, (x, y, w, h), have = job.current()
+        view = View.parse(self.state.view)
+        n = 1
+        if job.tiled and job.ms_per_pixel_pass:
+            n = int(np.clip(budget_ms / (job.ms_per_pixel_pass * w * h), 1, job.passes - have))
+        cam = TileCamera.of(self.state.camera, job.size, (x, y, w, h)) if job.tiled else None
+        t0 = time.perf_counter()
+        if job.linear:
+            state = self.main_state()
+            if view != View.OBJECT:  # one pass: the lobe and slice views are not accumulated
+                img, n = self.renderer.render_linear(state, job.size, 1, self.brdf), job.passes - have
+            else:
+                if cam is not None:
+                    state = replace(state, camera=cam)
+                acc = self.renderer.accumulate(replace(state, background=False), w, h, have, n, self.brdf,
+                                               SHOT_LINEAR_SLOT)
+                tex = self.backdrop_part.apply(acc, have + n, state, self.backdrop, SHOT_LINEAR_SLOT)
+                img = np.frombuffer(tex.read(), dtype="f4").reshape(h, w, 4)[::-1, :, :3]
+            job.image[y:y + h, x:x + w] = img
+            rgb8 = tonemap(img, self.state.exposure, ToneMap.parse(self.state.tonemap).value)
+        else:
+            if (w, h) not in self._shot_fbos:
+                self._shot_fbos[(w, h)] = self.ctx.simple_framebuffer((w, h), components=4)
+            fbo = self._shot_fbos[(w, h)]
+            fbo.use()
+            fbo.viewport = (0, 0, w, h)
+            got = self._draw(fbo, w, h, have, n, SHOT_SLOTS, camera=cam)
+            if view != View.OBJECT:
+                n = job.passes - have  # drawn once
+            else:
+                n = got - have
+            rgb8 = np.frombuffer(fbo.read(components=3), np.uint8).reshape(h, w, 3)[::-1]
+            job.image[y:y + h, x:x + w] = rgb8
+        self.ctx.finish()
+        if job.tiled and n:
+            job.ms_per_pixel_pass = (time.perf_counter() - t0) * 1000.0 / (w * h * n)
+        job.done += max(n, 1)
+        rgba = np.concatenate([rgb8, np.full(rgb8.shape[:2] + (1,), 255, np.uint8)], -1)[::-1]
+        H = job.size[1]
+        self.shot_texture.write(np.ascontiguousarray(rgba).tobytes(), viewport=(x, H - y - h, w, h))
 
     @staticmethod
     def _read_env(path: str) -> np.ndarray:
