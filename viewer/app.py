@@ -8,7 +8,15 @@ about 80 % of the screen (viewer/session.py ``WindowPrefs``), and frames the
 object for the view's aspect. Mouse: left-drag orbits, right-drag pans, the
 wheel zooms (when the pointer is in the view); a click on a glTF file's
 object selects its material. Keys: F frames the object, T toggles the
-turntable, H hides the panels, Esc quits. The view renders at the fraction
+turntable, H hides the panels, Ctrl+Z undoes, Ctrl+Shift+Z / Ctrl+Y redo, Esc
+quits; while a text field has the focus, keys go to it alone. Files dropped on
+the window open by kind (``LookDev.open_file``).
+
+Every input event that arrived since the last frame is handled in the frame:
+the panels run as many imgui passes as its input queue needs (imgui takes
+one click or key change per pass), and the view's mouse events are queued by
+the glfw callbacks and replayed in order, so a click or drag shorter than a
+slow frame is not lost. The view renders at the fraction
 of the window that keeps a frame within budget (60 ms while the user drags, 200 ms
 when still; software OpenGL ends at 1/8), one pass per frame while dragging,
 and passes accumulate when still (progressive).
@@ -16,6 +24,7 @@ and passes accumulate when still (progressive).
 from __future__ import annotations
 
 import time
+from collections import deque
 
 import numpy as np
 
@@ -42,6 +51,33 @@ def _screen_size() -> tuple[int, int] | None:
         return (mode.size.width, mode.size.height) if mode else None
     except Exception:  # noqa: BLE001 - any glfw failure: the caller falls back
         return None
+
+
+class FrameClock:
+    """Frames presented per second of wall time, over the last ``window`` frames
+    (at most ``span_s`` seconds): what the user sees, whatever each frame did."""
+
+    def __init__(self, window: int = 30, span_s: float = 2.0):
+        self.times: deque[float] = deque(maxlen=window)
+        self.span_s = span_s
+
+    def presented(self, t: float | None = None) -> None:
+        """Call once a frame is on screen."""
+        t = time.perf_counter() if t is None else t
+        self.times.append(t)
+        while len(self.times) > 2 and t - self.times[0] > self.span_s:
+            self.times.popleft()
+
+    @property
+    def fps(self) -> float:
+        n = len(self.times)
+        return 0.0 if n < 2 else (n - 1) / max(self.times[-1] - self.times[0], 1e-9)
+
+    @property
+    def frame_ms(self) -> float:
+        """The mean interval between the presented frames (1000 / fps)."""
+        fps = self.fps
+        return 0.0 if fps == 0 else 1000.0 / fps
 
 
 class WindowUnavailable(RuntimeError):
@@ -105,22 +141,61 @@ class App:
         self.scale = 1.0             # render resolution / window resolution (adaptive)
         self._last_ms: float | None = None
         self._frames = 0
+        self._events: deque = deque()  # the view's mouse events since the last frame, in order
+        self._cursor = glfw.get_cursor_pos(self.window)
+        self.clock = FrameClock()
+        imgui.get_io().config_input_trickle_event_queue = True  # one click per imgui pass: none is lost
         glfw.set_key_callback(self.window, self._on_key)
+        glfw.set_mouse_button_callback(self.window, self._on_mouse_button)
+        glfw.set_cursor_pos_callback(self.window, self._on_cursor)
+        glfw.set_scroll_callback(self.window, self._on_scroll)
+        glfw.set_drop_callback(self.window, self._on_drop)
         if not getattr(opts, "session", None):
             self.frame()  # the object fits the view (whatever the window's shape)
 
     # --- input -----------------------------------------------------------------------
     def _on_key(self, window, key, scancode, action, mods) -> None:
+        """Keys go to imgui's queue; the shortcuts are read from it after the panels
+        (``_shortcuts``), so a key typed into a text field never reaches the view."""
         self.gui.keyboard_callback(window, key, scancode, action, mods)
-        if action != glfw.PRESS or imgui.get_io().want_capture_keyboard:
+
+    def _on_mouse_button(self, window, button, action, mods) -> None:
+        self.gui.mouse_button_callback(window, button, action, mods)
+        self._events.append(("button", button, action == glfw.PRESS) + tuple(self._cursor))
+
+    def _on_cursor(self, window, x, y) -> None:
+        imgui.get_io().add_mouse_pos_event(x, y)  # where the event happened (not where the pointer is now)
+        self._cursor = (x, y)
+        self._events.append(("move", None, None, x, y))
+
+    def _on_scroll(self, window, dx, dy) -> None:
+        self.gui.scroll_callback(window, dx, dy)
+        self._events.append(("scroll", None, dy) + tuple(self._cursor))
+
+    def _on_drop(self, window, paths) -> None:
+        self._events.append(("drop", None, list(paths), 0.0, 0.0))
+
+    def _shortcuts(self) -> None:
+        """The view's keys pressed in this imgui pass, unless a widget has the keyboard
+        (a text field being typed into, a slider being dragged)."""
+        io = imgui.get_io()
+        if io.want_text_input or io.want_capture_keyboard or imgui.get_current_context().active_id != 0:
             return
-        if key == glfw.KEY_ESCAPE:
-            glfw.set_window_should_close(window, True)
-        elif key == glfw.KEY_F:
+        K = imgui.Key
+        pressed = lambda k: imgui.is_key_pressed(k, False)  # noqa: E731
+        if io.key_ctrl:
+            if pressed(K.z):
+                self.lookdev.redo() if io.key_shift else self.lookdev.undo()
+            elif pressed(K.y):
+                self.lookdev.redo()
+            return
+        if pressed(K.escape):
+            glfw.set_window_should_close(self.window, True)
+        if pressed(K.f):
             self.frame()
-        elif key == glfw.KEY_T:
+        if pressed(K.t):
             self.panels.turntable = not self.panels.turntable
-        elif key == glfw.KEY_H:
+        if pressed(K.h):
             self.panels.visible = not self.panels.visible
 
     def frame(self) -> None:
@@ -131,33 +206,40 @@ class App:
         self.lookdev.frame((w / 2 if self._side else w) / max(h, 1))
 
     def _mouse(self) -> None:
-        io = imgui.get_io()
+        """Replays the mouse events queued since the last frame on the view, in order:
+        drags orbit (left) or pan (right), a click picks a glTF part's material, the
+        wheel zooms; a press on a panel or while an imgui popup is open is imgui's."""
         ld = self.lookdev
-        x, y = glfw.get_cursor_pos(self.window)
         vx, vy, vw, vh = self.panels.viewport(self._window_size())
-        inside = vx <= x < vx + vw and vy <= y < vy + vh
-        button = next((b for b in (glfw.MOUSE_BUTTON_LEFT, glfw.MOUSE_BUTTON_RIGHT)
-                       if glfw.get_mouse_button(self.window, b) == glfw.PRESS), None)
-        if button is not None and (self._drag is not None or (inside and not io.want_capture_mouse)):
-            if self._drag is None and button == glfw.MOUSE_BUTTON_LEFT:
-                self._click = (x - vx, y - vy, vw, vh)
-            if self._drag is not None and self._drag[0] == button and (x, y) != self._drag[1:]:
+        popup = imgui.is_popup_open("", imgui.PopupFlags_.any_popup_id)
+        inside = lambda x, y: vx <= x < vx + vw and vy <= y < vy + vh and not popup  # noqa: E731
+        while self._events:
+            kind, button, value, x, y = self._events.popleft()
+            if kind == "drop":
+                for path in value:
+                    ld.open_file(path)
+            elif kind == "scroll":
+                if inside(x, y) and value:
+                    ld.zoom(0.9 ** value)
+            elif kind == "button" and button in (glfw.MOUSE_BUTTON_LEFT, glfw.MOUSE_BUTTON_RIGHT):
+                if value and self._drag is None and inside(x, y):
+                    self._drag = (button, x, y)
+                    self._click = (x - vx, y - vy, vw, vh) if button == glfw.MOUSE_BUTTON_LEFT else None
+                elif not value and self._drag is not None and self._drag[0] == button:
+                    if self._click is not None and ld.parts and not ld.side_by_side:
+                        cx, cy, cw, ch = self._click  # a click on the object selects its material (glTF files)
+                        ld.pick_material(int(cx), int(cy), (int(cw), int(ch)))
+                    self._click, self._drag = None, None
+            elif kind == "move" and self._drag is not None and (x, y) != self._drag[1:]:
+                button = self._drag[0]
                 self._click = None  # a drag, not a click
                 dx, dy = x - self._drag[1], y - self._drag[2]
                 if button == glfw.MOUSE_BUTTON_LEFT:
                     ld.orbit(-dx * 0.3, dy * 0.3)
                 else:
                     ld.pan(dx / max(vh, 1), dy / max(vh, 1))
-            self._drag = (button, x, y)
-        else:
-            if self._click is not None and button is None and ld.parts and not ld.side_by_side:
-                cx, cy, cw, ch = self._click  # a click on the object selects its material (glTF files)
-                ld.pick_material(int(cx), int(cy), (int(cw), int(ch)))
-            self._click = None
-            self._drag = None
+                self._drag = (button, x, y)
         self.dragging = self._drag is not None
-        if io.mouse_wheel and inside and not io.want_capture_mouse:
-            ld.zoom(0.9 ** io.mouse_wheel)
         if self.panels.turntable:
             ld.orbit(0.5, 0.0)
 
@@ -177,6 +259,23 @@ class App:
         x, y, w, h = self.panels.viewport((ww, wh))
         return round(x * sx), round(y * sy), max(1, round(w * sx)), max(1, round(h * sy))
 
+    #: The most imgui passes one frame runs to drain the input queue.
+    MAX_UI_PASSES = 64
+
+    def _ui(self) -> None:
+        """The panels and the shortcuts, once per pending imgui input event: imgui
+        takes one click or key change per pass, so each frame runs passes until its
+        queue is empty (a slow frame loses nothing and delays nothing)."""
+        queue = imgui.get_current_context().input_events_queue
+        for k in range(self.MAX_UI_PASSES):
+            if k:
+                imgui.end_frame()
+                imgui.new_frame()
+            self.panels.draw(self._window_size())
+            self._shortcuts()
+            if not len(queue):
+                break
+
     def step(self, passes_per_frame: int = 1) -> None:
         """Processes input, renders the view and the panels, presents the frame."""
         t0 = time.perf_counter()
@@ -185,7 +284,7 @@ class App:
         imgui.new_frame()
         w, h = self.framebuffer_size()
         w, h = max(w, 1), max(h, 1)
-        self.panels.draw(self._window_size())
+        self._ui()
         if self.lookdev.side_by_side != self._side:  # entering or leaving side by side: fit the halves
             self.frame()
         self._mouse()
@@ -193,10 +292,16 @@ class App:
         self.screen.viewport = (0, 0, w, h)
         self.screen.clear(0.0, 0.0, 0.0, 1.0)
         vx, vy, vw, vh = self.viewport()
-        self.screen.viewport = (vx, h - vy - vh, vw, vh)  # GL's origin is the bottom left
-        scale = self._adapt_scale(vw, vh)
-        passes = 1 if self.dragging else passes_per_frame
-        self.lookdev.render(self.screen, (vw, vh), passes, scale=scale)
+        ld = self.lookdev
+        if ld.screenshot_progress() is not None:
+            # The view shows the screenshot as it is rendered, a step per frame.
+            ld.step_screenshot()
+            self._show_screenshot()
+        else:
+            self.screen.viewport = (vx, h - vy - vh, vw, vh)  # GL's origin is the bottom left
+            scale = self._adapt_scale(vw, vh)
+            passes = 1 if self.dragging else passes_per_frame
+            ld.render(self.screen, (vw, vh), passes, scale=scale)
         self.screen.viewport = (0, 0, w, h)
         self.screen.use()
         self.screen.viewport = (0, 0, w, h)
@@ -205,8 +310,23 @@ class App:
         self.gui.render(imgui.get_draw_data())
         glfw.swap_buffers(self.window)
         self.ctx.finish()
-        self.lookdev.frame_done()
+        ld.frame_done()
+        self.clock.presented()
+        ld.timings.fps, ld.timings.frame_ms = self.clock.fps, self.clock.frame_ms
         self._measure((time.perf_counter() - t0) * 1000.0)
+
+    def _show_screenshot(self) -> None:
+        """The screenshot being rendered, fitted into the view (imgui's background layer)."""
+        tex = self.lookdev.shot_texture
+        if tex is None:
+            return
+        vx, vy, vw, vh = self.panels.viewport(self._window_size())
+        tw, th = tex.size
+        k = min(vw / tw, vh / th)
+        x0, y0 = vx + (vw - tw * k) / 2, vy + (vh - th * k) / 2
+        imgui.get_background_draw_list().add_image(imgui.ImTextureRef(tex.glo), imgui.ImVec2(x0, y0),
+                                                   imgui.ImVec2(x0 + tw * k, y0 + th * k),
+                                                   imgui.ImVec2(0, 1), imgui.ImVec2(1, 0))
 
     #: Frame-time budgets (ms): while dragging, and while refining when still.
     BUDGET_DRAG_MS, BUDGET_STILL_MS = 60.0, 200.0

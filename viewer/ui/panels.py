@@ -33,6 +33,8 @@ BACKGROUND_LABELS = {Background.ENV: "environment", Background.BLUR: "blurred en
 TURNTABLE_MAX_SIDE = 480
 #: Side bars: a share of the window's width, clamped (pixels).
 SIDEBAR_SHARE, SIDEBAR_MIN, SIDEBAR_MAX = 0.24, 240, 360
+#: The widest widget label: widgets leave room for it, so no label is clipped.
+WIDEST_LABEL = "background colour"
 RED = imgui.ImVec4(1.0, 0.35, 0.3, 1.0)
 DIM = imgui.ImVec4(0.7, 0.7, 0.7, 1.0)
 
@@ -79,19 +81,55 @@ class Panels:
         side = sidebar_width(w)
         flags = (imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse
                  | imgui.WindowFlags_.no_saved_settings | imgui.WindowFlags_.no_bring_to_front_on_focus)
+        self._grouped = False
         imgui.set_next_window_pos(imgui.ImVec2(0, 0), imgui.Cond_.always)
         imgui.set_next_window_size(imgui.ImVec2(side, h), imgui.Cond_.always)
         if imgui.begin("Material", None, flags)[0]:
+            imgui.push_item_width(-self._label_width())
             self._material()
+            imgui.pop_item_width()
         imgui.end()
         imgui.set_next_window_pos(imgui.ImVec2(w - side, 0), imgui.Cond_.always)
         imgui.set_next_window_size(imgui.ImVec2(side, h), imgui.Cond_.always)
         if imgui.begin("Scene and view", None, flags)[0]:
+            imgui.push_item_width(-self._label_width())
             self._status()
             self._view()
             self._scene()
             self._files()
+            imgui.pop_item_width()
         imgui.end()
+        if not self._grouped:  # no slider is held: the next edit is a new undo step
+            self.ld.end_group()
+
+    @staticmethod
+    def _label_width() -> float:
+        return imgui.calc_text_size(WIDEST_LABEL).x + imgui.get_style().item_inner_spacing.x
+
+    def _held(self, group: str) -> str | None:
+        """The undo group of the widget just drawn while it is held (a slider being
+        dragged: all its values are one undo step), else None."""
+        if imgui.is_item_active():
+            self._grouped = True
+            return group
+        return None
+
+    @staticmethod
+    def _wrap_buttons(labels: list[str], small: bool = True) -> str | None:
+        """Buttons side by side, wrapped to the panel's width; the label clicked (or None)."""
+        style = imgui.get_style()
+        right = imgui.get_cursor_screen_pos().x + imgui.get_content_region_avail().x
+        clicked = None
+        for k, label in enumerate(labels):
+            text = label.split("##")[0]
+            bw = imgui.calc_text_size(text).x + 2 * style.frame_padding.x
+            if k:
+                last = imgui.get_item_rect_max().x
+                if last + style.item_spacing.x + bw <= right:
+                    imgui.same_line()
+            if (imgui.small_button(label) if small else imgui.button(label)):
+                clicked = label
+        return clicked
 
     # --- material ---------------------------------------------------------------------------
     def _material(self) -> None:
@@ -107,7 +145,7 @@ class Panels:
         progress = ld.svbrdf_progress()
         if progress is not None:
             imgui.progress_bar(progress, None, "latent texture")
-        imgui.text(ld.material.name)
+        imgui.text_wrapped(ld.material.name)
         layers = ld.editor.layers
         for i, layer in enumerate(list(layers)):
             imgui.push_id(f"layer{i}")
@@ -116,17 +154,14 @@ class Panels:
             imgui.separator()
             imgui.text(f"{i}: {kind}{' (base)' if base else ''}")
             if kind == "dielectric" and not base:
-                imgui.same_line()
-                if imgui.small_button("up"):
+                hit = self._wrap_buttons(["up", "down", "medium", "remove"])
+                if hit == "up":
                     ld.edit("move", i, -1)
-                imgui.same_line()
-                if imgui.small_button("down"):
+                elif hit == "down":
                     ld.edit("move", i, 1)
-                imgui.same_line()
-                if imgui.small_button("medium"):
+                elif hit == "medium":
                     ld.edit("toggle_medium", i)
-                imgui.same_line()
-                if imgui.small_button("remove"):
+                elif hit == "remove":
                     ld.edit("remove", i)
             if base:
                 cur = BASE_TYPES.index(kind) if kind in BASE_TYPES else -1
@@ -137,22 +172,29 @@ class Panels:
             for key, value in layer.items():
                 if key in ("type", "path"):
                     if key == "path":
-                        imgui.text_colored(DIM, f"file: {value}")
+                        imgui.push_style_color(imgui.Col_.text, DIM)
+                        imgui.text_wrapped(f"file: {value}")
+                        imgui.pop_style_color()
                     continue
                 self._param(i, key, value)
             imgui.pop_id()
         imgui.separator()
-        if imgui.button("add clear coat"):
+        hit = self._wrap_buttons(["add clear coat", "save curve"], small=False)
+        if hit == "add clear coat":
             ld.edit("add_coat")
-        imgui.same_line()
-        if imgui.button("save curve"):
+        elif hit == "save curve":
             ld.save_curve()
         changed, self.material_path = imgui.input_text("material file", self.material_path)
-        if imgui.button("open material"):
+        hit = self._wrap_buttons(["open material", "save material"], small=False)
+        if hit == "open material":
             ld.open_material(self.material_path)
-        imgui.same_line()
-        if imgui.button("save material"):
+        elif hit == "save material":
             ld.save_material(self.material_path)
+        hit = self._wrap_buttons(["undo (Ctrl+Z)", "redo (Ctrl+Shift+Z)"], small=False)
+        if hit and hit.startswith("undo"):
+            ld.undo()
+        elif hit:
+            ld.redo()
 
     def _part_list(self) -> None:
         """The materials of a multi-material mesh (a glTF file's) with their notes;
@@ -175,10 +217,13 @@ class Panels:
         ld = self.ld
         lo, hi = RANGES.get(key, (0.0, 1.0))
         if isinstance(value, dict):  # a texture reference
-            imgui.text_colored(DIM, f"{key}: {value.get('texture')} [{value.get('channel')}]")
+            imgui.push_style_color(imgui.Col_.text, DIM)
+            imgui.text_wrapped(f"{key}: {value.get('texture')} [{value.get('channel')}]")
+            imgui.pop_style_color()
             changed, rng = imgui.drag_float2(f"{key} range", list(value.get("range", [lo, hi])), 0.005, lo, hi)
             if changed:
-                ld.set_param(i, key, {**value, "range": [float(rng[0]), float(rng[1])]})
+                with ld.coalescing(self._held(f"{i}.{key}.range")):
+                    ld.set_param(i, key, {**value, "range": [float(rng[0]), float(rng[1])]})
             return
         if key in COLOUR_KEYS:
             if isinstance(value, list) and any(isinstance(x, dict) for x in value):
@@ -186,13 +231,18 @@ class Panels:
                 return
             rgb = list(value) if isinstance(value, list) else [float(value)] * 3
             changed, new = imgui.color_edit3(key, rgb)
+            group = self._held(f"{i}.{key}")
             if changed:
-                ld.set_param(i, key, [float(x) for x in new])
+                self._grouped = True
+                with ld.coalescing(group or f"{i}.{key}.picker"):  # a picker's drag, too
+                    ld.set_param(i, key, [float(x) for x in new])
             return
         changed, v = imgui.slider_float(key, float(value), lo, hi,
                                         "%.3f", imgui.SliderFlags_.logarithmic if key == "roughness" else 0)
+        group = self._held(f"{i}.{key}")
         if changed:
-            ld.set_param(i, key, float(v))
+            with ld.coalescing(group):
+                ld.set_param(i, key, float(v))
 
     # --- view ---------------------------------------------------------------------------------
     def _view(self) -> None:
@@ -205,8 +255,10 @@ class Panels:
             imgui.same_line()
         imgui.new_line()
         changed, theta = imgui.slider_float("incidence (deg)", s.theta_i, 0.0, 89.0)
+        group = self._held("theta_i")
         if changed:
-            ld.update_state(theta_i=theta)
+            with ld.coalescing(group):
+                ld.update_state(theta_i=theta)
         modes = list(CompareMode)
         changed, k = imgui.combo("compare", modes.index(ld.compare), [COMPARE_LABELS[m] for m in modes])
         if changed:
@@ -217,13 +269,17 @@ class Panels:
             imgui.pop_style_color()
             if ld.compare == CompareMode.WIPE:
                 changed, x = imgui.slider_float("wipe", ld.wipe, 0.0, 1.0)
+                group = self._held("wipe")
                 if changed:
-                    ld.set_wipe(x)
+                    with ld.coalescing(group):
+                        ld.set_wipe(x)
             if ld.compare == CompareMode.ERROR:
                 changed, x = imgui.slider_float("error scale", ld.err_scale, 0.01, 1.0, "%.2f",
                                                 imgui.SliderFlags_.logarithmic)
+                group = self._held("error_scale")
                 if changed:
-                    ld.set_error_scale(x)
+                    with ld.coalescing(group):
+                        ld.set_error_scale(x)
                 self._error_bar()
             if ld.compare == CompareMode.FLIP:
                 self._flip_bar()
@@ -247,7 +303,11 @@ class Panels:
             col1 = imgui.get_color_u32(imgui.ImVec4(*c1, 1.0))
             dl.add_rect_filled_multi_color(a, b, col0, col1, col1, col0)
         imgui.dummy(imgui.ImVec2(w, h))
-        imgui.text(f"0 %{'':>30}{self.ld.err_scale * 100:.0f} % relative error")
+        imgui.text("0 %")
+        right = f"{self.ld.err_scale * 100:.0f} % relative error"
+        imgui.same_line(max(0.0, imgui.get_content_region_avail().x + imgui.get_cursor_pos_x()
+                            - imgui.calc_text_size(right).x))
+        imgui.text(right)
 
     def _flip_bar(self) -> None:
         """The magma scale of the FLIP map and the mean FLIP."""
@@ -263,7 +323,7 @@ class Panels:
             dl.add_rect_filled_multi_color(a, b, col0, col1, col1, col0)
         imgui.dummy(imgui.ImVec2(w, h))
         mean = self.ld.flip_mean
-        imgui.text(f"FLIP 0 ... 1   mean {'(waiting for the reference)' if mean is None else f'{mean:.4f}'}")
+        imgui.text_wrapped(f"FLIP 0 ... 1, mean {'(waiting for the reference)' if mean is None else f'{mean:.4f}'}")
 
     def _interpolation(self) -> None:
         ld = self.ld
@@ -278,8 +338,10 @@ class Panels:
             imgui.end_combo()
         if ld.interp.other is not None:
             changed, t = imgui.slider_float("weight", ld.interp.t, 0.0, 1.0)
+            group = self._held("interp.t")
             if changed:
-                ld.set_interpolation(t=t)
+                with ld.coalescing(group):
+                    ld.set_interpolation(t=t)
             if imgui.radio_button("latent blend", ld.interp.mode == "latent"):
                 ld.set_interpolation(mode="latent")
             imgui.same_line()
@@ -311,25 +373,26 @@ class Panels:
         if changed:
             ld.set_mesh(MESHES[k])
         _, self.mesh_path = imgui.input_text("mesh file", self.mesh_path)
-        imgui.same_line()
-        if imgui.small_button("load##mesh"):
+        if imgui.small_button("load mesh file"):
             ld.set_mesh(self.mesh_path)
         _, self.env_path = imgui.input_text("environment", self.env_path)
-        if imgui.small_button("load##env"):
+        # The generated environments, one click each.
+        hit = self._wrap_buttons(["load##env", "built-in sky"] + list(ENV_PRESETS))
+        if hit == "load##env":
             ld.set_environment(self.env_path or None)
-        imgui.same_line()
-        if imgui.small_button("built-in sky"):
+        elif hit == "built-in sky":
             self.env_path = ""
             ld.set_environment(None)
-        for name in ENV_PRESETS:  # the generated environments, one click each
-            imgui.same_line()
-            if imgui.small_button(name):
-                self.env_path = name
-                ld.set_environment(name)
+        elif hit is not None:
+            self.env_path = hit
+            ld.set_environment(hit)
         changes: dict = {}
+        held: list[str] = []
 
         def take(name: str, result) -> None:
             changed, value = result
+            if self._held(name):
+                held.append(name)
             if changed:
                 changes[name] = value
 
@@ -350,7 +413,9 @@ class Panels:
         take("env_intensity", imgui.slider_float("env intensity", s.env_intensity, 0.0, 4.0))
         az, el = _angles(s.light_dir)
         c4, az = imgui.slider_float("light azimuth", az, -180.0, 180.0)
+        held += ["light_dir"] if self._held("light_dir") else []
         c5, el = imgui.slider_float("light elevation", el, -10.0, 90.0)
+        held += ["light_dir"] if self._held("light_dir") else []
         if c4 or c5:
             changes["light_dir"] = _direction(az, el)
         take("light_radiance", imgui.slider_float("light intensity", s.light_radiance, 0.0, 20.0))
@@ -359,6 +424,7 @@ class Panels:
             changes["point_light"] = (2.0, -2.0, 2.5) if on else None
         if s.point_light is not None:
             c10, pos = imgui.drag_float3("point position", list(s.point_light), 0.05, -20.0, 20.0)
+            held += ["point_light"] if self._held("point_light") else []
             if c10:
                 changes["point_light"] = tuple(float(x) for x in pos)
             take("point_intensity", imgui.slider_float("point intensity", s.point_intensity, 0.0, 200.0))
@@ -368,14 +434,17 @@ class Panels:
         if c8:
             changes["tonemap"] = tonemaps[k]
         c11, fov = imgui.slider_float("field of view", s.camera.fov, *FOV_RANGE, "%.0f deg")
+        group = self._held("fov")
         if c11:
-            ld.set_fov(fov)
+            with ld.coalescing(group):
+                ld.set_fov(fov)
         _, self.turntable = imgui.checkbox("turntable", self.turntable)
         imgui.same_line()
         if imgui.button("frame (F)"):
             self.frame_view()
         if changes:
-            ld.update_state(**changes)
+            with ld.coalescing(held[0] if held else None):
+                ld.update_state(**changes)
 
     def _files(self) -> None:
         ld = self.ld
@@ -388,15 +457,24 @@ class Panels:
         if imgui.button("save session"):
             ld.save_session(self.session_path)
         _, self.shot_path = imgui.input_text("screenshot", self.shot_path)
-        if imgui.button("screenshot (.png/.exr)"):
-            w, h = self.view_size
-            ld.screenshot(self.shot_path, (max(w, 1), max(h, 1)), 16)
+        shot = ld.screenshot_progress()
+        if shot is None:
+            if imgui.button("screenshot (.png/.exr)"):
+                w, h = self.view_size
+                ld.start_screenshot(self.shot_path, (max(w, 1), max(h, 1)), 16)
+        else:
+            imgui.progress_bar(shot, imgui.ImVec2(-1, 0), f"screenshot {shot * 100:.0f} %")
+            if imgui.small_button("cancel screenshot"):
+                ld.cancel_screenshot()
         imgui.separator()
         _, self.turntable_path = imgui.input_text("turntable file", self.turntable_path)
         _, self.turntable_frames = imgui.slider_int("frames", self.turntable_frames, 4, 240)
         progress = ld.turntable_progress()
         if progress is None:
-            if imgui.button("capture turntable (.mp4/.gif/%03d.png)"):
+            imgui.push_style_color(imgui.Col_.text, DIM)
+            imgui.text_wrapped("turntable file: .mp4, .gif or name_%03d.png")
+            imgui.pop_style_color()
+            if imgui.button("capture turntable"):
                 w, h = self.view_size
                 k = min(1.0, TURNTABLE_MAX_SIDE / max(w, h, 1))  # the view's shape, at most 480 pixels a side
                 ld.start_turntable(self.turntable_path, self.turntable_frames,
@@ -407,8 +485,11 @@ class Panels:
     # --- status (top of the right side bar) -----------------------------------------------------
     def _status(self) -> None:
         ld, t = self.ld, self.ld.timings
-        imgui.text(f"{t.fps:5.1f} fps  frame {t.frame_ms:6.1f} ms  passes {ld.passes}")
-        imgui.text(f"latent {t.latent_ms:5.2f} ms  edit -> frame {t.edit_to_frame_ms:6.1f} ms")
+        # Frames presented: fps and the frame time are the same measure (fps = 1000 / frame).
+        imgui.text(f"{t.fps:5.1f} fps, frame {t.frame_ms:6.1f} ms")
+        imgui.text(f"view {t.render_ms:6.1f} ms, passes {ld.passes}")
+        imgui.text(f"latent {t.latent_ms:5.2f} ms")
+        imgui.text(f"edit -> frame {t.edit_to_frame_ms:6.1f} ms")
         if ld.notice:
             imgui.text_wrapped(ld.notice)
         if ld.error:
