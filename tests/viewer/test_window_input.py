@@ -101,6 +101,7 @@ SCRIPT = textwrap.dedent("""
             out["yaw"] = [yaw, ld.state.camera.yaw]
         with section("3"):
             # 3. H hides the panels: the object stays, and no old accumulation is left behind.
+            app.panels.visible = True  # whatever the scenarios before did
             for _ in range(3):
                 app.step()
             frames = []

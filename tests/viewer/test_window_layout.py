@@ -25,6 +25,21 @@ SCRIPT = textwrap.dedent("""
     from nbrdf.viewer.app import App
     from nbrdf.viewer.options import ViewOptions
     out = {}
+    clipped = set()
+    def spy_widget(name):  # an item that ends beyond its side bar's work area is clipped
+        real = getattr(imgui, name)
+        def wrapped(*a, **k):
+            r = real(*a, **k)
+            window = imgui.internal.get_current_window()
+            right = window.work_rect.max.x
+            if imgui.get_item_rect_max().x > right + 0.5 and window.name in ("Material", "Scene and view"):
+                label = a[0] if a and isinstance(a[0], str) else name
+                clipped.add(f"{name}: {label.split('##')[0]}")
+            return r
+        setattr(imgui, name, wrapped)
+    for name in ("text", "text_colored", "button", "small_button", "slider_float", "slider_int", "input_text",
+                 "combo", "checkbox", "color_edit3", "drag_float2", "drag_float3", "radio_button", "progress_bar"):  # (headers span the bar by design)
+        spy_widget(name)
     app = App(ViewOptions())
     app._adapt_scale = lambda w, h: 0.125  # cheap frames on software OpenGL
     rects = {}
@@ -39,6 +54,7 @@ SCRIPT = textwrap.dedent("""
         app.panels.expand_all = True  # every section open: the longest panels
         for _ in range(2):
             app.step()
+        out["clipped"] = sorted(clipped)
         out["window"] = list(glfw.get_window_size(app.window))
         out["viewport"] = list(app.viewport())
         out["rects"] = {k: list(v) for k, v in rects.items()}
@@ -60,16 +76,15 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
-@pytest.fixture(scope="module")
-def screen_1280():
-    """An Xvfb server with a 1280 x 800 screen; -displayfd says when it accepts clients."""
+def _screen(size: str):
+    """An Xvfb server with a screen of ``size``; -displayfd says when it accepts clients."""
     import select
 
     exe = shutil.which("Xvfb")
     if exe is None:
         pytest.skip("Xvfb is not installed (run `make test`, which installs it)")
     r, w = os.pipe()
-    proc = subprocess.Popen([exe, "-displayfd", str(w), "-screen", "0", "1280x800x24", "-nolisten", "tcp", "-noreset"],
+    proc = subprocess.Popen([exe, "-displayfd", str(w), "-screen", "0", f"{size}x24", "-nolisten", "tcp", "-noreset"],
                             pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     os.close(w)
     text = b""
@@ -85,25 +100,55 @@ def screen_1280():
         proc.kill()
         proc.wait(5)
         pytest.skip("could not start Xvfb")
-    yield f":{text.strip().decode()}"
-    proc.terminate()
-    proc.wait(5)
+    try:
+        yield f":{text.strip().decode()}"
+    finally:
+        proc.terminate()
+        proc.wait(5)
 
 
 @pytest.fixture(scope="module")
-def layout(screen_1280, tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("layout")
-    env = dict(os.environ, DISPLAY=screen_1280, XDG_CONFIG_HOME=str(tmp / "config"))
+def screen_1280():
+    yield from _screen("1280x800")
+
+
+def _layout(display: str, tmp) -> dict:
+    env = dict(os.environ, DISPLAY=display, XDG_CONFIG_HOME=str(tmp / "config"))
     r = subprocess.run([sys.executable, "-c", SCRIPT, str(tmp / "out.json")], env=env, capture_output=True,
                        text=True, timeout=900)
     assert r.returncode == 0, r.stderr[-3000:]
     return json.loads((tmp / "out.json").read_text())
 
 
+@pytest.fixture(scope="module")
+def layout(screen_1280, tmp_path_factory):
+    return _layout(screen_1280, tmp_path_factory.mktemp("layout"))
+
+
+@pytest.fixture(scope="module")
+def layout_1920(tmp_path_factory):
+    screen = _screen("1920x1080")
+    display = next(screen)
+    try:
+        yield _layout(display, tmp_path_factory.mktemp("layout1920"))
+    finally:
+        screen.close()
+
+
 def _overlap(a, b) -> bool:
     ax, ay, aw, ah = a
     bx, by, bw, bh = b
     return ax < bx + bw and bx < ax + aw and ay < by + bh and by < ay + ah
+
+
+def test_no_panel_label_is_clipped_at_1280x800(layout):
+    """Every widget of the side bars (all sections open) ends inside its bar: no
+    clipped label ("remove", "material fi", "passes" were)."""
+    assert layout["clipped"] == []
+
+
+def test_no_panel_label_is_clipped_at_1920x1080(layout_1920):
+    assert layout_1920["clipped"] == []
 
 
 def test_window_opens_at_80_percent_of_the_screen_and_remembers(layout):
