@@ -354,7 +354,8 @@ class Panels:
         curves = self.ld.plane_curves()
         if not curves:
             return
-        if implot.begin_plot("plane of incidence, f cos / (1 + f cos)", imgui.ImVec2(-1, 220), implot.Flags_.equal):
+        imgui.text_wrapped("plane of incidence: f cos / (1 + f cos)")  # the title above: the plot is narrow
+        if implot.begin_plot("##plane", imgui.ImVec2(-1, 220), implot.Flags_.equal):
             implot.setup_axes("", "", 0, 0)
             for name, (th, val) in curves.items():
                 t = np.radians(th)
