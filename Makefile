@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test clean
+.PHONY: setup run test lint clean
 
 setup: $(STAMP)
 
@@ -19,8 +19,18 @@ $(STAMP): pyproject.toml constraints.txt tools/setup_system.sh
 run: setup
 	@$(BIN)/nbrdf-view
 
-test: setup
+test: setup lint
 	@$(BIN)/python -m pytest
+
+# The packages mypy checks; it sees the repository's folders under their installed names through links.
+MYPY_PACKAGES := nbrdf.neural nbrdf.cli
+LINT_ROOT := $(VENV)/lint
+
+lint: setup
+	@$(BIN)/ruff check --quiet .
+	@mkdir -p $(LINT_ROOT)/nbrdf
+	@for d in cli neural training viewer; do ln -sfn ../../../$$d $(LINT_ROOT)/nbrdf/$$d; done
+	@cd $(LINT_ROOT) && ../bin/mypy --config-file ../../pyproject.toml $(addprefix -p ,$(MYPY_PACKAGES))
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis
