@@ -19,6 +19,7 @@ from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bu
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.coat import with_coat
 from nbrdf.neural.layering import CODE, LayeringNet
+from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE
 from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
 from nbrdf.neural.material import Material, Measured
 from nbrdf.neural.nets import MLPSpec, load_state, prefixed
@@ -103,12 +104,12 @@ def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, sta
             raise NbrdfError(f"a latent base must be a material code of {CODE} floats per channel "
                              f"(project it again with this model), got {z_base.shape[-1]}")
         z = z_base.expand(n, C, -1).reshape(n * C, -1)
-    elif stack.base == "conductor":
+    elif stack.base == CONDUCTOR:
         z = with_coat(leaf.conductor(chan(stack.base_roughness), stack.base_r0.expand(n, C).reshape(-1)), None)
-    elif stack.base == "dielectric":  # a bare interface: all coat, achromatic, the encoder gives a black body
+    elif stack.base == DIELECTRIC:  # a bare interface: all coat, achromatic, the encoder gives a black body
         z_b = leaf.dielectric(stack.base_roughness, stack.base_ior)[:, None].expand(n, C, -1).reshape(n * C, -1)
         z = with_coat(z_b, chan_pair(stack.coat().to(z_b.dtype), C))
-    elif stack.base == "diffuse":
+    elif stack.base == DIFFUSE:
         z = with_coat(leaf.diffuse(stack.base_albedo.expand(n, C).reshape(-1)), None)
     else:
         raise NbrdfError(f"a {stack.base} base has no leaf encoder")

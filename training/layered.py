@@ -31,10 +31,12 @@ from dataclasses import dataclass, field
 
 import torch
 
+from nbrdf.neural.layer_kinds import DIFFUSE, PARAMETRIC_BASES
 
 Tensor = torch.Tensor
 
-BASES = ("conductor", "diffuse", "dielectric")
+#: The bases the walk simulates (their codes are ``layer_kinds.BASE_CODES``).
+BASES = PARAMETRIC_BASES
 INV_4PI = 1.0 / (4.0 * math.pi)
 
 
@@ -115,7 +117,7 @@ def _check(p: StackParams, wi: Tensor, wo: Tensor, spp: int) -> None:
         raise NbrdfError("a direction lies below the horizon (z < 0); the stack's BRDF is 0 there")
     if bool((p.ior <= 0).any()) or bool((p.base_ior <= 0).any()):
         raise NbrdfError("an index of refraction is not positive")
-    if bool((p.roughness <= 0).any()) or (p.base != "diffuse" and bool((p.base_roughness <= 0).any())):
+    if bool((p.roughness <= 0).any()) or (p.base != DIFFUSE and bool((p.base_roughness <= 0).any())):
         raise NbrdfError("a roughness is not positive")
     if bool((p.sigma_t < 0).any()):
         raise NbrdfError("sigma_t is negative")

@@ -28,6 +28,7 @@ from typing import Callable
 
 import torch
 
+from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, encode, loss_target, predicted_target, unbiased_error
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.errors import NbrdfError
@@ -235,9 +236,9 @@ def _decoder_loss(model: NeuralModel, z: Tensor, feats: Tensor, cos_o: Tensor, t
 def leaf_values(kind: str, params: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
     """Closed-form values (B, P) of B leaves' bodies at pairs (B, P, 3): a
     bare dielectric is all coat (``neural.coat``), so its body is black."""
-    if kind == "conductor":
+    if kind == CONDUCTOR:
         return GGXConductor(params[:, 0:1], params[:, 1:2]).eval(wi, wo)
-    if kind == "dielectric":
+    if kind == DIELECTRIC:
         return torch.zeros(wi.shape[:-1], dtype=wi.dtype)
     return Lambertian(params[:, 0:1]).eval(wi, wo)
 

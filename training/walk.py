@@ -92,6 +92,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from nbrdf.neural.layer_kinds import BASE_CODES
+
 INV_PI = 1.0 / math.pi
 INV_4PI = 1.0 / (4.0 * math.pi)
 TWO_PI = 2.0 * math.pi
@@ -136,7 +138,6 @@ MIRROR_CHAIN_ROUGHNESS = 0.1
 MIRROR_CHAIN_P = 0.5
 #: Paths per work item (a block of one pair's paths run by one thread).
 BLOCK = 32
-BASE_CODES = {"conductor": 0, "diffuse": 1, "dielectric": 2}
 
 #: Compiler flags: fastmath without "nnan" / "ninf" (the non-finite checks
 #: stay valid); contraction into FMAs and reassociation change results only by

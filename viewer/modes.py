@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from enum import Enum
 
+from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
+
 
 class _Mode(str, Enum):
     """A mode whose value is its command-line word and whose position is its
@@ -78,11 +80,10 @@ class Method(_Mode):
     ANALYTIC = "analytic"    #: closed form; the analytic layering approximation for stacks
 
 
-class BaseKind(_Mode):
-    """The base layers the closed-form shader (shaders/analytic_brdf.glsl) evaluates."""
-    CONDUCTOR = "conductor"    #: GGX conductor, Schlick Fresnel
-    DIFFUSE = "diffuse"        #: Lambertian
-    DIELECTRIC = "dielectric"  #: a rough dielectric's reflection only
+#: The base layers the closed-form shader (shaders/analytic_brdf.glsl) evaluates: conductor (GGX, Schlick
+#: Fresnel), diffuse (Lambertian) and dielectric (a rough dielectric's reflection only). Members and codes
+#: come from the table of layer kinds, so ``BASE_<KIND>`` equals the walk's code of that base.
+BaseKind = _Mode("BaseKind", [(kind.upper(), kind) for kind in PARAMETRIC_BASES])
 
 
 def glsl_defines(*enums: type[_Mode]) -> str:

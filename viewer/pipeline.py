@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Callable
 import moderngl
 import torch
 
+from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.coat import code_coat
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material, material_to_dict
@@ -41,7 +42,7 @@ class BrdfKind(str, Enum):
 
 def analytic_capable(m: Material) -> bool:
     """Single layers have an exact closed form on the GPU."""
-    return not m.interfaces and not m.is_textured and m.base.type in ("conductor", "dielectric", "diffuse")
+    return not m.interfaces and not m.is_textured and m.base.type in PARAMETRIC_BASES
 
 
 def material_key(m: Material) -> str:
