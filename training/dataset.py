@@ -263,7 +263,7 @@ def generate(out: str | Path, cfg: DataConfig, preset: str = "custom", overwrite
         if ray is not None:
             from nbrdf.training.distributed import run_shards
 
-            run_shards(cfg, todo, ray, write)
+            run_shards(make_shard, cfg, todo, ray, write)
         else:
             for s in todo:
                 write(s, make_shard(cfg, s))

@@ -152,7 +152,7 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
 
     import numpy as np
 
-    from nbrdf.training.walk import run_walk
+    from nbrdf.training.walk_dispatch import run_walk
 
     del compile
     t0 = time.perf_counter()
