@@ -27,9 +27,9 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
+from nbrdf.training.methods import METHODS
 
 Tensor = torch.Tensor
-METHODS = ("reference", "analytic", "neural", "projected")
 
 
 class ClosedFormBRDF(ExactRGB):
@@ -154,11 +154,12 @@ class AnalyticLayeredBRDF(ExactRGB, _DefensivelySampled):
         return analytic_layered_eval(self.material, wi.double(), wo.double()).float()
 
 
-def brdf_for(material: Material, method: str, spp: int = 256, seed: int = 0, model=None) -> RGBBRDF:
+def brdf_for(material: Material, method: str, spp: int = 256, seed: int = 0, model=None,
+             projection_pairs: int = 2048, projection_spp: int = 64) -> RGBBRDF:
     """The material's BRDF by ``method`` (one of METHODS). ``spp`` and ``seed``
     drive the Monte Carlo reference; ``seed`` also the projection's samples
-    (which use their own 64 paths each); ``model`` is the neural bundle
-    (default: the shipped one)."""
+    (``projection_pairs`` reference values of ``projection_spp`` paths each);
+    ``model`` is the neural bundle (default: the shipped one)."""
     if method not in METHODS:
         raise NbrdfError(f"unknown method {method!r} (one of {', '.join(METHODS)})")
     if spp < 1:
@@ -178,7 +179,8 @@ def brdf_for(material: Material, method: str, spp: int = 256, seed: int = 0, mod
             from nbrdf.neural.decoder import default_decoder
 
             dec = default_decoder()
-        return latent_brdf(dec, fit(dec, material_samples(material, spp=64, seed=seed)), material)
+        samples = material_samples(material, n=projection_pairs, spp=projection_spp, seed=seed)
+        return latent_brdf(dec, fit(dec, samples), material)
     # analytic
     if material.is_textured:
         raise NbrdfError(f"{material.textures()[0][0]}: texture-mapped; the analytic model needs uniform layers")
