@@ -92,8 +92,6 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from nbrdf.neural.layer_kinds import BASE_CODES
-
 INV_PI = 1.0 / math.pi
 INV_4PI = 1.0 / (4.0 * math.pi)
 TWO_PI = 2.0 * math.pi

@@ -13,6 +13,7 @@ import numba
 import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import BASE_CODES
 from nbrdf.training import walk as W
 from nbrdf.training import walk_cuda
 
@@ -38,7 +39,7 @@ def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndar
     N = wi.shape[0]
     C = alb.shape[2]
     args = (f64(wi), f64(wo), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, f64(rough), f64(ior), f64(sigma), f64(alb),
-            W.BASE_CODES[base], f64(b_rough), f64(b_r0), f64(b_ior), f64(b_alb), int(rr_depth), int(max_depth),
+            BASE_CODES[base], f64(b_rough), f64(b_r0), f64(b_ior), f64(b_alb), int(rr_depth), int(max_depth),
             bool(forced), W.RR_WEIGHT, W.WIDE_ROUGHNESS, W.GUIDE_LAM, W.WIDE_LAM, W.WIDE_GUIDE_ROUGHNESS,
             int(W.SPLIT_MAX), int(W.SPLIT_STEP), float(W.SPLIT_FLOOR), W.BLOCK)
     if walk_device(device) == "cuda":
