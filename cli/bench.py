@@ -107,7 +107,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     b = sub.add_parser("bench", help="speed benchmarks, printed as JSON")
     bsub = b.add_subparsers(dest="what", required=True, parser_class=Parser)
     for name, (cls, fn) in BENCHES.items():
-        doc = cls.__doc__.split(": ", 1)[1]
+        doc = (cls.__doc__ or ": ").split(": ", 1)[1]
         p = bsub.add_parser(name, help=doc.rstrip("."), description=cls.__doc__)
         add_arguments(p, cls)
         p.set_defaults(fn=fn)

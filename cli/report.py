@@ -162,7 +162,7 @@ def cmd_report_operations(ns: argparse.Namespace) -> int:
     shown = [(k, m, r) for k, m, r in refs if k in ("two_layer", "three_layer") or c.set == "lookdev"]
     shown = shown[:: max(1, c.every)][:6]
     rows = []
-    for k, m, r in shown:
+    for _k, m, r in shown:
         imgs = [r.lobes[1]] + [lobe_image(fn(m, r), ev.THETAS[1]) for fn in methods.values()]
         rows.append((m.name, imgs))
     if rows:

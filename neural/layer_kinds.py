@@ -86,13 +86,11 @@ KINDS: dict[str, LayerKind] = {k.name: k for k in (
 
 #: Every kind that may end a stack, in the table's order.
 BASE_KINDS: tuple[str, ...] = tuple(k.name for k in KINDS.values() if k.base)
-#: The bases given by parameters (closed form, simulated, editable), in the order of their base code.
-PARAMETRIC_BASES: tuple[str, ...] = tuple(sorted((k.name for k in KINDS.values() if k.base_code is not None),
-                                                 key=lambda n: KINDS[n].base_code))
+_CODED = {k.base_code: k.name for k in KINDS.values() if k.base_code is not None}
+#: The bases given by parameters (closed form, simulated, editable), in the order of their base codes (0, 1, ...).
+PARAMETRIC_BASES: tuple[str, ...] = tuple(_CODED[code] for code in range(len(_CODED)))
 #: Base kind -> its integer in the shaders and the walk.
 BASE_CODES: dict[str, int] = {n: i for i, n in enumerate(PARAMETRIC_BASES)}
 #: Parameters holding colours (one value or three).
 COLOUR_PARAMS: tuple[str, ...] = tuple(dict.fromkeys(p.name for k in KINDS.values() for p in k.params
                                                      if p.shape == "rgb"))
-
-assert all(KINDS[n].base_code == i for n, i in BASE_CODES.items()), "base codes must be 0, 1, 2, ..."

@@ -16,8 +16,7 @@ from pathlib import Path
 from typing import Any, Union
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.layer_kinds import (BASE_KINDS, CONDUCTOR, DIELECTRIC, DIFFUSE, KINDS, LATENT, MEASURED,
-                                      MEDIUM, RANGES)
+from nbrdf.neural.layer_kinds import BASE_KINDS, CONDUCTOR, DIELECTRIC, DIFFUSE, KINDS, LATENT, MEASURED, MEDIUM, RANGES
 
 FORMAT = "nbrdf-material/1"
 
@@ -137,7 +136,8 @@ class Material:
         if isinstance(value, TextureRef) or (isinstance(value, tuple) and any(isinstance(x, TextureRef) for x in value)):
             raise NbrdfError(f"{value}: a texture-mapped parameter has no single value")
         if isinstance(value, tuple):
-            return (float(value[0]), float(value[1]), float(value[2]))
+            r, g, b = (float(x) for x in value if not isinstance(x, TextureRef))
+            return (r, g, b)
         return (float(value), float(value), float(value))
 
 
@@ -344,7 +344,7 @@ def material_to_dict(m: Material, new_dir: Path | None = None) -> dict:
     for layer in m.layers:
         d: dict[str, Any] = {"type": layer.type}
         for k in _FIELDS[layer.type]:
-            if k == "path":
+            if isinstance(layer, (Measured, LatentBase)) and k == "path":
                 d[k] = layer.path if new_dir is None else _rel(layer.resolved, new_dir)
             else:
                 d[k] = _value_to_json(getattr(layer, k), new_dir)

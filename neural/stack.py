@@ -15,14 +15,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, MEDIUM
-from nbrdf.neural.material import (FORMAT as FORMAT_MATERIAL, Conductor, Dielectric, Diffuse, LatentBase,
-                                   Material, Measured, Medium, parse_material)
+from nbrdf.neural.material import FORMAT as FORMAT_MATERIAL
+from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured, Medium, parse_material
 
 Tensor = torch.Tensor
 
@@ -86,10 +86,18 @@ class Stack:
         if self.layers:
             return torch.stack([self.roughness[:, 0], self.ior[:, 0]], -1)
         if self.base == DIELECTRIC:
-            return torch.stack([self.base_roughness, self.base_ior], -1)
+            return torch.stack([self.base_param("base_roughness"), self.base_param("base_ior")], -1)
         from nbrdf.neural.coat import NO_COAT
 
         return torch.tensor(NO_COAT, dtype=self.roughness.dtype).expand(self.n, 2)
+
+    def base_param(self, name: str) -> Tensor:
+        """A parameter of the base (``base_roughness``, ``base_r0``, ``base_ior``,
+        ``base_albedo``); one line when this stack's base kind has none."""
+        value = getattr(self, name)
+        if value is None:
+            raise NbrdfError(f"a {self.base} base has no {name.removeprefix('base_')}")
+        return value
 
     def tensors(self) -> dict[str, Tensor]:
         """The tensor fields that are set, by name."""
@@ -98,7 +106,8 @@ class Stack:
 
     def map(self, fn: Callable[[Tensor], Tensor]) -> "Stack":
         """A copy with ``fn`` applied to every tensor (all have N leading)."""
-        return replace(self, **{k: fn(v) for k, v in self.tensors().items()})
+        changes: dict[str, Any] = {k: fn(v) for k, v in self.tensors().items()}
+        return replace(self, **changes)
 
     def repeat_interleave(self, k: int) -> "Stack":
         """Every stack repeated k times in place (N k stacks)."""
@@ -113,7 +122,7 @@ class Stack:
     def per_channel(self) -> "Stack":
         """The same stacks as N C single-channel stacks (channel fastest)."""
         C = self.channels
-        out = {}
+        out: dict[str, Any] = {}
         for k, v in self.tensors().items():
             if k == "albedo":
                 out[k] = v.permute(0, 2, 1).reshape(self.n * C, self.layers, 1)
@@ -146,7 +155,7 @@ def material_stack(material: Material, values: ParamValues | None = None,
     values = values or uniform_values
     # the base first, then the interfaces bottom up: a bad parameter is named in that order
     base, place = material.base, f"layers[{len(material.layers) - 1}]"
-    kw: dict[str, object] = {}
+    kw: dict[str, Any] = {}
     if isinstance(base, Conductor):
         kw = dict(base_roughness=values(base.roughness, f"{place}.roughness")[:, 0].to(dtype),
                   base_r0=values(base.r0, f"{place}.r0").to(dtype))
@@ -215,7 +224,7 @@ def params_to_stack(params: Tensor) -> Stack:
     cls = CLASSES[int(codes[0])]
     col = lambda c: params[:, P[c]]
     k = params.shape[0]
-    empty = dict(roughness=params.new_zeros(k, 0), ior=params.new_zeros(k, 0), albedo=params.new_zeros(k, 0, 1),
+    empty: dict[str, Any] = dict(roughness=params.new_zeros(k, 0), ior=params.new_zeros(k, 0), albedo=params.new_zeros(k, 0, 1),
                  sigma_t=params.new_zeros(k, 0))
     if cls == CONDUCTOR:
         return Stack(**empty, base=CONDUCTOR, base_roughness=col("base_roughness"),
@@ -224,7 +233,7 @@ def params_to_stack(params: Tensor) -> Stack:
         return Stack(**empty, base=DIELECTRIC, base_roughness=col("top_roughness"), base_ior=col("top_ior"))
     used = _INTERFACE_COLUMNS[: 2 if cls in THREE_LAYERED else 1]
     st = lambda j: torch.stack([col(c[j]) for c in used], -1)
-    kw = dict(roughness=st(0), ior=st(1), albedo=st(2)[..., None], sigma_t=st(3),
+    kw: dict[str, Any] = dict(roughness=st(0), ior=st(1), albedo=st(2)[..., None], sigma_t=st(3),
               base_roughness=col("base_roughness"))
     if cls in DIFFUSE_BASED:
         return Stack(**kw, base=DIFFUSE, base_albedo=col("base_value")[:, None])
@@ -251,15 +260,16 @@ def stack_to_params(stack: Stack) -> Tensor:
     p = torch.zeros(stack.n, len(PARAM_NAMES), dtype=torch.float64)
     p[:, P["class"]] = CLASSES.index(cls)
     if cls == DIELECTRIC:
-        p[:, P["top_roughness"]], p[:, P["top_ior"]] = stack.base_roughness, stack.base_ior
+        p[:, P["top_roughness"]], p[:, P["top_ior"]] = stack.base_param("base_roughness"), stack.base_param("base_ior")
         return p
     for j, names in enumerate(_INTERFACE_COLUMNS[: stack.layers]):
         for name, t in zip(names, (stack.roughness[:, j], stack.ior[:, j], stack.albedo[:, j, 0], stack.sigma_t[:, j])):
             p[:, P[name]] = t
     if stack.base == CONDUCTOR:
-        p[:, P["base_roughness"]], p[:, P["base_value"]] = stack.base_roughness, stack.base_r0[:, 0]
+        p[:, P["base_roughness"]] = stack.base_param("base_roughness")
+        p[:, P["base_value"]] = stack.base_param("base_r0")[:, 0]
     else:
-        p[:, P["base_value"]] = stack.base_albedo[:, 0]
+        p[:, P["base_value"]] = stack.base_param("base_albedo")[:, 0]
     return p
 
 

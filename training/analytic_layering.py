@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import torch
 
-from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.material import Material
-from nbrdf.training.analytic import GGXDielectric
 from nbrdf.neural.microfacet import fresnel_dielectric
+from nbrdf.training.analytic import GGXDielectric
 from nbrdf.training.reference import single_layer_eval
 
 Tensor = torch.Tensor

@@ -22,7 +22,7 @@ from typing import Callable
 
 import torch
 
-from nbrdf.neural.brdf import ExactRGB, RGBBRDF, Sample
+from nbrdf.neural.brdf import RGBBRDF, ExactRGB, Sample
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured

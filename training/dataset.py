@@ -28,12 +28,20 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
+
 # The stack classes and the on-disk parameter vector belong to the stack translation
 # (neural.stack), the paper's distributions to training.distributions; re-exported here.
-from nbrdf.neural.stack import (CLASSES, DIFFUSE_BASED, PARAM_NAMES, THREE_LAYERED, P,  # noqa: F401
-                                params_coats, params_to_material, params_to_stack)
-from nbrdf.training.distributions import (clear_top_slabs, darken_top_slabs, sample_params,  # noqa: F401
-                                          sharpen_coats)
+from nbrdf.neural.stack import (  # noqa: F401
+    CLASSES,
+    DIFFUSE_BASED,
+    PARAM_NAMES,
+    THREE_LAYERED,
+    P,
+    params_coats,
+    params_to_material,
+    params_to_stack,
+)
+from nbrdf.training.distributions import clear_top_slabs, darken_top_slabs, sample_params, sharpen_coats  # noqa: F401
 
 Tensor = torch.Tensor
 

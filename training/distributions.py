@@ -20,8 +20,8 @@ from typing import Callable, TypeVar
 
 import torch
 
-from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC
 from nbrdf.neural.stack import CLASSES, DIFFUSE_BASED, PARAM_NAMES, THREE_LAYERED, P
 
 Tensor = torch.Tensor

@@ -19,9 +19,9 @@ import numpy as np
 import torch
 
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, MEDIUM
-from nbrdf.neural.material import FORMAT as MATERIAL_FORMAT, Material, parse_material
+from nbrdf.neural.material import FORMAT as MATERIAL_FORMAT
+from nbrdf.neural.material import Material, parse_material
 from nbrdf.neural.metrics import THETAS, albedo_error, directional_albedo, is_converged, lobe_psnr
-
 from nbrdf.training import distributions as D
 
 Tensor = torch.Tensor
@@ -188,7 +188,7 @@ def report_figures(refs: list[tuple[str, Material, Reference]], method: Method, 
     rows = []
     for cls in CLASS_COUNTS:
         picked = [(c, m, r) for c, m, r in refs if c == cls][:per_class]
-        for c, m, r in picked:
+        for _c, m, r in picked:
             row = next(x for x in result["rows"] if x["name"] == m.name)
             img = lobe_image(method(m, r), THETAS[1])
             rows.append((f"{m.name} {row['psnr'][1]:.1f} dB", r.lobes[1], img))

@@ -161,7 +161,6 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     wo = torch.as_tensor(wo).to(torch.float64)
     _check(p, wi, wo, spp)
     N, L = p.roughness.shape
-    C = p.albedo.shape[-1]
     npy = lambda t: t.detach().cpu().numpy()
     s1, s2, blocks, verts, dropped = run_walk(
         npy(wi), npy(wo), spp, seed, npy(p.roughness), npy(p.ior), npy(p.sigma_t), npy(p.albedo), p.base,

@@ -9,8 +9,8 @@ from typing import Callable
 
 import torch
 
-from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured, Medium
 from nbrdf.neural.stack import Stack, material_stack
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian

@@ -928,7 +928,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                                 ks = min(int(lv / lref), kstep, kmax - ntot + 1)
                                 kscale *= ks
                                 lref *= ks
-                                for j in range(ks - 1):  # pending copies: this vertex, before its reflection
+                                for _j in range(ks - 1):  # pending copies: this vertex, before its reflection
                                     stk[nstk, 0], stk[nstk, 1], stk[nstk, 2] = wx, wy, wz
                                     stk[nstk, 3], stk[nstk, 4], stk[nstk, 5], stk[nstk, 6] = bounces - 1, kscale, lref, ntot
                                     for c in range(C):

@@ -51,8 +51,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE
 from nbrdf.neural.material import FORMAT, Material, load_material
 
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}

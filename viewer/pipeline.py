@@ -20,9 +20,9 @@ from typing import TYPE_CHECKING, Callable
 import moderngl
 import torch
 
-from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.coat import code_coat
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.material import Material, material_to_dict
 from nbrdf.viewer.materials_gpu import analytic_uniforms, proxy_hint
 from nbrdf.viewer.modes import BrdfMode

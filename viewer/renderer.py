@@ -43,8 +43,8 @@ from nbrdf.neural.material import Material
 from nbrdf.viewer import shaders
 from nbrdf.viewer.camera import OrbitCamera
 from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
-from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.gl import use_compute
+from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.mesh import Mesh, named_mesh
 from nbrdf.viewer.modes import ToneMap, View
 from nbrdf.viewer.neural_gpu import SHARE_UNIT

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
 from test_analytic import ref_conductor, ref_dielectric
+
 from nbrdf.cli.main import nbrdf_main
 
 REPO = Path(__file__).resolve().parents[2]

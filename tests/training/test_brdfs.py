@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import pytest
 import torch
-
 from brdf_adapter import check_sampler
+
 from nbrdf.neural.brdf import RGBBRDF
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import parse_material
