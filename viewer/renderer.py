@@ -60,6 +60,7 @@ VIEWS = View.words()
 LOBE_SIZE = 64
 NORMAL_UNIT = 9  # texture unit of a material's normal map
 GBUFFER_UNITS = (10, 11, 12)  # texture units of the G-buffer in the compute lit pass
+TABLE_UNIT = 13  # texture unit of a material's baked body table
 LIT_GROUP = 8     # lit.comp's work group is LIT_GROUP x LIT_GROUP pixels
 LIT_CHUNK = 8     # passes per compute dispatch (bounds one dispatch's duration)
 MAIN = "main"    # the default accumulation slot
@@ -132,6 +133,8 @@ class Renderer:
         strategies' mixture (fewer BRDF evaluations, more noise, issue 12)."""
         self.sampling = LitSampling()
         """The lit pass's sampling: coat samples per pass, firefly clamp, seed (viewer/lit_sampling.py)."""
+        self.quick = False
+        """True: passes use ``sampling.quick()`` (the window's interactive frames, viewer/refinement.py)."""
         self._gbuf: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = {}
         self.neural = neural
         self._programs: dict[tuple, moderngl.Program] = {}
@@ -164,10 +167,8 @@ class Renderer:
         elif brdf.kind == BrdfKind.ANALYTIC:
             fs = shaders.source(frag, {"brdf": shaders.read("analytic_brdf.glsl")})
         else:
-            code = shaders.read("neural_brdf.glsl")
-            if brdf.kind == BrdfKind.TEXTURED:
-                code = shaders.read("latent_texture.glsl") + "\n" + code
-            fs = brdf.decoder.source(frag, {"brdf": code})
+            snippets, defines = _neural_snippets(brdf)
+            fs = brdf.decoder.source(frag, snippets, defines=defines)
         try:
             return self.ctx.program(vertex_shader=shaders.source(vert), fragment_shader=fs)
         except moderngl.Error as e:
@@ -186,10 +187,8 @@ class Renderer:
                 src = shaders.source(name, {"brdf": shaders.read("analytic_brdf.glsl")}, version=version,
                                      defines=defines)
             else:
-                code = shaders.read("neural_brdf.glsl")
-                if brdf.kind == BrdfKind.TEXTURED:
-                    code = shaders.read("latent_texture.glsl") + "\n" + code
-                src = brdf.decoder.source(name, {"brdf": code}, storage=storage, defines=defines)
+                snippets, extra = _neural_snippets(brdf)
+                src = brdf.decoder.source(name, snippets, storage=storage, defines={**extra, **(defines or {})})
             try:
                 self._programs[key] = self.ctx.compute_shader(src)
             except moderngl.Error as e:
@@ -222,7 +221,11 @@ class Renderer:
 
     def _bind_brdf(self, prog: moderngl.Program, brdf: GpuBrdf, compute: bool = False) -> None:
         """Makes ``brdf`` the program's BRDF: weights, latent share (or latent texture), uniforms."""
-        if brdf.neural:
+        if brdf.kind == BrdfKind.TABLE:
+            brdf.body_table.use(TABLE_UNIT)
+            if "u_body_table" in prog:
+                prog["u_body_table"].value = TABLE_UNIT
+        elif brdf.neural:
             brdf.decoder.bind(prog, brdf.decoder.compute_storage if compute else None)
             if brdf.share is not None and "u_nb_share" in prog:
                 prog["u_nb_share"].write(brdf.share)
@@ -495,7 +498,7 @@ class Renderer:
         p["u_env_on"].value = int(state.env_on)
         p["u_strategies"].value = self.strategies
         p["u_one_sample"].value = int(self.one_sample_mis)
-        self.sampling.bind(p)
+        (self.sampling.quick() if self.quick else self.sampling).bind(p)
         self.env.bind(p, math.radians(state.env_rotation))
 
     def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
@@ -623,6 +626,18 @@ class Renderer:
         """Binds a dummy texture to ``units`` (ends sampling from accumulation targets)."""
         for u in units:
             self._dummy.use(u)
+
+
+def _neural_snippets(brdf: GpuBrdf) -> tuple[dict[str, str], dict[str, object]]:
+    """The ``brdf`` snippet of a neural kind and its defines: the decoder (at a
+    uniform latent or a latent texture), or the baked body table (NB_BODY_TABLE,
+    no decoder compiled in)."""
+    code = shaders.read("neural_brdf.glsl")
+    if brdf.kind == BrdfKind.TEXTURED:
+        code = shaders.read("latent_texture.glsl") + "\n" + code
+    if brdf.kind == BrdfKind.TABLE:
+        return {"brdf": code, "neural_decoder.glsl": ""}, {"NB_BODY_TABLE": 1}
+    return {"brdf": code, "body_table.glsl": ""}, {}
 
 
 def _incidence(theta_deg: float) -> tuple[float, float, float]:
