@@ -19,6 +19,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import torch
 
 try:  # share imgui_bundle's GLFW when it is there
     from imgui_bundle import imgui, implot
@@ -104,6 +105,9 @@ class App:
         self._side = self.lookdev.side_by_side  # framed for two halves (compare side by side)
         self.dragging = False
         self.refine = Refinement()   # each frame's render scale and body (progressive refinement)
+        # An edit's CPU work is small tensors (latents, the body table) beside the GL driver's
+        # threads: one torch thread (two measured 5-10x slower bakes on a loaded 2-core machine).
+        torch.set_num_threads(1)
         self.scale = 1.0             # render resolution / view resolution of the last frame
         self.interactive = False     # whether the last frame was an interactive (changing view) one
         self._last_ms: float | None = None
