@@ -31,6 +31,7 @@ SCRIPT = textwrap.dedent("""
     tmp = Path(sys.argv[2])
     app = App(ViewOptions(material=sys.argv[1], size=(64, 48)), size=(64, 48))
     app.refine.settings.adaptive = False   # full resolution: compared pixel for pixel
+    app.lookdev.bodies.use_tables = False  # with the per-pixel decoder (as offscreen)
     app.panels.visible = False
     app.frame()  # the view is the whole window now (F)
     ld = app.lookdev
