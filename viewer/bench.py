@@ -265,6 +265,8 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
       measured on the still view's own estimator and body, as viewer/noise.py
       defines it (``noise_renders`` renders of ``noise_spp`` passes that differ
       only in their seed, at half the view's size), and falls as 1 / sqrt(passes);
+    - ``full_res_pass_cpu_ms_median``: CPU time of a full-resolution frame, all
+      threads (llvmpipe's included): what a pass needs of the machine, whatever else runs on it;
     - the machine's load average (1 minute) before and after: other work on the machine slows every figure."""
     import statistics
 
@@ -304,11 +306,12 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
             if steps > 16:
                 raise RuntimeError("bench app: the still view did not reach full resolution in 16 frames")
         full_res_s = time.perf_counter() - t_edit
-        passes = []
+        passes, cpu = [], []
         for _ in range(3):  # passes at full resolution
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             app.step()
             passes.append((time.perf_counter() - t) * 1000.0)
+            cpu.append((time.process_time() - c) * 1000.0)
         # The noise of the still view's estimator, per pass.
         _, _, vw, vh = app.viewport()
         r = ld.renderer
@@ -334,6 +337,7 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
             "table_bake_ms_median": round(statistics.median(bake), 1),
             "still_full_res_s": round(full_res_s, 2),
             "full_res_pass_ms_median": round(pass_ms, 1),
+            "full_res_pass_cpu_ms_median": round(statistics.median(cpu), 1),
             "relative_noise_per_pass": round(per_pass, 4),
             "passes_to_converge": need,
             "still_converged_s": round(converged_s, 1),
