@@ -357,3 +357,58 @@ def _seeds(renderer, state, vw: int, vh: int, spp: int, renders: int, brdf) -> t
         return render_seeds(renderer, state, (max(8, vw // 2), max(8, vh // 2)), spp, range(1, renders + 1))
     finally:
         renderer.brdf = old
+
+
+def bench_body_table(sizes: tuple[str, ...] = ("32x16x8", "48x24x12"), size: int = 128, spp: int = 4,
+                     materials: str | Path | None = None) -> dict:
+    """The baked body table's render-space error against the per-pixel decoder
+    (viewer/body_table_gpu.py): the lit sphere (default environment, no background)
+    of each uniform material of the look-development set (training/sets/lookdev)
+    rendered ``size`` x ``size`` with ``spp`` passes both ways, with the same random
+    numbers (the difference is the table's alone), scored with HDR-FLIP; per table
+    size the mean and worst FLIP and the median bake time (decoder pass and upload)."""
+    from nbrdf.neural.body_table import TableSize
+    from nbrdf.neural.material import load_material
+    from nbrdf.training.render_report import flip
+    from nbrdf.viewer.body_table_gpu import BodyTables
+    from nbrdf.viewer.gl import offscreen_context
+    from nbrdf.viewer.pipeline import MaterialPipeline
+    from nbrdf.viewer.renderer import Renderer, ViewState
+
+    root = Path(materials) if materials else Path(__file__).resolve().parents[1] / "training" / "sets" / "lookdev"
+    tables = [TableSize(*(int(x) for x in s.split("x"))) for s in sizes]
+    ctx = offscreen_context()
+    pipe, r, bt = MaterialPipeline(ctx), Renderer(ctx, mesh="sphere"), BodyTables(ctx)
+    state = ViewState(background=False)
+    state.camera.distance = 2.2
+    scores: dict[str, dict[str, float]] = {s: {} for s in sizes}
+    bake: dict[str, list[float]] = {s: [] for s in sizes}
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        for path in sorted(root.glob("*.json")):
+            m = load_material(path)
+            if m.is_textured:
+                continue
+            brdf = pipe.build(m, "neural")
+            ref = r.render_linear(state, (size, size), spp, brdf)
+            for name, t in zip(sizes, tables):
+                img = r.render_linear(state, (size, size), spp, bt.brdf(brdf, t))
+                bake[name].append(bt.bake_ms)
+                scores[name][path.stem] = round(flip(ref, img)[0], 4)
+    finally:
+        torch.set_num_threads(threads)
+    return {name: {"flip_mean": round(float(np.mean(list(v.values()))), 4),
+                   "flip_worst": max(v.values()), "worst": max(v, key=v.get),
+                   "bake_ms_median": round(float(np.median(bake[name])), 1), "per_material": v}
+            for name, v in scores.items()}
+
+
+if __name__ == "__main__":
+    import json
+    import sys
+
+    # python -m nbrdf.viewer.bench table [SIZE ...]: bench_body_table as JSON.
+    if sys.argv[1:2] != ["table"]:
+        sys.exit("usage: python -m nbrdf.viewer.bench table [NxMxK ...]")
+    print(json.dumps(bench_body_table(tuple(sys.argv[2:]) or ("32x16x8", "48x24x12")), indent=2))
