@@ -110,6 +110,7 @@ class App:
         torch.set_num_threads(1)
         self.scale = 1.0             # render resolution / view resolution of the last frame
         self.interactive = False     # whether the last frame was an interactive (changing view) one
+        self.quick = False           # whether the last frame used the quick estimator (interactive, previews)
         self._last_ms: float | None = None
         self._frames = 0
         body_notice = self.lookdev.bodies.calibrate(self.lookdev.brdf) if self.lookdev.brdf is not None else ""
@@ -205,8 +206,9 @@ class App:
         vx, vy, vw, vh = self.viewport()
         self.screen.viewport = (vx, h - vy - vh, vw, vh)  # GL's origin is the bottom left
         scale = self._adapt_scale(vw, vh)
-        passes = 1 if self.interactive else passes_per_frame
-        self.lookdev.render(self.screen, (vw, vh), passes, scale=scale, interactive=self.interactive)
+        passes = 1 if self.quick else passes_per_frame
+        self.lookdev.render(self.screen, (vw, vh), passes, scale=scale, interactive=self.interactive,
+                            quick=self.quick)
         self.screen.viewport = (0, 0, w, h)
         self.screen.use()
         self.screen.viewport = (0, 0, w, h)
@@ -223,10 +225,10 @@ class App:
         view changes (its accumulation was restarted since the last frame), doubling
         to full resolution once it is still; a new scale restarts the accumulation."""
         plan = self.refine.plan(changed=self.lookdev.passes == 0)
-        self.interactive = plan.interactive
-        if plan.scale != self.scale:
-            self.scale = plan.scale
+        self.interactive, self.quick = plan.interactive, plan.quick
+        if plan.restart:
             self.lookdev.invalidate()
+        self.scale = plan.scale
         return self.scale
 
     def _measure(self, ms: float) -> None:

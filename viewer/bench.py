@@ -258,10 +258,11 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
       frame between them; per edit the time from the edit to the end of the frame
       that shows it (``edit_to_frame_ms_median`` / ``_max``) and the fraction of
       the view's width that frame rendered (``edit_frame_scale``, the median);
-    - ``still_full_res_s``: from the drag's last edit until a full-resolution frame is on screen;
+    - ``still_full_res_s``: from the drag's last edit until a full-resolution frame is
+      on screen (the refinement's preview: one pass of the quick estimator);
     - ``still_converged_s``: from the last edit until the accumulated image's relative
-      noise is under ``noise_target``: the full-resolution frame, then as many
-      passes as the noise needs at the measured time per pass. The noise per pass is
+      noise is under ``noise_target``: the full-resolution preview, then as many
+      passes of the still view's estimator as the noise needs at the measured time per pass. The noise per pass is
       measured on the still view's own estimator and body, as viewer/noise.py
       defines it (``noise_renders`` renders of ``noise_spp`` passes that differ
       only in their seed, at half the view's size), and falls as 1 / sqrt(passes);
@@ -323,7 +324,7 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
         per_pass = rel * noise_spp ** 0.5
         need = max(1, int(np.ceil((per_pass / noise_target) ** 2)))
         pass_ms = statistics.median(passes)
-        converged_s = full_res_s + max(0, need - 1) * pass_ms / 1000.0
+        converged_s = full_res_s + need * pass_ms / 1000.0  # the full-resolution preview is not accumulated
         return {
             "renderer": app.ctx.info.get("GL_RENDERER", "?"),
             "window": f"{size[0]}x{size[1]}",

@@ -555,11 +555,12 @@ class LookDev:
         return reference_state(self.state, self.material) if self._compare_active() else self.state
 
     def render(self, target: moderngl.Framebuffer, size: tuple[int, int], passes: int = 1,
-               scale: float = 1.0, interactive: bool = False) -> None:
+               scale: float = 1.0, interactive: bool = False, quick: bool | None = None) -> None:
         """Adds ``passes`` to the accumulation (up to MAX_PASSES) and draws the
         view -- or the compare / BRDF-blend composite -- into ``target``; ``scale``
         < 1 renders fewer pixels while the user drags; ``interactive`` frames may
-        shade with a quicker body (``bodies``; a change of body restarts the accumulation)."""
+        shade with a quicker body (``bodies``; a change of body restarts the accumulation);
+        ``quick``: the quick estimator (None: when ``interactive``)."""
         t0 = time.perf_counter()
         self.poll()
         if self.brdf is None:  # the first material's latent texture is still building
@@ -581,7 +582,7 @@ class LookDev:
         state = self.main_state()
         lit = replace(state, background=False)  # the backdrop pass draws what is behind the object
         r = self.renderer
-        r.quick = interactive  # interactive frames: the quick estimator (one pass each)
+        r.quick = interactive if quick is None else quick  # the quick estimator (one pass per frame)
         a = r.accumulate(lit, vw, h, first, n, body) if n else r.frame_texture(view, vw, h)
         self.passes = first + n if view == View.OBJECT else 1
         pa = float(self.passes)

@@ -4,11 +4,15 @@ While the view changes (a slider drag, an orbit, any edit that restarts the
 accumulation) frames are *interactive*: rendered at a reduced scale that keeps
 a frame within ``budget_ms`` (adapted from the measured times of the
 interactive frames, never below ``min_scale``), with the quick body (the
-baked table on software OpenGL, viewer/body_source.py). As soon as the view is
-still it *always* refines, whatever the frame time: the scale doubles each
-frame up to full resolution, then passes accumulate at full resolution until
-the session's cap. A scale change restarts the accumulation, so passes of two
-resolutions are never mixed.
+baked table on software OpenGL, viewer/body_source.py) and the quick
+estimator (``LitSampling.quick``). As soon as the view is still it *always*
+refines, whatever the frame time: the scale doubles each frame up to full
+resolution, then passes accumulate at full resolution until the session's cap.
+A frame at a new scale is a *preview* (the quick estimator: the sharper image
+sooner); the frame after the first full-resolution preview restarts the
+accumulation with the full estimator, so the preview's noisier pass is not
+averaged into the converging image. A scale change restarts the accumulation,
+so passes of two resolutions are never mixed.
 
 The policy sees no clock: the window tells it whether the view changed and how
 long each frame took, so tests drive it with made-up frame times.
@@ -45,6 +49,10 @@ class FramePlan:
     """The render scale (fraction of the view's width and height)."""
     interactive: bool
     """True: the view is changing (quick body, reduced scale); False: refining a still view."""
+    quick: bool = False
+    """The quick estimator: interactive frames and previews at a new scale."""
+    restart: bool = False
+    """Restart the accumulation before this frame (a new scale, or the end of a preview)."""
 
 
 @dataclass
@@ -59,6 +67,8 @@ class Refinement:
     """The scale of the frame planned last."""
     interactive: bool = False
     """Whether the frame planned last was interactive."""
+    quick: bool = False
+    """Whether the frame planned last used the quick estimator."""
 
     def __post_init__(self) -> None:
         if self.interactive_scale < 0:
@@ -68,13 +78,18 @@ class Refinement:
         """The next frame: ``changed`` says the view changed since the last frame
         (its accumulation was restarted by an edit, a camera move, ...)."""
         s = self.settings
+        restart = False
         if not s.adaptive:
-            self.scale, self.interactive = 1.0, False
-        elif changed:
-            self.scale, self.interactive = self.interactive_scale, True
-        else:  # still: resolution first (doubling), then samples at full resolution
-            self.scale, self.interactive = (min(1.0, self.scale * 2.0) if self.scale < 1.0 else 1.0), False
-        return FramePlan(self.scale, self.interactive)
+            scale, self.interactive, quick = 1.0, False, False
+        elif changed:  # the accumulation was restarted by the change itself
+            scale, self.interactive, quick = self.interactive_scale, True, True
+        elif self.scale < 1.0:  # still: resolution first, doubling; a preview at each new scale
+            scale, self.interactive, quick = min(1.0, self.scale * 2.0), False, True
+        else:  # then samples at full resolution, after the preview is dropped
+            scale, self.interactive, quick, restart = 1.0, False, False, self.quick
+        restart = restart or scale != self.scale
+        self.scale, self.quick = scale, quick
+        return FramePlan(scale, self.interactive, quick, restart)
 
     def done(self, frame_ms: float) -> None:
         """The duration of the frame planned last; interactive frames adapt the

@@ -23,6 +23,19 @@ def test_still_view_refines_to_full_resolution_whatever_the_frame_time():
     assert all(f == (1.0, False) for f in frames[1:])  # then passes accumulate at full resolution
 
 
+def test_previews_use_the_quick_estimator_and_are_dropped():
+    p = Refinement(RefinementSettings(start_scale=0.25, min_scale=0.25))
+    plans = []
+    for changed in [True, False, False, False, False, False]:
+        plans.append(p.plan(changed))
+        p.done(5_000.0)
+    assert [x.scale for x in plans] == [0.25, 0.5, 1.0, 1.0, 1.0, 1.0]
+    assert [x.quick for x in plans] == [True, True, True, False, False, False]
+    # A new scale restarts the accumulation (resolutions never mix); so does the first
+    # full-estimator frame after the full-resolution preview (the preview is dropped).
+    assert [x.restart for x in plans] == [True, True, True, True, False, False]
+
+
 def test_interactive_scale_adapts_to_the_budget_within_its_bounds():
     p = Refinement(RefinementSettings(budget_ms=100.0, min_scale=0.5))
     # Slow interactive frames never go below min_scale.

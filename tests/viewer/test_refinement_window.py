@@ -74,5 +74,6 @@ def test_still_view_reaches_full_resolution_and_accumulates_with_slow_frames(fra
     assert full and full[0] <= 1, still  # resolution first: full within two still frames
     tail = still[full[0]:]
     assert all(f["scale"] == 1.0 for f in tail), still  # and it stays there
-    # The accumulation restarts with the resolution (one pass at full size), then grows a pass per frame.
-    assert [f["passes"] for f in tail] == list(range(1, len(tail) + 1)), still
+    # The accumulation restarts with the resolution (a one-pass preview at full size), restarts
+    # once more without the preview, then grows a pass per frame.
+    assert [f["passes"] for f in tail] == [1] + list(range(1, len(tail))), still
