@@ -76,3 +76,23 @@ def test_only_uniform_neural_materials_are_baked(setup):
     ctx, _, brdf, _, _ = setup
     with pytest.raises(NbrdfError):
         BodyTables(ctx).brdf(type(brdf)(brdf.material, BrdfKind.ANALYTIC), INTERACTIVE)
+
+
+def test_body_source_decides_from_the_measured_decoder_and_bakes_once_per_edit(setup):
+    from nbrdf.viewer.body_source import BodySettings, BodySource
+
+    ctx, _, brdf, _, _ = setup
+    slow = BodySource(ctx, BodySettings(fast_ns_per_pixel=0.0))  # any measured cost is too slow
+    assert "baked body tables" in slow.calibrate(brdf) and slow.use_tables and slow.ns_per_pixel > 0
+    a = slow.for_frame(brdf, interactive=True)
+    assert a.kind == BrdfKind.TABLE and a.body_table.size == (32, 16, 8)
+    assert slow.for_frame(brdf, interactive=True) is a  # one bake per edit, not per frame
+    still = slow.for_frame(brdf, interactive=False)
+    assert still.kind == BrdfKind.TABLE and still.body_table.size == (48, 24, 12)
+    edited = MaterialPipeline(ctx).build(brdf.material, "neural")
+    assert slow.for_frame(edited, interactive=True) is not a
+    fast = BodySource(ctx, BodySettings(fast_ns_per_pixel=float("inf")))
+    assert "decoder in every frame" in fast.calibrate(brdf) and not fast.use_tables
+    assert fast.for_frame(brdf, interactive=True) is brdf
+    slow.release()
+    fast.release()
