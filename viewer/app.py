@@ -114,6 +114,7 @@ class App:
         self._last_ms: float | None = None
         self._frames = 0
         body_notice = self.lookdev.bodies.calibrate(self.lookdev.brdf) if self.lookdev.brdf is not None else ""
+        self.lookdev.renderer.table_sampling = self.lookdev.bodies.sampling(self.lookdev.renderer.sampling)
         if body_notice:
             self.lookdev.notice = "; ".join(x for x in (self.lookdev.notice, body_notice) if x)
         glfw.set_key_callback(self.window, self._on_key)

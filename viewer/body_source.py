@@ -12,13 +12,14 @@ decoder. The choice is made once at start from the decoder's measured speed
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import moderngl
 import numpy as np
 
 from nbrdf.neural.body_table import TableSize
 from nbrdf.viewer.body_table_gpu import INTERACTIVE, STILL, BodyTables
+from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf
 
 
@@ -91,6 +92,16 @@ class BodySource:
                        if self.use_tables else
                        f"decoder {self.ns_per_pixel:.1f} ns per pixel and pass: the decoder in every frame")
         return self.notice
+
+    def sampling(self, base: LitSampling) -> LitSampling:
+        """The lit estimator for frames shaded from tables: a body sample costs a fetch,
+        not a decoder evaluation, so 2 resampled samples of 8 candidates give the
+        default's noise per second (measured: relative noise x sqrt(CPU time) within 3 %)
+        in 43 % of its time per pass -- shorter frames, the same time to converge.
+        ``base`` itself when the decoder shades."""
+        if not self.use_tables:
+            return base
+        return replace(base, ris_samples=min(base.ris_samples, 2), ris_candidates=min(base.ris_candidates, 8))
 
     def for_frame(self, brdf: GpuBrdf, interactive: bool) -> GpuBrdf:
         """The BRDF a frame shades with: ``brdf`` itself, or (tables in use, a uniform

@@ -135,6 +135,9 @@ class Renderer:
         """The lit pass's sampling: coat samples per pass, firefly clamp, seed (viewer/lit_sampling.py)."""
         self.quick = False
         """True: passes use ``sampling.quick()`` (the window's interactive frames, viewer/refinement.py)."""
+        self.table_sampling: LitSampling | None = None
+        """The sampling of draws whose body is a baked table (None: ``sampling``; the window's
+        choice, viewer/body_source.py ``BodySource.sampling``)."""
         self._gbuf: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = {}
         self.neural = neural
         self._programs: dict[tuple, moderngl.Program] = {}
@@ -429,7 +432,7 @@ class Renderer:
         for part, (_, _, b) in enumerate(draws):
             c = self.compute_program(b)
             self._bind_brdf(c, b, compute=True)
-            self._lit_uniforms(c, state)
+            self._lit_uniforms(c, state, b)
             c["u_eye"].value = tuple(state.camera.eye())
             if "u_material_id" in c:  # -1: every covered pixel (one material)
                 c["u_material_id"].value = part if len(draws) > 1 else -1
@@ -479,15 +482,16 @@ class Renderer:
             if len(draws) > 1:  # programs may be shared by two ranges: this range's BRDF
                 self._bind_brdf(p, b)
                 self._surface_uniforms(p, state, w, h, b.normal_map)
-            self._lit_uniforms(p, state)
+            self._lit_uniforms(p, state, b)
             vao = self._mesh_vao(p)
             for k in range(first, first + passes):
                 p["u_pass"].value = k
                 vao.render(moderngl.TRIANGLES, vertices=count, first=start)
         return vp, fbo
 
-    def _lit_uniforms(self, p: moderngl.Program | moderngl.ComputeShader, state: ViewState) -> None:
-        """The lights and the environment of lit_shade.glsl."""
+    def _lit_uniforms(self, p: moderngl.Program | moderngl.ComputeShader, state: ViewState,
+                      brdf: GpuBrdf | None = None) -> None:
+        """The lights and the environment of lit_shade.glsl, and the sampling of ``brdf``'s draw."""
         ld = np.asarray(state.light_dir, dtype=np.float64)
         p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
         p["u_light_radiance"].value = (state.light_radiance,) * 3
@@ -498,7 +502,9 @@ class Renderer:
         p["u_env_on"].value = int(state.env_on)
         p["u_strategies"].value = self.strategies
         p["u_one_sample"].value = int(self.one_sample_mis)
-        (self.sampling.quick() if self.quick else self.sampling).bind(p)
+        table = brdf is not None and brdf.kind == BrdfKind.TABLE and self.table_sampling is not None
+        sampling = self.table_sampling if table else self.sampling
+        (sampling.quick() if self.quick else sampling).bind(p)
         self.env.bind(p, math.radians(state.env_rotation))
 
     def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,

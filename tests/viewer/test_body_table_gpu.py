@@ -12,6 +12,7 @@ import torch
 from nbrdf.neural.body_table import TableSize
 from nbrdf.neural.material import load_material
 from nbrdf.viewer.body_table_gpu import INTERACTIVE, STILL, BodyTables
+from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.options import DEFAULT_MATERIAL
 from nbrdf.viewer.pipeline import BrdfKind, MaterialPipeline
 from nbrdf.viewer.renderer import Renderer, ViewState
@@ -91,8 +92,23 @@ def test_body_source_decides_from_the_measured_decoder_and_bakes_once_per_edit(s
     assert still.kind == BrdfKind.TABLE and still.body_table.size == (48, 24, 12)
     edited = MaterialPipeline(ctx).build(brdf.material, "neural")
     assert slow.for_frame(edited, interactive=True) is not a
+    assert (slow.sampling(LitSampling()).ris_samples, slow.sampling(LitSampling()).ris_candidates) == (2, 8)
     fast = BodySource(ctx, BodySettings(fast_ns_per_pixel=float("inf")))
     assert "decoder in every frame" in fast.calibrate(brdf) and not fast.use_tables
     assert fast.for_frame(brdf, interactive=True) is brdf
+    base = LitSampling()
+    assert fast.sampling(base) is base
     slow.release()
     fast.release()
+
+
+def test_table_sampling_applies_to_table_draws_only(setup):
+    ctx, r, brdf, state, ref = setup
+    tb = BodyTables(ctx).brdf(brdf, STILL)
+    plain = r.render_linear(state, (48, 48), 2, tb)
+    r.table_sampling = LitSampling(ris_samples=2, ris_candidates=8)
+    try:
+        assert not np.array_equal(r.render_linear(state, (48, 48), 2, tb), plain)
+        np.testing.assert_array_equal(r.render_linear(state, (48, 48), 2, brdf), ref)
+    finally:
+        r.table_sampling = None
