@@ -349,15 +349,18 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
 
 
 def _seeds(renderer, state, vw: int, vh: int, spp: int, renders: int, brdf) -> tuple:
-    """``noise.render_seeds`` with ``brdf`` as the renderer's default BRDF (the still view's table)."""
+    """``noise.render_seeds`` with ``brdf`` as the renderer's default BRDF (the still view's
+    table) and the sampling the window uses for it (render_seeds varies ``sampling``'s seed)."""
     from nbrdf.viewer.noise import render_seeds
 
-    old = renderer.brdf
+    old = renderer.brdf, renderer.sampling, renderer.table_sampling
     renderer.brdf = brdf
+    if renderer.table_sampling is not None:
+        renderer.sampling, renderer.table_sampling = renderer.table_sampling, None
     try:
         return render_seeds(renderer, state, (max(8, vw // 2), max(8, vh // 2)), spp, range(1, renders + 1))
     finally:
-        renderer.brdf = old
+        renderer.brdf, renderer.sampling, renderer.table_sampling = old
 
 
 def bench_body_table(sizes: tuple[str, ...] = ("32x16x8", "48x24x12"), size: int = 128, spp: int = 4,
