@@ -266,7 +266,8 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
       measured on the still view's own estimator and body, as viewer/noise.py
       defines it (``noise_renders`` renders of ``noise_spp`` passes that differ
       only in their seed, at half the view's size), and falls as 1 / sqrt(passes);
-    - ``full_res_pass_cpu_ms_median``: CPU time of a full-resolution frame, all
+    - ``edit_to_frame_cpu_ms_median``, ``full_res_pass_cpu_ms_median``: CPU time of an edit's
+      frame and of a full-resolution frame, all
       threads (llvmpipe's included): what a pass needs of the machine, whatever else runs on it;
     - the machine's load average (1 minute) before and after: other work on the machine slows every figure."""
     import statistics
@@ -286,14 +287,15 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
         first_frame_s = time.perf_counter() - t0
         for _ in range(warmup):  # the still view's programs and tables
             app.step()
-        latency, scales, latent, bake = [], [], [], []
+        latency, edit_cpu, scales, latent, bake = [], [], [], [], []
         base = len(ld.editor.layers) - 1
         t_edit = time.perf_counter()
         for k in range(edits):  # a drag: one edit per frame
-            t_edit = time.perf_counter()
+            t_edit, c_edit = time.perf_counter(), time.process_time()
             ld.set_param(base, "roughness", 0.2 + 0.05 * (k % 4))
             app.step()
             latency.append((time.perf_counter() - t_edit) * 1000.0)
+            edit_cpu.append((time.process_time() - c_edit) * 1000.0)
             scales.append(app.scale)
             latent.append(ld.timings.latent_ms)
             bake.append(ld.bodies.tables.bake_ms)
@@ -333,6 +335,7 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
             "first_frame_s": round(first_frame_s, 2),
             "edit_to_frame_ms_median": round(statistics.median(latency), 1),
             "edit_to_frame_ms_max": round(max(latency), 1),
+            "edit_to_frame_cpu_ms_median": round(statistics.median(edit_cpu), 1),
             "edit_frame_scale": statistics.median(scales),
             "latent_update_ms_median": round(statistics.median(latent), 2),
             "table_bake_ms_median": round(statistics.median(bake), 1),
