@@ -38,6 +38,7 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent_texture import LatentTexture, blend
 from nbrdf.neural.material import Material, load_material, material_to_dict, save_material
 from nbrdf.viewer.backdrop import Backdrop, BackdropSettings
+from nbrdf.viewer.body_source import BodySource
 from nbrdf.viewer.compare import Compare, reference_state
 from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, ToneMap, View
 from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, gpu_brdf, material_key
@@ -146,6 +147,8 @@ class LookDev:
         self.compare_part = Compare(ctx, self.renderer)
         self.backdrop = backdrop or BackdropSettings()
         self.backdrop_part = Backdrop(ctx, self.renderer)
+        self.bodies = BodySource(ctx)  # the window's frames: decoder or baked body table (viewer/body_source.py)
+        self._body: GpuBrdf | None = None  # the BRDF the accumulation was shaded with
         self._apply_material()
 
     @property
@@ -552,10 +555,12 @@ class LookDev:
         return reference_state(self.state, self.material) if self._compare_active() else self.state
 
     def render(self, target: moderngl.Framebuffer, size: tuple[int, int], passes: int = 1,
-               scale: float = 1.0) -> None:
+               scale: float = 1.0, interactive: bool = False, quick: bool | None = None) -> None:
         """Adds ``passes`` to the accumulation (up to MAX_PASSES) and draws the
         view -- or the compare / BRDF-blend composite -- into ``target``; ``scale``
-        < 1 renders fewer pixels while the user drags."""
+        < 1 renders fewer pixels while the user drags; ``interactive`` frames may
+        shade with a quicker body (``bodies``; a change of body restarts the accumulation);
+        ``quick``: the quick estimator (None: when ``interactive``)."""
         t0 = time.perf_counter()
         self.poll()
         if self.brdf is None:  # the first material's latent texture is still building
@@ -566,7 +571,10 @@ class LookDev:
         comparing = self._compare_active()
         blending = self.interp.brdf_blend and self.other_brdf is not None
         vw = max(1, w // 2) if self.side_by_side else w
-        first = self.passes
+        body = (self.bodies.for_frame(self.brdf, interactive) if View.parse(self.state.view) == View.OBJECT
+                else self.brdf)  # the lobe and slice views: the decoder itself
+        first = self.passes if body is self._body else 0
+        self._body = body
         n = 0 if first >= MAX_PASSES else min(passes, MAX_PASSES - first)
         view = View.parse(self.state.view)
         if view != View.OBJECT:
@@ -574,7 +582,8 @@ class LookDev:
         state = self.main_state()
         lit = replace(state, background=False)  # the backdrop pass draws what is behind the object
         r = self.renderer
-        a = r.accumulate(lit, vw, h, first, n, self.brdf) if n else r.frame_texture(view, vw, h)
+        r.quick = interactive if quick is None else quick  # the quick estimator (one pass per frame)
+        a = r.accumulate(lit, vw, h, first, n, body) if n else r.frame_texture(view, vw, h)
         self.passes = first + n if view == View.OBJECT else 1
         pa = float(self.passes)
         b, pb, weight = None, pa, None
@@ -732,4 +741,5 @@ class LookDev:
 
     def close(self) -> None:
         self.compare_part.close()
+        self.bodies.release()
         self.backdrop_part.release()

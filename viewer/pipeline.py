@@ -38,6 +38,7 @@ class BrdfKind(str, Enum):
     ANALYTIC = "analytic"   #: closed form (analytic_brdf.glsl)
     NEURAL = "neural"       #: the decoder at one latent (neural_brdf.glsl)
     TEXTURED = "textured"   #: the decoder at a latent texture (latent_texture.glsl)
+    TABLE = "table"         #: a uniform latent's body baked into a table (body_table.glsl), the coat exact
 
 
 def analytic_capable(m: Material) -> bool:
@@ -72,6 +73,8 @@ class GpuBrdf:
     """A texture-mapped material's per-texel share (TEXTURED)."""
     normal_map: moderngl.Texture | None = None
     """The material's tangent-space normal map, mip-mapped (None: the mesh normal)."""
+    body_table: moderngl.Texture | None = None
+    """TABLE: the body's log f over (theta_h, theta_d, phi_d), a float 3D texture (neural/body_table.py)."""
 
     @property
     def neural(self) -> bool:
