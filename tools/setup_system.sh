@@ -4,7 +4,7 @@
 # what to install. LLVM 19 (Dr.Jit's back end for Mitsuba's llvm variants,
 # nbrdf.mitsuba) is installed where apt can, else named in a notice.
 set -u
-if ! ls /usr/lib/*/libLLVM-19.so* /usr/lib/llvm-19/lib/libLLVM*.so* >/dev/null 2>&1; then
+if ! compgen -G "/usr/lib/*/libLLVM-19.so*" >/dev/null && ! compgen -G "/usr/lib/llvm-19/lib/libLLVM*.so*" >/dev/null; then
     if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
         echo "setup: installing libllvm19 (Mitsuba's llvm variants)"
         (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libllvm19) >/tmp/nbrdf-apt-llvm.log 2>&1 \
