@@ -144,13 +144,15 @@ def _np3(v) -> np.ndarray:
     return np.stack([np.asarray(v.x, np.float32), np.asarray(v.y, np.float32), np.asarray(v.z, np.float32)], 1)
 
 
+SYMBOLIC = ("nbrdf_reference: the walk runs per wavefront; render inside nbrdf.mitsuba.wavefront_mode() "
+            "(Dr.Jit's evaluated loops and calls)")
+
+
 def _to_np(v):
-    try:
-        dr.eval(v)
-        return _np3(v)
-    except RuntimeError as e:
-        raise PluginError("nbrdf_reference: the walk runs per wavefront; render inside "
-                          "nbrdf.mitsuba.wavefront_mode() (Dr.Jit's evaluated loops and calls)") from e
+    if dr.flag(dr.JitFlag.SymbolicScope):
+        raise PluginError(SYMBOLIC)
+    dr.eval(v)
+    return _np3(v)
 
 
 class NbrdfReferenceBSDF(mi.BSDF):
