@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import contextlib
 import itertools
-from pathlib import Path
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -34,38 +32,16 @@ def _prop(props, key: str, default=None):
     return props[key] if key in props else default
 
 
-def load_code(material: str, weights: str | None = None):
-    """(model, code (3, 34), Material or None) of a material JSON or a code
-    file (``nbrdf project --out Z.safetensors``), through the bundle
-    ``weights`` (default: the shipped one)."""
+def code_kernel(material: str, weights: str | None = None) -> CodeKernel:
+    """The Dr.Jit kernel of a material JSON or code file (``neural.material_code``)."""
     from nbrdf.neural.errors import NbrdfError
-    from nbrdf.neural.latent import load_latent
-    from nbrdf.neural.material import load_material
-    from nbrdf.neural.model import default_model, load_model
+    from nbrdf.neural.material_code import code_parts, load_code
 
     try:
-        model = load_model(weights) if weights else default_model()
-        p = Path(material)
-        if p.suffix.lower() == ".safetensors":
-            return model, load_latent(p, model.decoder_id).z, None
-        m = load_material(p)
-        if m.is_textured:
-            raise NbrdfError(f"{m.textures()[0][0]}: texture-mapped materials are not supported by the Mitsuba "
-                             "plugin; bake one texel or use the previewer")
-        return model, model.material_latent(m), m
+        model, code = load_code(material, weights)
+        (r, ior), (sigma, w) = code_parts(model, code)
     except NbrdfError as e:
         raise PluginError(f"nbrdf: {e}") from None
-
-
-def code_kernel(model, code) -> CodeKernel:
-    """The Dr.Jit kernel of a code (3, 34) under ``model``."""
-    from nbrdf.neural.coat import NO_COAT, coat_of
-
-    spec = model.decoder.spec
-    if code.shape != (3, spec.code):
-        raise PluginError(f"nbrdf: a material code must be (3, {spec.code}), got {tuple(code.shape)}")
-    r, ior = coat_of(code[0], spec.latent).tolist() if spec.coat else NO_COAT
-    sigma, w = model.proxy(code)
     return CodeKernel(DecoderKernel.from_torch(model.decoder, code), Coat(float(r), float(ior)),
                       Proxy(float(sigma), float(w)))
 
@@ -86,8 +62,7 @@ class NbrdfBSDF(mi.BSDF):
         if path is None:
             raise PluginError('nbrdf: the property "material" (a material JSON or a code file) is missing')
         self.path = str(path)
-        model, code, _ = load_code(self.path, _prop(props, "weights"))
-        self.kernel = code_kernel(model, code)
+        self.kernel = code_kernel(self.path, _prop(props, "weights"))
         diffuse = not self.kernel.coat.present and self.kernel.proxy.sigma > 0.5
         self.m_components = [_flags(diffuse)]
         self.m_flags = _flags(diffuse)
