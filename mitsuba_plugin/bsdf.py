@@ -119,13 +119,22 @@ def _np3(v) -> np.ndarray:
     return np.stack([np.asarray(v.x, np.float32), np.asarray(v.y, np.float32), np.asarray(v.z, np.float32)], 1)
 
 
-SYMBOLIC = ("nbrdf_reference: the walk runs per wavefront; render inside nbrdf.mitsuba.wavefront_mode() "
-            "(Dr.Jit's evaluated loops and calls)")
+SYMBOLIC = ("nbrdf_reference: traced in a symbolic loop or call, where the walk cannot run: it reflects nothing "
+            "there; render inside nbrdf.mitsuba.wavefront_mode() (Dr.Jit's evaluated loops and calls)")
+
+
+def _symbolic() -> bool:
+    """True while Dr.Jit traces symbolically. A symbolic call traces every live
+    BSDF of a scene's class, so raising here would break renders of scenes
+    that do not even use this plugin: it warns (Mitsuba's log) and reflects
+    nothing instead."""
+    if dr.flag(dr.JitFlag.SymbolicScope):
+        mi.Log(mi.LogLevel.Warn, SYMBOLIC)
+        return True
+    return False
 
 
 def _to_np(v):
-    if dr.flag(dr.JitFlag.SymbolicScope):
-        raise PluginError(SYMBOLIC)
     dr.eval(v)
     return _np3(v)
 
@@ -171,6 +180,8 @@ class NbrdfReferenceBSDF(mi.BSDF):
         return mi.Color3f(mi.Float(f[:, 0]), mi.Float(f[:, 1]), mi.Float(f[:, 2]))
 
     def eval(self, ctx, si, wo, active=True):
+        if _symbolic():
+            return dr.zeros(mi.Color3f, dr.width(wo))
         light, view = _to_np(wo), _to_np(si.wi)
         f = self._color(self._f(light, view))
         ok = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
@@ -179,6 +190,8 @@ class NbrdfReferenceBSDF(mi.BSDF):
     def pdf(self, ctx, si, wo, active=True):
         import torch
 
+        if _symbolic():
+            return dr.zeros(mi.Float, dr.width(wo))
         p = self.brdf.pdf(torch.from_numpy(_to_np(si.wi)), torch.from_numpy(_to_np(wo))).numpy()
         return dr.select(active, mi.Float(p.astype(np.float32)), 0.0)
 
@@ -188,6 +201,8 @@ class NbrdfReferenceBSDF(mi.BSDF):
     def sample(self, ctx, si, sample1, sample2, active=True):
         import torch
 
+        if _symbolic():
+            return dr.zeros(mi.BSDFSample3f, dr.width(si.wi)), dr.zeros(mi.Color3f, dr.width(si.wi))
         view = _to_np(si.wi)
         s1, s2 = np.asarray(sample1, np.float32), np.stack([np.asarray(sample2.x, np.float32),
                                                            np.asarray(sample2.y, np.float32)], 1)
