@@ -40,10 +40,10 @@ def code_kernel(material: str, weights: str | None = None) -> CodeKernel:
     try:
         model, code = load_code(material, weights)
         (r, ior), (sigma, w) = code_parts(model, code)
-    except NbrdfError as e:
+        decoder = DecoderKernel.from_torch(model.decoder, code)
+    except (NbrdfError, ValueError) as e:
         raise PluginError(f"nbrdf: {e}") from None
-    return CodeKernel(DecoderKernel.from_torch(model.decoder, code), Coat(float(r), float(ior)),
-                      Proxy(float(sigma), float(w)))
+    return CodeKernel(decoder, Coat(float(r), float(ior)), Proxy(float(sigma), float(w)))
 
 
 def _flags(kernel_or_diffuse: bool):
@@ -66,21 +66,26 @@ class NbrdfBSDF(mi.BSDF):
         diffuse = not self.kernel.coat.present and self.kernel.proxy.sigma > 0.5
         self.m_components = [_flags(diffuse)]
         self.m_flags = _flags(diffuse)
+        self._lobe = mi.BSDFFlags.DiffuseReflection if diffuse else mi.BSDFFlags.GlossyReflection
+
+    def _enabled(self, ctx, active):
+        """``active`` where the context asks for this BSDF's one component."""
+        return active & ctx.is_enabled(self._lobe, 0)
 
     def eval(self, ctx, si, wo, active=True):
         f = self.kernel.eval(wo, si.wi)
-        ok = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
+        ok = self._enabled(ctx, active) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
         return dr.select(ok, f * mi.Frame3f.cos_theta(wo), 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
-        return dr.select(active, self.kernel.pdf(si.wi, wo), 0.0)
+        return dr.select(self._enabled(ctx, active), self.kernel.pdf(si.wi, wo), 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
         return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         wo, pdf = self.kernel.sample(si.wi, sample1, sample2.x, sample2.y)
-        ok = active & (pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
+        ok = self._enabled(ctx, active) & (pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
         bs = dr.zeros(mi.BSDFSample3f)
         bs.wo = wo
         bs.pdf = dr.select(ok, pdf, 0.0)
