@@ -1,12 +1,11 @@
-"""Mitsuba tests: skipped as a whole only where the optional extra ``mitsuba``
-is not installed (``pip install -e ".[mitsuba]"``; ``make setup`` installs it)."""
+"""Fixtures of the Mitsuba tests. Each test module skips itself (one reason)
+only where the optional extra ``mitsuba`` is not installed
+(``pip install -e ".[mitsuba]"``; ``make setup`` installs it)."""
 from __future__ import annotations
 
 import json
 
 import pytest
-
-pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
 
 ASSETS = "viewer/assets/materials"
 

@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from nbrdf.cli.main import nbrdf_main
+
+pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
 
 
 def test_bench_mitsuba_prints_its_json(mi, materials, capsys):

@@ -10,6 +10,8 @@ import torch
 from nbrdf.neural.material import load_material
 from nbrdf.training.brdfs import brdf_for
 
+pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
+
 N = 4096
 
 

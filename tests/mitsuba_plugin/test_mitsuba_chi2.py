@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import pytest
 
+pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
+
 #: Simpson sub-intervals per cell when tabulating the pdf: the coat lobe of roughness 0.1 seen at 80 degrees
 #: is a few cells wide at the horizon, where Mitsuba's default 4 overestimates its integral by 2 %.
 IRES = 8

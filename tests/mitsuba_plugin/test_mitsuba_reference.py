@@ -8,6 +8,8 @@ import pytest
 
 from nbrdf.cli.main import nbrdf_main
 
+pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
+
 CALLS, SPP = 24, 16  # 384 paths per pair through the plugin
 
 

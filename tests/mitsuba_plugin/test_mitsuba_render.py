@@ -11,6 +11,8 @@ import pytest
 
 from nbrdf.cli.main import nbrdf_main
 
+pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
+
 RES = 24
 E = 3.0  # the directional light's irradiance
 
