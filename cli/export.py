@@ -15,10 +15,10 @@ from nbrdf.neural.errors import NbrdfError
 class ExportConfig:
     """``nbrdf export``: a material as a self-contained GLSL include (nbrdf_eval, nbrdf_sample, nbrdf_pdf)."""
 
-    material: str = field(default="", metadata={"positional": True, "metavar": "MATERIAL"})
-    """material JSON (SPEC section 4) or a code file from `nbrdf project`"""
-    glsl: str = ""
+    glsl: str
     """output .glsl: the decoder's weights, the material's code and its coat as constants, plus its sampler"""
+    material: str | None = field(default=None, metadata={"positional": True, "metavar": "MATERIAL"})
+    """material JSON (SPEC section 4) or a code file from `nbrdf project` (required)"""
     model: str | None = None
     """bundle (default: the shipped weights)"""
 
@@ -30,8 +30,6 @@ def cmd_export(a: argparse.Namespace) -> int:
     c: ExportConfig = build(ExportConfig, a)
     if not c.material:
         raise NbrdfError("export: give a MATERIAL (a material JSON or a code file)")
-    if not c.glsl:
-        raise NbrdfError("export: give --glsl OUT.glsl (the only export format)")
     out = out_path(c.glsl, (".glsl",))
     model, code = load_code(c.material, c.model)
     out.write_text(export_glsl(model, code, Path(c.material).name))
