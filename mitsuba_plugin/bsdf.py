@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -21,7 +22,8 @@ import numpy as np
 from nbrdf.mitsuba.kernel import Coat, CodeKernel, DecoderKernel, Proxy
 
 FLAGS_GLOSSY = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
-FLAGS_DIFFUSE = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+#: A proxy wider than this (and no coat) is reported to Mitsuba as a diffuse lobe, else glossy.
+DIFFUSE_SIGMA = 0.5
 
 
 class PluginError(RuntimeError):
@@ -46,10 +48,6 @@ def code_kernel(material: str, weights: str | None = None) -> CodeKernel:
     return CodeKernel(decoder, Coat(float(r), float(ior)), Proxy(float(sigma), float(w)))
 
 
-def _flags(kernel_or_diffuse: bool):
-    return FLAGS_DIFFUSE if kernel_or_diffuse else FLAGS_GLOSSY
-
-
 class NbrdfBSDF(mi.BSDF):
     """``{"type": "nbrdf", "material": PATH[, "weights": BUNDLE]}``."""
 
@@ -63,10 +61,10 @@ class NbrdfBSDF(mi.BSDF):
             raise PluginError('nbrdf: the property "material" (a material JSON or a code file) is missing')
         self.path = str(path)
         self.kernel = code_kernel(self.path, _prop(props, "weights"))
-        diffuse = not self.kernel.coat.present and self.kernel.proxy.sigma > 0.5
-        self.m_components = [_flags(diffuse)]
-        self.m_flags = _flags(diffuse)
+        diffuse = not self.kernel.coat.present and self.kernel.proxy.sigma > DIFFUSE_SIGMA
         self._lobe = mi.BSDFFlags.DiffuseReflection if diffuse else mi.BSDFFlags.GlossyReflection
+        self.m_components = [self._lobe | mi.BSDFFlags.FrontSide]
+        self.m_flags = self.m_components[0]
 
     def _enabled(self, ctx, active):
         """``active`` where the context asks for this BSDF's one component."""
@@ -85,13 +83,14 @@ class NbrdfBSDF(mi.BSDF):
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         wo, pdf = self.kernel.sample(si.wi, sample1, sample2.x, sample2.y)
-        ok = self._enabled(ctx, active) & (pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
+        ok = (self._enabled(ctx, active) & (pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0)
+              & (mi.Frame3f.cos_theta(wo) > 0))
         bs = dr.zeros(mi.BSDFSample3f)
         bs.wo = wo
         bs.pdf = dr.select(ok, pdf, 0.0)
         bs.eta = 1.0
         bs.sampled_component = mi.UInt32(0)
-        bs.sampled_type = mi.UInt32(+self.m_flags)
+        bs.sampled_type = mi.UInt32(+self._lobe)
         f = self.kernel.eval(wo, si.wi) * mi.Frame3f.cos_theta(wo)
         return bs, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0)
 
@@ -225,7 +224,7 @@ class NbrdfReferenceBSDF(mi.BSDF):
         bs.pdf = dr.select(ok, mi.Float(pdf), 0.0)
         bs.eta = 1.0
         bs.sampled_component = mi.UInt32(0)
-        bs.sampled_type = mi.UInt32(+self.m_flags)
+        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
         return bs, dr.select(ok, self._color(weight.astype(np.float32)), 0.0)
 
     def traverse(self, cb):
