@@ -22,8 +22,9 @@ import numpy as np
 from nbrdf.mitsuba.kernel import Coat, CodeKernel, DecoderKernel, Proxy
 
 FLAGS_GLOSSY = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
-#: A proxy wider than this (and no coat) is reported to Mitsuba as a diffuse lobe, else glossy.
-DIFFUSE_SIGMA = 0.5
+#: A material without a coat whose proxy gives the cosine lobe more than this share is reported
+#: to Mitsuba as a diffuse lobe, else as a glossy one.
+DIFFUSE_W = 0.9
 
 
 class PluginError(RuntimeError):
@@ -61,7 +62,7 @@ class NbrdfBSDF(mi.BSDF):
             raise PluginError('nbrdf: the property "material" (a material JSON or a code file) is missing')
         self.path = str(path)
         self.kernel = code_kernel(self.path, _prop(props, "weights"))
-        diffuse = not self.kernel.coat.present and self.kernel.proxy.sigma > DIFFUSE_SIGMA
+        diffuse = not self.kernel.coat.present and self.kernel.proxy.w > DIFFUSE_W
         self._lobe = mi.BSDFFlags.DiffuseReflection if diffuse else mi.BSDFFlags.GlossyReflection
         self.m_components = [self._lobe | mi.BSDFFlags.FrontSide]
         self.m_flags = self.m_components[0]
