@@ -115,11 +115,10 @@ def cmd_bench_mitsuba(a: argparse.Namespace) -> int:
         raise NbrdfError(f"bench mitsuba: {e.name} is not installed (pip install -e '.[mitsuba]')") from None
     except ImportError as e:
         raise NbrdfError(f"bench mitsuba: {e}") from None
-    from nbrdf.mitsuba.bsdf import PluginError
-
     from pathlib import Path
 
     import nbrdf.viewer
+    from nbrdf.mitsuba.bsdf import PluginError
 
     material = c.material or str(Path(nbrdf.viewer.__file__).parent / "assets" / "materials" / "car_paint.json")
     try:

@@ -243,7 +243,7 @@ class DecoderKernel:
         with torch.no_grad():
             shares = decoder.latent_share(code.float()).numpy()  # (3, W)
             w_dir = decoder.hidden[0].weight[:, spec.latent:].numpy()
-            hidden = [(l.weight.numpy(), l.bias.numpy()) for l in decoder.hidden[1:]]
+            hidden = [(layer.weight.numpy(), layer.bias.numpy()) for layer in decoder.hidden[1:]]
             out = (decoder.out.weight.numpy(), decoder.out.bias.numpy())
         return DecoderKernel(spec.encoding, spec.activation, w_dir, shares, hidden, out)
 

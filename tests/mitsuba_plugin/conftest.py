@@ -12,8 +12,9 @@ ASSETS = "viewer/assets/materials"
 
 @pytest.fixture(scope="session")
 def mi():
-    import nbrdf.mitsuba  # noqa: F401  - registers the plugins (llvm_ad_rgb)
     import mitsuba
+
+    import nbrdf.mitsuba  # noqa: F401  - registers the plugins (llvm_ad_rgb)
 
     assert mitsuba.variant() == "llvm_ad_rgb"
     return mitsuba
