@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml constraints.txt tools/setup_system.sh
 	@test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	@$(BIN)/python -m pip install -q --upgrade pip >/dev/null
 	@$(BIN)/python -m pip install -q -c constraints.txt "torch==2.13.0"
-	@$(BIN)/python -m pip install -q -c constraints.txt -e ".[test]"
+	@$(BIN)/python -m pip install -q -c constraints.txt -e ".[test,mitsuba]"
 	@touch $(STAMP)
 
 run: setup
