@@ -13,20 +13,26 @@ sigma(a) = a^1.1 / (1 - a^1.1). The atoms are:
   refracted one); the mean refracts (Snell); the reflected variance is
   sigma(a), the transmitted one sigma of the roughness scaled by the paper's
   ior ratio term, with the Jacobian of refraction j = eta cos_t / cos_i;
-- a medium slab: Beer-Lambert along the refracted mean, exp(-sigma_t / mu).
-  Scattering follows the paper's single-scattering operator (the scattered
-  energy A x e^-x, x = sigma_t / mu) split for the isotropic phase function
-  of this project: half keeps travelling forward (added to the
-  transmittance), half goes back up as a reflection; the scattered share
-  carries the variance of a near-uniform lobe (roughness ``ALPHA_MAX``);
+- a medium slab: Beer-Lambert along the refracted mean, exp(-sigma_t / mu)
+  (the paper's absorption operator; the mean and the variance pass
+  unchanged);
 - a conductor base (Schlick FGD table, linear in r0) or a lone dielectric
-  base (its reflection; what it transmits is lost);
-- a diffuse base, which the paper does not cover: the light the mean chain
-  brings down is made Lambertian and leaves through the stack along wo's
-  own refracted chain (reciprocal), with the geometric series of
-  inter-reflections against the stack above taken with hemispherical
-  averages of the same tables (total internal reflection included) and the
-  1 / eta^2 radiance compression of the base's slab.
+  base (its reflection; what it transmits is lost).
+
+Two things the paper leaves open for this project's stacks are made
+diffuse (``Slab``, ``diffuse_term``): a diffuse base, and the light a
+scattering medium takes out of the chain (``scattered``: what interacts,
+1 - exp(-sigma_t / mu), times the multiple-scattering albedo of isotropic
+scatterers; half goes up, half down). The paper's
+own scattering operator keeps forward-scattered light in the transmitted
+lobe with the phase function's variance; for an isotropic phase function
+that variance is unbounded and would turn every lobe below into roughness 1,
+so the scattered light is treated as a Lambertian source instead. Diffuse
+light leaves through the stack along wo's own refracted chain (reciprocity)
+with the 1 / eta^2 radiance compression of its slab, after the geometric
+series of inter-reflections against the stack above and below, taken with
+cosine-weighted hemispherical averages of the same tables (total internal
+reflection included).
 
 Atoms are combined with the paper's adding equations (geometric series of
 energies 1 / (1 - R_i0 R_12) and the matching variance adding). Each
@@ -322,16 +328,9 @@ def _atom_stats(atom: Atom, cti: Tensor, tables: BelcourTables) -> _Stats:
         j21 = cti / (ctt * atom.ior)
         return _Stats(ctt, R12[:, None].expand(-1, 3), T12[:, None].expand(-1, 3), R21[:, None].expand(-1, 3),
                       T21[:, None].expand(-1, 3), s_r, s_t12, s_r, s_t21, j12, j21)
-    if atom.kind == "medium":
-        x = atom.sigma_t / cti.clamp_min(1e-8)
-        e = torch.exp(-x)
-        scat = 0.5 * col * (x * e)[:, None]  # single scattering, half forward, half back (isotropic)
-        T = e[:, None] + scat
-        s_iso = roughness_to_variance(torch.full_like(cti, 1.0))
-        share = (scat.mean(-1) / T.mean(-1).clamp_min(1e-30))
-        s_t = share * s_iso
-        s_r = torch.where(scat.mean(-1) > 0, s_iso, z)
-        return _Stats(cti, scat, T, scat, T, s_r, s_t, s_r, s_t, one, one)
+    if atom.kind == "medium":  # Beer-Lambert along the mean; what scatters leaves the chain (``scattered``)
+        T = torch.exp(-atom.sigma_t / cti.clamp_min(1e-8))[:, None].expand(-1, 3)
+        return _Stats(cti, z3, T, z3, T, z, z, z, z, one, one)
     a = torch.full_like(cti, atom.roughness)
     if atom.kind == "conductor":
         R = tables.conductor(cti[:, None], a[:, None], col[None, :])
@@ -352,18 +351,42 @@ class Lobe:
     roughness: Tensor
 
 
+def scattered(atom: Atom, mu: Tensor) -> Tensor:
+    """(N, 3) energy a medium scatters out of a lobe crossing it at cosine mu
+    and that escapes the slab: all that interacts, 1 - exp(-sigma_t / mu),
+    times the multiple-scattering albedo of isotropic scatterers
+    (1 - g) / (1 + g), g = sqrt(1 - A) (Hapke), so a white medium loses
+    nothing and a dark one about A / 4."""
+    g = torch.sqrt(1 - torch.tensor(atom.color, dtype=mu.dtype))
+    return ((1 - g) / (1 + g))[None, :] * (1 - torch.exp(-atom.sigma_t / mu.clamp_min(1e-8)))[:, None]
+
+
+@dataclass
+class Slab:
+    """A slab of the stack as the diffuse light sees it."""
+
+    atom: Atom | None
+    """its medium (None: clear), or the diffuse base (the last slab)"""
+    T_in: Tensor
+    """(N, 3) energy of the mean chain arriving at its top"""
+    mu: Tensor
+    """(N,) the chain's cosine inside it"""
+    eta: float
+    """its absolute ior"""
+    r_above: Tensor
+    """(3,) hemispherical reflectance of everything above it, for diffuse light from inside"""
+    r_below: Tensor | None = None
+    """(3,) hemispherical reflectance of it and everything below, for diffuse light from above"""
+
+
 @dataclass
 class Decomposition:
-    """The statistics of a stack lit from cosine mu (N,)."""
+    """The statistics of a stack lit from cosines mu (N,)."""
 
     lobes: list[Lobe]
     """one per reflecting atom, top to bottom"""
-    T_down: Tensor
-    """(N, 3) energy that reaches the base through everything above it"""
-    R_up_hemi: Tensor
-    """(3,) hemispherical reflectance of the stack above the base for diffuse light from below"""
-    eta_base: float
-    """absolute ior of the slab the base sits in"""
+    slabs: list[Slab]
+    """the slabs under each interface that hold a scattering medium or the diffuse base"""
 
 
 def _mean(x: Tensor) -> Tensor:
@@ -385,9 +408,12 @@ def decompose(atoms: list[Atom], mu: Tensor, tables: BelcourTables | None = None
     s_ri0, s_t0i, s_ti0 = (torch.zeros(n, dtype=dt) for _ in range(3))
     j0i, ji0 = torch.ones(n, dtype=dt), torch.ones(n, dtype=dt)
     lobes: list[Lobe] = []
+    slabs: list[Slab] = []
     r_hemi = torch.zeros(3, dtype=dt)
     eta_abs = 1.0
     for atom in atoms:
+        if atom.kind == "medium" and max(atom.color) > 0 and atom.sigma_t > 0 or atom.kind == "diffuse":
+            slabs.append(Slab(atom, T0i, cti, eta_abs, r_hemi))
         if atom.kind == "diffuse":
             break
         st = _atom_stats(atom, cti, tables)
@@ -412,10 +438,11 @@ def decompose(atoms: list[Atom], mu: Tensor, tables: BelcourTables | None = None
         j0i, ji0 = j0i * st.j12, ji0 * st.j21
         cti = st.ctt
         if atom.kind in ("interface", "medium"):
-            r_hemi = _hemi_add(atom, r_hemi, tables)
+            r_hemi = _add_above(_hemi_rt(atom, tables), r_hemi)
             if atom.kind == "interface":
                 eta_abs *= atom.ior
-    return Decomposition(lobes, T0i, r_hemi, eta_abs)
+    _fill_r_below(atoms, slabs, tables)
+    return Decomposition(lobes, slabs)
 
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(32)
@@ -428,23 +455,72 @@ def _hemi(fn, dtype=torch.float64) -> Tensor:
     return 2 * (fn(mu) * (w * mu)[:, None]).sum(0)
 
 
-def _hemi_add(atom: Atom, r_below: Tensor, tables: BelcourTables) -> Tensor:
-    """Diffuse light from below: the reflectance of (atom over what lies above
-    it) given ``r_below``, the reflectance of what lies above, both
-    hemispherical averages."""
-    def stats(mu: Tensor, up: bool) -> tuple[Tensor, Tensor]:
-        if atom.kind == "interface":
-            a, e = torch.full_like(mu, atom.roughness), torch.full_like(mu, atom.ior)
-            R, T = tables.dielectric(mu, a, e, down=not up)
+def _hemi_rt(atom: Atom, tables: BelcourTables) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Hemispherical (cosine-weighted) averages of an atom for diffuse light:
+    (R from above, T downward, R from below, T upward), each (3,)."""
+    if atom.kind == "interface":
+        def rt(mu: Tensor, down: bool) -> tuple[Tensor, Tensor]:
+            R, T = tables.dielectric(mu, torch.full_like(mu, atom.roughness), torch.full_like(mu, atom.ior), down)
             return R[:, None].expand(-1, 3), T[:, None].expand(-1, 3)
-        st = _atom_stats(atom, mu, tables)
-        return st.R12, st.T12
 
-    r_from_above = _hemi(lambda m: stats(m, up=False)[0])
-    t_down = _hemi(lambda m: stats(m, up=False)[1])
-    r_from_below = _hemi(lambda m: stats(m, up=True)[0])
-    t_up = _hemi(lambda m: stats(m, up=True)[1])
-    return r_from_below + t_up * t_down * r_below / (1 - r_below * r_from_above)
+        return (_hemi(lambda m: rt(m, True)[0]), _hemi(lambda m: rt(m, True)[1]),
+                _hemi(lambda m: rt(m, False)[0]), _hemi(lambda m: rt(m, False)[1]))
+    if atom.kind == "medium":  # unscattered light passes, scattered light leaves half up, half down
+        s = _hemi(lambda m: scattered(atom, m))
+        t = _hemi(lambda m: torch.exp(-atom.sigma_t / m.clamp_min(1e-8))[:, None].expand(-1, 3)) + 0.5 * s
+        return 0.5 * s, t, 0.5 * s, t
+    if atom.kind == "conductor":
+        col = torch.tensor(atom.color, dtype=torch.float64)
+        r = _hemi(lambda m: tables.conductor(m[:, None], torch.full_like(m, atom.roughness)[:, None], col[None, :]))
+    elif atom.kind == "dielectric":
+        r = _hemi(lambda m: tables.dielectric(m, torch.full_like(m, atom.roughness),
+                                              torch.full_like(m, atom.ior))[0][:, None].expand(-1, 3))
+    else:  # diffuse
+        r = torch.tensor(atom.color, dtype=torch.float64)
+    z = torch.zeros(3, dtype=torch.float64)
+    return r, z, z, z
+
+
+def _add_above(rt: tuple[Tensor, Tensor, Tensor, Tensor], r_above: Tensor) -> Tensor:
+    """Reflectance for diffuse light from below of (an atom under what lies above it, of reflectance r_above)."""
+    r12, t12, r21, t21 = rt
+    return r21 + t21 * t12 * r_above / (1 - r_above * r12)
+
+
+def _add_below(rt: tuple[Tensor, Tensor, Tensor, Tensor], r_below: Tensor) -> Tensor:
+    """Reflectance for diffuse light from above of (an atom over what lies below it, of reflectance r_below)."""
+    r12, t12, r21, t21 = rt
+    return r12 + t12 * t21 * r_below / (1 - r_below * r21)
+
+
+def _fill_r_below(atoms: list[Atom], slabs: list[Slab], tables: BelcourTables) -> None:
+    """Each slab's r_below, adding the atoms bottom-up."""
+    r = torch.zeros(3, dtype=torch.float64)
+    pending = {id(s.atom): s for s in slabs}
+    for atom in reversed(atoms):
+        r = _add_below(_hemi_rt(atom, tables), r) if atom.kind != "diffuse" else torch.tensor(atom.color,
+                                                                                               dtype=torch.float64)
+        if id(atom) in pending:
+            pending[id(atom)].r_below = r
+
+
+def diffuse_term(dec: Decomposition, n: int) -> Tensor:
+    """(n, 3) the diffuse light of the slabs, for a decomposition of
+    [mu_i (n), mu_o (n)]: each source goes up (half of what a medium scatters,
+    all that the diffuse base reflects), the rest down onto what lies below;
+    the geometric series against the stack above (hemispherical) and the
+    exit along wo's chain with the 1 / eta^2 of the slab."""
+    f = torch.zeros(n, 3, dtype=torch.float64)
+    for slab in dec.slabs:
+        assert slab.atom is not None and slab.r_below is not None
+        if slab.atom.kind == "diffuse":
+            up = slab.T_in[:n] * torch.tensor(slab.atom.color, dtype=torch.float64)
+        else:
+            s = slab.T_in[:n] * scattered(slab.atom, slab.mu[:n])
+            up = 0.5 * s * (1 + slab.r_below)
+        series = 1 / (1 - slab.r_above * slab.r_below)
+        f = f + up * series * slab.T_in[n:] / (math.pi * slab.eta ** 2)
+    return f
 
 
 # --- evaluation --------------------------------------------------------------------------------
@@ -476,16 +552,10 @@ def belcour_eval_atoms(atoms: list[Atom], wi: Tensor, wo: Tensor, tables: Belcou
     up = (wi[:, 2] > 0) & (wo[:, 2] > 0)
     wi_s = torch.where(up[:, None], wi, torch.tensor([0.0, 0.0, 1.0], dtype=wi.dtype))
     wo_s = torch.where(up[:, None], wo, torch.tensor([0.0, 0.0, 1.0], dtype=wi.dtype))
-    diffuse = atoms[-1] if atoms[-1].kind == "diffuse" else None
-    mu = torch.cat([wi_s[:, 2], wo_s[:, 2]]) if diffuse is not None else wi_s[:, 2]
-    dec = decompose(atoms, mu, tables)
-    f = torch.zeros(n, 3, dtype=wi.dtype)
+    dec = decompose(atoms, torch.cat([wi_s[:, 2], wo_s[:, 2]]), tables)
+    f = diffuse_term(dec, n).to(wi.dtype)
     for lobe in dec.lobes:
         f = f + lobe.energy[:n] * _lobe_shape(lobe.atom, wi_s, wo_s, lobe.roughness[:n], tables)
-    if diffuse is not None:
-        alb = torch.tensor(diffuse.color, dtype=wi.dtype)
-        series = 1 / (1 - alb * dec.R_up_hemi)
-        f = f + dec.T_down[:n] * dec.T_down[n:] * (alb * series / (math.pi * dec.eta_base ** 2))[None, :]
     return torch.where(up[:, None], f, torch.zeros_like(f))
 
 
