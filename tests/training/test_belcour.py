@@ -206,3 +206,13 @@ def test_the_generator_is_what_the_tables_hold():
     for side in ("down", "up"):
         assert bool(((spec_tables.t[f"R_{side}"] + spec_tables.t[f"T_{side}"]) <= 1 + 1e-9).all())
     assert bool((spec_tables.t["A"] >= spec_tables.t["B"]).all()) and bool((spec_tables.t["B"] >= 0).all())
+
+
+def test_the_reciprocal_variant_is_reciprocal_and_the_papers_is_not():
+    atoms = [Atom("interface", 0.1, 1.5), Atom("medium", color=(0.5, 0.7, 0.9), sigma_t=1.0),
+             Atom("conductor", 0.3, color=(0.9, 0.6, 0.3))]
+    wi, wo = pairs(1000)
+    f = belcour_eval_atoms(atoms, wi, wo, reciprocal=True)
+    assert torch.allclose(f, belcour_eval_atoms(atoms, wo, wi, reciprocal=True), rtol=1e-9, atol=1e-12)
+    g = belcour_eval_atoms(atoms, wi, wo)
+    assert not torch.allclose(g, belcour_eval_atoms(atoms, wo, wi), rtol=1e-3)
