@@ -141,8 +141,10 @@ def test_thicker_absorbing_media_only_darken():
 
 
 # the lobe PSNR floor (SPEC section 9 metric) against the Monte Carlo ground
-# truth: measured 38-41 dB on these stacks; the floor states an order-of-
-# magnitude agreement, not the model's accuracy.
+# truth (64 spp, seed 1, fixed): measured 38.6 / 38.8 dB (coated white diffuse,
+# 0 / 60 degrees) and 33.8 / 31.5 dB (varnished copper); the analytic layering
+# baseline scores 23-27 dB there. The floor states an order-of-magnitude
+# agreement, not the model's accuracy.
 PSNR_FLOOR = 30.0
 STACKS = {
     "coated white diffuse": [{"type": "dielectric", "roughness": 0.03, "ior": 1.5},
