@@ -32,7 +32,7 @@ class EvalConfig:
     """float32 (N, 3) .npy of RGB BRDF values (no cosine)"""
     method: Method = Method.REFERENCE
     """reference: closed form or Monte Carlo; neural: leaf encoders, layering and the decoder; projected: the
-    decoder at a latent fitted to the reference"""
+    decoder at a latent fitted to the reference; belcour: Belcour 2018's analytic layered model"""
     spp: int = 256
     """Monte Carlo paths per pair (reference of a stack)"""
     seed: int = 0

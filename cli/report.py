@@ -75,7 +75,8 @@ class RenderReport:
     """comma-separated sets: lookdev (the bundled sharp-coat set), heldout (the paper-distribution
     held-out set), or paths of material JSON files / folders"""
     methods: str = "neural,projected"
-    """comma-separated methods: neural (the full neural path), projected (the decoder at a fitted latent)"""
+    """comma-separated methods: neural (the full neural path), projected (the decoder at a fitted latent),
+    belcour (Belcour 2018's analytic layered model, a baseline)"""
     size: int = 96
     """sphere image size in pixels (square)"""
     spp: int = 384

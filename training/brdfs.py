@@ -8,6 +8,8 @@
   give 0 there, as ``nbrdf eval`` writes them);
 - ``analytic``: closed form for a single layer, the analytic layering
   baseline (``training.analytic_layering``) for a stack;
+- ``belcour``: Belcour 2018's layered model (``training.belcour``), single
+  layers included (it reduces to their closed form);
 - ``neural``: the full neural path (leaf encoders, layering, decoder);
 - ``projected``: the decoder at latents fitted to the reference.
 
@@ -154,6 +156,22 @@ class AnalyticLayeredBRDF(ExactRGB, _DefensivelySampled):
         return analytic_layered_eval(self.material, wi.double(), wo.double()).float()
 
 
+class BelcourBRDF(ExactRGB, _DefensivelySampled):
+    """Belcour 2018's layered model of a uniform stack (float64 inside, the input's dtype out)."""
+
+    def __init__(self, material: Material):
+        from nbrdf.training.belcour import atoms_of, default_tables
+
+        self.atoms = atoms_of(material)
+        self.tables = default_tables()
+        self.sampler = DefensiveSampler(_top_roughness(material))
+
+    def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
+        from nbrdf.training.belcour import belcour_eval_atoms
+
+        return belcour_eval_atoms(self.atoms, wi.double(), wo.double(), self.tables).to(wi.dtype)
+
+
 def brdf_for(material: Material, method: str, spp: int = 256, seed: int = 0, model=None,
              projection_pairs: int = 2048, projection_spp: int = 64) -> RGBBRDF:
     """The material's BRDF by ``method`` (one of METHODS). ``spp`` and ``seed``
@@ -181,6 +199,8 @@ def brdf_for(material: Material, method: str, spp: int = 256, seed: int = 0, mod
             dec = default_decoder()
         samples = material_samples(material, n=projection_pairs, spp=projection_spp, seed=seed)
         return latent_brdf(dec, fit(dec, samples), material)
+    if method == "belcour":
+        return BelcourBRDF(material)
     # analytic
     if material.is_textured:
         raise NbrdfError(f"{material.textures()[0][0]}: texture-mapped; the analytic model needs uniform layers")

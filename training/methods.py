@@ -36,6 +36,7 @@ class Method(WordEnum):
     NEURAL = "neural"        #: the full neural path the viewer uses
     PROJECTED = "projected"  #: the decoder at a latent fitted to the reference
     ANALYTIC = "analytic"    #: closed form; the analytic layering approximation for stacks
+    BELCOUR = "belcour"      #: Belcour 2018's layered model (statistical operators), a baseline
 
 
 #: The method words, in order.

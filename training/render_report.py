@@ -14,7 +14,9 @@ Methods scored against the reference:
   coat in closed form);
 - ``projected``: the decoder at a body latent fitted to the reference minus
   the top interface's reflection, plus that coat (its capacity alone, no
-  operation networks).
+  operation networks);
+- ``belcour``: Belcour 2018's analytic layered model (``training.belcour``),
+  the baseline real-time renderers use.
 
 References are closed form for single interfaces and Monte Carlo for stacks,
 rendered as two independent halves (their mean is the reference; their FLIP
@@ -49,7 +51,7 @@ LIGHT = (-0.45, 0.55, 0.70)
 SETS_DIR = Path(__file__).resolve().parent / "sets"
 #: Bumped when a change makes cached reference renders stale.
 CACHE_VERSION = 1
-METHODS = ("neural", "projected")
+METHODS = ("neural", "projected", "belcour")
 
 
 @dataclass
