@@ -1,4 +1,4 @@
-"""``nbrdf bench reference|render|app|operations``: speed benchmarks, each
+"""``nbrdf bench reference|render|app|operations|mitsuba``: speed benchmarks, each
 printed as one JSON object (the measuring code lives in the library)."""
 from __future__ import annotations
 
@@ -54,6 +54,18 @@ class OperationsBench:
     """timed calls per operation"""
 
 
+@dataclass
+class MitsubaBench:
+    """``nbrdf bench mitsuba``: RGB evaluations per second of the nbrdf BSDF inside Mitsuba's kernel, and of torch."""
+
+    material: str = ""
+    """material JSON or code file (default: the bundled three-layer car paint)"""
+    pairs: int = 1 << 20
+    """direction pairs per timed wavefront"""
+    repeats: int = 5
+    """timed runs (the median is reported)"""
+
+
 def cmd_bench_reference(a: argparse.Namespace) -> int:
     from nbrdf.training.bench import bench_reference
 
@@ -93,12 +105,36 @@ def cmd_bench_operations(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_mitsuba(a: argparse.Namespace) -> int:
+    c: MitsubaBench = build(MitsubaBench, a)
+    at_least("--pairs", c.pairs)
+    at_least("--repeats", c.repeats)
+    try:
+        from nbrdf.mitsuba.bench import bench_mitsuba
+    except ModuleNotFoundError as e:
+        raise NbrdfError(f"bench mitsuba: {e.name} is not installed (pip install -e '.[mitsuba]')") from None
+    except ImportError as e:
+        raise NbrdfError(f"bench mitsuba: {e}") from None
+    from pathlib import Path
+
+    import nbrdf.viewer
+    from nbrdf.mitsuba.bsdf import PluginError
+
+    material = c.material or str(Path(nbrdf.viewer.__file__).parent / "assets" / "materials" / "car_paint.json")
+    try:
+        print(json.dumps(bench_mitsuba(material, c.pairs, c.repeats, torch_n=min(c.pairs, 1 << 16)), indent=2))
+    except (PluginError, RuntimeError) as e:
+        raise NbrdfError(str(e).strip().splitlines()[-1].removeprefix("PluginError: ").removeprefix("nbrdf: ")) from None
+    return 0
+
+
 #: ``nbrdf bench`` subcommands: name -> (config, command).
 BENCHES = {
     "reference": (ReferenceBench, cmd_bench_reference),
     "render": (RenderBench, cmd_bench_render),
     "app": (AppBench, cmd_bench_app),
     "operations": (OperationsBench, cmd_bench_operations),
+    "mitsuba": (MitsubaBench, cmd_bench_mitsuba),
 }
 
 
@@ -107,7 +143,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     b = sub.add_parser("bench", help="speed benchmarks, printed as JSON")
     bsub = b.add_subparsers(dest="what", required=True, parser_class=Parser)
     for name, (cls, fn) in BENCHES.items():
-        doc = cls.__doc__.split(": ", 1)[1]
+        doc = (cls.__doc__ or ": ").split(": ", 1)[1]
         p = bsub.add_parser(name, help=doc.rstrip("."), description=cls.__doc__)
         add_arguments(p, cls)
         p.set_defaults(fn=fn)

@@ -54,7 +54,7 @@ class Parser(argparse.ArgumentParser):
             fn(self)
         return self
 
-    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+    def parse_known_args(self, args=None, namespace=None):
         self.ready()
         return super().parse_known_args(args, namespace)
 
@@ -66,7 +66,7 @@ class Parser(argparse.ArgumentParser):
         self.ready()
         return super().format_help()
 
-    def error(self, message: str):  # type: ignore[override]
+    def error(self, message: str):
         raise NbrdfError(f"{self.prog}: {message}")
 
 
@@ -108,8 +108,8 @@ def _unwrap_optional(tp: Any) -> tuple[Any, bool]:
 def _default(f: dataclasses.Field) -> Any:
     if f.default is not dataclasses.MISSING:
         return f.default
-    if f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
-        return f.default_factory()  # type: ignore[misc]
+    if f.default_factory is not dataclasses.MISSING:
+        return f.default_factory()
     return dataclasses.MISSING
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -14,7 +14,10 @@ from nbrdf.cli.common import at_least, load_pairs, model_or_default, out_path, p
 from nbrdf.cli.config import add_arguments, build
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
-from nbrdf.viewer.modes import Method
+from nbrdf.training.methods import Method
+
+if TYPE_CHECKING:
+    import torch
 
 
 @dataclass
@@ -29,7 +32,7 @@ class EvalConfig:
     """float32 (N, 3) .npy of RGB BRDF values (no cosine)"""
     method: Method = Method.REFERENCE
     """reference: closed form or Monte Carlo; neural: leaf encoders, layering and the decoder; projected: the
-    decoder at a latent fitted to the reference"""
+    decoder at a latent fitted to the reference; belcour: Belcour 2018's analytic layered model"""
     spp: int = 256
     """Monte Carlo paths per pair (reference of a stack)"""
     seed: int = 0
@@ -82,10 +85,10 @@ def make_evaluator(material, method: Method, spp: int, seed: int) -> Evaluator:
     the material's BRDF from the one factory, ``training.brdfs.brdf_for``, after
     the checks every evaluating command shares."""
     at_least("--spp", spp)
-    from nbrdf.training.brdfs import brdf_for
+    from nbrdf.training.brdfs import ReferenceBRDF, brdf_for
 
     brdf = brdf_for(material, Method.parse(method, "--method").value, spp=spp, seed=seed)
-    if method != Method.REFERENCE:
+    if not isinstance(brdf, ReferenceBRDF):  # the Monte Carlo reference alone reports its progress
         return brdf.eval_with_error
 
     def ref(wi: "torch.Tensor", wo: "torch.Tensor"):
@@ -111,13 +114,12 @@ def cmd_eval(a: argparse.Namespace) -> int:
     fn = make_evaluator(material, c.method, c.spp, c.seed)
     f, se = fn(torch.from_numpy(wi), torch.from_numpy(wo))
     np.save(out, f.detach().numpy().astype(np.float32))
-    if c.method == Method.REFERENCE:
+    if c.method == Method.REFERENCE and se is not None:
         np.save(stderr_path(out), se.detach().numpy().astype(np.float32))
     return 0
 
 
 def cmd_lobe(a: argparse.Namespace) -> int:
-    import torch
 
     from nbrdf.neural.metrics import lobe_image
 

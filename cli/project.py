@@ -65,7 +65,7 @@ def cmd_project(a: argparse.Namespace) -> int:
         if c.coat:
             s.coat = _coat_arg(c.coat)
             source["coat"] = s.coat.tolist()
-    else:
+    elif c.merl:
         s = pj.merl_samples(c.merl, n=c.pairs, seed=c.seed)
         source = {"merl": str(c.merl), "pairs": c.pairs}
     if c.coat and not c.samples:

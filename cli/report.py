@@ -75,7 +75,8 @@ class RenderReport:
     """comma-separated sets: lookdev (the bundled sharp-coat set), heldout (the paper-distribution
     held-out set), or paths of material JSON files / folders"""
     methods: str = "neural,projected"
-    """comma-separated methods: neural (the full neural path), projected (the decoder at a fitted latent)"""
+    """comma-separated methods: neural (the full neural path), projected (the decoder at a fitted latent),
+    belcour (Belcour 2018's analytic layered model, a baseline)"""
     size: int = 96
     """sphere image size in pixels (square)"""
     spp: int = 384
@@ -162,7 +163,7 @@ def cmd_report_operations(ns: argparse.Namespace) -> int:
     shown = [(k, m, r) for k, m, r in refs if k in ("two_layer", "three_layer") or c.set == "lookdev"]
     shown = shown[:: max(1, c.every)][:6]
     rows = []
-    for k, m, r in shown:
+    for _k, m, r in shown:
         imgs = [r.lobes[1]] + [lobe_image(fn(m, r), ev.THETAS[1]) for fn in methods.values()]
         rows.append((m.name, imgs))
     if rows:

@@ -18,11 +18,12 @@ import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import cast
 
 import torch
 from torch import nn
 
-from nbrdf.neural.coat import code_size, coat_eval, coat_of
+from nbrdf.neural.coat import coat_eval, coat_of, code_size
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.nets import load_state
 
@@ -147,6 +148,8 @@ def encode(wi: Tensor, wo: Tensor, encoding: str = "rusink5") -> Tensor:
 class Decoder(nn.Module):
     """MLP over [latent, features] -> y = log f (one channel)."""
 
+    latent_mean: Tensor  # a buffer (see __init__)
+
     def __init__(self, spec: DecoderSpec = DecoderSpec()):
         super().__init__()
         self.spec = spec
@@ -161,10 +164,15 @@ class Decoder(nn.Module):
         """The direction features this decoder was trained on (``encode``)."""
         return encode(wi, wo, self.spec.encoding)
 
+    @property
+    def first_layer(self) -> nn.Linear:
+        """The first hidden layer, whose input is [latent, features]."""
+        return cast(nn.Linear, self.hidden[0])
+
     def latent_share(self, z: Tensor) -> Tensor:
         """The latent's part of the first layer's pre-activation, (..., width);
         z may be a latent or a whole material code (its coat is not decoded)."""
-        first = self.hidden[0]
+        first = self.first_layer
         return z[..., : self.spec.latent] @ first.weight[:, : self.spec.latent].T + first.bias
 
     def coat(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor | None:
@@ -175,7 +183,7 @@ class Decoder(nn.Module):
         return coat_eval(coat_of(z, self.spec.latent), wi, wo)
 
     def log_f_from_share(self, share: Tensor, feats: Tensor) -> Tensor:
-        first = self.hidden[0]
+        first = self.first_layer
         x = self.act(share + feats @ first.weight[:, self.spec.latent:].T)
         for layer in self.hidden[1:]:
             x = self.act(layer(x))

@@ -16,9 +16,11 @@ Layout of the stream, in vec4 units (rows padded to whole vec4s):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import torch
+from torch import nn
 
 from nbrdf.neural.decoder import ENCODINGS, LOBE_ALPHAS, LOBE_IOR, Decoder, DecoderSpec
 from nbrdf.neural.errors import NbrdfError
@@ -167,9 +169,10 @@ def pack(dec: Decoder) -> PackedDecoder:
         return out
 
     with torch.no_grad():
-        w1 = dec.hidden[0].weight.numpy()[:, s.latent:]
+        w1 = dec.first_layer.weight.numpy()[:, s.latent:]
         put("first", padded(w1, 4 * (-(-s.features // 4))))
-        for k, layer in enumerate(dec.hidden[1:], start=1):
+        for k, module in enumerate(dec.hidden[1:], start=1):
+            layer = cast(nn.Linear, module)
             wb = np.concatenate([layer.weight.numpy().reshape(-1), layer.bias.numpy()])
             put(f"hidden{k}", wb)
         wo = np.concatenate([dec.out.weight.numpy().reshape(-1), dec.out.bias.numpy(), np.zeros(3, np.float32)])

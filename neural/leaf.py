@@ -13,25 +13,23 @@ import torch
 from torch import nn
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, KINDS
 from nbrdf.neural.nets import MLP, MLPSpec
 
 Tensor = torch.Tensor
 
 #: Leaf type -> parameter names, in input order.
-LEAF_PARAMS: dict[str, tuple[str, ...]] = {
-    "conductor": ("roughness", "r0"),
-    "dielectric": ("roughness", "ior"),
-    "diffuse": ("albedo",),
-}
+LEAF_PARAMS: dict[str, tuple[str, ...]] = {k: tuple(p.name for p in KINDS[k].params)
+                                           for k in (CONDUCTOR, DIELECTRIC, DIFFUSE)}
 
 
 def leaf_features(kind: str, params: Tensor) -> Tensor:
     """Network inputs (N, k) from raw parameters (N, k) in LEAF_PARAMS order."""
-    if kind == "conductor":
+    if kind == CONDUCTOR:
         return torch.stack([params[:, 0].clamp(1e-4, 1).pow(1 / 3), params[:, 1]], -1)
-    if kind == "dielectric":
+    if kind == DIELECTRIC:
         return torch.stack([params[:, 0].clamp(1e-4, 1).pow(1 / 3), (params[:, 1] - 1.05) / 0.95], -1)
-    if kind == "diffuse":
+    if kind == DIFFUSE:
         return torch.stack([params[:, 0], params[:, 0].clamp_min(0).sqrt()], -1)
     raise NbrdfError(f"no leaf encoder for {kind!r} (one of {', '.join(LEAF_PARAMS)})")
 
@@ -64,13 +62,13 @@ class LeafEncoders(nn.Module):
         return self.nets[kind](leaf_features(kind, params))
 
     def conductor(self, roughness: Tensor, r0: Tensor) -> Tensor:
-        return self.encode("conductor", torch.stack(torch.broadcast_tensors(_t(roughness), _t(r0)), -1))
+        return self.encode(CONDUCTOR, torch.stack(torch.broadcast_tensors(_t(roughness), _t(r0)), -1))
 
     def dielectric(self, roughness: Tensor, ior: Tensor) -> Tensor:
-        return self.encode("dielectric", torch.stack(torch.broadcast_tensors(_t(roughness), _t(ior)), -1))
+        return self.encode(DIELECTRIC, torch.stack(torch.broadcast_tensors(_t(roughness), _t(ior)), -1))
 
     def diffuse(self, albedo: Tensor) -> Tensor:
-        return self.encode("diffuse", _t(albedo)[:, None])
+        return self.encode(DIFFUSE, _t(albedo)[:, None])
 
 
 def _t(x) -> Tensor:

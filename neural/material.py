@@ -16,17 +16,10 @@ from pathlib import Path
 from typing import Any, Union
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import BASE_KINDS, CONDUCTOR, DIELECTRIC, DIFFUSE, KINDS, LATENT, MEASURED, MEDIUM, RANGES
 
 FORMAT = "nbrdf-material/1"
 
-#: Legal ranges (SPEC section 3).
-RANGES = {
-    "roughness": (0.01, 1.0),
-    "ior": (1.05, 2.0),
-    "r0": (0.0, 1.0),
-    "albedo": (0.0, 1.0),
-    "sigma_t": (0.0, 5.0),
-}
 CHANNELS = ("r", "g", "b", "a", "l")
 
 
@@ -49,27 +42,27 @@ PerChannel = Union[float, tuple[Union[float, TextureRef], ...], TextureRef]
 class Dielectric:
     roughness: Scalar
     ior: Scalar
-    type: str = field(default="dielectric", init=False)
+    type: str = field(default=DIELECTRIC, init=False)
 
 
 @dataclass(frozen=True)
 class Medium:
     albedo: PerChannel
     sigma_t: Scalar
-    type: str = field(default="medium", init=False)
+    type: str = field(default=MEDIUM, init=False)
 
 
 @dataclass(frozen=True)
 class Conductor:
     roughness: Scalar
     r0: PerChannel
-    type: str = field(default="conductor", init=False)
+    type: str = field(default=CONDUCTOR, init=False)
 
 
 @dataclass(frozen=True)
 class Diffuse:
     albedo: PerChannel
-    type: str = field(default="diffuse", init=False)
+    type: str = field(default=DIFFUSE, init=False)
 
 
 @dataclass(frozen=True)
@@ -78,7 +71,7 @@ class Measured:
 
     path: str
     resolved: Path = field(compare=False)
-    type: str = field(default="measured", init=False)
+    type: str = field(default=MEASURED, init=False)
 
 
 @dataclass(frozen=True)
@@ -87,23 +80,16 @@ class LatentBase:
 
     path: str
     resolved: Path = field(compare=False)
-    type: str = field(default="latent", init=False)
+    type: str = field(default=LATENT, init=False)
 
 
 Layer = Union[Dielectric, Medium, Conductor, Diffuse, Measured, LatentBase]
 
-# key -> (kind, required); kind: "scalar", "rgb" or "path"
-_FIELDS: dict[str, dict[str, str]] = {
-    "dielectric": {"roughness": "scalar", "ior": "scalar"},
-    "medium": {"albedo": "rgb", "sigma_t": "scalar"},
-    "conductor": {"roughness": "scalar", "r0": "rgb"},
-    "diffuse": {"albedo": "rgb"},
-    "measured": {"path": "path"},
-    "latent": {"path": "path"},
-}
-_CLASSES = {"dielectric": Dielectric, "medium": Medium, "conductor": Conductor, "diffuse": Diffuse,
-            "measured": Measured, "latent": LatentBase}
-BASE_TYPES = ("conductor", "diffuse", "dielectric", "measured", "latent")
+#: layer type -> {parameter: "scalar" | "rgb" | "path"}, from the table of layer kinds.
+_FIELDS: dict[str, dict[str, str]] = {k.name: {p.name: p.shape for p in k.params} for k in KINDS.values()}
+_CLASSES = {DIELECTRIC: Dielectric, MEDIUM: Medium, CONDUCTOR: Conductor, DIFFUSE: Diffuse,
+            MEASURED: Measured, LATENT: LatentBase}
+BASE_TYPES = BASE_KINDS
 
 
 @dataclass(frozen=True)
@@ -150,7 +136,8 @@ class Material:
         if isinstance(value, TextureRef) or (isinstance(value, tuple) and any(isinstance(x, TextureRef) for x in value)):
             raise NbrdfError(f"{value}: a texture-mapped parameter has no single value")
         if isinstance(value, tuple):
-            return (float(value[0]), float(value[1]), float(value[2]))
+            r, g, b = (float(x) for x in value if not isinstance(x, TextureRef))
+            return (r, g, b)
         return (float(value), float(value), float(value))
 
 
@@ -269,10 +256,11 @@ def _check_stack(layers: list[Layer]) -> None:
     """Interfaces (each optionally followed by one medium) above one base."""
     n = len(layers)
     for i, layer in enumerate(layers):
+        kind = KINDS[layer.type]
         if isinstance(layer, Medium):
             if i == 0 or i == n - 1 or not isinstance(layers[i - 1], Dielectric):
                 raise NbrdfError(f"layers[{i}]: a medium must sit between two interfaces")
-        elif i < n - 1 and not isinstance(layer, Dielectric):
+        elif i < n - 1 and not kind.interface:
             raise NbrdfError(f"layers[{i}]: a {layer.type} can only be the base (the last layer); "
                              "above the base come dielectric interfaces and media")
 
@@ -356,7 +344,7 @@ def material_to_dict(m: Material, new_dir: Path | None = None) -> dict:
     for layer in m.layers:
         d: dict[str, Any] = {"type": layer.type}
         for k in _FIELDS[layer.type]:
-            if k == "path":
+            if isinstance(layer, (Measured, LatentBase)) and k == "path":
                 d[k] = layer.path if new_dir is None else _rel(layer.resolved, new_dir)
             else:
                 d[k] = _value_to_json(getattr(layer, k), new_dir)

@@ -15,9 +15,10 @@ from pathlib import Path
 
 import torch
 
+from nbrdf.neural.coat import with_coat
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bundle, save_decoder
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.coat import with_coat
+from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, LATENT
 from nbrdf.neural.layering import CODE, LayeringNet
 from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
 from nbrdf.neural.material import Material, Measured
@@ -73,7 +74,7 @@ class NeuralModel:
                              "the latent operations need a coat-split bundle (retrain, docs/RESULTS.md)")
         stack = material_stack(material, values or uniform_values, dtype=torch.float32)
         z_base = None
-        if stack.base == "latent":
+        if stack.base == LATENT and stack.base_path is not None:
             from nbrdf.neural.latent import load_latent
 
             z_base = load_latent(stack.base_path, self.decoder_id).z[None]
@@ -103,16 +104,22 @@ def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, sta
             raise NbrdfError(f"a latent base must be a material code of {CODE} floats per channel "
                              f"(project it again with this model), got {z_base.shape[-1]}")
         z = z_base.expand(n, C, -1).reshape(n * C, -1)
-    elif stack.base == "conductor":
-        z = with_coat(leaf.conductor(chan(stack.base_roughness), stack.base_r0.expand(n, C).reshape(-1)), None)
-    elif stack.base == "dielectric":  # a bare interface: all coat, achromatic, the encoder gives a black body
-        z_b = leaf.dielectric(stack.base_roughness, stack.base_ior)[:, None].expand(n, C, -1).reshape(n * C, -1)
+    elif leaf is None:
+        raise NbrdfError(f"a {stack.base} base needs the leaf encoders")
+    elif stack.base == CONDUCTOR:
+        r0 = stack.base_param("base_r0").expand(n, C).reshape(-1)
+        z = with_coat(leaf.conductor(chan(stack.base_param("base_roughness")), r0), None)
+    elif stack.base == DIELECTRIC:  # a bare interface: all coat, achromatic, the encoder gives a black body
+        z_b = leaf.dielectric(stack.base_param("base_roughness"), stack.base_param("base_ior"))
+        z_b = z_b[:, None].expand(n, C, -1).reshape(n * C, -1)
         z = with_coat(z_b, chan_pair(stack.coat().to(z_b.dtype), C))
-    elif stack.base == "diffuse":
-        z = with_coat(leaf.diffuse(stack.base_albedo.expand(n, C).reshape(-1)), None)
+    elif stack.base == DIFFUSE:
+        z = with_coat(leaf.diffuse(stack.base_param("base_albedo").expand(n, C).reshape(-1)), None)
     else:
         raise NbrdfError(f"a {stack.base} base has no leaf encoder")
     for j in reversed(range(stack.layers)):
+        if layering is None:
+            raise NbrdfError("a stack of interfaces needs the layering network")
         top = chan_pair(torch.stack([stack.roughness[:, j], stack.ior[:, j]], -1).to(z.dtype), C)
         z = layering(top, z, stack.albedo[:, j].expand(n, C).reshape(-1).to(z.dtype),
                      chan(stack.sigma_t[:, j]).to(z.dtype))

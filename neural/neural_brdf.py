@@ -11,9 +11,9 @@ from __future__ import annotations
 import torch
 
 from nbrdf.neural.brdf import ExactRGB, Sample
+from nbrdf.neural.coat import coat_of
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.material import Diffuse, Material
-from nbrdf.neural.coat import coat_of
 from nbrdf.neural.sampling import coated_pdf, coated_sample
 
 Tensor = torch.Tensor

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import torch
 
-from nbrdf.neural.decoder import Decoder, encode, loss_target, predicted_target, unbiased_error
 from nbrdf.neural.coat import COAT_PARAMS, coat_eval, with_coat
+from nbrdf.neural.decoder import Decoder, loss_target, predicted_target, unbiased_error
 from nbrdf.neural.errors import NbrdfError
 
 Tensor = torch.Tensor

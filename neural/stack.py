@@ -15,21 +15,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import torch
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import (FORMAT as FORMAT_MATERIAL, Conductor, Dielectric, Diffuse, LatentBase,
-                                   Material, Measured, Medium, parse_material)
+from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, MEDIUM
+from nbrdf.neural.material import FORMAT as FORMAT_MATERIAL
+from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured, Medium, parse_material
 
 Tensor = torch.Tensor
 
-#: Base kinds a stack can end in; the first three have parameters.
-BASES = ("conductor", "diffuse", "dielectric", "latent", "measured")
-
 #: The data sets' stack classes (SPEC section 9), in the order of their class index.
-CLASSES = ("conductor", "dielectric", "two_layer", "three_layer", "diffuse_base", "three_layer_diffuse")
+CLASSES = (CONDUCTOR, DIELECTRIC, "two_layer", "three_layer", "diffuse_base", "three_layer_diffuse")
 #: Classes whose base is a Lambertian (base_value = its albedo); the others end in a conductor.
 DIFFUSE_BASED = ("diffuse_base", "three_layer_diffuse")
 THREE_LAYERED = ("three_layer", "three_layer_diffuse")
@@ -87,11 +85,19 @@ class Stack:
         itself, ``NO_COAT`` for other bases."""
         if self.layers:
             return torch.stack([self.roughness[:, 0], self.ior[:, 0]], -1)
-        if self.base == "dielectric":
-            return torch.stack([self.base_roughness, self.base_ior], -1)
+        if self.base == DIELECTRIC:
+            return torch.stack([self.base_param("base_roughness"), self.base_param("base_ior")], -1)
         from nbrdf.neural.coat import NO_COAT
 
         return torch.tensor(NO_COAT, dtype=self.roughness.dtype).expand(self.n, 2)
+
+    def base_param(self, name: str) -> Tensor:
+        """A parameter of the base (``base_roughness``, ``base_r0``, ``base_ior``,
+        ``base_albedo``); one line when this stack's base kind has none."""
+        value = getattr(self, name)
+        if value is None:
+            raise NbrdfError(f"a {self.base} base has no {name.removeprefix('base_')}")
+        return value
 
     def tensors(self) -> dict[str, Tensor]:
         """The tensor fields that are set, by name."""
@@ -100,7 +106,8 @@ class Stack:
 
     def map(self, fn: Callable[[Tensor], Tensor]) -> "Stack":
         """A copy with ``fn`` applied to every tensor (all have N leading)."""
-        return replace(self, **{k: fn(v) for k, v in self.tensors().items()})
+        changes: dict[str, Any] = {k: fn(v) for k, v in self.tensors().items()}
+        return replace(self, **changes)
 
     def repeat_interleave(self, k: int) -> "Stack":
         """Every stack repeated k times in place (N k stacks)."""
@@ -115,7 +122,7 @@ class Stack:
     def per_channel(self) -> "Stack":
         """The same stacks as N C single-channel stacks (channel fastest)."""
         C = self.channels
-        out = {}
+        out: dict[str, Any] = {}
         for k, v in self.tensors().items():
             if k == "albedo":
                 out[k] = v.permute(0, 2, 1).reshape(self.n * C, self.layers, 1)
@@ -148,25 +155,23 @@ def material_stack(material: Material, values: ParamValues | None = None,
     values = values or uniform_values
     # the base first, then the interfaces bottom up: a bad parameter is named in that order
     base, place = material.base, f"layers[{len(material.layers) - 1}]"
-    kw: dict[str, object] = {}
+    kw: dict[str, Any] = {}
     if isinstance(base, Conductor):
-        kind = "conductor"
         kw = dict(base_roughness=values(base.roughness, f"{place}.roughness")[:, 0].to(dtype),
                   base_r0=values(base.r0, f"{place}.r0").to(dtype))
     elif isinstance(base, Diffuse):
-        kind = "diffuse"
         kw = dict(base_roughness=torch.full((1,), 0.5, dtype=dtype),
                   base_albedo=values(base.albedo, f"{place}.albedo").to(dtype))
     elif isinstance(base, Dielectric):
-        kind = "dielectric"
         kw = dict(base_roughness=values(base.roughness, f"{place}.roughness")[:, 0].to(dtype),
                   base_ior=values(base.ior, f"{place}.ior")[:, 0].to(dtype))
     elif isinstance(base, (LatentBase, Measured)):
-        kind, kw = base.type, dict(base_path=base.resolved)
+        kw = dict(base_path=base.resolved)
     elif isinstance(base, Medium):  # the parser forbids it; guard all the same
         raise NbrdfError("a medium cannot be the base")
     else:
         raise NbrdfError(f"{place}: unknown base {type(base).__name__}")
+    kind = base.type
     interfaces = material.interfaces
     places = [i for i, layer in enumerate(material.layers) if isinstance(layer, Dielectric)][: len(interfaces)]
     cols: dict[str, list[Tensor]] = {"roughness": [], "ior": [], "albedo": [], "sigma_t": []}
@@ -203,7 +208,7 @@ def params_coats(params: Tensor) -> Tensor:
 
     params = torch.as_tensor(params)
     c = torch.stack([params[:, P["top_roughness"]], params[:, P["top_ior"]]], -1)
-    bare = params[:, P["class"]].round().long() == CLASSES.index("conductor")
+    bare = params[:, P["class"]].round().long() == CLASSES.index(CONDUCTOR)
     return torch.where(bare[:, None], torch.tensor(NO_COAT, dtype=c.dtype), c)
 
 
@@ -219,30 +224,30 @@ def params_to_stack(params: Tensor) -> Stack:
     cls = CLASSES[int(codes[0])]
     col = lambda c: params[:, P[c]]
     k = params.shape[0]
-    empty = dict(roughness=params.new_zeros(k, 0), ior=params.new_zeros(k, 0), albedo=params.new_zeros(k, 0, 1),
+    empty: dict[str, Any] = dict(roughness=params.new_zeros(k, 0), ior=params.new_zeros(k, 0), albedo=params.new_zeros(k, 0, 1),
                  sigma_t=params.new_zeros(k, 0))
-    if cls == "conductor":
-        return Stack(**empty, base="conductor", base_roughness=col("base_roughness"),
+    if cls == CONDUCTOR:
+        return Stack(**empty, base=CONDUCTOR, base_roughness=col("base_roughness"),
                      base_r0=col("base_value")[:, None])
-    if cls == "dielectric":
-        return Stack(**empty, base="dielectric", base_roughness=col("top_roughness"), base_ior=col("top_ior"))
+    if cls == DIELECTRIC:
+        return Stack(**empty, base=DIELECTRIC, base_roughness=col("top_roughness"), base_ior=col("top_ior"))
     used = _INTERFACE_COLUMNS[: 2 if cls in THREE_LAYERED else 1]
     st = lambda j: torch.stack([col(c[j]) for c in used], -1)
-    kw = dict(roughness=st(0), ior=st(1), albedo=st(2)[..., None], sigma_t=st(3),
+    kw: dict[str, Any] = dict(roughness=st(0), ior=st(1), albedo=st(2)[..., None], sigma_t=st(3),
               base_roughness=col("base_roughness"))
     if cls in DIFFUSE_BASED:
-        return Stack(**kw, base="diffuse", base_albedo=col("base_value")[:, None])
-    return Stack(**kw, base="conductor", base_r0=col("base_value")[:, None])
+        return Stack(**kw, base=DIFFUSE, base_albedo=col("base_value")[:, None])
+    return Stack(**kw, base=CONDUCTOR, base_r0=col("base_value")[:, None])
 
 
 def stack_class(stack: Stack) -> str:
     """The data-set class of a stack's shape."""
     L = stack.layers
-    if L == 0 and stack.base in ("conductor", "dielectric"):
+    if L == 0 and stack.base in (CONDUCTOR, DIELECTRIC):
         return stack.base
-    if stack.base == "conductor" and L in (1, 2):
+    if stack.base == CONDUCTOR and L in (1, 2):
         return ("two_layer", "three_layer")[L - 1]
-    if stack.base == "diffuse" and L in (1, 2):
+    if stack.base == DIFFUSE and L in (1, 2):
         return ("diffuse_base", "three_layer_diffuse")[L - 1]
     raise NbrdfError(f"a stack of {L} interface(s) over a {stack.base} base is none of the data-set classes")
 
@@ -254,16 +259,17 @@ def stack_to_params(stack: Stack) -> Tensor:
     cls = stack_class(stack)
     p = torch.zeros(stack.n, len(PARAM_NAMES), dtype=torch.float64)
     p[:, P["class"]] = CLASSES.index(cls)
-    if cls == "dielectric":
-        p[:, P["top_roughness"]], p[:, P["top_ior"]] = stack.base_roughness, stack.base_ior
+    if cls == DIELECTRIC:
+        p[:, P["top_roughness"]], p[:, P["top_ior"]] = stack.base_param("base_roughness"), stack.base_param("base_ior")
         return p
     for j, names in enumerate(_INTERFACE_COLUMNS[: stack.layers]):
         for name, t in zip(names, (stack.roughness[:, j], stack.ior[:, j], stack.albedo[:, j, 0], stack.sigma_t[:, j])):
             p[:, P[name]] = t
-    if stack.base == "conductor":
-        p[:, P["base_roughness"]], p[:, P["base_value"]] = stack.base_roughness, stack.base_r0[:, 0]
+    if stack.base == CONDUCTOR:
+        p[:, P["base_roughness"]] = stack.base_param("base_roughness")
+        p[:, P["base_value"]] = stack.base_param("base_r0")[:, 0]
     else:
-        p[:, P["base_value"]] = stack.base_albedo[:, 0]
+        p[:, P["base_value"]] = stack.base_param("base_albedo")[:, 0]
     return p
 
 
@@ -273,12 +279,12 @@ def params_to_material(p: Tensor, name: str = "sample") -> Material:
     f = lambda t: float(t.reshape(-1)[0])
     layers: list[dict] = []
     for j in range(s.layers):
-        layers += [{"type": "dielectric", "roughness": f(s.roughness[:, j]), "ior": f(s.ior[:, j])},
-                   {"type": "medium", "albedo": f(s.albedo[:, j]), "sigma_t": f(s.sigma_t[:, j])}]
-    if s.base == "conductor":
-        layers.append({"type": "conductor", "roughness": f(s.base_roughness), "r0": f(s.base_r0)})
-    elif s.base == "diffuse":
-        layers.append({"type": "diffuse", "albedo": f(s.base_albedo)})
+        layers += [{"type": DIELECTRIC, "roughness": f(s.roughness[:, j]), "ior": f(s.ior[:, j])},
+                   {"type": MEDIUM, "albedo": f(s.albedo[:, j]), "sigma_t": f(s.sigma_t[:, j])}]
+    if s.base == CONDUCTOR:
+        layers.append({"type": CONDUCTOR, "roughness": f(s.base_roughness), "r0": f(s.base_r0)})
+    elif s.base == DIFFUSE:
+        layers.append({"type": DIFFUSE, "albedo": f(s.base_albedo)})
     else:
-        layers.append({"type": "dielectric", "roughness": f(s.base_roughness), "ior": f(s.base_ior)})
+        layers.append({"type": DIELECTRIC, "roughness": f(s.base_roughness), "ior": f(s.base_ior)})
     return parse_material({"format": FORMAT_MATERIAL, "name": name, "layers": layers})

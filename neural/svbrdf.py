@@ -83,7 +83,7 @@ class TextureValues:
             if key not in self._maps:
                 self._maps[key] = read_map(ref.resolved, ref.channel)
         if size is None:
-            size = tuple(max(m.shape[i] for m in self._maps.values()) for i in (0, 1))  # type: ignore[assignment]
+            size = (max(m.shape[0] for m in self._maps.values()), max(m.shape[1] for m in self._maps.values()))
         h, w = size
         if not (1 <= h <= MAX_SIZE and 1 <= w <= MAX_SIZE):
             raise NbrdfError(f"latent texture size {h}x{w} is outside 1..{MAX_SIZE} per side")

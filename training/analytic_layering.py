@@ -14,9 +14,10 @@ from __future__ import annotations
 import torch
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.material import Material
-from nbrdf.training.analytic import GGXDielectric
 from nbrdf.neural.microfacet import fresnel_dielectric
+from nbrdf.training.analytic import GGXDielectric
 from nbrdf.training.reference import single_layer_eval
 
 Tensor = torch.Tensor
@@ -50,7 +51,7 @@ def check_analytic(material: Material) -> None:
     conductor, diffuse or dielectric base)."""
     if material.is_textured:
         raise NbrdfError(f"{material.textures()[0][0]}: texture-mapped; the analytic model needs uniform layers")
-    if material.base.type not in ("conductor", "diffuse", "dielectric"):
+    if material.base.type not in PARAMETRIC_BASES:
         raise NbrdfError(f"a {material.base.type} base has no analytic layering model")
 
 

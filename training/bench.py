@@ -31,7 +31,7 @@ V2_NOISE_PSNR = 60.0
 
 
 def machine() -> dict:
-    from nbrdf.training.walk import threads, walk_device
+    from nbrdf.training.walk_dispatch import threads, walk_device
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     return {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),

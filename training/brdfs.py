@@ -8,6 +8,8 @@
   give 0 there, as ``nbrdf eval`` writes them);
 - ``analytic``: closed form for a single layer, the analytic layering
   baseline (``training.analytic_layering``) for a stack;
+- ``belcour``: Belcour 2018's layered model (``training.belcour``), single
+  layers included (it reduces to their closed form);
 - ``neural``: the full neural path (leaf encoders, layering, decoder);
 - ``projected``: the decoder at latents fitted to the reference.
 
@@ -22,14 +24,14 @@ from typing import Callable
 
 import torch
 
-from nbrdf.neural.brdf import ExactRGB, RGBBRDF, Sample
+from nbrdf.neural.brdf import RGBBRDF, ExactRGB, Sample
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
+from nbrdf.training.methods import METHODS
 
 Tensor = torch.Tensor
-METHODS = ("reference", "analytic", "neural", "projected")
 
 
 class ClosedFormBRDF(ExactRGB):
@@ -154,11 +156,28 @@ class AnalyticLayeredBRDF(ExactRGB, _DefensivelySampled):
         return analytic_layered_eval(self.material, wi.double(), wo.double()).float()
 
 
-def brdf_for(material: Material, method: str, spp: int = 256, seed: int = 0, model=None) -> RGBBRDF:
+class BelcourBRDF(ExactRGB, _DefensivelySampled):
+    """Belcour 2018's layered model of a uniform stack (float64 inside, the input's dtype out)."""
+
+    def __init__(self, material: Material):
+        from nbrdf.training.belcour import atoms_of, default_tables
+
+        self.atoms = atoms_of(material)
+        self.tables = default_tables()
+        self.sampler = DefensiveSampler(_top_roughness(material))
+
+    def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
+        from nbrdf.training.belcour import belcour_eval_atoms
+
+        return belcour_eval_atoms(self.atoms, wi.double(), wo.double(), self.tables).to(wi.dtype)
+
+
+def brdf_for(material: Material, method: str, spp: int = 256, seed: int = 0, model=None,
+             projection_pairs: int = 2048, projection_spp: int = 64) -> RGBBRDF:
     """The material's BRDF by ``method`` (one of METHODS). ``spp`` and ``seed``
     drive the Monte Carlo reference; ``seed`` also the projection's samples
-    (which use their own 64 paths each); ``model`` is the neural bundle
-    (default: the shipped one)."""
+    (``projection_pairs`` reference values of ``projection_spp`` paths each);
+    ``model`` is the neural bundle (default: the shipped one)."""
     if method not in METHODS:
         raise NbrdfError(f"unknown method {method!r} (one of {', '.join(METHODS)})")
     if spp < 1:
@@ -178,7 +197,10 @@ def brdf_for(material: Material, method: str, spp: int = 256, seed: int = 0, mod
             from nbrdf.neural.decoder import default_decoder
 
             dec = default_decoder()
-        return latent_brdf(dec, fit(dec, material_samples(material, spp=64, seed=seed)), material)
+        samples = material_samples(material, n=projection_pairs, spp=projection_spp, seed=seed)
+        return latent_brdf(dec, fit(dec, samples), material)
+    if method == "belcour":
+        return BelcourBRDF(material)
     # analytic
     if material.is_textured:
         raise NbrdfError(f"{material.textures()[0][0]}: texture-mapped; the analytic model needs uniform layers")

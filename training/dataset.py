@@ -28,12 +28,20 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
+
 # The stack classes and the on-disk parameter vector belong to the stack translation
 # (neural.stack), the paper's distributions to training.distributions; re-exported here.
-from nbrdf.neural.stack import (CLASSES, DIFFUSE_BASED, PARAM_NAMES, THREE_LAYERED, P,  # noqa: F401
-                                params_coats, params_to_material, params_to_stack)
-from nbrdf.training.distributions import (clear_top_slabs, darken_top_slabs, sample_params,  # noqa: F401
-                                          sharpen_coats)
+from nbrdf.neural.stack import (  # noqa: F401
+    CLASSES,
+    DIFFUSE_BASED,
+    PARAM_NAMES,
+    THREE_LAYERED,
+    P,
+    params_coats,
+    params_to_material,
+    params_to_stack,
+)
+from nbrdf.training.distributions import clear_top_slabs, darken_top_slabs, sample_params, sharpen_coats  # noqa: F401
 
 Tensor = torch.Tensor
 
@@ -263,7 +271,7 @@ def generate(out: str | Path, cfg: DataConfig, preset: str = "custom", overwrite
         if ray is not None:
             from nbrdf.training.distributed import run_shards
 
-            run_shards(cfg, todo, ray, write)
+            run_shards(make_shard, cfg, todo, ray, write)
         else:
             for s in todo:
                 write(s, make_shard(cfg, s))

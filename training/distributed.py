@@ -1,6 +1,7 @@
 """Data-set shards as Ray tasks (``nbrdf data ... --ray auto|local|ADDRESS``).
 
-Ray (an existing distributed engine) runs ``dataset.make_shard`` for every
+Ray (an existing distributed engine) runs the shard function it is given
+(``dataset.make_shard``: this module does not import the data set) for every
 shard that is not on disk yet; the driver writes each result atomically as it
 arrives, so the output folder lives on the driver only, an interrupted run
 resumes like a local one, and a shard is byte-for-byte the shard a local run
@@ -68,14 +69,15 @@ def connect(address: str):
     return ray
 
 
-def run_shards(cfg, shards: list, address: str, write: Callable[[object, dict], None],
-               on_done: Callable[[object], None] = lambda s: None) -> None:
-    """Runs ``make_shard(cfg, s)`` for every shard as one Ray task each and
-    hands every result to ``write(shard, arrays)`` (then ``on_done(shard)``)
-    in completion order. Errors raised inside a task reach the caller."""
+def run_shards(make_shard: Callable[[object, object], dict], cfg, shards: list, address: str,
+               write: Callable[[object, dict], None], on_done: Callable[[object], None] = lambda s: None) -> None:
+    """Runs ``make_shard(cfg, s)`` (a module-level function, so Ray ships it
+    by reference) for every shard as one Ray task each and hands every result
+    to ``write(shard, arrays)`` (then ``on_done(shard)``) in completion order.
+    Errors raised inside a task reach the caller."""
     ray = connect(address)
     task = ray.remote(num_cpus=1)(_make_shard_task)  # one CPU per task: the walk runs one thread there
-    pending = {task.remote(cfg, s): s for s in shards}
+    pending = {task.remote(make_shard, cfg, s): s for s in shards}
     try:
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1)
@@ -95,12 +97,10 @@ def run_shards(cfg, shards: list, address: str, write: Callable[[object, dict], 
             ray.cancel(ref)
 
 
-def _make_shard_task(cfg, shard):
+def _make_shard_task(make_shard, cfg, shard):
     """One shard in a Ray worker: the walk on the one CPU Ray granted (the
     result does not depend on it)."""
     import numba
-
-    from nbrdf.training.dataset import make_shard
 
     numba.set_num_threads(1)
     return make_shard(cfg, shard)

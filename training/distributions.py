@@ -21,6 +21,7 @@ from typing import Callable, TypeVar
 import torch
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC
 from nbrdf.neural.stack import CLASSES, DIFFUSE_BASED, PARAM_NAMES, THREE_LAYERED, P
 
 Tensor = torch.Tensor
@@ -157,8 +158,8 @@ def random_leaf_params(kind: str, n: int, g: torch.Generator) -> Tensor:
     order: conductor (roughness, r0), dielectric (roughness, ior), diffuse (albedo)."""
     u = torch.rand(n, 2, generator=g)
     rough = roughness(u[:, 0])
-    if kind == "conductor":
+    if kind == CONDUCTOR:
         return torch.stack([rough, colour(u[:, 1])], -1)
-    if kind == "dielectric":
+    if kind == DIELECTRIC:
         return torch.stack([rough, ior(u[:, 1])], -1)
     return colour(u[:, :1])

@@ -18,9 +18,10 @@ from typing import Callable
 import numpy as np
 import torch
 
-from nbrdf.neural.material import FORMAT as MATERIAL_FORMAT, Material, parse_material
+from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, MEDIUM
+from nbrdf.neural.material import FORMAT as MATERIAL_FORMAT
+from nbrdf.neural.material import Material, parse_material
 from nbrdf.neural.metrics import THETAS, albedo_error, directional_albedo, is_converged, lobe_psnr
-
 from nbrdf.training import distributions as D
 
 Tensor = torch.Tensor
@@ -40,14 +41,14 @@ def heldout_material(cls: str, g: np.random.Generator, name: str) -> Material:
     alb = lambda: [r6(D.medium_albedo(x)) for x in _u(g, 3)]
     sig = lambda: r6(D.sigma_t(_u(g)))
     colour = lambda: [r6(D.colour(x)) for x in _u(g, 3)]
-    diel = lambda: {"type": "dielectric", "roughness": rough(), "ior": ior()}
-    med = lambda: {"type": "medium", "albedo": alb(), "sigma_t": sig()}
-    cond = lambda: {"type": "conductor", "roughness": rough(), "r0": colour()}
+    diel = lambda: {"type": DIELECTRIC, "roughness": rough(), "ior": ior()}
+    med = lambda: {"type": MEDIUM, "albedo": alb(), "sigma_t": sig()}
+    cond = lambda: {"type": CONDUCTOR, "roughness": rough(), "r0": colour()}
     layers = {"conductor": lambda: [cond()], "dielectric": lambda: [diel()],
               "two_layer": lambda: [diel(), med(), cond()],
               "three_layer": lambda: [diel(), med(), diel(), med(), cond()],
               "three_layer_diffuse": lambda: [diel(), med(), diel(), med(),
-                                              {"type": "diffuse", "albedo": colour()}],
+                                              {"type": DIFFUSE, "albedo": colour()}],
               }[cls]()
     return parse_material({"format": MATERIAL_FORMAT, "name": name, "layers": layers})
 
@@ -187,7 +188,7 @@ def report_figures(refs: list[tuple[str, Material, Reference]], method: Method, 
     rows = []
     for cls in CLASS_COUNTS:
         picked = [(c, m, r) for c, m, r in refs if c == cls][:per_class]
-        for c, m, r in picked:
+        for _c, m, r in picked:
             row = next(x for x in result["rows"] if x["name"] == m.name)
             img = lobe_image(method(m, r), THETAS[1])
             rows.append((f"{m.name} {row['psnr'][1]:.1f} dB", r.lobes[1], img))

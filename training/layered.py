@@ -31,10 +31,12 @@ from dataclasses import dataclass, field
 
 import torch
 
+from nbrdf.neural.layer_kinds import DIFFUSE, PARAMETRIC_BASES
 
 Tensor = torch.Tensor
 
-BASES = ("conductor", "diffuse", "dielectric")
+#: The bases the walk simulates (their codes are ``layer_kinds.BASE_CODES``).
+BASES = PARAMETRIC_BASES
 INV_4PI = 1.0 / (4.0 * math.pi)
 
 
@@ -115,7 +117,7 @@ def _check(p: StackParams, wi: Tensor, wo: Tensor, spp: int) -> None:
         raise NbrdfError("a direction lies below the horizon (z < 0); the stack's BRDF is 0 there")
     if bool((p.ior <= 0).any()) or bool((p.base_ior <= 0).any()):
         raise NbrdfError("an index of refraction is not positive")
-    if bool((p.roughness <= 0).any()) or (p.base != "diffuse" and bool((p.base_roughness <= 0).any())):
+    if bool((p.roughness <= 0).any()) or (p.base != DIFFUSE and bool((p.base_roughness <= 0).any())):
         raise NbrdfError("a roughness is not positive")
     if bool((p.sigma_t < 0).any()):
         raise NbrdfError("sigma_t is negative")
@@ -150,7 +152,7 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
 
     import numpy as np
 
-    from nbrdf.training.walk import run_walk
+    from nbrdf.training.walk_dispatch import run_walk
 
     del compile
     t0 = time.perf_counter()
@@ -159,7 +161,6 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     wo = torch.as_tensor(wo).to(torch.float64)
     _check(p, wi, wo, spp)
     N, L = p.roughness.shape
-    C = p.albedo.shape[-1]
     npy = lambda t: t.detach().cpu().numpy()
     s1, s2, blocks, verts, dropped = run_walk(
         npy(wi), npy(wo), spp, seed, npy(p.roughness), npy(p.ior), npy(p.sigma_t), npy(p.albedo), p.base,

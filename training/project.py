@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from nbrdf.neural.decoder import Decoder, default_decoder, encode, loss_target, predicted_target
+from nbrdf.neural.decoder import Decoder, loss_target, predicted_target
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent import MaterialLatent
 from nbrdf.neural.material import Material, Measured

@@ -10,6 +10,7 @@ from typing import Callable
 import torch
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured, Medium
 from nbrdf.neural.stack import Stack, material_stack
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
@@ -37,7 +38,7 @@ def simulator_params(stack: Stack) -> StackParams:
     """A batched stack (``neural.stack``) as the simulator's parameters."""
     if stack.layers == 0:
         raise NbrdfError("a single-layer material needs no simulation")
-    if stack.base not in ("conductor", "diffuse", "dielectric"):
+    if stack.base not in PARAMETRIC_BASES:
         raise NbrdfError(f"a {stack.base} base has no Monte Carlo reference under other layers")
     kw = {k: v for k, v in stack.tensors().items() if k.startswith("base_")}
     return StackParams(roughness=stack.roughness, ior=stack.ior, albedo=stack.albedo, sigma_t=stack.sigma_t,

@@ -14,7 +14,9 @@ Methods scored against the reference:
   coat in closed form);
 - ``projected``: the decoder at a body latent fitted to the reference minus
   the top interface's reflection, plus that coat (its capacity alone, no
-  operation networks).
+  operation networks);
+- ``belcour``: Belcour 2018's analytic layered model (``training.belcour``),
+  the baseline real-time renderers use.
 
 References are closed form for single interfaces and Monte Carlo for stacks,
 rendered as two independent halves (their mean is the reference; their FLIP
@@ -49,7 +51,7 @@ LIGHT = (-0.45, 0.55, 0.70)
 SETS_DIR = Path(__file__).resolve().parent / "sets"
 #: Bumped when a change makes cached reference renders stale.
 CACHE_VERSION = 1
-METHODS = ("neural", "projected")
+METHODS = ("neural", "projected", "belcour")
 
 
 @dataclass
@@ -320,19 +322,13 @@ def _slug(name: str) -> str:
 # --- methods ------------------------------------------------------------------------------
 def method_evaluators(m: Material, model, methods: tuple[str, ...], pairs: int, spp: int,
                       seed: int) -> dict[str, EvalFn]:
-    """fn(wi, wo) of every method for one material; the projection fits the
-    reference's samples under the material's own coat (``neural.coat``)."""
-    from nbrdf.training.project import fit, material_samples
+    """fn(wi, wo) of every method for one material, from the one BRDF factory
+    (``training.brdfs.brdf_for``); the projection fits ``pairs`` reference
+    values of ``spp`` paths under the material's own coat (``neural.coat``)."""
+    from nbrdf.training.brdfs import brdf_for
 
-    dec = model.decoder
-    out: dict[str, EvalFn] = {}
-    if "neural" in methods:
-        z_n = model.material_latent(m)
-        out["neural"] = lambda wi, wo, z=z_n: dec.eval_rgb(z, wi, wo)
-    if "projected" in methods:
-        z_p = fit(dec, material_samples(m, n=pairs, spp=spp, seed=seed + 1))
-        out["projected"] = lambda wi, wo, z=z_p: dec.eval_rgb(z, wi, wo)
-    return out
+    return {name: brdf_for(m, name, seed=seed + 1, model=model, projection_pairs=pairs, projection_spp=spp).eval
+            for name in METHODS if name in methods}
 
 
 # --- the report ---------------------------------------------------------------------------

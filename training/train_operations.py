@@ -29,14 +29,15 @@ from typing import Callable
 import torch
 
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, encode, loss_target, predicted_target, unbiased_error
-from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.geometry import cosine_hemisphere
+from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC
 from nbrdf.neural.layering import CODE, LATENT, LayeringNet, layering_spec
 from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
 from nbrdf.neural.model import NeuralModel, layered_latents, load_model, save_model
 from nbrdf.neural.sampling import SamplerNet, lambert_pdf, proxy_pdf, proxy_sample
-from nbrdf.training.analytic import GGXConductor, Lambertian
 from nbrdf.neural.stack import CLASSES, THREE_LAYERED, P, params_to_stack
+from nbrdf.training.analytic import GGXConductor, Lambertian
 from nbrdf.training.dataset import body_values, data_folders, load_manifest, load_split, sample_pairs
 from nbrdf.training.distributions import mixed_params, random_leaf_params  # noqa: F401 (random_leaf_params re-exported)
 
@@ -235,9 +236,9 @@ def _decoder_loss(model: NeuralModel, z: Tensor, feats: Tensor, cos_o: Tensor, t
 def leaf_values(kind: str, params: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
     """Closed-form values (B, P) of B leaves' bodies at pairs (B, P, 3): a
     bare dielectric is all coat (``neural.coat``), so its body is black."""
-    if kind == "conductor":
+    if kind == CONDUCTOR:
         return GGXConductor(params[:, 0:1], params[:, 1:2]).eval(wi, wo)
-    if kind == "dielectric":
+    if kind == DIELECTRIC:
         return torch.zeros(wi.shape[:-1], dtype=wi.dtype)
     return Lambertian(params[:, 0:1]).eval(wi, wo)
 

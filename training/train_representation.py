@@ -106,7 +106,7 @@ def validate(dec: Decoder, val: BRDFSet, steps: int = 150, fit_pairs: int | None
         s = dec.spec.loss_scale
         err = ((predicted_target(y, cos_o, s) - loss_target(f, cos_o, s)) ** 2).mean(-1)
     out = {"all": float(err.mean())}
-    for i, cls in enumerate(CLASSES):
+    for _i, cls in enumerate(CLASSES):
         sel = [k for k, c in enumerate(val.classes) if c == cls]
         if sel:
             out[cls] = float(err[sel].mean())

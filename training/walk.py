@@ -136,7 +136,6 @@ MIRROR_CHAIN_ROUGHNESS = 0.1
 MIRROR_CHAIN_P = 0.5
 #: Paths per work item (a block of one pair's paths run by one thread).
 BLOCK = 32
-BASE_CODES = {"conductor": 0, "diffuse": 1, "dielectric": 2}
 
 #: Compiler flags: fastmath without "nnan" / "ninf" (the non-finite checks
 #: stay valid); contraction into FMAs and reassociation change results only by
@@ -929,7 +928,7 @@ def _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, 
                                 ks = min(int(lv / lref), kstep, kmax - ntot + 1)
                                 kscale *= ks
                                 lref *= ks
-                                for j in range(ks - 1):  # pending copies: this vertex, before its reflection
+                                for _j in range(ks - 1):  # pending copies: this vertex, before its reflection
                                     stk[nstk, 0], stk[nstk, 1], stk[nstk, 2] = wx, wy, wz
                                     stk[nstk, 3], stk[nstk, 4], stk[nstk, 5], stk[nstk, 6] = bounces - 1, kscale, lref, ntot
                                     for c in range(C):
@@ -1122,71 +1121,4 @@ def _run(wi, wo, spp, seed, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, 
     return s1, s2, verts, dropped
 
 
-def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndarray, ior: np.ndarray,
-             sigma: np.ndarray, alb: np.ndarray, base: str, b_rough: np.ndarray, b_r0: np.ndarray,
-             b_ior: np.ndarray, b_alb: np.ndarray, rr_depth: int = 4, max_depth: int = 100_000,
-             forced: bool = True, device: str | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
-    """Runs the walk for N pairs (float64 arrays, shapes as ``StackParams``
-    with explicit channels) on ``device`` ("cpu", "cuda"; None: ``walk_device()``).
-    Returns per pair the sum and sum of squares of the path contributions
-    (N, C), the per-block sums (N, n_blocks, C) for batch means, the vertex
-    count and the number of dropped paths."""
-    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)
-    if forced:
-        # reciprocity (both directions lie above the stack): walk from the
-        # more grazing one, whose light refracts nearer the critical angle and
-        # feeds the light trapped under the coat; the steeper one's exit lobe
-        # is then reached by next-event estimation and the two-bounce
-        # connection instead of by rare paths (docs/RESULTS.md, Ground truth v2)
-        swap = (np.asarray(wo)[:, 2] < np.asarray(wi)[:, 2])[:, None]
-        wi, wo = np.where(swap, wo, wi), np.where(swap, wi, wo)
-    N = wi.shape[0]
-    C = alb.shape[2]
-    args = (f64(wi), f64(wo), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, f64(rough), f64(ior), f64(sigma), f64(alb),
-            BASE_CODES[base], f64(b_rough), f64(b_r0), f64(b_ior), f64(b_alb), int(rr_depth), int(max_depth),
-            bool(forced), RR_WEIGHT, WIDE_ROUGHNESS, GUIDE_LAM, WIDE_LAM, WIDE_GUIDE_ROUGHNESS, int(SPLIT_MAX),
-            int(SPLIT_STEP), float(SPLIT_FLOOR), BLOCK)
-    if walk_device(device) == "cuda":
-        from nbrdf.training.walk_cuda import run_items
-
-        s1, s2, verts, dropped = run_items(*args)
-    else:
-        s1, s2, verts, dropped = _run(*args)
-    nb = s1.shape[0] // max(N, 1)
-    blocks = s1.reshape(N, nb, C)
-    return blocks.sum(1), s2.reshape(N, nb, C).sum(1), blocks, int(verts.sum()), int(dropped.sum())
-
-
-def walk_device(requested: str | None = None) -> str:
-    """Where the walk runs: ``requested``, else ``NBRDF_WALK_DEVICE``: cpu,
-    cuda, or auto (the default): CUDA when Numba finds a device, else the
-    CPU. One line (``NbrdfError``) for an unknown value or for cuda without a
-    device."""
-    import os
-
-    from nbrdf.neural.errors import NbrdfError
-
-    source = "device" if requested is not None else "NBRDF_WALK_DEVICE"
-    want = requested if requested is not None else os.environ.get("NBRDF_WALK_DEVICE", "auto")
-    want = want.strip().lower() or "auto"
-    if want not in ("auto", "cpu", "cuda"):
-        raise NbrdfError(f"{source} must be auto, cpu or cuda (got {want!r})")
-    if want == "cpu":
-        return "cpu"
-    from nbrdf.training.walk_cuda import available
-
-    if available():
-        return "cuda"
-    if want == "cuda":
-        raise NbrdfError(f"{source}=cuda, but Numba finds no CUDA device (install the cuda extra on a machine with one)")
-    return "cpu"
-
-
-def threads() -> int:
-    """Threads the walk runs on (``NUMBA_NUM_THREADS`` or every core)."""
-    import numba
-
-    return numba.get_num_threads()
-
-
-__all__ = ["run_walk", "walk_device", "threads", "RR_WEIGHT", "BLOCK"]
+__all__ = ["RR_WEIGHT", "BLOCK"]

@@ -9,7 +9,7 @@ of ``walk.BLOCK`` paths), and each path's random numbers depend only on
 (seed, pair, path), so the CPU and the GPU trace the same paths: per-pair results differ only by floating-point
 rounding (FMA contraction, the device's libm), never by the launch shape.
 
-Chosen by ``training.walk.walk_device``: ``NBRDF_WALK_DEVICE`` = auto (the
+Chosen by ``training.walk_dispatch.walk_device``: ``NBRDF_WALK_DEVICE`` = auto (the
 default: CUDA when Numba finds a device), cpu or cuda. The test suite never
 needs a device: it runs this kernel in Numba's CUDA simulator
 (tests/training/test_walk_cuda.py) and compiles it to PTX where NVVM is

@@ -16,10 +16,11 @@ Every input event that arrived since the last frame is handled in the frame:
 the panels run as many imgui passes as its input queue needs (imgui takes
 one click or key change per pass), and the view's mouse events are queued by
 the glfw callbacks and replayed in order, so a click or drag shorter than a
-slow frame is not lost. The view renders at the fraction
-of the window that keeps a frame within budget (60 ms while the user drags, 200 ms
-when still; software OpenGL ends at 1/8), one pass per frame while dragging,
-and passes accumulate when still (progressive).
+slow frame is not lost. While the view changes, frames render at the
+fraction of the view that keeps them within about 100 ms; a still view always
+refines, resolution first up to full, then passes accumulate
+(viewer/refinement.py). On software OpenGL a uniform material's body comes
+from a table baked per edit (viewer/body_source.py).
 """
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ import time
 from collections import deque
 
 import numpy as np
+import torch
 
 try:  # share imgui_bundle's GLFW when it is there
     from imgui_bundle import imgui, implot
@@ -39,7 +41,7 @@ import moderngl
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.gl import check_version
 from nbrdf.viewer.lookdev import MAX_PASSES, LookDev
-from nbrdf.viewer.modes import View
+from nbrdf.viewer.refinement import Refinement
 from nbrdf.viewer.renderer import ViewState
 
 
@@ -138,13 +140,23 @@ class App:
         self._click: tuple[float, float, int, int] | None = None  # a left press not yet moved (view coordinates)
         self._side = self.lookdev.side_by_side  # framed for two halves (compare side by side)
         self.dragging = False
-        self.scale = 1.0             # render resolution / window resolution (adaptive)
+        self.refine = Refinement()   # each frame's render scale and body (progressive refinement)
+        # An edit's CPU work is small tensors (latents, the body table) beside the GL driver's
+        # threads: one torch thread (two measured 5-10x slower bakes on a loaded 2-core machine).
+        torch.set_num_threads(1)
+        self.scale = 1.0             # render resolution / view resolution of the last frame
+        self.interactive = False     # whether the last frame was an interactive (changing view) one
+        self.quick = False           # whether the last frame used the quick estimator (interactive, previews)
         self._last_ms: float | None = None
         self._frames = 0
         self._events: deque = deque()  # the view's mouse events since the last frame, in order
         self._cursor = glfw.get_cursor_pos(self.window)
         self.clock = FrameClock()
         imgui.get_io().config_input_trickle_event_queue = True  # one click per imgui pass: none is lost
+        body_notice = self.lookdev.bodies.calibrate(self.lookdev.brdf) if self.lookdev.brdf is not None else ""
+        self.lookdev.renderer.table_sampling = self.lookdev.bodies.sampling(self.lookdev.renderer.sampling)
+        if body_notice:
+            self.lookdev.notice = "; ".join(x for x in (self.lookdev.notice, body_notice) if x)
         glfw.set_key_callback(self.window, self._on_key)
         glfw.set_mouse_button_callback(self.window, self._on_mouse_button)
         glfw.set_cursor_pos_callback(self.window, self._on_cursor)
@@ -300,8 +312,8 @@ class App:
         else:
             self.screen.viewport = (vx, h - vy - vh, vw, vh)  # GL's origin is the bottom left
             scale = self._adapt_scale(vw, vh)
-            passes = 1 if self.dragging else passes_per_frame
-            ld.render(self.screen, (vw, vh), passes, scale=scale)
+            passes = 1 if self.quick else passes_per_frame
+            ld.render(self.screen, (vw, vh), passes, scale=scale, interactive=self.interactive, quick=self.quick)
         self.screen.viewport = (0, 0, w, h)
         self.screen.use()
         self.screen.viewport = (0, 0, w, h)
@@ -328,33 +340,22 @@ class App:
                                                    imgui.ImVec2(x0 + tw * k, y0 + th * k),
                                                    imgui.ImVec2(0, 1), imgui.ImVec2(1, 0))
 
-    #: Frame-time budgets (ms): while dragging, and while refining when still.
-    BUDGET_DRAG_MS, BUDGET_STILL_MS = 60.0, 200.0
-
     def _adapt_scale(self, w: int, h: int) -> float:
-        """The render scale that keeps a whole frame (view, panels, present) within
-        budget on this GPU: software OpenGL renders the neural shader at a fraction
-        of the window, a GPU at full size. Steps of 1/8 between 1/8 and 1, so
-        the accumulation restarts rarely."""
-        if self._last_ms is None or self.lookdev.state.view == View.LOBE:
-            return self.scale
-        budget = self.BUDGET_DRAG_MS if self.dragging else self.BUDGET_STILL_MS
-        step = 0.125
-        want = self.scale
-        if self._last_ms > 1.5 * budget:
-            ratio = (budget / self._last_ms) ** 0.5
-            want = max(step, np.floor(self.scale * ratio / step) * step)
-        elif self._last_ms < 0.4 * budget and self.scale < 1.0:
-            want = min(1.0, self.scale + step)
-        if want != self.scale:
-            self.scale = float(want)
+        """The next frame's render scale from the refinement policy: reduced while the
+        view changes (its accumulation was restarted since the last frame), doubling
+        to full resolution once it is still; a new scale restarts the accumulation."""
+        plan = self.refine.plan(changed=self.lookdev.passes == 0)
+        self.interactive, self.quick = plan.interactive, plan.quick
+        if plan.restart:
             self.lookdev.invalidate()
+        self.scale = plan.scale
         return self.scale
 
     def _measure(self, ms: float) -> None:
         self._frames += 1
         if self._frames > 2:  # the first frames build shaders
             self._last_ms = ms
+            self.refine.done(ms)
 
     def read_pixels(self) -> np.ndarray:
         """The presented frame as uint8 (H, W, 3), row 0 at the top."""

@@ -248,40 +248,174 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
     }
 
 
-def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int = 6) -> dict:
-    """The look-development window (needs a display; Xvfb will do): frame time
-    and the latency from a slider edit (a base roughness change, through leaf
-    encoders and layering) to the end of the first frame that shows it, with
-    the window's adaptive resolution as a user gets it."""
+def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int = 3,
+              noise_target: float = 0.01, noise_renders: int = 4, noise_spp: int = 4) -> dict:
+    """The look-development window (needs a display; Xvfb will do) as a user gets
+    it, adaptive resolution on (viewer/refinement.py):
+
+    - ``first_frame_s``: from opening the window to its first frame on screen;
+    - a slider drag: ``edits`` base-roughness edits, one frame each, no still
+      frame between them; per edit the time from the edit to the end of the frame
+      that shows it (``edit_to_frame_ms_median`` / ``_max``) and the fraction of
+      the view's width that frame rendered (``edit_frame_scale``, the median);
+    - ``still_full_res_s``: from the drag's last edit until a full-resolution frame is
+      on screen (the refinement's preview: one pass of the quick estimator);
+    - ``still_converged_s``: from the last edit until the accumulated image's relative
+      noise is under ``noise_target``: the full-resolution preview, then as many
+      passes of the still view's estimator as the noise needs at the measured time per pass. The noise per pass is
+      measured on the still view's own estimator and body, as viewer/noise.py
+      defines it (``noise_renders`` renders of ``noise_spp`` passes that differ
+      only in their seed, at half the view's size), and falls as 1 / sqrt(passes);
+    - ``edit_to_frame_cpu_ms_median``, ``full_res_pass_cpu_ms_median``: CPU time of an edit's
+      frame and of a full-resolution frame, all
+      threads (llvmpipe's included): what a pass needs of the machine, whatever else runs on it;
+    - the machine's load average (1 minute) before and after: other work on the machine slows every figure."""
     import statistics
 
     from nbrdf.viewer.app import App
+    from dataclasses import replace
+
+    from nbrdf.viewer.noise import per_pixel_noise
     from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
 
+    load0 = os.getloadavg()[0]
+    t0 = time.perf_counter()
     app = App(ViewOptions(material=DEFAULT_MATERIAL, size=size), size=size)
     ld = app.lookdev
     try:
-        for _ in range(warmup):
+        app.step()
+        first_frame_s = time.perf_counter() - t0
+        for _ in range(warmup):  # the still view's programs and tables
             app.step()
-        frames, latency, latent = [], [], []
+        latency, edit_cpu, scales, latent, bake = [], [], [], [], []
         base = len(ld.editor.layers) - 1
-        for k in range(edits):
-            for _ in range(2):
-                t0 = time.perf_counter()
-                app.step()
-                frames.append((time.perf_counter() - t0) * 1000.0)
+        t_edit = time.perf_counter()
+        for k in range(edits):  # a drag: one edit per frame
+            t_edit, c_edit = time.perf_counter(), time.process_time()
             ld.set_param(base, "roughness", 0.2 + 0.05 * (k % 4))
             app.step()
-            latency.append(ld.timings.edit_to_frame_ms)
+            latency.append((time.perf_counter() - t_edit) * 1000.0)
+            edit_cpu.append((time.process_time() - c_edit) * 1000.0)
+            scales.append(app.scale)
             latent.append(ld.timings.latent_ms)
+            bake.append(ld.bodies.tables.bake_ms)
+        # Still: refine until a full-resolution frame is shown.
+        steps = 0
+        while True:
+            app.step()
+            steps += 1
+            if app.scale >= 1.0 and not app.interactive:
+                break
+            if steps > 16:
+                raise RuntimeError("bench app: the still view did not reach full resolution in 16 frames")
+        full_res_s = time.perf_counter() - t_edit
+        passes, cpu = [], []
+        for _ in range(3):  # passes at full resolution
+            t, c = time.perf_counter(), time.process_time()
+            app.step()
+            passes.append((time.perf_counter() - t) * 1000.0)
+            cpu.append((time.process_time() - c) * 1000.0)
+        # The noise of the still view's estimator, per pass.
+        _, _, vw, vh = app.viewport()
+        r = ld.renderer
+        body = ld.bodies.for_frame(ld.brdf, interactive=False)
+        state = replace(ld.main_state(), background=False)
+        r.quick = False
+        imgs, mask, _ = _seeds(r, state, vw, vh, noise_spp, noise_renders, body)
+        rel = float(per_pixel_noise(imgs, mask).mean())
+        per_pass = rel * noise_spp ** 0.5
+        need = max(1, int(np.ceil((per_pass / noise_target) ** 2)))
+        pass_ms = statistics.median(passes)
+        converged_s = full_res_s + need * pass_ms / 1000.0  # the full-resolution preview is not accumulated
         return {
             "renderer": app.ctx.info.get("GL_RENDERER", "?"),
             "window": f"{size[0]}x{size[1]}",
-            "render_scale": app.scale,
-            "frame_ms_median": round(statistics.median(frames), 1),
+            "view": f"{vw}x{vh}",
+            "body": ld.bodies.notice or "decoder",
+            "first_frame_s": round(first_frame_s, 2),
             "edit_to_frame_ms_median": round(statistics.median(latency), 1),
             "edit_to_frame_ms_max": round(max(latency), 1),
+            "edit_to_frame_cpu_ms_median": round(statistics.median(edit_cpu), 1),
+            "edit_frame_scale": statistics.median(scales),
             "latent_update_ms_median": round(statistics.median(latent), 2),
+            "table_bake_ms_median": round(statistics.median(bake), 1),
+            "still_full_res_s": round(full_res_s, 2),
+            "full_res_pass_ms_median": round(pass_ms, 1),
+            "full_res_pass_cpu_ms_median": round(statistics.median(cpu), 1),
+            "relative_noise_per_pass": round(per_pass, 4),
+            "passes_to_converge": need,
+            "still_converged_s": round(converged_s, 1),
+            "load_average_1min": [round(load0, 2), round(os.getloadavg()[0], 2)],
         }
     finally:
         app.close()
+
+
+def _seeds(renderer, state, vw: int, vh: int, spp: int, renders: int, brdf) -> tuple:
+    """``noise.render_seeds`` with ``brdf`` as the renderer's default BRDF (the still view's
+    table) and the sampling the window uses for it (render_seeds varies ``sampling``'s seed)."""
+    from nbrdf.viewer.noise import render_seeds
+
+    old = renderer.brdf, renderer.sampling, renderer.table_sampling
+    renderer.brdf = brdf
+    if renderer.table_sampling is not None:
+        renderer.sampling, renderer.table_sampling = renderer.table_sampling, None
+    try:
+        return render_seeds(renderer, state, (max(8, vw // 2), max(8, vh // 2)), spp, range(1, renders + 1))
+    finally:
+        renderer.brdf, renderer.sampling, renderer.table_sampling = old
+
+
+def bench_body_table(sizes: tuple[str, ...] = ("32x16x8", "48x24x12"), size: int = 128, spp: int = 4,
+                     materials: str | Path | None = None) -> dict:
+    """The baked body table's render-space error against the per-pixel decoder
+    (viewer/body_table_gpu.py): the lit sphere (default environment, no background)
+    of each uniform material of the look-development set (training/sets/lookdev)
+    rendered ``size`` x ``size`` with ``spp`` passes both ways, with the same random
+    numbers (the difference is the table's alone), scored with HDR-FLIP; per table
+    size the mean and worst FLIP and the median bake time (decoder pass and upload)."""
+    from nbrdf.neural.body_table import TableSize
+    from nbrdf.neural.material import load_material
+    from nbrdf.training.render_report import flip
+    from nbrdf.viewer.body_table_gpu import BodyTables
+    from nbrdf.viewer.gl import offscreen_context
+    from nbrdf.viewer.pipeline import MaterialPipeline
+    from nbrdf.viewer.renderer import Renderer, ViewState
+
+    root = Path(materials) if materials else Path(__file__).resolve().parents[1] / "training" / "sets" / "lookdev"
+    tables = [TableSize(*(int(x) for x in s.split("x"))) for s in sizes]
+    ctx = offscreen_context()
+    pipe, r, bt = MaterialPipeline(ctx), Renderer(ctx, mesh="sphere"), BodyTables(ctx)
+    state = ViewState(background=False)
+    state.camera.distance = 2.2
+    scores: dict[str, dict[str, float]] = {s: {} for s in sizes}
+    bake: dict[str, list[float]] = {s: [] for s in sizes}
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        for path in sorted(root.glob("*.json")):
+            m = load_material(path)
+            if m.is_textured:
+                continue
+            brdf = pipe.build(m, "neural")
+            ref = r.render_linear(state, (size, size), spp, brdf)
+            for name, t in zip(sizes, tables):
+                img = r.render_linear(state, (size, size), spp, bt.brdf(brdf, t))
+                bake[name].append(bt.bake_ms)
+                scores[name][path.stem] = round(flip(ref, img)[0], 4)
+    finally:
+        torch.set_num_threads(threads)
+    return {name: {"flip_mean": round(float(np.mean(list(v.values()))), 4),
+                   "flip_worst": max(v.values()), "worst": max(v, key=v.get),
+                   "bake_ms_median": round(float(np.median(bake[name])), 1), "per_material": v}
+            for name, v in scores.items()}
+
+
+if __name__ == "__main__":
+    import json
+    import sys
+
+    # python -m nbrdf.viewer.bench table [SIZE ...]: bench_body_table as JSON.
+    if sys.argv[1:2] != ["table"]:
+        sys.exit("usage: python -m nbrdf.viewer.bench table [NxMxK ...]")
+    print(json.dumps(bench_body_table(tuple(sys.argv[2:]) or ("32x16x8", "48x24x12")), indent=2))

@@ -52,6 +52,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE
 from nbrdf.neural.material import FORMAT, Material, load_material
 
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
@@ -436,31 +437,31 @@ def _convert_material(gltf: _Gltf, index: int | None, out_dir: Path,
                 notes.append(f"KHR_materials_clearcoat.{k}: no equivalent (ignored)")
     coated = coat_factor >= 0.5
     if coated:
-        layers.append({"type": "dielectric", "ior": COAT_IOR,
+        layers.append({"type": DIELECTRIC, "ior": COAT_IOR,
                        "roughness": w.roughness(float(coat.get("clearcoatRoughnessFactor", 0.0)),
                                                 w.texture(coat.get("clearcoatRoughnessTexture"),
                                                           "clearcoatRoughnessTexture"), "clearcoat roughness")})
     if is_metal:
         if transmission > 0:
             notes.append(f"transmissionFactor {_g(transmission)} on a metal: no effect (ignored)")
-        layers.append({"type": "conductor", "roughness": roughness, "r0": colour})
+        layers.append({"type": CONDUCTOR, "roughness": roughness, "r0": colour})
     elif transmission >= 0.5:
         notes.append(f"transmissionFactor {_g(transmission)}: a layer stack does not transmit; "
                      "shown as its surface reflection (a single dielectric layer)")
         if coated:
             notes.append("clear coat over a transmissive base: the coat alone is kept")
         else:
-            layers.append({"type": "dielectric", "roughness": roughness, "ior": round(ior, 6)})
+            layers.append({"type": DIELECTRIC, "roughness": roughness, "ior": round(ior, 6)})
     else:
         if transmission > 0:
             notes.append(f"transmissionFactor {_g(transmission)}: taken as opaque (nearest)")
         rel_ior = ior / COAT_IOR if coated else ior
         if rel_ior >= 1.05:
-            layers.append({"type": "dielectric", "roughness": roughness, "ior": round(min(rel_ior, 2.0), 6)})
+            layers.append({"type": DIELECTRIC, "roughness": roughness, "ior": round(min(rel_ior, 2.0), 6)})
         else:
             notes.append(f"base interface under the clear coat: relative ior {_g(rel_ior)} < 1.05 "
                          "reflects nothing and is left out")
-        layers.append({"type": "diffuse", "albedo": colour})
+        layers.append({"type": DIFFUSE, "albedo": colour})
 
     # properties without an equivalent
     emissive = m.get("emissiveFactor", [0, 0, 0])

@@ -39,6 +39,7 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent_texture import LatentTexture, blend
 from nbrdf.neural.material import Material, load_material, material_to_dict, save_material
 from nbrdf.viewer.backdrop import Backdrop, BackdropSettings
+from nbrdf.viewer.body_source import BodySource
 from nbrdf.viewer.compare import Compare, reference_state
 from nbrdf.viewer.history import History
 from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, ToneMap, View
@@ -170,6 +171,8 @@ class LookDev:
         self.compare_part = Compare(ctx, self.renderer)
         self.backdrop = backdrop or BackdropSettings()
         self.backdrop_part = Backdrop(ctx, self.renderer)
+        self.bodies = BodySource(ctx)  # the window's frames: decoder or baked body table (viewer/body_source.py)
+        self._body: GpuBrdf | None = None  # the BRDF the accumulation was shaded with
         self._apply_material()
         self.history.reset(self.snapshot())
 
@@ -675,11 +678,14 @@ class LookDev:
         return reference_state(self.state, self.material) if self._compare_active() else self.state
 
     def render(self, target: moderngl.Framebuffer, size: tuple[int, int], passes: int = 1,
-               scale: float = 1.0) -> None:
+               scale: float = 1.0, interactive: bool = False, quick: bool | None = None) -> None:
         """Adds ``passes`` to the accumulation (up to MAX_PASSES) and draws the
         view -- or the compare / BRDF-blend composite -- into ``target``; ``scale``
-        < 1 renders fewer pixels. Any change of the rendered size (window,
-        panels shown or hidden, scale) or of the view starts the accumulation over."""
+        < 1 renders fewer pixels while the user drags; ``interactive`` frames may
+        shade with a quicker body (``bodies``; a change of body restarts the accumulation);
+        ``quick``: the quick estimator (None: when ``interactive``). Any change of the
+        rendered size (window, panels shown or hidden, scale) or of the view starts the
+        accumulation over."""
         t0 = time.perf_counter()
         self.poll()
         if self.brdf is None:  # the first material's latent texture is still building
@@ -687,23 +693,31 @@ class LookDev:
             target.clear(0.0, 0.0, 0.0, 1.0)
             return
         w, h = max(1, int(size[0] * scale)), max(1, int(size[1] * scale))
-        key = (w, h, View.parse(self.state.view), self.side_by_side)
+        view = View.parse(self.state.view)
+        key = (w, h, view, self.side_by_side)
         if key != self._accum_key:  # what is accumulated was for another viewport
             self._accum_key = key
             self.passes = 0
+        # The lobe and slice views: the decoder itself; a change of body restarts the accumulation.
+        body = self.bodies.for_frame(self.brdf, interactive) if view == View.OBJECT else self.brdf
+        if body is not self._body:
+            self._body = body
+            self.passes = 0
+        self.renderer.quick = interactive if quick is None else quick  # the quick estimator (one pass per frame)
         before = self.passes
-        self.passes = self._draw(target, w, h, self.passes, passes, VIEW_SLOTS)
+        self.passes = self._draw(target, w, h, self.passes, passes, VIEW_SLOTS, body=body)
         self.timings.render_ms = (time.perf_counter() - t0) * 1000.0
         if View.parse(self.state.view) == View.OBJECT and self.passes > before:
             self._ms_per_pixel_pass = self.timings.render_ms / (w * h * (self.passes - before))
 
     def _draw(self, target: moderngl.Framebuffer, w: int, h: int, first: int, passes: int,
-              slots: tuple[str, str], camera=None) -> int:
+              slots: tuple[str, str], camera=None, body: GpuBrdf | None = None) -> int:
         """Adds up to ``passes`` passes after ``first`` into the accumulation
         ``slots`` (the image, the second image of a blend) at (w, h) and draws
         the composite into ``target``; returns the passes accumulated. The
         lobe and slice views are drawn once (``first`` 0) and shown from then on.
-        ``camera``: another camera than the view's (a screenshot's tile)."""
+        ``camera``: another camera than the view's (a screenshot's tile); ``body``: the
+        BRDF the image is shaded with (None: the decoder's, ``brdf``)."""
         comparing = self._compare_active()
         blending = self.interp.brdf_blend and self.other_brdf is not None
         vw = max(1, w // 2) if self.side_by_side else w
@@ -715,7 +729,7 @@ class LookDev:
         if camera is not None:
             state = replace(state, camera=camera)
         lit = replace(state, background=False)  # the backdrop pass draws what is behind the object
-        a = self._accumulated(view, lit, vw, h, first, n, self.brdf, slots[0])
+        a = self._accumulated(view, lit, vw, h, first, n, body or self.brdf, slots[0])
         done = first + n if view == View.OBJECT else 1
         pa = float(done)
         b, pb, weight = None, pa, None
@@ -945,6 +959,8 @@ class LookDev:
         if job.tiled and job.ms_per_pixel_pass:
             n = int(np.clip(budget_ms / (job.ms_per_pixel_pass * w * h), 1, job.passes - have))
         cam = TileCamera.of(self.state.camera, job.size, (x, y, w, h)) if job.tiled else None
+        body = self.bodies.for_frame(self.brdf, False) if view == View.OBJECT else self.brdf
+        self.renderer.quick = False  # a still image: the full estimator
         t0 = time.perf_counter()
         if job.linear:
             state = self.main_state()
@@ -953,7 +969,7 @@ class LookDev:
             else:
                 if cam is not None:
                     state = replace(state, camera=cam)
-                acc = self.renderer.accumulate(replace(state, background=False), w, h, have, n, self.brdf,
+                acc = self.renderer.accumulate(replace(state, background=False), w, h, have, n, body,
                                                SHOT_LINEAR_SLOT)
                 tex = self.backdrop_part.apply(acc, have + n, state, self.backdrop, SHOT_LINEAR_SLOT)
                 img = np.frombuffer(tex.read(), dtype="f4").reshape(h, w, 4)[::-1, :, :3]
@@ -965,7 +981,7 @@ class LookDev:
             fbo = self._shot_fbos[(w, h)]
             fbo.use()
             fbo.viewport = (0, 0, w, h)
-            got = self._draw(fbo, w, h, have, n, SHOT_SLOTS, camera=cam)
+            got = self._draw(fbo, w, h, have, n, SHOT_SLOTS, camera=cam, body=body)
             if view != View.OBJECT:
                 n = job.passes - have  # drawn once
             else:
@@ -988,4 +1004,5 @@ class LookDev:
 
     def close(self) -> None:
         self.compare_part.close()
+        self.bodies.release()
         self.backdrop_part.release()

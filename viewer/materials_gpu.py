@@ -4,6 +4,7 @@ analytic layering approximation."""
 from __future__ import annotations
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import CONDUCTOR, DIFFUSE
 from nbrdf.neural.material import Material
 from nbrdf.neural.neural_brdf import proxy_hint  # noqa: F401 (the renderer's import)
 from nbrdf.neural.stack import material_stack
@@ -27,7 +28,7 @@ def analytic_uniforms(m: Material) -> dict:
     L = s.layers
     pad = lambda xs, v: [*xs, *[v] * (MAX_INTERFACES - L)]
     rgb = lambda t: tuple(float(c) for c in t)
-    colour = {"conductor": s.base_r0, "diffuse": s.base_albedo}.get(s.base)
+    colour = {CONDUCTOR: s.base_r0, DIFFUSE: s.base_albedo}.get(s.base)
     return {
         "u_num_interfaces": L,
         "u_if_roughness": pad([float(x) for x in s.roughness[0]], 0.5),

@@ -7,10 +7,12 @@ a shader never hard-codes a mode number.
 """
 from __future__ import annotations
 
-from enum import Enum
+from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
+from nbrdf.training.methods import Method as Method  # the one definition; named here with the other modes
+from nbrdf.training.methods import WordEnum
 
 
-class _Mode(str, Enum):
+class _Mode(WordEnum):
     """A mode whose value is its command-line word and whose position is its
     shader constant."""
 
@@ -18,24 +20,6 @@ class _Mode(str, Enum):
     def code(self) -> int:
         """The integer the shaders receive for this mode (its position)."""
         return list(type(self)).index(self)
-
-    @classmethod
-    def words(cls) -> tuple[str, ...]:
-        """The command-line words, in order."""
-        return tuple(m.value for m in cls)
-
-    @classmethod
-    def parse(cls, word: "str | _Mode", place: str = "mode"):
-        """The member named by ``word``; a clear one-line error otherwise."""
-        if isinstance(word, cls):
-            return word
-        try:
-            return cls(str(word))
-        except ValueError:
-            raise ValueError(f"{place}: {word!r} is not one of {', '.join(cls.words())}") from None
-
-    def __str__(self) -> str:  # argparse prints choices with str()
-        return self.value
 
 
 class View(_Mode):
@@ -70,19 +54,10 @@ class BrdfMode(_Mode):
     PROJECTED = "projected" #: a latent fitted to the reference
 
 
-class Method(_Mode):
-    """How ``nbrdf eval`` / ``nbrdf lobe`` evaluate a material (SPEC section 8)."""
-    REFERENCE = "reference"  #: ground truth: closed form or Monte Carlo
-    NEURAL = "neural"        #: the full neural path the viewer uses
-    PROJECTED = "projected"  #: the decoder at a latent fitted to the reference
-    ANALYTIC = "analytic"    #: closed form; the analytic layering approximation for stacks
-
-
-class BaseKind(_Mode):
-    """The base layers the closed-form shader (shaders/analytic_brdf.glsl) evaluates."""
-    CONDUCTOR = "conductor"    #: GGX conductor, Schlick Fresnel
-    DIFFUSE = "diffuse"        #: Lambertian
-    DIELECTRIC = "dielectric"  #: a rough dielectric's reflection only
+#: The base layers the closed-form shader (shaders/analytic_brdf.glsl) evaluates: conductor (GGX, Schlick
+#: Fresnel), diffuse (Lambertian) and dielectric (a rough dielectric's reflection only). Members and codes
+#: come from the table of layer kinds, so ``BASE_<KIND>`` equals the walk's code of that base.
+BaseKind = _Mode("BaseKind", [(kind.upper(), kind) for kind in PARAMETRIC_BASES])
 
 
 def glsl_defines(*enums: type[_Mode]) -> str:
@@ -90,7 +65,7 @@ def glsl_defines(*enums: type[_Mode]) -> str:
     lines = []
     for enum in enums:
         prefix = {"View": "VIEW", "CompareMode": "COMPARE", "ToneMap": "TONEMAP",
-                  "BrdfMode": "BRDF", "Method": "METHOD", "BaseKind": "BASE"}.get(enum.__name__, enum.__name__.upper())
+                  "BrdfMode": "BRDF", "BaseKind": "BASE"}.get(enum.__name__, enum.__name__.upper())
         lines += [f"#define {prefix}_{m.name} {m.code}" for m in enum]
     return "\n".join(lines) + "\n"
 

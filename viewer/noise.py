@@ -109,9 +109,11 @@ def per_pixel_noise(images: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return std / np.maximum(mean, 1e-12)
 
 
-def measure_noise(renderer, state, config: NoiseConfig = NoiseConfig(), progress: bool = False) -> NoiseReport:
+def measure_noise(renderer, state, config: NoiseConfig | None = None, progress: bool = False) -> NoiseReport:
     """The relative noise of ``renderer``'s image of ``state`` (its ``sampling``
-    settings as they are), over ``config.renders`` independent seeds."""
+    settings as they are), over ``config.renders`` independent seeds
+    (default: ``NoiseConfig()``)."""
+    config = config or NoiseConfig()
     seeds = range(1, config.renders + 1)
     imgs, mask, dt = render_seeds(renderer, state, config.size, config.spp, seeds, progress)
     rel = per_pixel_noise(imgs, mask)

@@ -114,7 +114,8 @@ def write_turntable(out: Path, frames: list, exposure: float, tonemap) -> None:
     """Linear frames -> a video (.mp4, H.264 through imageio's ffmpeg plugin), a looping GIF, or numbered files."""
     import imageio.v2 as iio
 
-    from nbrdf.viewer.image_io import tonemap as to_srgb8, write_image
+    from nbrdf.viewer.image_io import tonemap as to_srgb8
+    from nbrdf.viewer.image_io import write_image
 
     kind = turntable_kind(out)
     out.parent.mkdir(parents=True, exist_ok=True)

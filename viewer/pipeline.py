@@ -22,6 +22,7 @@ import torch
 
 from nbrdf.neural.coat import code_coat
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.material import Material, material_to_dict
 from nbrdf.viewer.materials_gpu import analytic_uniforms, proxy_hint
 from nbrdf.viewer.modes import BrdfMode
@@ -37,11 +38,12 @@ class BrdfKind(str, Enum):
     ANALYTIC = "analytic"   #: closed form (analytic_brdf.glsl)
     NEURAL = "neural"       #: the decoder at one latent (neural_brdf.glsl)
     TEXTURED = "textured"   #: the decoder at a latent texture (latent_texture.glsl)
+    TABLE = "table"         #: a uniform latent's body baked into a table (body_table.glsl), the coat exact
 
 
 def analytic_capable(m: Material) -> bool:
     """Single layers have an exact closed form on the GPU."""
-    return not m.interfaces and not m.is_textured and m.base.type in ("conductor", "dielectric", "diffuse")
+    return not m.interfaces and not m.is_textured and m.base.type in PARAMETRIC_BASES
 
 
 def material_key(m: Material) -> str:
@@ -71,6 +73,8 @@ class GpuBrdf:
     """A texture-mapped material's per-texel share (TEXTURED)."""
     normal_map: moderngl.Texture | None = None
     """The material's tangent-space normal map, mip-mapped (None: the mesh normal)."""
+    body_table: moderngl.Texture | None = None
+    """TABLE: the body's log f over (theta_h, theta_d, phi_d), a float 3D texture (neural/body_table.py)."""
 
     @property
     def neural(self) -> bool:

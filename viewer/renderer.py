@@ -43,8 +43,8 @@ from nbrdf.neural.material import Material
 from nbrdf.viewer import shaders
 from nbrdf.viewer.camera import OrbitCamera
 from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
-from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.gl import use_compute
+from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.mesh import Mesh, named_mesh
 from nbrdf.viewer.modes import ToneMap, View
 from nbrdf.viewer.neural_gpu import SHARE_UNIT
@@ -60,6 +60,7 @@ VIEWS = View.words()
 LOBE_SIZE = 64
 NORMAL_UNIT = 9  # texture unit of a material's normal map
 GBUFFER_UNITS = (10, 11, 12)  # texture units of the G-buffer in the compute lit pass
+TABLE_UNIT = 13  # texture unit of a material's baked body table
 LIT_GROUP = 8     # lit.comp's work group is LIT_GROUP x LIT_GROUP pixels
 LIT_CHUNK = 8     # passes per compute dispatch (bounds one dispatch's duration)
 MAIN = "main"    # the default accumulation slot
@@ -132,6 +133,11 @@ class Renderer:
         strategies' mixture (fewer BRDF evaluations, more noise, issue 12)."""
         self.sampling = LitSampling()
         """The lit pass's sampling: coat samples per pass, firefly clamp, seed (viewer/lit_sampling.py)."""
+        self.quick = False
+        """True: passes use ``sampling.quick()`` (the window's interactive frames, viewer/refinement.py)."""
+        self.table_sampling: LitSampling | None = None
+        """The sampling of draws whose body is a baked table (None: ``sampling``; the window's
+        choice, viewer/body_source.py ``BodySource.sampling``)."""
         self._gbuf: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = {}
         self.neural = neural
         self._programs: dict[tuple, moderngl.Program] = {}
@@ -164,10 +170,8 @@ class Renderer:
         elif brdf.kind == BrdfKind.ANALYTIC:
             fs = shaders.source(frag, {"brdf": shaders.read("analytic_brdf.glsl")})
         else:
-            code = shaders.read("neural_brdf.glsl")
-            if brdf.kind == BrdfKind.TEXTURED:
-                code = shaders.read("latent_texture.glsl") + "\n" + code
-            fs = brdf.decoder.source(frag, {"brdf": code})
+            snippets, defines = _neural_snippets(brdf)
+            fs = brdf.decoder.source(frag, snippets, defines=defines)
         try:
             return self.ctx.program(vertex_shader=shaders.source(vert), fragment_shader=fs)
         except moderngl.Error as e:
@@ -186,10 +190,8 @@ class Renderer:
                 src = shaders.source(name, {"brdf": shaders.read("analytic_brdf.glsl")}, version=version,
                                      defines=defines)
             else:
-                code = shaders.read("neural_brdf.glsl")
-                if brdf.kind == BrdfKind.TEXTURED:
-                    code = shaders.read("latent_texture.glsl") + "\n" + code
-                src = brdf.decoder.source(name, {"brdf": code}, storage=storage, defines=defines)
+                snippets, extra = _neural_snippets(brdf)
+                src = brdf.decoder.source(name, snippets, storage=storage, defines={**extra, **(defines or {})})
             try:
                 self._programs[key] = self.ctx.compute_shader(src)
             except moderngl.Error as e:
@@ -222,7 +224,11 @@ class Renderer:
 
     def _bind_brdf(self, prog: moderngl.Program, brdf: GpuBrdf, compute: bool = False) -> None:
         """Makes ``brdf`` the program's BRDF: weights, latent share (or latent texture), uniforms."""
-        if brdf.neural:
+        if brdf.kind == BrdfKind.TABLE:
+            brdf.body_table.use(TABLE_UNIT)
+            if "u_body_table" in prog:
+                prog["u_body_table"].value = TABLE_UNIT
+        elif brdf.neural:
             brdf.decoder.bind(prog, brdf.decoder.compute_storage if compute else None)
             if brdf.share is not None and "u_nb_share" in prog:
                 prog["u_nb_share"].write(brdf.share)
@@ -426,7 +432,7 @@ class Renderer:
         for part, (_, _, b) in enumerate(draws):
             c = self.compute_program(b)
             self._bind_brdf(c, b, compute=True)
-            self._lit_uniforms(c, state)
+            self._lit_uniforms(c, state, b)
             c["u_eye"].value = tuple(state.camera.eye())
             if "u_material_id" in c:  # -1: every covered pixel (one material)
                 c["u_material_id"].value = part if len(draws) > 1 else -1
@@ -476,15 +482,16 @@ class Renderer:
             if len(draws) > 1:  # programs may be shared by two ranges: this range's BRDF
                 self._bind_brdf(p, b)
                 self._surface_uniforms(p, state, w, h, b.normal_map)
-            self._lit_uniforms(p, state)
+            self._lit_uniforms(p, state, b)
             vao = self._mesh_vao(p)
             for k in range(first, first + passes):
                 p["u_pass"].value = k
                 vao.render(moderngl.TRIANGLES, vertices=count, first=start)
         return vp, fbo
 
-    def _lit_uniforms(self, p: moderngl.Program | moderngl.ComputeShader, state: ViewState) -> None:
-        """The lights and the environment of lit_shade.glsl."""
+    def _lit_uniforms(self, p: moderngl.Program | moderngl.ComputeShader, state: ViewState,
+                      brdf: GpuBrdf | None = None) -> None:
+        """The lights and the environment of lit_shade.glsl, and the sampling of ``brdf``'s draw."""
         ld = np.asarray(state.light_dir, dtype=np.float64)
         p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
         p["u_light_radiance"].value = (state.light_radiance,) * 3
@@ -495,7 +502,9 @@ class Renderer:
         p["u_env_on"].value = int(state.env_on)
         p["u_strategies"].value = self.strategies
         p["u_one_sample"].value = int(self.one_sample_mis)
-        self.sampling.bind(p)
+        table = brdf is not None and brdf.kind == BrdfKind.TABLE and self.table_sampling is not None
+        sampling = self.table_sampling if table else self.sampling
+        (sampling.quick() if self.quick else sampling).bind(p)
         self.env.bind(p, math.radians(state.env_rotation))
 
     def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
@@ -623,6 +632,18 @@ class Renderer:
         """Binds a dummy texture to ``units`` (ends sampling from accumulation targets)."""
         for u in units:
             self._dummy.use(u)
+
+
+def _neural_snippets(brdf: GpuBrdf) -> tuple[dict[str, str], dict[str, object]]:
+    """The ``brdf`` snippet of a neural kind and its defines: the decoder (at a
+    uniform latent or a latent texture), or the baked body table (NB_BODY_TABLE,
+    no decoder compiled in)."""
+    code = shaders.read("neural_brdf.glsl")
+    if brdf.kind == BrdfKind.TEXTURED:
+        code = shaders.read("latent_texture.glsl") + "\n" + code
+    if brdf.kind == BrdfKind.TABLE:
+        return {"brdf": code, "neural_decoder.glsl": ""}, {"NB_BODY_TABLE": 1}
+    return {"brdf": code, "body_table.glsl": ""}, {}
 
 
 def _incidence(theta_deg: float) -> tuple[float, float, float]:

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
 from test_analytic import ref_conductor, ref_dielectric
+
 from nbrdf.cli.main import nbrdf_main
 
 REPO = Path(__file__).resolve().parents[2]
@@ -180,3 +180,28 @@ def test_console_script_exit_status(tmp_path):
     r = subprocess.run([str(exe), "eval", "--material", str(tmp_path / "none.json"), "--pairs", "p.npy", "--out", "f.npy"],
                        capture_output=True, text=True)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_eval_and_lobe_belcour(tmp_path, capsys):
+    """``--method belcour``: a stack's values through the one factory (no
+    standard-error file: the model is exact), the lobe image, and a base the
+    model does not cover as one line."""
+    pairs = random_pairs(16, 4)
+    np.save(tmp_path / "p.npy", pairs)
+    code, _, err = run(["eval", "--material", DEFAULT, "--pairs", tmp_path / "p.npy", "--out", tmp_path / "f.npy",
+                        "--method", "belcour"], capsys)
+    assert code == 0, err
+    f = np.load(tmp_path / "f.npy")
+    assert f.shape == (16, 3) and f.dtype == np.float32 and np.isfinite(f).all() and (f > 0).all()
+    assert not (tmp_path / "f.stderr.npy").exists()
+    code, _, err = run(["lobe", "--material", DEFAULT, "--theta-i", 30, "--method", "belcour",
+                        "--out", tmp_path / "l.npy"], capsys)
+    assert code == 0, err
+    assert np.load(tmp_path / "l.npy").shape == (64, 64, 3)
+    (tmp_path / "z.safetensors").write_bytes(b"not read: the model refuses the base first")
+    latent = write_material(tmp_path / "m.json", [{"type": "dielectric", "roughness": 0.1, "ior": 1.5},
+                                                  {"type": "latent", "path": "z.safetensors"}])
+    code, _, err = run(["eval", "--material", latent, "--pairs", tmp_path / "p.npy", "--out", tmp_path / "g.npy",
+                        "--method", "belcour"], capsys)
+    assert_one_line_error(code, err)
+    assert "layers[1]: a latent base has no belcour model" in err

@@ -7,10 +7,10 @@ import math
 
 import numpy as np
 import pytest
+from test_cli import DEFAULT, assert_one_line_error, random_pairs, run, write_material
 
 from nbrdf.neural.model import default_model
 from nbrdf.neural.sampling import coated_pdf
-from test_cli import DEFAULT, assert_one_line_error, random_pairs, run, write_material
 
 THREE = [{"type": "dielectric", "roughness": 0.1, "ior": 1.5}, {"type": "medium", "albedo": 0.5, "sigma_t": 0.2},
          {"type": "dielectric", "roughness": 0.3, "ior": 1.3}, {"type": "medium", "albedo": 0.5, "sigma_t": 0.2},

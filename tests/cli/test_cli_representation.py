@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from test_cli import assert_one_line_error, random_pairs, run, write_material
 
 from nbrdf.neural.decoder import Decoder, DecoderSpec, save_decoder
 from nbrdf.neural.latent import load_latent
-from test_cli import DEFAULT, assert_one_line_error, random_pairs, run, write_material
 from nbrdf.training.analytic import GGXConductor
 from nbrdf.training.merl import MerlBRDF
 

@@ -6,8 +6,8 @@ import math
 
 import pytest
 import torch
-
 from brdf_adapter import check_sampler
+
 from nbrdf.neural.coat import NO_COAT, coat_eval, coat_of, coat_pdf, coat_probability, coat_sample, with_coat
 from nbrdf.neural.decoder import Decoder, DecoderSpec
 from nbrdf.neural.errors import NbrdfError
@@ -125,11 +125,10 @@ def test_projection_fits_the_body_under_a_known_coat():
 def test_body_of_a_simulated_stack_is_the_value_without_the_top_reflection():
     """The data set's bodies (value minus the coat) are what the simulator
     computes without its closed-form top reflection, to round-off."""
+    from nbrdf.neural.stack import CLASSES, PARAM_NAMES, P, params_to_stack
     from nbrdf.training.dataset import BRDFSet, body_values
-    from nbrdf.neural.stack import CLASSES, PARAM_NAMES, P
     from nbrdf.training.layered import simulate
     from nbrdf.training.reference import simulator_params
-    from nbrdf.neural.stack import params_to_stack
 
     p = torch.zeros(1, len(PARAM_NAMES), dtype=torch.float64)
     p[0, P["class"]] = CLASSES.index("two_layer")

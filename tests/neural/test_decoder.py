@@ -8,8 +8,17 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from nbrdf.neural.decoder import (ENCODINGS, LOBE_ALPHAS, LOBE_IOR, Decoder, DecoderSpec, encode, load_decoder,
-                                  read_bundle, save_decoder)
+from nbrdf.neural.decoder import (
+    ENCODINGS,
+    LOBE_ALPHAS,
+    LOBE_IOR,
+    Decoder,
+    DecoderSpec,
+    encode,
+    load_decoder,
+    read_bundle,
+    save_decoder,
+)
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.training.merl import angles
 
@@ -113,7 +122,7 @@ def test_weight_file_round_trip_and_id(tmp_path):
 
 
 def _tamper(path, **changes):
-    from safetensors.torch import load_file, save_file
+    from safetensors.torch import save_file
 
     from nbrdf.neural.decoder import read_bundle as rb
 

@@ -10,8 +10,16 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import (Conductor, Dielectric, Medium, TextureRef, load_material, material_to_dict,
-                             parse_material, save_material)
+from nbrdf.neural.material import (
+    Conductor,
+    Dielectric,
+    Medium,
+    TextureRef,
+    load_material,
+    material_to_dict,
+    parse_material,
+    save_material,
+)
 
 PRESETS = sorted((Path(__file__).resolve().parents[2] / "viewer" / "assets" / "materials").glob("*.json"))
 SPEC_EXAMPLE = {

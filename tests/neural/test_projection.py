@@ -3,12 +3,12 @@ from __future__ import annotations
 
 import pytest
 import torch
+from test_decoder import rand_dirs
 
-from nbrdf.neural.decoder import Decoder, DecoderSpec, encode
+from nbrdf.neural.decoder import Decoder, DecoderSpec
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent import MaterialLatent, load_latent, save_latent
 from nbrdf.neural.projection import ProjectionConfig, project
-from test_decoder import rand_dirs
 
 
 @pytest.fixture(scope="module")

@@ -6,9 +6,9 @@ import math
 
 import pytest
 import torch
+from stattools import chi2_sphere
 
 from nbrdf.neural.sampling import SamplerNet, gndf, proxy_pdf, proxy_sample
-from stattools import chi2_sphere
 
 ALPHA = 1e-3
 

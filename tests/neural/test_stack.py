@@ -6,8 +6,16 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import parse_material
-from nbrdf.neural.stack import (CLASSES, PARAM_NAMES, P, material_stack, params_to_material, params_to_stack,
-                                stack_class, stack_to_params)
+from nbrdf.neural.stack import (
+    CLASSES,
+    PARAM_NAMES,
+    P,
+    material_stack,
+    params_to_material,
+    params_to_stack,
+    stack_class,
+    stack_to_params,
+)
 
 
 def _material(*layers):

@@ -6,8 +6,8 @@ import math
 
 import pytest
 import torch
-
 from brdf_adapter import check_sampler
+
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
 
 ALPHA = 1e-3  # significance level of each chi-square test (fixed seeds: deterministic)

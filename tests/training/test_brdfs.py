@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import pytest
 import torch
-
 from brdf_adapter import check_sampler
+
 from nbrdf.neural.brdf import RGBBRDF
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import parse_material
@@ -132,4 +132,4 @@ def test_bad_requests_are_one_line_errors(tmp_path):
     for method in ("reference", "analytic"):
         with pytest.raises(NbrdfError, match="texture-mapped"):
             brdf_for(textured, method)
-    assert set(METHODS) == {"reference", "analytic", "neural", "projected"}
+    assert set(METHODS) == {"reference", "analytic", "neural", "projected", "belcour"}

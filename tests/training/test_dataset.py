@@ -2,18 +2,28 @@
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
 from safetensors.numpy import load_file
+from stattools import z_threshold
 
 from nbrdf.neural.errors import NbrdfError
-from stattools import z_threshold
-from nbrdf.training.dataset import (CLASSES, P, PRESETS, DataConfig, generate, load_split, make_shard, params_to_material,
-                              plan, sample_pairs, sample_params)
+from nbrdf.training.dataset import (
+    CLASSES,
+    PRESETS,
+    DataConfig,
+    P,
+    generate,
+    load_split,
+    make_shard,
+    params_to_material,
+    plan,
+    sample_pairs,
+    sample_params,
+)
 from nbrdf.training.reference import reference_eval
 
 SMALL = DataConfig(counts=dict(conductor=2, dielectric=2, two_layer=3, three_layer=1, diffuse_base=1),

@@ -8,9 +8,9 @@ import math
 
 import pytest
 import torch
-
 from analog_walk import analog_bins, uniform_in_bins
 from stattools import z_threshold
+
 from nbrdf.training.analytic import GGXDielectric
 from nbrdf.training.layered import StackParams, simulate
 

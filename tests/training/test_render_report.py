@@ -128,6 +128,17 @@ def test_report_on_a_tiny_set_writes_json_and_figure(tmp_path: Path):
     assert res2["sets"]["set"]["rows"][1]["neural"] == res["sets"]["set"]["rows"][1]["neural"]
 
 
+def test_report_scores_belcour_beside_neural(tmp_path: Path):
+    folder = tmp_path / "set"
+    folder.mkdir()
+    (folder / "gold.json").write_text((SETS_DIR / "lookdev" / "coated-gold.json").read_text())
+    cfg = RenderReportConfig(sets=(str(folder),), out=tmp_path / "out", size=16, spp=4, noise_target=0.0,
+                             methods=("neural", "belcour"), progress=False, figure=False)
+    summ = run_render_report(cfg)["sets"]["set"]["summary"]["all"]
+    assert 0 < summ["belcour"]["flip_median"] <= 1 and 0 < summ["neural"]["flip_median"] <= 1
+    assert "belcour FLIP median" in (tmp_path / "out" / "render.md").read_text()
+
+
 def test_reference_refinement_doubles_paths_and_pools_halves(tmp_path: Path):
     m = load_material(SETS_DIR / "lookdev" / "coated-gold.json")
     geo = sphere_geometry(16)

@@ -14,10 +14,10 @@ import numba
 import pytest
 import torch
 from scipy import stats
+from stattools import z_threshold
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.training.layered import SimStats, StackParams, simulate
-from stattools import z_threshold
 
 D = torch.float64
 
@@ -196,7 +196,7 @@ def _heldout_z(names: tuple[str, ...]) -> list[tuple[float, str, int, float, flo
     from nbrdf.training.reference import stack_params
 
     rows = []
-    for k, (cls, m) in enumerate(heldout_set()):
+    for k, (_cls, m) in enumerate(heldout_set()):
         if m.name not in names:
             continue
         wi, wo = _dirs(160, 300 + k, 0.0, 90.0), _dirs(160, 600 + k, 0.0, 90.0)

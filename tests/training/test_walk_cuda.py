@@ -17,7 +17,7 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.training.layered import StackParams, simulate
-from nbrdf.training.walk import walk_device
+from nbrdf.training.walk_dispatch import walk_device
 
 N = 7  # pairs: 7 x 2 blocks = 14 work items, not a multiple of the CUDA block
 SPP = 48  # one full block of 32 paths and one partial block

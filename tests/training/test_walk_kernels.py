@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from numba import njit
 from scipy import stats
+from stattools import z_threshold
 
 from nbrdf.training import walk as W
-from stattools import z_threshold
 
 
 def _rand_dir(rng, upper: bool, lo: float = 0.02):

@@ -30,7 +30,8 @@ SCRIPT = textwrap.dedent("""
     from nbrdf.viewer.options import ViewOptions
     tmp = Path(sys.argv[2])
     app = App(ViewOptions(material=sys.argv[1], size=(64, 48)), size=(64, 48))
-    app.BUDGET_STILL_MS = app.BUDGET_DRAG_MS = 1e9   # full resolution: compared pixel for pixel
+    app.refine.settings.adaptive = False   # full resolution: compared pixel for pixel
+    app.lookdev.bodies.use_tables = False  # with the per-pixel decoder (as offscreen)
     app.panels.visible = False
     app.frame()  # the view is the whole window now (F)
     ld = app.lookdev

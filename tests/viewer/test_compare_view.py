@@ -5,10 +5,10 @@ over the view) -- and the HDR-FLIP view's map and mean."""
 from __future__ import annotations
 
 import os
-from dataclasses import replace
 import subprocess
 import sys
 import textwrap
+from dataclasses import replace
 
 import numpy as np
 import pytest

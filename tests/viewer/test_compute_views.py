@@ -11,8 +11,8 @@ from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, DecoderSpec, load_dec
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
 from nbrdf.viewer import gl
-from nbrdf.viewer.options import DEFAULT_MATERIAL
 from nbrdf.viewer.neural_gpu import GpuDecoder, WeightStorage, probe_compute
+from nbrdf.viewer.options import DEFAULT_MATERIAL
 from nbrdf.viewer.pipeline import MaterialPipeline
 from nbrdf.viewer.renderer import Renderer, ViewState
 

@@ -8,12 +8,21 @@ import math
 import numpy as np
 import pytest
 import torch
+from stattools import chi2_sphere
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.viewer.env_presets import (ENV_PRESETS, KEY_WHITE, cache_dir, key_white, make_environment,
-                                      preetham_zenith, resolve_environment, sun_direction, texel_solid_angles)
+from nbrdf.viewer.env_presets import (
+    ENV_PRESETS,
+    KEY_WHITE,
+    cache_dir,
+    key_white,
+    make_environment,
+    preetham_zenith,
+    resolve_environment,
+    sun_direction,
+    texel_solid_angles,
+)
 from nbrdf.viewer.environment import EnvironmentMap
-from stattools import chi2_sphere
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 

@@ -3,15 +3,13 @@ GLSL samples like numpy, and a white Lambertian sphere in a uniform white
 environment renders white (the furnace test of the whole MIS estimator)."""
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 import torch
+from stattools import chi2_sphere
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import parse_material
-from stattools import chi2_sphere
 from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
 
 pytestmark = pytest.mark.gl

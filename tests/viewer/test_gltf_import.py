@@ -88,7 +88,7 @@ def test_dielectric_specular_transmission_and_notes(tmp_path):
     f0 = 0.5 * (0.4 / 2.4) ** 2
     assert top.ior == pytest.approx((1 + f0 ** 0.5) / (1 - f0 ** 0.5), rel=1e-5)
     assert isinstance(base, Diffuse) and all(isinstance(t, TextureRef) for t in base.albedo)
-    for c, (factor, ref) in enumerate(zip((0.2, 0.4, 0.8), base.albedo)):
+    for _c, (factor, ref) in enumerate(zip((0.2, 0.4, 0.8), base.albedo)):
         texels = read_map(ref.resolved, ref.channel)
         assert texels[0, 0] == pytest.approx(factor * srgb_to_linear(188 / 255), abs=1e-4)
         assert texels[0, -1] == pytest.approx(factor, abs=1e-4)

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from nbrdf.neural.material import load_material
-from nbrdf.viewer.renderer import ViewState
 from nbrdf.viewer.offscreen import make_renderer
 from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
+from nbrdf.viewer.renderer import ViewState
 
 GOLDEN = Path(__file__).parent / "golden"
 MATERIALS = DEFAULT_MATERIAL.parent

@@ -76,7 +76,7 @@ def test_compute_default_storage_matches_torch_with_shipped_weights(gl_ctx):
     wo[:100, 2] *= -1
     gdec = GpuDecoder(gl_ctx, dec)
     assert gdec.compute_storage == COMPUTE_STORAGE
-    for k in range(3):
+    for _k in range(3):
         z = dec.latent_mean + 0.5 * torch.randn(3, 32, generator=g)
         with torch.no_grad():
             ref = dec.eval_rgb(z, wi, wo).numpy()
@@ -120,7 +120,6 @@ def test_ssbo_path_on_an_old_context_is_a_clear_error():
 def test_packing_layout_and_share():
     dec = Decoder(DecoderSpec(width=32, depth=3))
     p = pack(dec)
-    s = dec.spec
     first = 32 * 2
     hidden = (32 * 32 + 32) // 4
     assert p.offsets == {"first": 0, "hidden1": first, "hidden2": first + hidden, "out": first + 2 * hidden}
@@ -139,8 +138,8 @@ def test_lobe_view_matches_the_torch_lobe_image(gl_ctx):
     the torch decoder at the same latents, within 1e-3."""
     from nbrdf.neural.material import load_material
     from nbrdf.neural.metrics import lobe_image
-    from nbrdf.viewer.renderer import Renderer, ViewState
     from nbrdf.viewer.options import DEFAULT_MATERIAL
+    from nbrdf.viewer.renderer import Renderer, ViewState
 
     torch.manual_seed(6)
     dec = Decoder(DecoderSpec()).eval()

@@ -2,8 +2,6 @@
 GLSL lobe against the torch closed forms, and image files (the command line: tests/cli/test_view.py)."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
@@ -11,8 +9,8 @@ from nbrdf.neural.material import load_material, parse_material
 from nbrdf.neural.metrics import lobe_image
 from nbrdf.training.reference import single_layer_eval
 from nbrdf.viewer.image_io import read_exr, write_image
-from nbrdf.viewer.renderer import Renderer, ViewState
 from nbrdf.viewer.options import DEFAULT_MATERIAL
+from nbrdf.viewer.renderer import Renderer, ViewState
 
 pytestmark = pytest.mark.gl
 

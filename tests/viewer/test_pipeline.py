@@ -13,9 +13,9 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material, parse_material
 from nbrdf.neural.model import default_model
 from nbrdf.viewer.modes import BrdfMode
+from nbrdf.viewer.options import DEFAULT_MATERIAL
 from nbrdf.viewer.pipeline import BrdfKind, MaterialPipeline
 from nbrdf.viewer.renderer import Renderer, ViewState
-from nbrdf.viewer.options import DEFAULT_MATERIAL
 
 ROUGH_GOLD = {"format": "nbrdf-material/1", "name": "rough gold",
               "layers": [{"type": "conductor", "roughness": 0.4, "r0": [1.0, 0.78, 0.34]}]}

@@ -9,9 +9,9 @@ import torch
 from nbrdf.neural.material import load_material, parse_material
 from nbrdf.neural.model import default_model
 from nbrdf.training.reference import reference_eval, single_layer_eval
+from nbrdf.viewer.options import DEFAULT_MATERIAL
 from nbrdf.viewer.reference import ReferenceWorker, lobe_job, slice_job
 from nbrdf.viewer.renderer import Renderer, ViewState
-from nbrdf.viewer.options import DEFAULT_MATERIAL
 
 GOLD = {"format": "nbrdf-material/1", "name": "g", "layers": [{"type": "conductor", "roughness": 0.3,
                                                              "r0": [1.0, 0.78, 0.34]}]}

@@ -12,8 +12,8 @@ import pytest
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
 from nbrdf.viewer.modes import CompareMode, ToneMap, View
-from nbrdf.viewer.session import SessionDoc
 from nbrdf.viewer.options import DEFAULT_MATERIAL
+from nbrdf.viewer.session import SessionDoc
 
 DATA = Path(__file__).parent / "data"
 V1 = DATA / "session_v1.json"  # written by the previous LookDev (before the split), with its object render

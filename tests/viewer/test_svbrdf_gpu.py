@@ -13,7 +13,6 @@ from nbrdf.neural.material import load_material, parse_material
 from nbrdf.neural.model import default_model
 from nbrdf.viewer.neural_gpu import GpuDecoder, GpuLatentTexture, probe_fragment
 from nbrdf.viewer.renderer import Renderer, ViewState
-from nbrdf.viewer.options import DEFAULT_MATERIAL
 
 ROUGH_GOLD = {"format": "nbrdf-material/1", "name": "rough gold",
               "layers": [{"type": "conductor", "roughness": 0.4, "r0": [1.0, 0.78, 0.34]}]}

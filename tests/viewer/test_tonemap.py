@@ -11,8 +11,20 @@ import pytest
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer import shaders
 from nbrdf.viewer.modes import ToneMap, glsl_defines
-from nbrdf.viewer.tonemap import (AGX_INSET, AGX_MAX_EV, AGX_MIN_EV, AGX_OUTSET, agx, agx_sigmoid, aces_fitted,
-                                  exposure_scale, pbr_neutral, srgb_encode, to_display8, tonemap)
+from nbrdf.viewer.tonemap import (
+    AGX_INSET,
+    AGX_MAX_EV,
+    AGX_MIN_EV,
+    AGX_OUTSET,
+    aces_fitted,
+    agx,
+    agx_sigmoid,
+    exposure_scale,
+    pbr_neutral,
+    srgb_encode,
+    to_display8,
+    tonemap,
+)
 
 
 def grey(v: float) -> np.ndarray:

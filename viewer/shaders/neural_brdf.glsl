@@ -4,7 +4,15 @@
 // u_nb_share). The lit view importance-samples the coat's visible normals
 // mixed with the body's learned proxy pdf (u_proxy_sigma, u_proxy_w,
 // computed once per material on the CPU), as neural/sampling.py coated_sample.
+// NB_BODY_TABLE: the body from the material's baked table (body_table.glsl; the
+// code then supplies no decoder), else the decoder itself.
+#ifdef NB_BODY_TABLE
+//@INCLUDE body_table.glsl
+#define NB_BODY(wi, wo) nb_table(wi, wo)
+#else
 //@INCLUDE neural_decoder.glsl
+#define NB_BODY(wi, wo) nb_decode(wi, wo)
+#endif
 //@INCLUDE sampling.glsl
 //@INCLUDE coat.glsl
 uniform float u_proxy_sigma;
@@ -13,10 +21,10 @@ uniform float u_proxy_w;
 uniform vec2 u_coat;  // (roughness, ior); ior 1: no coat
 #define NB_COAT u_coat
 #endif
-vec3 brdf(vec3 wi, vec3 wo) { return nb_decode(wi, wo) + vec3(coat_eval(wi, wo, NB_COAT)); }
+vec3 brdf(vec3 wi, vec3 wo) { return NB_BODY(wi, wo) + vec3(coat_eval(wi, wo, NB_COAT)); }
 // The split for the lit pass (lit_shade.glsl): body and coat estimated apart.
 #define NB_SPLIT_COAT 1
-vec3 body_brdf(vec3 wi, vec3 wo) { return nb_decode(wi, wo); }
+vec3 body_brdf(vec3 wi, vec3 wo) { return NB_BODY(wi, wo); }
 vec3 sample_body(vec3 wo, vec3 u) { return sample_proxy(wo, u, u_proxy_sigma, u_proxy_w); }
 float pdf_body(vec3 wo, vec3 wi) { return pdf_proxy(wo, wi, u_proxy_sigma, u_proxy_w); }
 vec2 coat_code() { return NB_COAT; }

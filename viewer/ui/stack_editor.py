@@ -11,19 +11,17 @@ import copy
 from pathlib import Path
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import RANGES as MATERIAL_RANGES, Material, parse_material
+from nbrdf.neural.layer_kinds import COLOUR_PARAMS, DIELECTRIC, KINDS, MEDIUM, PARAMETRIC_BASES
+from nbrdf.neural.layer_kinds import RANGES as MATERIAL_RANGES
+from nbrdf.neural.material import Material, parse_material
 
-#: Defaults of a new layer of each type.
-NEW_LAYER = {
-    "conductor": {"type": "conductor", "roughness": 0.2, "r0": [0.95, 0.64, 0.54]},
-    "diffuse": {"type": "diffuse", "albedo": [0.5, 0.5, 0.5]},
-    "dielectric": {"type": "dielectric", "roughness": 0.05, "ior": 1.5},
-    "medium": {"type": "medium", "albedo": [0.9, 0.9, 0.9], "sigma_t": 0.5},
-}
-BASE_TYPES = ("conductor", "diffuse", "dielectric")
+#: The base types the editor offers (those given by parameters).
+BASE_TYPES = PARAMETRIC_BASES
+#: Defaults of a new layer of each type (the table of layer kinds).
+NEW_LAYER = {k: KINDS[k].new_layer() for k in (*BASE_TYPES, MEDIUM)}
 #: Slider ranges per parameter: the material's own legal ranges (SPEC section 3).
 RANGES = MATERIAL_RANGES
-COLOUR_KEYS = ("r0", "albedo")
+COLOUR_KEYS = COLOUR_PARAMS
 
 
 class StackEditor:
@@ -61,7 +59,7 @@ class StackEditor:
     def add_coat(self, medium: bool = True) -> Material:
         """A clear coat on top: a dielectric interface (and a medium below it)."""
         doc = copy.deepcopy(self.doc)
-        new = [copy.deepcopy(NEW_LAYER["dielectric"])] + ([copy.deepcopy(NEW_LAYER["medium"])] if medium else [])
+        new = [copy.deepcopy(NEW_LAYER[DIELECTRIC])] + ([copy.deepcopy(NEW_LAYER[MEDIUM])] if medium else [])
         doc["layers"] = new + doc["layers"]
         return self._apply(doc)
 
@@ -69,12 +67,12 @@ class StackEditor:
         """Adds a medium under the interface at ``interface``, or removes it."""
         doc = copy.deepcopy(self.doc)
         layers = doc["layers"]
-        if self._layer(doc, interface)["type"] != "dielectric" or interface == len(layers) - 1:
+        if self._layer(doc, interface)["type"] != DIELECTRIC or interface == len(layers) - 1:
             raise NbrdfError(f"layers[{interface}]: only an interface above the base carries a medium")
-        if layers[interface + 1]["type"] == "medium":
+        if layers[interface + 1]["type"] == MEDIUM:
             del layers[interface + 1]
         else:
-            layers.insert(interface + 1, copy.deepcopy(NEW_LAYER["medium"]))
+            layers.insert(interface + 1, copy.deepcopy(NEW_LAYER[MEDIUM]))
         return self._apply(doc)
 
     def remove(self, index: int) -> Material:
@@ -84,7 +82,7 @@ class StackEditor:
         kind = self._layer(doc, index)["type"]
         if index == len(layers) - 1:
             raise NbrdfError(f"layers[{index}]: the base cannot be removed (change its type instead)")
-        count = 2 if kind == "dielectric" and layers[index + 1]["type"] == "medium" else 1
+        count = 2 if kind == DIELECTRIC and layers[index + 1]["type"] == MEDIUM else 1
         del layers[index:index + count]
         return self._apply(doc)
 
@@ -114,7 +112,7 @@ class StackEditor:
         """Layer indices grouped as interface (+ medium) ... base."""
         groups: list[list[int]] = []
         for i, layer in enumerate(self.layers):
-            if layer["type"] == "medium" and groups:
+            if layer["type"] == MEDIUM and groups:
                 groups[-1].append(i)
             else:
                 groups.append([i])

@@ -1,0 +1,235 @@
+"""The two Mitsuba BSDF plugins of an nbrdf material (SPEC section 8).
+
+``nbrdf``: the neural material as the previewer shows it, evaluated inside
+Mitsuba's kernel (``kernel.CodeKernel``). ``nbrdf_reference``: the Monte
+Carlo ground truth, a fresh unbiased estimate of f per query from the
+project's walk (``training.reference.reference_eval``), called per wavefront
+through numpy, so it needs Dr.Jit's evaluated mode (``wavefront_mode``).
+
+Mitsuba's conventions: ``si.wi`` is the project's ``wo`` (toward the
+viewer), the queried direction is the project's ``wi`` (toward the light);
+``eval`` returns f(wi, wo) cos(theta_i). Both are one-sided reflection BSDFs.
+"""
+from __future__ import annotations
+
+import contextlib
+import itertools
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from nbrdf.mitsuba.kernel import Coat, CodeKernel, DecoderKernel, Proxy
+
+FLAGS_GLOSSY = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
+#: A material without a coat whose proxy gives the cosine lobe more than this share is reported
+#: to Mitsuba as a diffuse lobe, else as a glossy one.
+DIFFUSE_W = 0.9
+
+
+class PluginError(RuntimeError):
+    """Bad input to a plugin (one line: what is wrong and where)."""
+
+
+def _prop(props, key: str, default=None):
+    return props[key] if key in props else default
+
+
+def code_kernel(material: str, weights: str | None = None) -> CodeKernel:
+    """The Dr.Jit kernel of a material JSON or code file (``neural.material_code``)."""
+    from nbrdf.neural.errors import NbrdfError
+    from nbrdf.neural.material_code import code_parts, load_code
+
+    try:
+        model, code = load_code(material, weights)
+        (r, ior), (sigma, w) = code_parts(model, code)
+        decoder = DecoderKernel.from_torch(model.decoder, code)
+    except (NbrdfError, ValueError) as e:
+        raise PluginError(f"nbrdf: {e}") from None
+    return CodeKernel(decoder, Coat(float(r), float(ior)), Proxy(float(sigma), float(w)))
+
+
+class NbrdfBSDF(mi.BSDF):
+    """``{"type": "nbrdf", "material": PATH[, "weights": BUNDLE]}``."""
+
+    def __init__(self, props):
+        mi.BSDF.__init__(self, props)
+        if not dr.is_jit_v(mi.Float):
+            raise PluginError(f"nbrdf: the variant {mi.variant()} is not a JIT variant; use llvm_ad_rgb "
+                              "or cuda_ad_rgb")
+        path = _prop(props, "material")
+        if path is None:
+            raise PluginError('nbrdf: the property "material" (a material JSON or a code file) is missing')
+        self.path = str(path)
+        self.kernel = code_kernel(self.path, _prop(props, "weights"))
+        diffuse = not self.kernel.coat.present and self.kernel.proxy.w > DIFFUSE_W
+        self._lobe = mi.BSDFFlags.DiffuseReflection if diffuse else mi.BSDFFlags.GlossyReflection
+        self.m_components = [self._lobe | mi.BSDFFlags.FrontSide]
+        self.m_flags = self.m_components[0]
+
+    def _enabled(self, ctx, active):
+        """``active`` where the context asks for this BSDF's one component."""
+        return active & ctx.is_enabled(self._lobe, 0)
+
+    def eval(self, ctx, si, wo, active=True):
+        f = self.kernel.eval(wo, si.wi)
+        ok = self._enabled(ctx, active) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
+        return dr.select(ok, f * mi.Frame3f.cos_theta(wo), 0.0)
+
+    def pdf(self, ctx, si, wo, active=True):
+        return dr.select(self._enabled(ctx, active), self.kernel.pdf(si.wi, wo), 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        wo, pdf = self.kernel.sample(si.wi, sample1, sample2.x, sample2.y)
+        ok = (self._enabled(ctx, active) & (pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0)
+              & (mi.Frame3f.cos_theta(wo) > 0))
+        bs = dr.zeros(mi.BSDFSample3f)
+        bs.wo = wo
+        bs.pdf = dr.select(ok, pdf, 0.0)
+        bs.eta = 1.0
+        bs.sampled_component = mi.UInt32(0)
+        bs.sampled_type = mi.UInt32(+self._lobe)
+        f = self.kernel.eval(wo, si.wi) * mi.Frame3f.cos_theta(wo)
+        return bs, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0)
+
+    def traverse(self, cb):
+        pass
+
+    def to_string(self):
+        c, p = self.kernel.coat, self.kernel.proxy
+        return (f"NbrdfBSDF[material={self.path!r}, coat=(roughness {c.roughness:g}, ior {c.ior:g}), "
+                f"proxy=(sigma {p.sigma:g}, w {p.w:g})]")
+
+
+# --- the Monte Carlo reference ------------------------------------------------------------
+@contextlib.contextmanager
+def wavefront_mode():
+    """Dr.Jit's evaluated (wavefront) loops and calls, which ``nbrdf_reference``
+    needs to hand each wavefront to the walk; restores the flags after."""
+    flags = (dr.JitFlag.SymbolicLoops, dr.JitFlag.SymbolicCalls)
+    old = [dr.flag(f) for f in flags]
+    try:
+        for f in flags:
+            dr.set_flag(f, False)
+        yield
+    finally:
+        for f, v in zip(flags, old):
+            dr.set_flag(f, v)
+
+
+def _np3(v) -> np.ndarray:
+    return np.stack([np.asarray(v.x, np.float32), np.asarray(v.y, np.float32), np.asarray(v.z, np.float32)], 1)
+
+
+SYMBOLIC = ("nbrdf_reference: traced in a symbolic loop or call, where the walk cannot run: it reflects nothing "
+            "there; render inside nbrdf.mitsuba.wavefront_mode() (Dr.Jit's evaluated loops and calls)")
+
+
+def _symbolic() -> bool:
+    """True while Dr.Jit traces symbolically. A symbolic call traces every live
+    BSDF of a scene's class, so raising here would break renders of scenes
+    that do not even use this plugin: it warns (Mitsuba's log) and reflects
+    nothing instead."""
+    if dr.flag(dr.JitFlag.SymbolicScope):
+        mi.Log(mi.LogLevel.Warn, SYMBOLIC)
+        return True
+    return False
+
+
+def _to_np(v):
+    dr.eval(v)
+    return _np3(v)
+
+
+class NbrdfReferenceBSDF(mi.BSDF):
+    """``{"type": "nbrdf_reference", "material": PATH[, "spp": N, "seed": S]}``:
+    every query draws ``spp`` new walk paths per lane (an unbiased, noisy f)."""
+
+    def __init__(self, props):
+        mi.BSDF.__init__(self, props)
+        from nbrdf.neural.errors import NbrdfError
+        from nbrdf.neural.material import load_material
+        from nbrdf.training.brdfs import ReferenceBRDF
+
+        path = _prop(props, "material")
+        if path is None:
+            raise PluginError('nbrdf_reference: the property "material" (a material JSON) is missing')
+        self.path = str(path)
+        self.spp = int(_prop(props, "spp", 1))
+        if self.spp < 1:
+            raise PluginError(f"nbrdf_reference: spp {self.spp} must be at least 1")
+        try:
+            self.material = load_material(self.path)
+            self.brdf = ReferenceBRDF(self.material, spp=self.spp)
+        except NbrdfError as e:
+            raise PluginError(f"nbrdf_reference: {e}") from None
+        self._seeds = itertools.count(int(_prop(props, "seed", 0)) * 1_000_003 + 1)
+        self.m_components = [FLAGS_GLOSSY]
+        self.m_flags = FLAGS_GLOSSY
+
+    def _f(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """A fresh estimate of f (N, 3) at the project's (wi, wo)."""
+        import torch
+
+        from nbrdf.training.reference import reference_eval
+
+        f, _ = reference_eval(self.material, torch.from_numpy(wi), torch.from_numpy(wo), spp=self.spp,
+                              seed=next(self._seeds))
+        return f.numpy().astype(np.float32)
+
+    @staticmethod
+    def _color(f: np.ndarray):
+        return mi.Color3f(mi.Float(f[:, 0]), mi.Float(f[:, 1]), mi.Float(f[:, 2]))
+
+    def eval(self, ctx, si, wo, active=True):
+        if _symbolic():
+            return dr.zeros(mi.Color3f, dr.width(wo))
+        light, view = _to_np(wo), _to_np(si.wi)
+        f = self._color(self._f(light, view))
+        ok = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
+        return dr.select(ok, f * mi.Frame3f.cos_theta(wo), 0.0)
+
+    def pdf(self, ctx, si, wo, active=True):
+        import torch
+
+        if _symbolic():
+            return dr.zeros(mi.Float, dr.width(wo))
+        p = self.brdf.pdf(torch.from_numpy(_to_np(si.wi)), torch.from_numpy(_to_np(wo))).numpy()
+        return dr.select(active, mi.Float(p.astype(np.float32)), 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        import torch
+
+        if _symbolic():
+            return dr.zeros(mi.BSDFSample3f, dr.width(si.wi)), dr.zeros(mi.Color3f, dr.width(si.wi))
+        view = _to_np(si.wi)
+        s1, s2 = np.asarray(sample1, np.float32), np.stack([np.asarray(sample2.x, np.float32),
+                                                           np.asarray(sample2.y, np.float32)], 1)
+        s1 = np.broadcast_to(s1, (view.shape[0],))
+        u = torch.from_numpy(np.ascontiguousarray(np.concatenate([s2, s1[:, None]], 1)))  # u[:, 2] picks the lobe
+        w, pdf = self.brdf.sampler.sample(torch.from_numpy(view), u)
+        light = w.numpy().astype(np.float32)
+        pdf = pdf.numpy().astype(np.float32)
+        f = self._f(light, view)
+        ok_np = pdf > 0
+        weight = np.where(ok_np[:, None], f * light[:, 2:3] / np.where(ok_np, pdf, 1.0)[:, None], 0.0)
+        bs = dr.zeros(mi.BSDFSample3f)
+        bs.wo = mi.Vector3f(mi.Float(light[:, 0]), mi.Float(light[:, 1]), mi.Float(light[:, 2]))
+        ok = active & mi.Bool(ok_np)
+        bs.pdf = dr.select(ok, mi.Float(pdf), 0.0)
+        bs.eta = 1.0
+        bs.sampled_component = mi.UInt32(0)
+        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
+        return bs, dr.select(ok, self._color(weight.astype(np.float32)), 0.0)
+
+    def traverse(self, cb):
+        pass
+
+    def to_string(self):
+        return f"NbrdfReferenceBSDF[material={self.path!r}, spp={self.spp}]"

@@ -1,0 +1,287 @@
+"""A material code's BRDF in Dr.Jit: the same arithmetic as the torch path
+(``neural.coat``, ``neural.microfacet``, ``neural.decoder``, ``neural.sampling``),
+written over Dr.Jit arrays so it runs inside Mitsuba's rendering kernel.
+
+The decoder runs through ``drjit.nn`` (cooperative vectors: vectorised on the
+CPU, tensor cores on NVIDIA GPUs); the latent's share of the first layer is a
+per-channel bias computed once per material. Directions are in the local
+frame (z the normal); ``wi`` and ``wo`` are the project's (light, viewer).
+Every function reads the array types of the Mitsuba variant in force.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+#: The lobes11 features' GGX-like widths and the ior of their refracted half vector (``neural.decoder``).
+LOBE_ALPHAS = (0.03, 0.1, 0.3)
+LOBE_IOR = 1.5
+
+
+# --- small vector helpers -----------------------------------------------------------------
+def _normalize(v, eps: float):
+    return v / dr.maximum(dr.norm(v), eps)
+
+
+def _sq(x):
+    return x * x
+
+
+# --- GGX and Fresnel (neural.microfacet) --------------------------------------------------
+def fresnel_dielectric(cos_i, eta: float):
+    """Exact unpolarised Fresnel reflectance; 1 under total internal reflection."""
+    c = dr.minimum(dr.abs(cos_i), 1.0)
+    sin2_t = (1.0 - c * c) / (eta * eta)
+    cos_t = dr.sqrt(dr.maximum(1.0 - sin2_t, 0.0))
+    rs = (c - eta * cos_t) / (c + eta * cos_t)
+    rp = (eta * c - cos_t) / (eta * c + cos_t)
+    return dr.select(sin2_t >= 1.0, 1.0, 0.5 * (rs * rs + rp * rp))
+
+
+def ggx_d(m, alpha: float):
+    a2 = alpha * alpha
+    denom = _sq(m.x) + _sq(m.y) + _sq(m.z) * a2
+    return dr.select(m.z > 0, a2 / (math.pi * denom * denom), 0.0)
+
+
+def _g1_dir(w, alpha: float):
+    tan2 = (_sq(w.x) + _sq(w.y)) / dr.maximum(_sq(w.z), 1e-30)
+    return 2.0 / (1.0 + dr.sqrt(1.0 + alpha * alpha * tan2))
+
+
+def smith_g1(w, m, alpha: float):
+    return dr.select(dr.dot(w, m) * w.z > 0, _g1_dir(w, alpha), 0.0)
+
+
+def sample_vndf(w, alpha: float, u1, u2):
+    """Heitz 2018's visible-normal sample, w mirrored to the upper hemisphere."""
+    sgn = dr.select(w.z < 0, -1.0, 1.0)
+    v = _normalize(mi.Vector3f(alpha * w.x * sgn, alpha * w.y * sgn, w.z * sgn), 1e-15)
+    lensq = _sq(v.x) + _sq(v.y)
+    safe = lensq > 1e-14
+    il = dr.rsqrt(dr.select(safe, lensq, 1.0))
+    t1x = dr.select(safe, -v.y * il, 1.0)
+    t1y = dr.select(safe, v.x * il, 0.0)
+    t2x, t2y, t2z = -v.z * t1y, v.z * t1x, v.x * t1y - v.y * t1x
+    r = dr.sqrt(u1)
+    s_phi, c_phi = dr.sincos(2.0 * math.pi * u2)
+    p1, p2 = r * c_phi, r * s_phi
+    s = 0.5 * (1.0 + v.z)
+    p2 = (1.0 - s) * dr.sqrt(dr.maximum(1.0 - p1 * p1, 0.0)) + s * p2
+    p3 = dr.sqrt(dr.maximum(1.0 - p1 * p1 - p2 * p2, 0.0))
+    m = mi.Vector3f(alpha * (p1 * t1x + p2 * t2x + p3 * v.x), alpha * (p1 * t1y + p2 * t2y + p3 * v.y),
+                    dr.maximum(p2 * t2z + p3 * v.z, 1e-12))
+    return dr.normalize(m)
+
+
+def vndf_pdf(w, m, alpha: float):
+    wu = w * dr.select(w.z < 0, -1.0, 1.0)
+    wm = dr.dot(wu, m)
+    pdf = _g1_dir(wu, alpha) * dr.maximum(wm, 0.0) * ggx_d(m, alpha) / dr.maximum(dr.abs(wu.z), 1e-30)
+    return dr.select(wm > 0, pdf, 0.0)
+
+
+def reflect(w, m):
+    return 2.0 * dr.dot(w, m) * m - w
+
+
+# --- the clear coat (neural.coat) --------------------------------------------------------
+@dataclass(frozen=True)
+class Coat:
+    """A code's clear coat, already clamped to its legal range; ior 1: none."""
+
+    roughness: float
+    ior: float
+
+    @property
+    def present(self) -> bool:
+        return self.ior > 1.0 + 1e-4
+
+    def eval(self, wi, wo):
+        """The coat's reflection in 1/sr (no cosine)."""
+        a, eta = self.roughness, self.ior
+        h = _normalize(wi + wo, 1e-30)
+        f = (fresnel_dielectric(dr.dot(wi, h), eta) * ggx_d(h, a) * smith_g1(wi, h, a) * smith_g1(wo, h, a)
+             / dr.maximum(4.0 * wi.z * wo.z, 1e-30))
+        return dr.select((wi.z > 0) & (wo.z > 0) & (eta > 1.0), f, 0.0)
+
+    def pdf(self, w, w_other):
+        h = _normalize(w + w_other, 1e-30)
+        p = vndf_pdf(w, h, self.roughness) / (4.0 * dr.maximum(dr.abs(dr.dot(w, h)), 1e-30))
+        return dr.select((w.z > 0) & (w_other.z > 0), p, 0.0)
+
+    def sample(self, w, u1, u2):
+        return reflect(w, sample_vndf(w, self.roughness, u1, u2))
+
+    def probability(self, w):
+        """Share of samples given to the coat at incidence w (``neural.coat.coat_probability``)."""
+        if not self.present:
+            return mi.Float(0.0)
+        return dr.clip(dr.sqrt(fresnel_dielectric(dr.clip(w.z, 0.0, 1.0), self.ior)), 0.05, 0.95)
+
+
+# --- the body's proxy pdf (neural.sampling) ----------------------------------------------
+@dataclass(frozen=True)
+class Proxy:
+    """(1 - w) Gaussian(sigma) over the projected half vector + w Lambertian."""
+
+    sigma: float
+    w: float
+
+    @property
+    def disk_norm(self) -> float:
+        return 2 * math.pi * self.sigma ** 2 * -math.expm1(-0.5 / self.sigma ** 2)
+
+    def pdf(self, wi, wo):
+        h = _normalize(wi + wo, 1e-12)
+        h = dr.select(h.z < 0, -h, h)
+        r2 = _sq(h.x) + _sq(h.y)
+        p_disk = dr.exp(-0.5 * r2 / self.sigma ** 2) / self.disk_norm
+        g = p_disk * h.z / (4.0 * dr.maximum(dr.abs(dr.dot(wi, h)), 1e-12))
+        return (1.0 - self.w) * g + self.w * dr.maximum(wo.z, 0.0) / math.pi
+
+    def sample(self, wi, u0, u1, u2):
+        s_phi, c_phi = dr.sincos(2.0 * math.pi * u2)
+        trunc = -math.expm1(-0.5 / self.sigma ** 2)
+        r = dr.minimum(self.sigma * dr.sqrt(-2.0 * dr.log(1.0 - u1 * trunc)), 1.0)
+        h = mi.Vector3f(r * c_phi, r * s_phi, dr.sqrt(dr.maximum(1.0 - r * r, 0.0)))
+        wo_g = 2.0 * dr.dot(wi, h) * h - wi
+        rc = dr.sqrt(u1)
+        wo_c = mi.Vector3f(rc * c_phi, rc * s_phi, dr.sqrt(dr.maximum(1.0 - u1, 0.0)))
+        return _normalize(dr.select(u0 < self.w, wo_c, wo_g), 1e-12)
+
+
+def coated_pdf(coat: Coat, proxy: Proxy, wi, wo):
+    """pdf of ``coated_sample`` given wi (``neural.sampling.coated_pdf``)."""
+    p = proxy.pdf(wi, wo)
+    if coat.present:
+        pc = coat.probability(wi)
+        p = pc * coat.pdf(wi, wo) + (1.0 - pc) * p
+    return dr.select((wi.z > 0) & (wo.z > 0), p, 0.0)
+
+
+def coated_sample(coat: Coat, proxy: Proxy, wi, u0, u1, u2):
+    """The other direction given wi: u0 picks the coat or the proxy (and is
+    rescaled to stay uniform for the proxy's own choice), u1, u2 draw it."""
+    if not coat.present:
+        return proxy.sample(wi, u0, u1, u2)
+    pc = coat.probability(wi)
+    u_p = dr.clip((u0 - pc) / dr.maximum(1.0 - pc, 1e-6), 0.0, 1.0 - 1e-7)
+    return dr.select(u0 < pc, coat.sample(wi, u1, u2), proxy.sample(wi, u_p, u1, u2))
+
+
+# --- the decoder's direction features (neural.decoder) ------------------------------------
+def rusink5(wi, wo) -> list:
+    h = _normalize(wi + wo, 1e-12)
+    cos_d = dr.clip(dr.dot(wi, h), -1.0, 1.0)
+    theta_h = dr.atan2(dr.sqrt(_sq(h.x) + _sq(h.y)), h.z)
+    theta_d = dr.atan2(dr.norm(dr.cross(wi, h)), cos_d)
+    t = wi - cos_d * h
+    b = mi.Vector3f(-h.y, h.x, 0.0)
+    bn = dr.norm(b)
+    b = dr.select(bn > 1e-7, b / dr.maximum(bn, 1e-12), mi.Vector3f(0.0, 1.0, 0.0))
+    tn2 = dr.squared_norm(t)
+    ty = dr.dot(t, b)
+    cos2 = dr.select(tn2 > 1e-14, 1.0 - 2.0 * ty * ty / dr.maximum(tn2, 1e-30), 1.0)
+    return [dr.sqrt(theta_h * (2.0 / math.pi)), theta_d * (2.0 / math.pi), cos2, wi.z * wo.z, 0.5 * (wi.z + wo.z)]
+
+
+def _bumps(h) -> list:
+    c2, s2 = _sq(h.z), _sq(h.x) + _sq(h.y)
+    return [a * a * c2 / dr.maximum(a * a * c2 + s2, 1e-30) for a in LOBE_ALPHAS]
+
+
+def lobes11(wi, wo) -> list:
+    def inside(w):
+        tx, ty = w.x / LOBE_IOR, w.y / LOBE_IOR
+        return mi.Vector3f(tx, ty, dr.sqrt(dr.maximum(1.0 - tx * tx - ty * ty, 0.0)))
+
+    return (rusink5(wi, wo) + _bumps(_normalize(wi + wo, 1e-12))
+            + _bumps(_normalize(inside(wi) + inside(wo), 1e-12)))
+
+
+ENCODERS = {"rusink5": rusink5, "lobes11": lobes11}
+
+
+# --- the decoder network ------------------------------------------------------------------
+class DecoderKernel:
+    """The shipped decoder at one material: per channel, relu layers over the
+    direction features with the latent's share as the first layer's bias,
+    then y = log f; f = exp(min(y, 80)). Weights packed once for ``drjit.nn``."""
+
+    def __init__(self, encoding: str, activation: str, w_dir: np.ndarray, shares: np.ndarray,
+                 hidden: list[tuple[np.ndarray, np.ndarray]], out: tuple[np.ndarray, np.ndarray]):
+        import drjit.nn as nn
+
+        if activation != "relu":
+            raise ValueError(f"the decoder's activation {activation!r} is not supported in Mitsuba (relu only)")
+        if encoding not in ENCODERS:
+            raise ValueError(f"the decoder's encoding {encoding!r} is unknown")
+        self.encoding = encoding
+        T = mi.TensorXf
+        mats = [T(np.ascontiguousarray(w_dir, np.float32))]
+        mats += [T(np.ascontiguousarray(s, np.float32)) for s in shares]
+        for w, b in hidden + [out]:
+            mats += [T(np.ascontiguousarray(w, np.float32)), T(np.ascontiguousarray(b, np.float32))]
+        packed = nn.pack(*mats, layout="inference")
+        self._nn = nn
+        self.w_dir = packed[0]
+        self.shares = packed[1:1 + len(shares)]
+        rest = packed[1 + len(shares):]
+        self.layers = [(rest[2 * k], rest[2 * k + 1]) for k in range(len(rest) // 2)]
+
+    @staticmethod
+    def from_torch(decoder, code) -> "DecoderKernel":
+        """The kernel of a ``neural.decoder.Decoder`` at a code (3, 34) or latent (3, 32)."""
+        import torch
+
+        spec = decoder.spec
+        with torch.no_grad():
+            shares = decoder.latent_share(code.float()).numpy()  # (3, W)
+            w_dir = decoder.hidden[0].weight[:, spec.latent:].numpy()
+            hidden = [(layer.weight.numpy(), layer.bias.numpy()) for layer in decoder.hidden[1:]]
+            out = (decoder.out.weight.numpy(), decoder.out.bias.numpy())
+        return DecoderKernel(spec.encoding, spec.activation, w_dir, shares, hidden, out)
+
+    def body(self, wi, wo) -> list:
+        """Decoded body values [f_r, f_g, f_b] (1/sr), zero below the horizon."""
+        nn = self._nn
+        x = nn.CoopVec(*ENCODERS[self.encoding](wi, wo))
+        up = (wi.z > 0) & (wo.z > 0)
+        out = []
+        for share in self.shares:
+            h = dr.maximum(nn.matvec(self.w_dir, x, share), 0.0)
+            for k, (w, b) in enumerate(self.layers):
+                h = nn.matvec(w, h, b)
+                if k < len(self.layers) - 1:
+                    h = dr.maximum(h, 0.0)
+            y = list(h)[0]
+            out.append(dr.select(up, dr.exp(dr.minimum(y, 80.0)), 0.0))
+        return out
+
+
+class CodeKernel:
+    """A whole material code: decoded body plus closed-form coat, and its sampler."""
+
+    def __init__(self, decoder: DecoderKernel, coat: Coat, proxy: Proxy):
+        self.decoder, self.coat, self.proxy = decoder, coat, proxy
+
+    def eval(self, wi, wo):
+        """RGB f(wi, wo) as a ``mi.Color3f`` (no cosine)."""
+        r, g, b = self.decoder.body(wi, wo)
+        if self.coat.present:
+            c = self.coat.eval(wi, wo)
+            r, g, b = r + c, g + c, b + c
+        return mi.Color3f(r, g, b)
+
+    def pdf(self, w, w_other):
+        return coated_pdf(self.coat, self.proxy, w, w_other)
+
+    def sample(self, w, u0, u1, u2):
+        """(other direction, its pdf); pdf 0 where the draw fell below the horizon."""
+        wo = coated_sample(self.coat, self.proxy, w, u0, u1, u2)
+        return wo, coated_pdf(self.coat, self.proxy, w, wo)

@@ -1,0 +1,79 @@
+"""The window's refinement under Xvfb with adaptive resolution on, through the
+App's API: with slow frames an edit still ends in a full-resolution view that
+accumulates passes. Frames are made slow by a fake clock in the window's
+module (every reading 1.5 s later than the one before), so no wall clock is
+asserted and the outcome does not depend on the machine's speed."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from nbrdf.viewer.options import DEFAULT_MATERIAL
+
+pytestmark = pytest.mark.gl
+
+SCRIPT = textwrap.dedent("""
+    import json, sys
+    import nbrdf.viewer.app as app_module
+    from nbrdf.viewer.app import App
+    from nbrdf.viewer.options import ViewOptions
+
+    class SlowClock:  # each reading 1.5 s after the one before: every frame takes 1.5 s or more
+        t = 0.0
+        @classmethod
+        def perf_counter(cls):
+            cls.t += 1.5
+            return cls.t
+        sleep = staticmethod(lambda s: None)
+
+    app = App(ViewOptions(material=sys.argv[1], size=(96, 72)), size=(96, 72))
+    app_module.time = SlowClock
+    app.panels.visible = False
+    app.frame()
+    ld = app.lookdev
+    frames = []
+    def step(tag):
+        app.step()
+        frames.append({"tag": tag, "scale": app.scale, "interactive": getattr(app, "interactive", app.dragging), "passes": ld.passes})
+    try:
+        for _ in range(4):
+            step("start")
+        for k in range(3):  # a drag: three edits, one frame each
+            ld.set_param(len(ld.editor.layers) - 1, "roughness", 0.3 + 0.1 * k)
+            step("edit")
+        for _ in range(5):
+            step("still")
+        print(json.dumps({"frames": frames, "notice": ld.notice}))
+    finally:
+        app.close()
+""")
+
+
+@pytest.fixture(scope="module")
+def frames(xvfb_display):
+    env = dict(os.environ, DISPLAY=xvfb_display)
+    r = subprocess.run([sys.executable, "-c", SCRIPT, str(DEFAULT_MATERIAL)], env=env,
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return json.loads(r.stdout.strip().splitlines()[-1])["frames"]
+
+
+def test_edit_frames_are_interactive_at_half_resolution_or_more(frames):
+    edits = [f for f in frames if f["tag"] == "edit"]
+    assert all(f["interactive"] and f["scale"] >= 0.5 for f in edits), edits
+
+
+def test_still_view_reaches_full_resolution_and_accumulates_with_slow_frames(frames):
+    still = [f for f in frames if f["tag"] == "still"]
+    full = [i for i, f in enumerate(still) if f["scale"] == 1.0 and not f["interactive"]]
+    assert full and full[0] <= 1, still  # resolution first: full within two still frames
+    tail = still[full[0]:]
+    assert all(f["scale"] == 1.0 for f in tail), still  # and it stays there
+    # The accumulation restarts with the resolution (a one-pass preview at full size), restarts
+    # once more without the preview, then grows a pass per frame.
+    assert [f["passes"] for f in tail] == [1] + list(range(1, len(tail))), still

@@ -1,0 +1,131 @@
+"""Which body a frame of the window shades with: the per-pixel decoder or a baked table.
+
+On a GPU the decoder runs per pixel in every frame. On software OpenGL
+(llvmpipe) four decoder evaluations per pixel and pass make a frame take
+seconds, so a uniform neural material's body is baked after each edit into a
+table (viewer/body_table_gpu.py): a coarse one for interactive frames, a finer
+one for the still view (render-space error against the decoder in
+docs/decisions/020-baked-body-table.md). Latent textures always use the
+decoder. The choice is made once at start from the decoder's measured speed
+(``calibrate``) and said in one line (``notice``).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import moderngl
+import numpy as np
+
+from nbrdf.neural.body_table import TableSize
+from nbrdf.viewer.body_table_gpu import INTERACTIVE, STILL, BodyTables
+from nbrdf.viewer.lit_sampling import LitSampling
+from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf
+
+
+@dataclass
+class BodySettings:
+    """How frames pick their body."""
+
+    interactive: TableSize = INTERACTIVE
+    """The table of interactive frames."""
+    still: TableSize = STILL
+    """The table of the still view."""
+    fast_ns_per_pixel: float = 10.0
+    """The per-pixel decoder is used (no tables) when one lit pass costs less than
+    this per pixel (4 decoder evaluations; 10 ns: a 1080p pass in about 20 ms)."""
+    probe_pairs: int = 8192
+    """Decoder evaluations timed at start (8 times more, up to 2^20, while the probe takes under 20 ms)."""
+
+
+class BodySource:
+    """Hands each frame the BRDF to shade with (module docstring)."""
+
+    def __init__(self, ctx: moderngl.Context, settings: BodySettings | None = None):
+        self.ctx = ctx
+        self.settings = settings or BodySettings()
+        self.tables = BodyTables(ctx)
+        self.use_tables: bool | None = None
+        """Decided by ``calibrate`` (None: not yet; frames use the decoder)."""
+        self.ns_per_pixel: float | None = None
+        """The measured cost of one lit pass's decoder work per pixel (4 evaluations), ns."""
+        self.notice = ""
+        self._baked: dict[TableSize, tuple[GpuBrdf, GpuBrdf]] = {}
+
+    def calibrate(self, brdf: GpuBrdf) -> str:
+        """Times the decoder on this GL (a probe pass of ``probe_pairs`` evaluations at
+        the material's latent, after one warm-up) and decides; returns the notice."""
+        from nbrdf.viewer.neural_gpu import probe_fragment
+
+        if brdf.decoder is None or brdf.latent is None:
+            return self.notice
+        from nbrdf.viewer import shaders
+
+        def pairs(n: int) -> np.ndarray:
+            v = np.random.default_rng(0).normal(size=(2, n, 3)).astype(np.float32)
+            v /= np.linalg.norm(v, axis=-1, keepdims=True)
+            v[..., 2] = np.abs(v[..., 2])
+            return v
+
+        gdec = brdf.decoder
+        prog = self.ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
+                                fragment_shader=gdec.source("decoder_probe.frag"))
+        n = self.settings.probe_pairs
+        try:
+            v = pairs(64)
+            probe_fragment(self.ctx, gdec, brdf.latent, v[0], v[1], prog)  # warm-up
+            while True:  # enough evaluations that the pass, not its set-up and read-back, is timed
+                v = pairs(n)
+                t0 = time.perf_counter()
+                probe_fragment(self.ctx, gdec, brdf.latent, v[0], v[1], prog)
+                dt = time.perf_counter() - t0
+                if dt >= 0.02 or n >= 1 << 20:
+                    break
+                n *= 8
+        finally:
+            prog.release()
+        self.ns_per_pixel = 4.0 * dt / n * 1e9
+        self.use_tables = self.ns_per_pixel > self.settings.fast_ns_per_pixel
+        s = self.settings
+        self.notice = (f"decoder {self.ns_per_pixel:.0f} ns per pixel and pass: baked body tables "
+                       f"({_dims(s.interactive)} while editing, {_dims(s.still)} when still)"
+                       if self.use_tables else
+                       f"decoder {self.ns_per_pixel:.1f} ns per pixel and pass: the decoder in every frame")
+        return self.notice
+
+    def sampling(self, base: LitSampling) -> LitSampling:
+        """The lit estimator for frames shaded from tables: a body sample costs a fetch,
+        not a decoder evaluation, so 2 resampled samples of 8 candidates cost 43 % of
+        the default's lit pass at the same noise per CPU second (offscreen, 128 x 128).
+        In the window, whose frames also composite and draw panels, a full-resolution
+        frame takes half the CPU time (0.56 s against 1.12 s, 520 x 620 view) and 1 %
+        noise needs 64 passes instead of 26: about 25 % longer to converge, in frames
+        half as long, so the window answers input twice as soon while it refines.
+        ``base`` itself when the decoder shades."""
+        if not self.use_tables:
+            return base
+        return replace(base, ris_samples=min(base.ris_samples, 2), ris_candidates=min(base.ris_candidates, 8))
+
+    def for_frame(self, brdf: GpuBrdf, interactive: bool) -> GpuBrdf:
+        """The BRDF a frame shades with: ``brdf`` itself, or (tables in use, a uniform
+        neural material) its body baked into the interactive or the still table
+        (baked once per ``brdf``, i.e. once per edit)."""
+        if not self.use_tables or brdf.kind != BrdfKind.NEURAL or brdf.latent is None:
+            return brdf
+        size = self.settings.interactive if interactive else self.settings.still
+        done = self._baked.get(size)
+        if done is None or done[0] is not brdf:
+            done = (brdf, self.tables.brdf(brdf, size))
+            self._baked[size] = done
+        return done[1]
+
+    def release(self) -> None:
+        self.tables.release()
+        self._baked.clear()
+
+
+def _dims(s: TableSize) -> str:
+    return f"{s.theta_h}x{s.theta_d}x{s.phi_d}"
+
+
+__all__ = ["BodySettings", "BodySource"]

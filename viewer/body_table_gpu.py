@@ -1,0 +1,93 @@
+"""A uniform neural material's baked body table on the GPU.
+
+``BodyTables.brdf`` turns a NEURAL ``GpuBrdf`` into a TABLE one: the body
+baked on the CPU (neural/body_table.py, one batched torch decoder pass over
+the table's nodes) and written into a float 3D texture, the coat unchanged
+(closed form in the shader). The direction features of the nodes and their
+part of the decoder's first layer do not depend on the material, so they are
+computed once per table size; an edit then costs the decoder's hidden layers
+over the nodes. One texture per size is kept and rewritten per edit.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import moderngl
+import torch
+
+from nbrdf.neural.body_table import TableSize, table_directions
+from nbrdf.neural.decoder import Decoder
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf
+
+#: The table of interactive frames (while the user edits): HDR-FLIP against the per-pixel
+#: decoder 0.007 mean, 0.013 worst over the look-development set (docs/decisions/020).
+INTERACTIVE = TableSize(32, 16, 8)
+#: The table of the still view where the per-pixel decoder is too slow: 0.004 mean, 0.007 worst.
+STILL = TableSize(48, 24, 12)
+
+
+class BodyTables:
+    """Bakes bodies into tables and keeps the textures (one per ``TableSize``)."""
+
+    def __init__(self, ctx: moderngl.Context):
+        self.ctx = ctx
+        self._tex: dict[TableSize, moderngl.Texture] = {}
+        self._pre: dict[tuple[int, TableSize], torch.Tensor] = {}
+        self.bake_ms: float = 0.0
+        """The last bake's milliseconds (decoder pass and upload)."""
+
+    def _preactivation(self, dec: Decoder, size: TableSize) -> torch.Tensor:
+        """The nodes' direction features times the first layer's direction weights, (P, width)."""
+        key = (id(dec), size)
+        if key not in self._pre:
+            wi, wo = table_directions(size)
+            with torch.no_grad():
+                feats = dec.encode(wi.reshape(-1, 3), wo.reshape(-1, 3))
+                self._pre[key] = feats @ dec.hidden[0].weight[:, dec.spec.latent:].T
+        return self._pre[key]
+
+    @torch.no_grad()
+    def bake(self, dec: Decoder, z: torch.Tensor, size: TableSize) -> torch.Tensor:
+        """log f (K, M, N, 3) of the body of code ``z`` (3, >= latent) at the nodes of ``size``;
+        equal to ``neural.body_table.bake_body`` (the same network, the first layer split)."""
+        if not torch.isfinite(z).all():
+            raise NbrdfError("body table: the latent has non-finite values")
+        pre = self._preactivation(dec, size.check())
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)  # small matrices beside llvmpipe's threads: 2 threads measured 5-10x slower
+        try:
+            x = dec.act(dec.latent_share(z.float())[:, None, :] + pre[None])  # (3, P, width)
+            for layer in dec.hidden[1:]:
+                x = dec.act(layer(x))
+            y = dec.out(x)[..., 0].clamp(-80.0, 80.0)  # (3, P)
+        finally:
+            torch.set_num_threads(threads)
+        return y.T.reshape(*size.shape, 3).contiguous()
+
+    def brdf(self, base: GpuBrdf, size: TableSize) -> GpuBrdf:
+        """``base`` (a NEURAL ``GpuBrdf``) with its body from a freshly baked table of ``size``."""
+        if base.kind != BrdfKind.NEURAL or base.latent is None:
+            raise NbrdfError(f"body table: a uniform neural material only (got {base.kind.value})")
+        t0 = time.perf_counter()
+        values = self.bake(base.decoder.dec, base.latent, size)
+        tex = self._tex.get(size)
+        if tex is None:
+            k, m, n = size.shape
+            tex = self.ctx.texture3d((n, m, k), 3, dtype="f4")
+            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+            self._tex[size] = tex
+        tex.write(values.numpy().astype("f4").tobytes())
+        self.bake_ms = (time.perf_counter() - t0) * 1000.0
+        return replace(base, kind=BrdfKind.TABLE, body_table=tex, share=None)
+
+    def release(self) -> None:
+        for t in self._tex.values():
+            t.release()
+        self._tex.clear()
+        self._pre.clear()
+
+
+__all__ = ["INTERACTIVE", "STILL", "BodyTables"]
