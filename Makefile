@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test clean
+.PHONY: setup run test clean fuzz
 
 setup: $(STAMP)
 
@@ -21,6 +21,14 @@ run: setup
 
 test: setup
 	@$(BIN)/python -m pytest
+
+# Every input format fuzzed (tools/fuzz.py): 10,000 byte-level mutations per format, then the
+# structure-aware hypothesis tests at 1,000 examples each; FUZZ_SEED picks the mutations.
+FUZZ_SEED ?= 1
+FUZZ_COUNT ?= 10000
+fuzz: setup
+	@nice $(BIN)/python tools/fuzz.py --count $(FUZZ_COUNT) --seed $(FUZZ_SEED)
+	@NBRDF_FUZZ_EXAMPLES=1000 NBRDF_FUZZ_MUTATIONS=1000 nice $(BIN)/python -m pytest tests/fuzz -q
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis

@@ -1,0 +1,42 @@
+"""Material and session JSON files: every seed edited anywhere in its tree, and
+byte-level mutations, load or end in one NbrdfError line."""
+import json
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+import fuzz
+from fuzzing import FUZZ, check, check_campaign, dumps, edited_json
+
+MATERIALS = [json.loads(s) for s in fuzz.seeds("material")]
+SESSIONS = [json.loads(s) for s in fuzz.seeds("session")]
+
+
+def test_material_byte_mutations(worker):
+    check_campaign(worker, "material")
+
+
+def test_session_byte_mutations(worker):
+    check_campaign(worker, "session")
+
+
+@FUZZ
+@given(st.sampled_from(MATERIALS).flatmap(edited_json))
+def test_material_edited_anywhere(worker, doc):
+    check(worker, "material", dumps(doc))
+
+
+@FUZZ
+@given(st.sampled_from(SESSIONS).flatmap(edited_json))
+def test_session_edited_anywhere(worker, doc):
+    check(worker, "session", dumps(doc))
+
+
+def test_session_regressions(worker):
+    """Found by fuzzing: bytes that are not UTF-8 and NaN tokens ended in a traceback or loaded NaN state."""
+    good = fuzz.seeds("session")[0]
+    assert worker.run("session", good[:40] + b"\xb0\xff" + good[40:])[0] == "error"
+    doc = json.loads(good)
+    doc["view"]["theta_i"] = float("nan")
+    assert worker.run("session", dumps(doc))[0] == "error"
+    assert worker.run("session", b"[" * 100000)[0] == "error"
