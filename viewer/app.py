@@ -108,6 +108,9 @@ class App:
         glfw.set_key_callback(self.window, self._on_key)
         if not getattr(opts, "session", None):
             self.frame()  # the object fits the view (whatever the window's shape)
+        from nbrdf.viewer.autosave import WindowAutosave
+
+        self.autosave = WindowAutosave(self.lookdev, getattr(opts, "restore", None))  # may restore a crashed session
 
     # --- input -----------------------------------------------------------------------
     def _on_key(self, window, key, scancode, action, mods) -> None:
@@ -186,6 +189,7 @@ class App:
         w, h = self.framebuffer_size()
         w, h = max(w, 1), max(h, 1)
         self.panels.draw(self._window_size())
+        self.autosave.frame(imgui)  # written a few seconds after a change; the restore prompt
         if self.lookdev.side_by_side != self._side:  # entering or leaving side by side: fit the halves
             self.frame()
         self._mouse()
@@ -254,6 +258,7 @@ class App:
         if self.window:
             self.prefs.size = self._window_size()
             self.prefs.save()
+            self.autosave.close()  # the final state written, the lock released: a clean exit
             self.lookdev.close()
             _ = self.ctx.error
             self.gui.shutdown()
