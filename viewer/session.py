@@ -159,7 +159,7 @@ class SessionDoc:
         except NbrdfError as e:
             msg = str(e)
             raise NbrdfError(msg if msg.startswith(source) else f"{source}: {msg}") from None
-        except (KeyError, TypeError, ValueError) as e:
+        except (KeyError, TypeError, ValueError, AttributeError) as e:
             raise NbrdfError(f"{source}: malformed session ({type(e).__name__}: {e})") from None
         return cls(material=mat, mesh=data.get("mesh", "sphere"), environment=data.get("environment"),
                    state=state, compare=compare, mipmapping=bool(v.get("mipmapping", True)), interpolation=interp,

@@ -40,3 +40,25 @@ def test_session_regressions(worker):
     doc["view"]["theta_i"] = float("nan")
     assert worker.run("session", dumps(doc))[0] == "error"
     assert worker.run("session", b"[" * 100000)[0] == "error"
+
+
+def test_material_regressions(worker):
+    """Found by the structure-aware fuzzer: a layer type that is a list (unhashable) and file paths holding
+    a NUL character ended in a TypeError / ValueError traceback."""
+    doc = json.loads(fuzz.seeds("material")[0])
+    doc["layers"][0]["type"] = []
+    assert worker.run("material", dumps(doc))[0] == "error"
+    for layer in ({"type": "measured", "path": "a\u0000b"},
+                  {"type": "conductor", "roughness": {"texture": "a\u0000b"}, "r0": [1, 1, 1]}):
+        doc["layers"] = [layer]
+        assert worker.run("material", dumps(doc))[0] == "error"
+    doc["layers"] = [{"type": "conductor", "roughness": 0.3, "r0": [1, 1, 1]}]
+    doc["normal_map"] = "n\u0000.png"
+    assert worker.run("material", dumps(doc))[0] == "error"
+
+
+def test_session_backdrop_regression(worker):
+    """Found by the structure-aware fuzzer: a "backdrop" that is a number ended in an AttributeError."""
+    doc = json.loads(fuzz.seeds("session")[1])
+    doc["backdrop"] = 3
+    assert worker.run("session", dumps(doc))[0] == "error"
