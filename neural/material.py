@@ -369,7 +369,9 @@ def material_to_dict(m: Material, new_dir: Path | None = None) -> dict:
 
 def save_material(m: Material, path: str | Path) -> None:
     """Writes pretty JSON; relative paths still point at the same files."""
+    from nbrdf.neural.files import save_text
+
     p = Path(path)
-    if not p.parent.exists():
+    if not p.parent.is_dir():
         raise NbrdfError(f"{path}: the folder {p.parent} does not exist")
-    p.write_text(json.dumps(material_to_dict(m, p.parent), indent=2) + "\n", encoding="utf-8")
+    save_text(p, json.dumps(material_to_dict(m, p.parent), indent=2) + "\n")

@@ -20,13 +20,13 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.files import write_atomic as _write_atomic
 
 #: Overrides the state folder (tests, several independent setups on one account).
 STATE_ENV = "NBRDF_STATE_DIR"
@@ -42,19 +42,9 @@ def state_dir() -> Path:
 
 
 def write_atomic(path: Path, text: str) -> None:
-    """``text`` to ``path`` through a temporary file in the same folder and
-    ``os.replace``: readers see the old file or the new one, never a part."""
+    """The state folder made if needed, then ``neural.files.write_atomic``."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    _write_atomic(path, text)
 
 
 def _alive(pid: int) -> bool:

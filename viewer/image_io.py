@@ -3,6 +3,7 @@ through the OpenEXR package whose native library ships inside its wheel),
 .npy (linear float32); environment maps from .hdr/.exr as float32 radiance."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -31,23 +32,34 @@ def tonemap(img: np.ndarray, exposure: float = 0.0, mode: str = "aces") -> np.nd
 
 
 def write_image(path: str | Path, img: np.ndarray, exposure: float = 0.0, mode: str = "aces") -> None:
-    """Writes linear (H, W, 3) float data, row 0 at the top."""
+    """Writes linear (H, W, 3) float data, row 0 at the top, atomically: a
+    full disk or an unwritable folder is one NbrdfError line and leaves any
+    file already at ``path`` whole."""
+
     p = check_output(path)
     suffix = p.suffix.lower()
     img = np.ascontiguousarray(img, dtype=np.float32)
-    if suffix == ".npy":
-        np.save(p, img)
-    elif suffix == ".png":
-        import imageio.v3 as iio
+    tmp = p.with_name(f".{p.stem}.{os.getpid()}.tmp{suffix}")  # same folder: os.replace is atomic
+    try:
+        if suffix == ".npy":
+            with open(tmp, "wb") as f:
+                np.save(f, img)
+        elif suffix == ".png":
+            import imageio.v3 as iio
 
-        iio.imwrite(p, tonemap(img, exposure, mode))
-    else:
-        import OpenEXR
+            iio.imwrite(tmp, tonemap(img, exposure, mode), extension=".png")
+        else:
+            import OpenEXR
 
-        channels = {"R": img[..., 0].copy(), "G": img[..., 1].copy(), "B": img[..., 2].copy()}
-        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-        with OpenEXR.File(header, channels) as f:
-            f.write(str(p))
+            channels = {"R": img[..., 0].copy(), "G": img[..., 1].copy(), "B": img[..., 2].copy()}
+            header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+            with OpenEXR.File(header, channels) as f:
+                f.write(str(tmp))
+        os.replace(tmp, p)
+    except Exception as e:  # noqa: BLE001 - OSError, or the image library's own error for the same cause
+        tmp.unlink(missing_ok=True)
+        reason = getattr(e, "strerror", None) or str(e).splitlines()[0][:120] or type(e).__name__
+        raise NbrdfError(f"{path}: cannot be written ({reason}); any file already there is unchanged") from None
 
 
 def read_normal_map(path: str | Path) -> np.ndarray:

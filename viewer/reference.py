@@ -220,6 +220,9 @@ def _shutdown(proc, requests) -> None:
     if proc.is_alive():
         proc.terminate()
         proc.join(timeout=2)
+    # Jobs the process never read stay in the pipe: the queue's feeder thread, blocked writing them,
+    # must not be joined at interpreter exit (it would wait forever).
+    requests.cancel_join_thread()
 
 
 class ReferenceWorker:
@@ -290,7 +293,7 @@ class ReferenceWorker:
         if self._proc is None or self._finalizer is None or self._proc.is_alive():
             return
         code = self._proc.exitcode
-        how = f"killed by signal {-code}" if code is not None and code < 0 else f"exit status {code}"
+        how = f"was killed by signal {-code}" if code is not None and code < 0 else f"exited with status {code}"
         self._finalizer.detach()
         atexit.unregister(self._finalizer)
         self._finalizer = None
@@ -299,7 +302,7 @@ class ReferenceWorker:
             q.close()
         self._proc = None
         self.deaths += 1
-        msg = f"the Monte Carlo worker process died ({how})"
+        msg = f"the Monte Carlo worker process {how}"
         key, spec = self._current, self._spec
         if key is not None and spec is not None:
             n = self._job_deaths[key] = self._job_deaths.get(key, 0) + 1

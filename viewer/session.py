@@ -124,7 +124,10 @@ class SessionDoc:
         }
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        """Writes the document atomically (a failed write leaves any previous file whole)."""
+        from nbrdf.neural.files import save_text
+
+        save_text(path, json.dumps(self.to_dict(), indent=2) + "\n")
 
     @classmethod
     def parse(cls, data: object, source: str = "session") -> "SessionDoc":

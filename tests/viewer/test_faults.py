@@ -174,3 +174,59 @@ def test_the_window_survives_a_killed_worker_and_unwritable_folders(xvfb_display
     assert json.loads(saved["s.json"].decode())["format"] == "nbrdf-session/1"
     assert "killed by signal 9; restarted" in out["status"] and out["restarted"]
     assert out["after"][0] > 0 and out["after"][1] is None and out["pixels"] > 0
+
+
+# ----------------------------------------------------------------------- a full disk
+def _full_disk(monkeypatch, module):
+    """Every write through ``module``'s os.replace fails as on a full disk (after the temporary file)."""
+    def replace(src, dst):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(module.os, "replace", replace)
+
+
+def test_a_full_disk_keeps_the_saved_material_and_session(tmp_path, monkeypatch):
+    import nbrdf.neural.files as files
+    from nbrdf.neural.errors import NbrdfError
+    from nbrdf.neural.material import save_material
+    from nbrdf.viewer.session import SessionDoc
+
+    m = load_material(DEFAULT_MATERIAL)
+    save_material(m, tmp_path / "m.json")
+    SessionDoc(m).save(tmp_path / "s.json")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    _full_disk(monkeypatch, files)
+    with pytest.raises(NbrdfError, match="No space left on device.*unchanged"):
+        save_material(m, tmp_path / "m.json")
+    with pytest.raises(NbrdfError, match="No space left on device.*unchanged"):
+        SessionDoc(m).save(tmp_path / "s.json")
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before  # whole, and no temporary left
+
+
+@pytest.mark.parametrize("suffix", [".png", ".exr", ".npy"])
+def test_a_full_disk_keeps_the_saved_screenshot(tmp_path, monkeypatch, suffix):
+    import nbrdf.viewer.image_io as image_io
+    from nbrdf.neural.errors import NbrdfError
+
+    img = np.full((4, 6, 3), 0.5, np.float32)
+    image_io.write_image(tmp_path / f"shot{suffix}", img)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    _full_disk(monkeypatch, image_io)
+    with pytest.raises(NbrdfError, match="No space left on device.*unchanged"):
+        image_io.write_image(tmp_path / f"shot{suffix}", img * 2)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_an_unwritable_folder_is_one_line(tmp_path):
+    from nbrdf.neural.errors import NbrdfError
+    from nbrdf.neural.material import save_material
+    from nbrdf.viewer.image_io import write_image
+    from nbrdf.viewer.session import SessionDoc
+
+    bad = _unwritable(tmp_path)
+    m = load_material(DEFAULT_MATERIAL)
+    for save in (lambda: save_material(m, bad / "m.json"), lambda: SessionDoc(m).save(bad / "s.json"),
+                 lambda: write_image(bad / "x.exr", np.zeros((2, 2, 3)))):
+        with pytest.raises(NbrdfError) as e:
+            save()
+        assert "\n" not in str(e.value) and str(bad) in str(e.value)
