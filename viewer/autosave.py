@@ -264,9 +264,9 @@ class WindowAutosave:
         flags = (imgui.WindowFlags_.no_title_bar | imgui.WindowFlags_.always_auto_resize
                  | imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_saved_settings)
         imgui.begin("##recover", None, flags)
-        imgui.text("The last session ended unexpectedly.")
+        imgui.text("The last session ended unexpectedly:")
         imgui.same_line()
-        if imgui.button("Restore it"):
+        if imgui.button("Restore"):
             self.restore()
         imgui.same_line()
         if imgui.button("Discard"):
