@@ -70,6 +70,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
     samples: list[dict] = []
     counts: dict[str, int] = {}
     failures: list[str] = []
+    jumps: list[tuple[float, int, str]] = []  # (resident memory added by an edit and its frame, edit, kind)
 
     def edit(k: int) -> str:
         r = rng.random()
@@ -130,11 +131,13 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
                     samples.append({"edit": p * edits + k, "rss_mb": rss_mb(), "gl": gl_objects()})
                 if k == edits:
                     break
+                before = rss_mb()
                 what = edit(k)
+                app.step()
+                jumps.append((rss_mb() - before, p * edits + k, what.split()[0]))
                 if "failed" in what:
                     failures.append(what)
                 counts[what.split()[0]] = counts.get(what.split()[0], 0) + 1
-                app.step()
             passes.append(canonical())
         seconds = time.perf_counter() - t0
     finally:
@@ -152,6 +155,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         "gl_after_warmup": after[0]["gl"], "gl_end": after[-1]["gl"], "gl_max_after_warmup": max(gl_total),
         "rss_after_warmup_mb": after[0]["rss_mb"], "rss_end_mb": after[-1]["rss_mb"],
         "passes": passes,
+        "largest_memory_steps": sorted(jumps, reverse=True)[:8],
         "samples": samples,
     }
 
@@ -177,6 +181,8 @@ def main(argv: list[str] | None = None) -> int:
     print("soak: in one state (default preset, sphere, object view) after warm-up and after each pass: "
           + "; ".join(f"GL objects {sum(c['gl'].values())}, memory {c['rss_mb']:.0f} MB" for c in res["passes"]),
           flush=True)
+    print("soak: largest memory steps (MB, edit, kind): "
+          + ", ".join(f"{mb:+.1f} at {k} ({kind})" for mb, k, kind in res["largest_memory_steps"][:5]), flush=True)
     if res["failures"]:
         print("soak: failed edits: " + "; ".join(res["failures"]), flush=True)
     return 0
