@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test lint clean
+.PHONY: setup run test lint clean fuzz soak
 
 setup: $(STAMP)
 
@@ -31,6 +31,18 @@ lint: setup
 	@mkdir -p $(LINT_ROOT)/nbrdf
 	@for d in cli neural training viewer; do ln -sfn ../../../$$d $(LINT_ROOT)/nbrdf/$$d; done
 	@cd $(LINT_ROOT) && ../bin/mypy --config-file ../../pyproject.toml $(addprefix -p ,$(MYPY_PACKAGES))
+
+# Every input format fuzzed (tools/fuzz.py): 10,000 byte-level mutations per format, then the
+# structure-aware hypothesis tests at 1,000 examples each; FUZZ_SEED picks the mutations.
+FUZZ_SEED ?= 1
+FUZZ_COUNT ?= 10000
+fuzz: setup
+	@nice $(BIN)/python tools/fuzz.py --count $(FUZZ_COUNT) --seed $(FUZZ_SEED)
+	@NBRDF_FUZZ_EXAMPLES=1000 NBRDF_FUZZ_MUTATIONS=1000 nice $(BIN)/python -m pytest tests/fuzz -q
+
+# The window under Xvfb for 1,000 random edits: memory and live GL objects per 100 edits (tools/soak.py).
+soak: setup
+	@xvfb-run -a -s "-screen 0 640x480x24" nice $(BIN)/python tools/soak.py --edits 1000 --seed 1 --out soak.json
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis

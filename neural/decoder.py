@@ -304,9 +304,11 @@ def load_decoder(path: str | Path) -> Decoder:
     tensors, meta = read_bundle(path)
     try:
         arch = json.loads(meta["architecture"])
+        if not isinstance(arch, dict):
+            raise TypeError("not an object")
         arch.setdefault("coat", False)  # files from before the coat split decode whole BRDFs
         spec = DecoderSpec(**arch)
-    except (KeyError, TypeError, json.JSONDecodeError) as e:
+    except (KeyError, TypeError, ValueError) as e:
         raise NbrdfError(f"{path}: architecture metadata is missing or malformed ({e})") from None
     if meta.get("latent_size") != str(spec.latent):
         raise NbrdfError(f"{path}: latent size {meta.get('latent_size')} disagrees with the architecture")

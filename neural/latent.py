@@ -53,7 +53,13 @@ def load_latent(path: str | Path, decoder_id: str | None = None) -> MaterialLate
         raise NbrdfError(f"{path}: format {meta.get('format')!r} is not {FORMAT}")
     if z is None or tuple(z.shape) not in SHAPES or not torch.isfinite(z).all():
         raise NbrdfError(f"{path}: the code must be a finite (3, 34) array (or (3, 32) before the coat split)")
-    lat = MaterialLatent(z.float(), meta.get("decoder_id", ""), json.loads(meta.get("source", "{}") or "{}"))
+    try:
+        source = json.loads(meta.get("source", "{}") or "{}")
+    except ValueError:
+        source = None
+    if not isinstance(source, dict):
+        raise NbrdfError(f"{path}: the \"source\" metadata is not a JSON object")
+    lat = MaterialLatent(z.float(), meta.get("decoder_id", ""), source)
     if decoder_id is not None and lat.decoder_id != decoder_id:
         raise NbrdfError(f"{path}: this latent belongs to decoder {lat.decoder_id or '(unknown)'}, "
                          f"not to the decoder in use ({decoder_id}); project the material again")

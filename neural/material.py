@@ -180,7 +180,7 @@ def _texture(v: dict, place: str, key: str, base_dir: Path) -> TextureRef:
         if k not in ("texture", "channel", "range"):
             raise NbrdfError(f"{place}.{k}: unknown key")
     path = v.get("texture")
-    if not isinstance(path, str) or not path:
+    if not isinstance(path, str) or not path or "\0" in path:
         raise NbrdfError(f"{place}.texture: expected a file path, got {_kind(path)}")
     channel = v.get("channel", "r")
     if channel not in CHANNELS:
@@ -222,7 +222,7 @@ def _layer(v: Any, i: int, base_dir: Path) -> Layer:
     if not isinstance(v, dict):
         raise NbrdfError(f"{place}: expected an object, got {_kind(v)}")
     t = v.get("type")
-    if t not in _FIELDS:
+    if not isinstance(t, str) or t not in _FIELDS:
         if "type" not in v:
             raise NbrdfError(f'{place}: missing key "type"')
         raise NbrdfError(f"{place}.type: unknown layer type {_kind(t) if not isinstance(t, str) else json.dumps(t)}"
@@ -242,7 +242,7 @@ def _layer(v: Any, i: int, base_dir: Path) -> Layer:
         elif kind == "rgb":
             kw[k] = _rgb(v[k], p, k, base_dir)
         else:
-            if not isinstance(v[k], str) or not v[k]:
+            if not isinstance(v[k], str) or not v[k] or "\0" in v[k]:
                 raise NbrdfError(f"{p}: expected a file path, got {_kind(v[k])}")
             resolved = (base_dir / v[k]).resolve()
             if not resolved.is_file():
@@ -289,7 +289,7 @@ def parse_material(data: object, base_dir: Path | str = ".", source: str = "mate
     _check_stack(layers)
     normal = data.get("normal_map")
     if normal is not None:
-        if not isinstance(normal, str) or not normal:
+        if not isinstance(normal, str) or not normal or "\0" in normal:
             raise NbrdfError(f"normal_map: expected a file path, got {_kind(normal)}")
         if not (base_dir / normal).is_file():
             raise NbrdfError(f"normal_map: {(base_dir / normal).resolve()} not found")
@@ -357,7 +357,9 @@ def material_to_dict(m: Material, new_dir: Path | None = None) -> dict:
 
 def save_material(m: Material, path: str | Path) -> None:
     """Writes pretty JSON; relative paths still point at the same files."""
+    from nbrdf.neural.files import save_text
+
     p = Path(path)
-    if not p.parent.exists():
+    if not p.parent.is_dir():
         raise NbrdfError(f"{path}: the folder {p.parent} does not exist")
-    p.write_text(json.dumps(material_to_dict(m, p.parent), indent=2) + "\n", encoding="utf-8")
+    save_text(p, json.dumps(material_to_dict(m, p.parent), indent=2) + "\n")

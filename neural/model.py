@@ -193,7 +193,7 @@ def load_model(path: str | Path | None = None) -> NeuralModel:
             model.sampler = SamplerNet(MLPSpec(**specs["sampler"]))
             load_state(model.sampler, tensors, "sampler", str(path))
         model.trained_on = ops.get("trained_on", {})
-    except (KeyError, TypeError, json.JSONDecodeError) as e:
+    except (KeyError, TypeError, AttributeError, ValueError) as e:
         raise NbrdfError(f"{path}: operations metadata is missing or malformed ({e})") from None
     return model
 

@@ -25,7 +25,8 @@ class MLPSpec:
     def __post_init__(self):
         if self.activation not in ("relu", "silu"):
             raise NbrdfError(f"activation {self.activation!r} is unknown (relu or silu)")
-        if not (self.inputs >= 1 and self.outputs >= 1 and 1 <= self.depth <= 16 and 1 <= self.width <= 4096):
+        if not (1 <= self.inputs <= 4096 and 1 <= self.outputs <= 4096 and 1 <= self.depth <= 16
+                and 1 <= self.width <= 4096):
             raise NbrdfError(f"network shape {asdict(self)} is unsupported")
 
 

@@ -39,6 +39,7 @@ import glfw
 import moderngl
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.autosave import WindowAutosave
 from nbrdf.viewer.gl import check_version
 from nbrdf.viewer.lookdev import MAX_PASSES, LookDev
 from nbrdf.viewer.refinement import Refinement
@@ -164,6 +165,7 @@ class App:
         glfw.set_drop_callback(self.window, self._on_drop)
         if not getattr(opts, "session", None):
             self.frame()  # the object fits the view (whatever the window's shape)
+        self.autosave = WindowAutosave(self.lookdev, getattr(opts, "restore", None))  # may restore a crashed session
 
     # --- input -----------------------------------------------------------------------
     def _on_key(self, window, key, scancode, action, mods) -> None:
@@ -284,6 +286,7 @@ class App:
                 imgui.end_frame()
                 imgui.new_frame()
             self.panels.draw(self._window_size())
+            self.autosave.prompt(imgui)  # after a crash: restore or discard the last session
             self._shortcuts()
             if not len(queue):
                 break
@@ -297,6 +300,7 @@ class App:
         w, h = self.framebuffer_size()
         w, h = max(w, 1), max(h, 1)
         self._ui()
+        self.autosave.frame()  # written a few seconds after a change
         if self.lookdev.side_by_side != self._side:  # entering or leaving side by side: fit the halves
             self.frame()
         self._mouse()
@@ -375,6 +379,7 @@ class App:
         if self.window:
             self.prefs.size = self._window_size()
             self.prefs.save()
+            self.autosave.close()  # the final state written, the lock released: a clean exit
             self.lookdev.close()
             _ = self.ctx.error
             self.gui.shutdown()

@@ -152,8 +152,9 @@ class Compare:
         where = "directional light only, " if View.parse(view) == View.OBJECT else ""
         noise = r.noise if r is not None else None
         level = f", noise {100 * noise:.1f} %" if noise is not None else ""
+        died = f" ({self.worker.notice})" if self.worker.notice else ""  # a killed worker, restarted
         return (f"reference: Monte Carlo, {where}{r.spp if r else 0} paths per pixel{level}"
-                f"{'' if r and r.done else '...'}")
+                f"{'' if r and r.done else '...'}{died}")
 
     def plane_curve(self, material: Material, theta_i: float, wi: torch.Tensor, wo: torch.Tensor,
                     n: int) -> np.ndarray | None:

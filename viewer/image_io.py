@@ -3,6 +3,7 @@ through the OpenEXR package whose native library ships inside its wheel),
 .npy (linear float32); environment maps from .hdr/.exr as float32 radiance."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -31,23 +32,34 @@ def tonemap(img: np.ndarray, exposure: float = 0.0, mode: str = "aces") -> np.nd
 
 
 def write_image(path: str | Path, img: np.ndarray, exposure: float = 0.0, mode: str = "aces") -> None:
-    """Writes linear (H, W, 3) float data, row 0 at the top."""
+    """Writes linear (H, W, 3) float data, row 0 at the top, atomically: a
+    full disk or an unwritable folder is one NbrdfError line and leaves any
+    file already at ``path`` whole."""
+
     p = check_output(path)
     suffix = p.suffix.lower()
     img = np.ascontiguousarray(img, dtype=np.float32)
-    if suffix == ".npy":
-        np.save(p, img)
-    elif suffix == ".png":
-        import imageio.v3 as iio
+    tmp = p.with_name(f".{p.stem}.{os.getpid()}.tmp{suffix}")  # same folder: os.replace is atomic
+    try:
+        if suffix == ".npy":
+            with open(tmp, "wb") as f:
+                np.save(f, img)
+        elif suffix == ".png":
+            import imageio.v3 as iio
 
-        iio.imwrite(p, tonemap(img, exposure, mode))
-    else:
-        import OpenEXR
+            iio.imwrite(tmp, tonemap(img, exposure, mode), extension=".png")
+        else:
+            import OpenEXR
 
-        channels = {"R": img[..., 0].copy(), "G": img[..., 1].copy(), "B": img[..., 2].copy()}
-        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-        with OpenEXR.File(header, channels) as f:
-            f.write(str(p))
+            channels = {"R": img[..., 0].copy(), "G": img[..., 1].copy(), "B": img[..., 2].copy()}
+            header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+            with OpenEXR.File(header, channels) as f:
+                f.write(str(tmp))
+        os.replace(tmp, p)
+    except Exception as e:  # noqa: BLE001 - OSError, or the image library's own error for the same cause
+        tmp.unlink(missing_ok=True)
+        reason = getattr(e, "strerror", None) or str(e).splitlines()[0][:120] or type(e).__name__
+        raise NbrdfError(f"{path}: cannot be written ({reason}); any file already there is unchanged") from None
 
 
 def read_normal_map(path: str | Path) -> np.ndarray:
@@ -61,11 +73,21 @@ def read_normal_map(path: str | Path) -> np.ndarray:
     return np.ascontiguousarray(x[..., :3].astype(np.float32))
 
 
+#: The largest environment read (pixels): 16k x 8k, beyond any equirectangular map
+#: a GPU samples; a header declaring more is refused before anything is allocated.
+MAX_ENV_PIXELS = 16384 * 8192
+
+
 def read_exr(path: str | Path) -> np.ndarray:
     import OpenEXR
 
+    side = int(np.sqrt(MAX_ENV_PIXELS * 2))
+    OpenEXR.setMaxImageSize(side, side)  # the library's own guard against huge declared sizes
+    OpenEXR.setMaxTileSize(side, side)
     with OpenEXR.File(str(path)) as f:
         ch = f.channels()
+        if not ch:
+            raise NbrdfError(f"--env {path}: the file holds no channels")
         if "RGB" in ch:
             return np.asarray(ch["RGB"].pixels, dtype=np.float32)
         if all(k in ch for k in "RGB"):
@@ -98,11 +120,65 @@ def read_environment(path: str | Path) -> np.ndarray:
 
 
 def _read_rgbe(p: Path) -> np.ndarray:
-    """Radiance .hdr through imageio's pillow-free reader when it keeps float
-    data; the decoded array is checked to be float (never silent 8-bit)."""
-    import imageio.v3 as iio
-
-    img = iio.imread(p)
-    if not np.issubdtype(img.dtype, np.floating):
-        raise NbrdfError(f"--env {p}: the reader returned {img.dtype} data, not float radiance")
-    return img.astype(np.float32)
+    """A Radiance .hdr (RGBE, flat or new-style run-length scanlines) as float32
+    (H, W, 3), row 0 = the top of the image. Every declared size is checked
+    against the file before it is used."""
+    data = p.read_bytes()
+    bad = f"--env {p}: not a Radiance .hdr file"
+    if not data.startswith((b"#?RADIANCE", b"#?RGBE")):
+        raise NbrdfError(f"{bad} (no #?RADIANCE signature)")
+    end = data.find(b"\n\n")
+    if end < 0 or end > 65536:
+        raise NbrdfError(f"{bad} (no end of the header)")
+    for line in data[:end].split(b"\n")[1:]:
+        if line.startswith(b"FORMAT=") and line.strip() != b"FORMAT=32-bit_rle_rgbe":
+            raise NbrdfError(f"{bad} ({line.decode('latin-1').strip()[:40]}: only 32-bit_rle_rgbe is read)")
+    eol = data.find(b"\n", end + 2)
+    res = data[end + 2: eol if eol >= 0 else len(data)].split()
+    if len(res) != 4 or res[0] not in (b"-Y", b"+Y") or res[2] not in (b"+X", b"-X") \
+            or not (res[1].isdigit() and res[3].isdigit()) or len(res[1]) > 6 or len(res[3]) > 6:
+        raise NbrdfError(f"{bad} (resolution line {b' '.join(res).decode('latin-1')[:40]!r} "
+                         "is not -Y H +X W or one of its flips)")
+    h, w = int(res[1]), int(res[3])
+    body = data[eol + 1:] if eol >= 0 else b""
+    # A run-length byte pair expands to at most 127 bytes: a file this short cannot hold the image.
+    if not (1 <= h and 1 <= w and h * w <= MAX_ENV_PIXELS) or h * w * 4 > 64 * len(body):
+        raise NbrdfError(f"--env {p}: {w} x {h} pixels is more than the file holds (or than {MAX_ENV_PIXELS} pixels)")
+    rgbe = np.empty((h, w, 4), np.uint8)
+    buf = np.frombuffer(body, np.uint8)
+    pos = 0
+    for y in range(h):
+        if 8 <= w < 32768 and pos + 4 <= len(buf) and buf[pos] == 2 and buf[pos + 1] == 2 and buf[pos + 2] < 128:
+            if (int(buf[pos + 2]) << 8 | int(buf[pos + 3])) != w:
+                raise NbrdfError(f"--env {p}: scanline {y} says a width other than {w}")
+            pos += 4
+            for c in range(4):
+                x = 0
+                while x < w:
+                    if pos >= len(buf):
+                        raise NbrdfError(f"--env {p}: the file ends inside scanline {y}")
+                    n = int(buf[pos])
+                    if n > 128:  # a run
+                        n -= 128
+                        if x + n > w or pos + 1 >= len(buf):
+                            raise NbrdfError(f"--env {p}: a run overflows scanline {y}")
+                        rgbe[y, x:x + n, c] = buf[pos + 1]
+                        pos += 2
+                    else:  # literal bytes
+                        if n == 0 or x + n > w or pos + 1 + n > len(buf):
+                            raise NbrdfError(f"--env {p}: bad literal run in scanline {y}")
+                        rgbe[y, x:x + n, c] = buf[pos + 1: pos + 1 + n]
+                        pos += 1 + n
+                    x += n
+        else:  # a flat scanline
+            if pos + 4 * w > len(buf):
+                raise NbrdfError(f"--env {p}: the file ends inside scanline {y}")
+            rgbe[y] = buf[pos: pos + 4 * w].reshape(w, 4)
+            pos += 4 * w
+    e = rgbe[..., 3].astype(np.int32)
+    img = np.where(e[..., None] > 0, np.ldexp(rgbe[..., :3].astype(np.float32) + 0.5, (e - 136)[..., None]), 0.0)
+    if res[0] == b"+Y":
+        img = img[::-1]
+    if res[2] == b"-X":
+        img = img[:, ::-1]
+    return np.ascontiguousarray(img, dtype=np.float32)

@@ -124,7 +124,15 @@ def load_mesh(path: str | Path) -> Mesh:
             raise NbrdfError(f"--mesh {path}: cannot be read as a mesh ({type(e).__name__}: {str(e)[:80]})") from None
     if not isinstance(scene, trimesh.Trimesh) or len(scene.faces) == 0:
         raise NbrdfError(f"--mesh {path}: holds no triangles")
-    m = mesh_from_trimesh(scene)
+    v, f = np.asarray(scene.vertices), np.asarray(scene.faces)
+    if v.ndim != 2 or v.shape[1] != 3 or not np.isfinite(v).all():
+        raise NbrdfError(f"--mesh {path}: vertex positions are not finite 3D points")
+    if f.ndim != 2 or f.shape[1] != 3 or f.min() < 0 or f.max() >= len(v):
+        raise NbrdfError(f"--mesh {path}: faces refer to vertices the file does not hold")
+    try:
+        m = mesh_from_trimesh(scene)
+    except NbrdfError as e:
+        raise NbrdfError(f"--mesh {path}: {e}") from None
     m.parts = parts
     return m.normalized()
 
@@ -137,6 +145,10 @@ def mesh_from_trimesh(tm) -> Mesh:
     nrm[flat] = (0.0, 0.0, 1.0)
     uv = getattr(tm.visual, "uv", None)
     uv = np.zeros((len(pos), 2), "f4") if uv is None or len(uv) != len(pos) else np.asarray(uv, "f4")
+    if uv.ndim != 2 or uv.shape[1] != 2 or not np.isfinite(uv).all():
+        raise NbrdfError("texture coordinates are not finite (u, v) pairs")
+    if not np.isfinite(nrm).all():
+        raise NbrdfError("vertex normals are not finite")
     ind = np.asarray(tm.faces, dtype=np.uint32).reshape(-1)
     return Mesh(pos, nrm, _tangents(pos, nrm, uv, ind), uv, ind)
 

@@ -220,6 +220,9 @@ def _shutdown(proc, requests) -> None:
     if proc.is_alive():
         proc.terminate()
         proc.join(timeout=2)
+    # Jobs the process never read stay in the pipe: the queue's feeder thread, blocked writing them,
+    # must not be joined at interpreter exit (it would wait forever).
+    requests.cancel_join_thread()
 
 
 class ReferenceWorker:
@@ -232,8 +235,13 @@ class ReferenceWorker:
         self.threads = threads or max(1, (os.cpu_count() or 2) // 2)
         self._cache: dict[str, ReferenceImage] = {}
         self._current: str | None = None
+        self._spec: JobSpec | None = None  # what was sent for ``_current``: sent again after a restart
         self._proc = None
         self._finalizer = None
+        self.deaths = 0
+        """How many times the process died (killed, out of memory, a crash in native code) and was restarted."""
+        self._last_death: tuple[float, str] | None = None
+        self._job_deaths: dict[str, int] = {}
 
     def _ensure(self) -> None:
         """Starts the process on first use (a window without stacks never pays for it)."""
@@ -263,10 +271,55 @@ class ReferenceWorker:
             return
         self._ensure()
         self._current = job.key
-        self._requests.put(job.spec(self.start_spp, self.round_spp))
+        self._spec = job.spec(self.start_spp, self.round_spp)
+        self._requests.put(self._spec)
+
+    #: A job that the process dies on this many times is reported failed, not retried.
+    MAX_DEATHS_PER_JOB = 3
+    #: Seconds the notice of a restart stays in the status line.
+    NOTICE_SECONDS = 30.0
+
+    @property
+    def notice(self) -> str | None:
+        """One line on the last death of the process while it is recent (None otherwise)."""
+        if self._last_death is None or time.monotonic() - self._last_death[0] > self.NOTICE_SECONDS:
+            return None
+        return self._last_death[1]
+
+    def _supervise(self) -> None:
+        """A process that died while open (SIGKILL, out of memory, a native crash) is
+        reported and replaced, and its job sent again; its queues are dropped unread
+        (a message cut in half by the death would block a reader)."""
+        if self._proc is None or self._finalizer is None or self._proc.is_alive():
+            return
+        code = self._proc.exitcode
+        how = f"was killed by signal {-code}" if code is not None and code < 0 else f"exited with status {code}"
+        self._finalizer.detach()
+        atexit.unregister(self._finalizer)
+        self._finalizer = None
+        for q in (self._requests, self._results):
+            q.cancel_join_thread()
+            q.close()
+        self._proc = None
+        self.deaths += 1
+        msg = f"the Monte Carlo worker process {how}"
+        key, spec = self._current, self._spec
+        if key is not None and spec is not None:
+            n = self._job_deaths[key] = self._job_deaths.get(key, 0) + 1
+            if n >= self.MAX_DEATHS_PER_JOB:
+                shape = (*spec.mask.shape, 3)
+                self._cache[key] = ReferenceImage(np.zeros(shape, np.float32), 0, True,
+                                                  f"{msg} {n} times on this job; not retried")
+                self._current = self._spec = None
+                self._last_death = (time.monotonic(), f"{msg} {n} times on this job; not retried")
+                return
+            self._ensure()
+            self._requests.put(spec)
+        self._last_death = (time.monotonic(), f"{msg}; restarted" if key else f"{msg}; restarts on the next job")
 
     def _drain(self) -> None:
         """Takes every image the process has sent into the cache."""
+        self._supervise()
         if self._proc is None:
             return
         while True:
@@ -276,7 +329,7 @@ class ReferenceWorker:
                 return
             self._cache[key] = ReferenceImage(img, spp, done, err, se)
             if key == self._current and (done or err):
-                self._current = None
+                self._current = self._spec = None
 
     def result(self, key: str) -> ReferenceImage | None:
         self._drain()
@@ -309,4 +362,4 @@ class ReferenceWorker:
             self._finalizer()
             atexit.unregister(self._finalizer)
             self._finalizer = None
-        self._current = None
+        self._current = self._spec = None

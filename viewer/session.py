@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import Material, material_to_dict, parse_material
+from nbrdf.neural.material import Material, _reject_constant, material_to_dict, parse_material
 from nbrdf.viewer.backdrop import BackdropSettings
 from nbrdf.viewer.camera import OrbitCamera
 from nbrdf.viewer.modes import CompareMode, ToneMap, View
@@ -124,7 +124,10 @@ class SessionDoc:
         }
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        """Writes the document atomically (a failed write leaves any previous file whole)."""
+        from nbrdf.neural.files import save_text
+
+        save_text(path, json.dumps(self.to_dict(), indent=2) + "\n")
 
     @classmethod
     def parse(cls, data: object, source: str = "session") -> "SessionDoc":
@@ -159,7 +162,7 @@ class SessionDoc:
         except NbrdfError as e:
             msg = str(e)
             raise NbrdfError(msg if msg.startswith(source) else f"{source}: {msg}") from None
-        except (KeyError, TypeError, ValueError) as e:
+        except (KeyError, TypeError, ValueError, AttributeError) as e:
             raise NbrdfError(f"{source}: malformed session ({type(e).__name__}: {e})") from None
         return cls(material=mat, mesh=data.get("mesh", "sphere"), environment=data.get("environment"),
                    state=state, compare=compare, mipmapping=bool(v.get("mipmapping", True)), interpolation=interp,
@@ -172,9 +175,17 @@ class SessionDoc:
         if not p.is_file():
             raise NbrdfError(f"{p}: no such file")
         try:
-            data = json.loads(p.read_text())
+            data = json.loads(p.read_text(encoding="utf-8"), parse_constant=_reject_constant)
         except json.JSONDecodeError as e:
             raise NbrdfError(f"{p}: not JSON ({e.msg} at line {e.lineno})") from None
+        except UnicodeDecodeError:
+            raise NbrdfError(f"{p}: not a UTF-8 text file") from None
+        except ValueError as e:
+            raise NbrdfError(f"{p}: {e}") from None
+        except RecursionError:
+            raise NbrdfError(f"{p}: nested too deeply") from None
+        except OSError as e:
+            raise NbrdfError(f"{p}: cannot be read ({e.strerror or type(e).__name__})") from None
         return cls.parse(data, str(p))
 
 

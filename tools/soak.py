@@ -1,0 +1,192 @@
+"""Soak test of the previewer window: N random edits through the window's own
+API (parameter edits, view and camera changes, preset loads, compare toggles,
+mesh switches), one frame after each, with the process's resident memory and
+the live OpenGL objects (textures, buffers, programs, framebuffers,
+renderbuffers, vertex arrays, counted by the GL's own ``glIs*`` over the name
+range) sampled every ``--every`` edits. After the warm-up fraction, a least-
+squares line through the samples gives the slope per 100 edits.
+
+    python tools/soak.py --edits 1000 --seed 1 --out soak.json   # needs a display (Xvfb: make soak)
+
+``--repeat R`` replays the same edit sequence R times: caches (shader
+variants, per-mode targets) fill in the first pass, so a later pass that
+leaves more live GL objects behind, in the same state, is a leak. Prints a summary; ``--out`` writes every sample and the slopes as JSON.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: The GL object kinds counted, by the glIs* function that tells a live name.
+GL_KINDS = ("Texture", "Buffer", "Program", "Framebuffer", "Renderbuffer", "VertexArray", "Shader")
+#: Names probed per kind (Mesa hands out the lowest free name, so live objects sit below this).
+NAME_RANGE = 4096
+
+
+def gl_objects() -> dict[str, int]:
+    """Live GL objects of the current context, per kind."""
+    from OpenGL import GL
+
+    out = {}
+    for kind in GL_KINDS:
+        test = getattr(GL, f"glIs{kind}")
+        out[kind] = sum(1 for name in range(1, NAME_RANGE) if test(name))
+    return out
+
+
+def rss_mb() -> float:
+    """Resident memory of this process (MB)."""
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def slope_per_100(x: list[int], y: list[float]) -> float:
+    """Least-squares slope of y over x, per 100 units of x."""
+    if len(x) < 2:
+        return 0.0
+    return float(np.polyfit(np.asarray(x, float), np.asarray(y, float), 1)[0] * 100)
+
+
+def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=(96, 64)) -> dict:
+    from nbrdf.viewer.app import App
+    from nbrdf.viewer.lookdev import presets
+    from nbrdf.viewer.options import ViewOptions
+
+    rng = random.Random(seed)
+    app = App(ViewOptions(size=size), size=size)
+    app.BUDGET_STILL_MS = app.BUDGET_DRAG_MS = 1e9  # a fixed render size: the measurement is of leaks, not speed
+    ld = app.lookdev
+    names = [n for n in presets() if n != "worn_tiles"]  # textured presets build a latent texture each
+    meshes = ["sphere", "testmesh", str(ROOT / "viewer/assets/meshes/pebble_on_plinth.glb"), "sphere"]
+    samples: list[dict] = []
+    counts: dict[str, int] = {}
+    failures: list[str] = []
+    jumps: list[tuple[float, int, str]] = []  # (resident memory added by an edit and its frame, edit, kind)
+
+    def edit(k: int) -> str:
+        r = rng.random()
+        if r < 0.45:  # a parameter of some layer
+            i = rng.randrange(len(ld.material.layers))
+            layer = ld.material.layers[i]
+            key = rng.choice([k for k in ("roughness", "ior", "sigma_t") if hasattr(layer, k)] or ["roughness"])
+            lo, hi = {"roughness": (0.02, 0.9), "ior": (1.1, 2.0), "sigma_t": (0.0, 3.0)}[key]
+            ok = ld.set_param(i, key, round(rng.uniform(lo, hi), 3)) if hasattr(layer, key) else True
+            return "param" if ok else f"param failed: {ld.error}"
+        if r < 0.65:
+            ld.orbit(rng.uniform(-30, 30), rng.uniform(-10, 10))
+            ld.zoom(rng.uniform(0.9, 1.1))
+            ld.set_view(rng.choice(["object", "object", "lobe", "slice"]))
+            return "view"
+        if r < 0.8:
+            return "preset" if ld.load_preset(rng.choice(names)) else f"preset failed: {ld.error}"
+        if r < 0.92:
+            return "compare" if ld.set_compare(rng.choice(["off", "side", "wipe", "error", "off"])) \
+                else f"compare failed: {ld.error}"
+        return "mesh" if ld.set_mesh(rng.choice(meshes)) else f"mesh failed: {ld.error}"
+
+    def canonical() -> dict:
+        """The same state every time (default preset, sphere, no compare, object view): GL objects
+        and memory comparable between the start and the end."""
+        ld.load_preset("default")
+        ld.set_mesh("sphere")
+        ld.set_compare("off")
+        ld.set_view("object")
+        for _ in range(2):
+            app.step()
+        return {"rss_mb": rss_mb(), "gl": gl_objects()}
+
+    try:
+        # Warm-up: every view and compare mode for each kind of BRDF the presets give (analytic, neural),
+        # every mesh: the shader variants and per-mode targets the edits will use exist before measuring.
+        kinds = set()
+        for name in names:
+            ld.load_preset(name)
+            app.step()
+            if ld.brdf is None or ld.brdf.kind in kinds:
+                continue
+            kinds.add(ld.brdf.kind)
+            for view in ("object", "lobe", "slice"):
+                for mode in ("off", "side", "wipe", "error"):
+                    ld.set_view(view)
+                    ld.set_compare(mode)
+                    app.step()
+        for mesh in meshes:
+            ld.set_mesh(mesh)
+            app.step()
+        passes = [canonical()]
+        t0 = time.perf_counter()
+        for p in range(repeat):  # the same edits again: a pass after the first may create nothing new
+            rng.seed(seed)
+            for k in range(edits + 1):
+                if k % every == 0 and (p == 0 or k > 0):
+                    samples.append({"edit": p * edits + k, "rss_mb": rss_mb(), "gl": gl_objects()})
+                if k == edits:
+                    break
+                before = rss_mb()
+                what = edit(k)
+                app.step()
+                jumps.append((rss_mb() - before, p * edits + k, what.split()[0]))
+                if "failed" in what:
+                    failures.append(what)
+                counts[what.split()[0]] = counts.get(what.split()[0], 0) + 1
+            passes.append(canonical())
+        seconds = time.perf_counter() - t0
+    finally:
+        app.close()
+    start = next(i for i, s in enumerate(samples) if s["edit"] >= warmup * edits * repeat)
+    after = samples[start:]
+    x = [s["edit"] for s in after]
+    gl_total = [sum(s["gl"].values()) for s in after]
+    return {
+        "edits": edits * repeat, "repeat": repeat, "seed": seed, "every": every, "warmup_edits": after[0]["edit"], "seconds": seconds,
+        "kinds": counts, "failures": failures[:10],
+        "rss_slope_mb_per_100": slope_per_100(x, [s["rss_mb"] for s in after]),
+        "rss_slope_second_half_mb_per_100": slope_per_100(x[len(x) // 2:], [s["rss_mb"] for s in after][len(x) // 2:]),
+        "gl_slope_per_100": slope_per_100(x, gl_total),
+        "gl_after_warmup": after[0]["gl"], "gl_end": after[-1]["gl"], "gl_max_after_warmup": max(gl_total),
+        "rss_after_warmup_mb": after[0]["rss_mb"], "rss_end_mb": after[-1]["rss_mb"],
+        "passes": passes,
+        "largest_memory_steps": sorted(jumps, reverse=True)[:8],
+        "samples": samples,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--edits", type=int, default=1000, help="random edits (one frame after each)")
+    ap.add_argument("--seed", type=int, default=1, help="the edit sequence's seed")
+    ap.add_argument("--every", type=int, default=25, help="edits between samples")
+    ap.add_argument("--warmup", type=float, default=0.2, help="the fraction of edits left out of the fit")
+    ap.add_argument("--repeat", type=int, default=1, help="passes of the same edit sequence")
+    ap.add_argument("--out", type=Path, help="JSON with every sample")
+    a = ap.parse_args(argv)
+    res = run(a.edits, a.seed, a.every, a.warmup, a.repeat)
+    if a.out:
+        a.out.write_text(json.dumps(res, indent=1))
+    print(f"soak: {res['edits']} edits (seed {res['seed']}) in {res['seconds']:.0f} s {res['kinds']}; after "
+          f"{res['warmup_edits']} edits of warm-up: memory {res['rss_after_warmup_mb']:.0f} -> "
+          f"{res['rss_end_mb']:.0f} MB, slope {res['rss_slope_mb_per_100']:+.2f} MB per 100 edits (second half "
+          f"{res['rss_slope_second_half_mb_per_100']:+.2f}); GL objects "
+          f"{sum(res['gl_after_warmup'].values())} -> {sum(res['gl_end'].values())} "
+          f"(max {res['gl_max_after_warmup']}), slope {res['gl_slope_per_100']:+.2f} per 100 edits", flush=True)
+    print("soak: in one state (default preset, sphere, object view) after warm-up and after each pass: "
+          + "; ".join(f"GL objects {sum(c['gl'].values())}, memory {c['rss_mb']:.0f} MB" for c in res["passes"]),
+          flush=True)
+    print("soak: largest memory steps (MB, edit, kind): "
+          + ", ".join(f"{mb:+.1f} at {k} ({kind})" for mb, k, kind in res["largest_memory_steps"][:5]), flush=True)
+    if res["failures"]:
+        print("soak: failed edits: " + "; ".join(res["failures"]), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
