@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test clean
+.PHONY: setup run test clean goldens
 
 setup: $(STAMP)
 
@@ -21,6 +21,11 @@ run: setup
 
 test: setup
 	@$(BIN)/python -m pytest
+
+# Rewrites every stored render the tests compare against (golden images, the session
+# render; tests/viewer/goldens.py) after a change that alters pictures on purpose.
+goldens: setup
+	@$(BIN)/python tests/viewer/goldens.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis
