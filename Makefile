@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test clean goldens
+.PHONY: setup run test test-slow clean goldens
 
 setup: $(STAMP)
 
@@ -19,8 +19,14 @@ $(STAMP): pyproject.toml constraints.txt tools/setup_system.sh
 run: setup
 	@$(BIN)/nbrdf-view
 
+# The default suite (no wall-clock assertions; tests marked slow left out); CI runs
+# `make test test-slow`, so every test runs there.
 test: setup
-	@$(BIN)/python -m pytest
+	@$(BIN)/python -m pytest -m "not slow"
+
+# The slow tests alone (multi-seed statistics, long Monte Carlo runs, installs).
+test-slow: setup
+	@$(BIN)/python -m pytest -m slow
 
 # Rewrites every stored render the tests compare against (golden images, the session
 # render; tests/viewer/goldens.py) after a change that alters pictures on purpose.
