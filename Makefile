@@ -28,10 +28,12 @@ test: setup
 test-slow: setup
 	@$(BIN)/python -m pytest -m slow
 
-# Rewrites every stored render the tests compare against (golden images, the session
-# render; tests/viewer/goldens.py) after a change that alters pictures on purpose.
+# Rewrites every stored render or array the tests compare against (golden images, the
+# session render: tests/viewer/goldens.py; the look-development reference lobes the
+# shipped networks are held to: tests/training/shipped_lobes.py); nothing else writes them.
 goldens: setup
 	@$(BIN)/python tests/viewer/goldens.py
+	@$(BIN)/python tests/training/shipped_lobes.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis
