@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test lint clean fuzz soak
+.PHONY: setup run test test-slow lint clean fuzz soak goldens
 
 setup: $(STAMP)
 
@@ -19,8 +19,21 @@ $(STAMP): pyproject.toml constraints.txt tools/setup_system.sh
 run: setup
 	@$(BIN)/nbrdf-view
 
+# The default suite (no wall-clock assertions; tests marked slow left out); CI runs
+# `make test test-slow`, so every test runs there.
 test: setup lint
-	@$(BIN)/python -m pytest
+	@$(BIN)/python -m pytest -m "not slow"
+
+# The slow tests alone (multi-seed statistics, long Monte Carlo runs, installs).
+test-slow: setup
+	@$(BIN)/python -m pytest -m slow
+
+# Rewrites every stored render or array the tests compare against (golden images, the
+# session render: tests/viewer/goldens.py; the look-development reference lobes the
+# shipped networks are held to: tests/training/shipped_lobes.py); nothing else writes them.
+goldens: setup
+	@$(BIN)/python tests/viewer/goldens.py
+	@$(BIN)/python tests/training/shipped_lobes.py
 
 # The packages mypy checks; it sees the repository's folders under their installed names through links.
 MYPY_PACKAGES := nbrdf.neural nbrdf.cli

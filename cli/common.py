@@ -2,6 +2,7 @@
 pairs, output paths, the model and material loaders, progress bars."""
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 from typing import Sequence
@@ -56,6 +57,17 @@ def at_least(flag: str, value: int, least: int = 1) -> None:
     """One-line error unless ``value >= least``."""
     if value < least:
         raise NbrdfError(f"{flag}: {value} must be at least {least}")
+
+
+def in_range(flag: str, value: float, low: float, high: float = math.inf, *, low_open: bool = False,
+             high_open: bool = True) -> None:
+    """One-line error unless ``value`` lies between ``low`` and ``high``
+    (``low_open``/``high_open``: that end excluded)."""
+    lo_ok = value > low if low_open else value >= low
+    hi_ok = value < high if high_open else value <= high
+    if not (lo_ok and hi_ok):
+        lo, hi = "(" if low_open else "[", ")" if high_open else "]"
+        raise NbrdfError(f"{flag}: {value} is outside {lo}{low:g}, {high:g}{hi}")
 
 
 def progress(total: int, desc: str):

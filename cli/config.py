@@ -8,6 +8,8 @@ flag's default, and its type decides the parsing:
 - ``bool``: a switch (``--name`` when the default is False, ``--no-name`` when True);
 - a mode enum (``viewer/modes.py``) or a ``Literal``: ``choices``;
 - ``int``/``float``/``str`` and their ``X | None`` forms: converted by argparse;
+  a float flag takes finite numbers only (:func:`finite_float`: ``nan`` and
+  ``inf`` are never a setting, and would render black or train to NaN);
 - anything else (``tuple[int, int]`` sizes, ``X,Y,Z`` points): a parser given
   in the field's ``metadata["parse"]``, run after argparse so that its error is
   the command's own one-line message.
@@ -15,6 +17,9 @@ flag's default, and its type decides the parsing:
 A field without a default is a required flag. ``metadata`` may also set
 ``positional`` (an optional positional argument), ``flag`` (another flag name),
 ``metavar``, ``choices`` and ``shown`` (how the default reads in ``--help``).
+Each flag's action carries ``field_type``, the field's type with ``None``
+unwrapped, so that checks over every flag of every command (tests) start from
+the dataclasses.
 
 Usage errors never print usage text: :class:`Parser` raises ``NbrdfError``,
 which the entry points turn into one line on stderr and exit status 2.
@@ -26,6 +31,7 @@ import ast
 import dataclasses
 import enum
 import inspect
+import math
 import textwrap
 import types
 import typing
@@ -68,6 +74,18 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message: str):
         raise NbrdfError(f"{self.prog}: {message}")
+
+
+def finite_float(text: str) -> float:
+    """The converter of every float flag: a finite number, else argparse's
+    one-line usage error naming the flag."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid float value: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
 
 
 @lru_cache(maxsize=None)
@@ -154,7 +172,7 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, *, only: Iterable[
                 kw.update(action="store_false", default=True)
             else:
                 kw.update(action="store_true", default=False)
-            parser.add_argument(*names, help=text, **kw)
+            parser.add_argument(*names, help=text, **kw).field_type = tp
             added.append(f.name)
             continue
         words = choices.get(f.name, meta.get("choices"))
@@ -164,8 +182,10 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, *, only: Iterable[
             words = [str(a) for a in typing.get_args(tp)]
         if words is not None:
             kw["choices"] = list(words)
-        elif "parse" not in meta and tp in (int, float):
-            kw["type"] = tp
+        elif "parse" not in meta and tp is float:
+            kw["type"] = finite_float
+        elif "parse" not in meta and tp is int:
+            kw["type"] = int
         if default is dataclasses.MISSING or f.name in required:
             if meta.get("positional"):
                 raise TypeError(f"{cls.__name__}.{f.name}: a positional field needs a default")
@@ -174,7 +194,7 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, *, only: Iterable[
             kw["default"] = default
             if default is not None:
                 text = f"{text} (default: {meta.get('shown', _shown(default))})".strip()
-        parser.add_argument(*names, help=text, **kw)
+        parser.add_argument(*names, help=text, **kw).field_type = tp
         added.append(f.name)
     return added
 

@@ -8,9 +8,8 @@ import argparse
 from dataclasses import dataclass
 from typing import Callable
 
-from nbrdf.cli.common import at_least
+from nbrdf.cli.common import at_least, in_range
 from nbrdf.cli.config import Parser, add_arguments, build, values
-from nbrdf.neural.errors import NbrdfError
 
 #: Operation-only fields that the leaf and sampler commands do not take.
 LAYERING_ONLY = ("data", "recursion_steps", "width", "depth", "loss", "loss_scale", "relative_scale")
@@ -38,8 +37,9 @@ def cmd_train_representation(a: argparse.Namespace) -> int:
 
     for name in ("epochs", "batch", "val_every"):
         at_least("--" + name.replace("_", "-"), getattr(a, name))
-    if a.loss_scale <= 0:
-        raise NbrdfError(f"--loss-scale: {a.loss_scale} must be positive")
+    for name in ("lr", "latent_lr", "loss_scale"):
+        in_range("--" + name.replace("_", "-"), getattr(a, name), 0.0, low_open=True)
+    in_range("--latent-reg", a.latent_reg, 0.0)
     spec = build(DecoderSpec, a, SPEC_HELP)
     cfg = build(TrainConfig, a, spec=spec)
     run: RunArgs = build(RunArgs, a)
@@ -55,6 +55,11 @@ def cmd_train_operation(a: argparse.Namespace) -> int:
                   "sampler": (to.SamplerConfig, to.train_sampler)}[a.what]
     for name in ("steps", "batch", "pairs"):
         at_least("--" + name, getattr(a, name))
+    in_range("--lr", a.lr, 0.0, low_open=True)
+    in_range("--ema", a.ema, 0.0, 1.0)
+    for name in ("loss_scale", "relative_scale"):
+        if hasattr(a, name):
+            in_range("--" + name.replace("_", "-"), getattr(a, name), 0.0)
     kw = values(cls, a)
     if not kw.get("decoder"):  # --decoder not given: the dataclass default (the shipped weights)
         kw.pop("decoder", None)

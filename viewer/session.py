@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, field
+import typing
+from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from pathlib import Path
 
 from nbrdf.neural.errors import NbrdfError
@@ -79,6 +80,30 @@ class CompareSettings:
             raise NbrdfError(f"compare: wipe {self.wipe} must be in [0, 1], error scale {self.error_scale} > 0")
 
 
+def require_finite(data: object, source: str, where: str = "") -> None:
+    """One-line ``NbrdfError`` naming the first non-finite number in a session
+    document (JSON reads ``NaN`` and ``Infinity``; no field of a session takes
+    them, and one would render black or move the camera to nowhere). On a
+    dataclass (the parsed view state) it also refuses a field typed ``float``
+    that holds anything but a number (a string "nan" converts with ``float``)."""
+    if is_dataclass(data):
+        hints = typing.get_type_hints(type(data))
+        for f in fields(data):
+            value, name = getattr(data, f.name), f"{where}.{f.name}".lstrip(".")
+            tp = hints[f.name]
+            if tp is float or (typing.get_origin(tp) is tuple and set(typing.get_args(tp)) == {float}):
+                for x in value if isinstance(value, (tuple, list)) else (value,):
+                    if isinstance(x, bool) or not isinstance(x, (int, float)):
+                        raise NbrdfError(f"{source}: {name} is {x!r}, not a number")
+            require_finite(value, source, name)
+        return
+    if isinstance(data, float) and not math.isfinite(data):
+        raise NbrdfError(f"{source}: {where or 'value'} is {data}, not a finite number")
+    items = data.items() if isinstance(data, dict) else enumerate(data) if isinstance(data, (list, tuple)) else ()
+    for key, value in items:
+        require_finite(value, source, f"{where}[{key}]" if isinstance(key, int) else f"{where}.{key}".lstrip("."))
+
+
 @dataclass
 class SessionDoc:
     """One look-development session, as saved to and read from a file."""
@@ -134,6 +159,7 @@ class SessionDoc:
         """A session from its document; every field is checked, errors are one line."""
         if not isinstance(data, dict) or data.get("format") != SESSION_FORMAT:
             raise NbrdfError(f"{source}: not an {SESSION_FORMAT} file")
+        require_finite(data, source)
         try:
             mat = parse_material(data["material"], data.get("material_dir", "."), source=f"{source}: material")
             cam = OrbitCamera(**data["camera"])
@@ -151,6 +177,7 @@ class SessionDoc:
                               env_intensity=float(lt["env_intensity"]), env_rotation=float(lt["env_rotation"]),
                               env_on=bool(lt["env_on"]), background=bool(lt["background"]),
                               exposure=float(v["exposure"]), tonemap=tonemap)
+            require_finite(state, source)
             interp = Interpolation(**data.get("interpolation", {}))
             bd = data.get("backdrop") or {}  # older sessions: the defaults
             backdrop = BackdropSettings(bd.get("mode", BackdropSettings.mode), bd.get("flat_colour", (0.18,) * 3),

@@ -39,6 +39,19 @@ def test_lobe_neural_is_the_eval_on_the_lobe_grid(tmp_path, capsys):
     assert code == 0, err
     img = np.load(tmp_path / "l.npy")
     assert img.shape == (64, 64, 3) and img.max() > 0.1
+    # the same directions through `nbrdf eval`: the lobe is f cos(theta_o) on the disk, zero outside
+    from nbrdf.neural.geometry import incidence, lobe_grid
+
+    wo, mask = (t.numpy() for t in lobe_grid(64))
+    d = wo[mask]
+    wi = np.broadcast_to(incidence(30.0).numpy(), d.shape)
+    np.save(tmp_path / "p.npy", np.concatenate([wi, d], 1).astype(np.float32))
+    code, out, err = run(["eval", "--material", DEFAULT, "--pairs", tmp_path / "p.npy", "--out", tmp_path / "f.npy",
+                          "--method", "neural"], capsys)
+    assert code == 0, err
+    f = np.load(tmp_path / "f.npy")
+    np.testing.assert_allclose(img[mask], f * d[:, 2:3], rtol=1e-4, atol=1e-6)
+    assert (img[~mask] == 0).all()
 
 
 def test_sample_writes_directions_and_their_pdf(tmp_path, capsys):

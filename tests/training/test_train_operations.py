@@ -120,6 +120,7 @@ def test_layering_shape_and_loss_scale_are_chosen(bundles):
         train_layering(replace(cfg, out=str(root / "lay_neg"), loss_scale=-1.0), progress=False)
 
 
+@pytest.mark.slow
 def test_moving_average_of_weights_is_shipped_and_survives_a_resume(bundles, monkeypatch):
     """``--ema``: the bundle holds the average of the weights, not the last
     step's; a run stopped at a checkpoint and resumed ends with the same

@@ -2,15 +2,18 @@
 input it cannot simulate in one line, agrees with the v1 estimator (exit
 sampled at the top) while wasting less work on the total-internal-reflection
 stack, and its 64-path standard errors hold (z-scores against long runs are
-standard normal by a Kolmogorov-Smirnov test) on the standard stack and,
-narrowly since estimator v5 (splitting by exit importance), on the trapping
-stack, and on the held-out stacks with sharp lobes in series but one (a
+standard normal by a Kolmogorov-Smirnov test; over eight seeds their standard
+deviation lies in [0.9, 1.1] and their mean within +-0.1) on the standard
+stack, not yet on the trapping stack (a strict xfail states the figure), and on
+the held-out stacks with sharp lobes in series but one (a
 strict xfail states that target)."""
 from __future__ import annotations
 
+import functools
 import math
 
 import numba
+import numpy as np
 import pytest
 import torch
 from scipy import stats
@@ -108,16 +111,33 @@ def test_v2_agrees_with_v1_and_costs_less_on_the_trapping_stack():
     assert cost1 > 20 * cost2, (float(cost1), float(cost2))
 
 
-def _z_scores(stack_fn, n: int, seed: int):
+@functools.lru_cache(maxsize=None)
+def _standard_run(n: int, seed: int):
     wo = _dirs(n, seed)
-    long_m, long_e = simulate(stack_fn(n), _wi(n), wo, spp=8192, seed=seed + 1, dtype=D)
-    m, e = simulate(stack_fn(n), _wi(n), wo, spp=64, seed=seed + 2, dtype=D)
-    return ((m - long_m) / (e ** 2 + long_e ** 2).sqrt())[:, 0].numpy()  # red: channels share paths
+    long_m, long_e = simulate(standard_stack(n), _wi(n), wo, spp=8192, seed=seed + 1, dtype=D)
+    m, e = simulate(standard_stack(n), _wi(n), wo, spp=64, seed=seed + 2, dtype=D)
+    return m, e, long_m, long_e
+
+
+def _z_scores(n: int, seed: int, value: float = 1.0):
+    """64-path z-scores against 8192 paths on the standard stack (``value`` scales the estimates)."""
+    m, e, long_m, long_e = _standard_run(n, seed)
+    return ((value * m - long_m) / (e ** 2 + long_e ** 2).sqrt())[:, 0].numpy()  # red: channels share paths
 
 
 def test_64_path_errors_hold_on_the_standard_stack():
-    z = _z_scores(standard_stack, 160, 21)
+    """KS at significance 1e-3 (p 0.12-0.67 at the eight seeds of SEEDS)."""
+    z = _z_scores(160, 21)
     assert stats.kstest(z, "norm").pvalue > 1e-3, (z.mean(), z.std())
+
+
+@pytest.mark.parametrize("value", [1.1, 0.9])
+def test_the_ks_check_rejects_estimates_10_percent_off(value):
+    """Its power: estimates 10 % high or low fail it (p < 1e-44 at all eight
+    seeds of SEEDS). It does not see error bars 10 % off (0 of 8 seeds): the
+    8-seed check below does."""
+    z = _z_scores(160, 21, value)
+    assert stats.kstest(z, "norm").pvalue < 1e-3, (z.mean(), z.std())
 
 
 def test_64_path_estimates_are_no_longer_low_where_trapped_light_leaves():
@@ -180,13 +200,62 @@ def test_importance_splitting_leaves_other_stacks_unchanged(monkeypatch):
     assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
 
 
+#: The seeds of the multi-seed error-bar checks: 31 and every tenth after it (fixed before any result was seen).
+SEEDS = (31, 41, 51, 61, 71, 81, 91, 101)
+
+
+@functools.lru_cache(maxsize=None)
+def _runs(stack: str, n: int) -> tuple[tuple[np.ndarray, ...], ...]:
+    """Per seed of SEEDS, red channel (channels share paths): 64-path estimates and
+    errors and 8192-path ones, (m, e, long_m, long_e), on n directions."""
+    fn = {"standard": standard_stack, "trap": trap_stack}[stack]
+    out = []
+    for seed in SEEDS:
+        wo = _dirs(n, seed)
+        lm, le = simulate(fn(n), _wi(n), wo, spp=8192, seed=seed + 1, dtype=D)
+        m, e = simulate(fn(n), _wi(n), wo, spp=64, seed=seed + 2, dtype=D)
+        out.append(tuple(v[:, 0].numpy() for v in (m, e, lm, le)))
+    return tuple(out)
+
+
+def _pooled_z(runs, value: float = 1.0, error: float = 1.0) -> np.ndarray:
+    """The z-scores of every seed together; ``value`` and ``error`` scale the
+    64-path estimates and their error bars (the perturbations the check must see)."""
+    return np.concatenate([(value * m - lm) / np.sqrt((error * e) ** 2 + le ** 2) for m, e, lm, le in runs])
+
+
+def _calibrated(z: np.ndarray) -> bool:
+    """Error bars that mean what they say: z standard deviation in [0.9, 1.1], mean within +-0.1."""
+    return 0.9 <= z.std() <= 1.1 and abs(z.mean()) <= 0.1
+
+
+@pytest.mark.slow
+def test_64_path_error_bars_hold_over_8_seeds_on_the_standard_stack():
+    """1,280 z-scores (160 directions x 8 seeds): sd 1.024, mean -0.036 measured."""
+    z = _pooled_z(_runs("standard", 160))
+    assert _calibrated(z), (z.mean(), z.std())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("value,error", [(1.1, 1.0), (0.9, 1.0), (1.0, 0.9)])
+def test_the_8_seed_check_rejects_10_percent_errors(value, error):
+    """The check's power: on the stack where it holds, estimates 10 % high or
+    low (pooled z mean +1.70 / -1.78) or error bars 10 % too small (sd 1.136)
+    fail it. Error bars 10 % too large (sd 0.931) pass: the window is the
+    issue's, and too-large bars are the safe side."""
+    z = _pooled_z(_runs("standard", 160), value, error)
+    assert not _calibrated(z), (z.mean(), z.std())
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="the trapping stack's 64-path error bars are too small and its estimates low: "
+                   "over the 8 seeds z pooled sd 1.142, mean -0.258 (per seed sd 1.02-1.21, mean -0.20 to "
+                   "-0.35; KS p < 1e-3 at 2 of 8); target sd in [0.9, 1.1], mean within +-0.1")
 def test_64_path_errors_hold_on_the_trapping_stack():
     """Issue 14's requirement on the trapping stack (480 directions, 64 paths
-    against 8192). Passes since estimator v5, narrowly: KS p 2.8e-3 at this
-    seed (z mean -0.30, sd 1.14); seeds 41 / 51 / 61 / 71 give 4.9e-3 /
-    2.1e-2 / 3.9e-2 / 5.5e-5 (docs/RESULTS.md, Estimator v5)."""
-    z = _z_scores(trap_stack, 480, 31)
-    assert stats.kstest(z, "norm").pvalue > 1e-3, (z.mean(), z.std())
+    against 8192) over 8 seeds (3,840 z-scores)."""
+    z = _pooled_z(_runs("trap", 480))
+    assert _calibrated(z), (z.mean(), z.std())
 
 
 def _heldout_z(names: tuple[str, ...]) -> list[tuple[float, str, int, float, float, float]]:

@@ -126,7 +126,7 @@ def test_slider_changes_latents_and_pixels_as_offscreen(session_run, gl_ctx):
     img = Backdrop(gl_ctx, r).render_linear(ViewState(), (64, 48), 2, r.brdf, opts.backdrop())
     expected = tonemap(img, opts.exposure, opts.tonemap.value).astype(int)
     assert np.abs(f["b"].astype(int) - expected).max() <= 2
-    assert 0 < out["latent_ms"] < 1000 and out["edit_to_frame_ms"] >= out["latent_ms"]
+    assert 0 < out["latent_ms"] <= out["edit_to_frame_ms"]  # the frame follows the latent (timings: nbrdf bench app)
 
 
 def test_session_reopens_exactly(session_run):

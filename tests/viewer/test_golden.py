@@ -1,50 +1,62 @@
-"""Golden images: every view of the bundled materials against stored renders.
-
-The lobe and slice views are deterministic functions of the material, held to
-|a - b| <= 1e-3 (1 + |b|); the lit view is Monte Carlo with fixed random
-numbers, held to a 2 % relative mean difference (another GPU's rounding moves
-a few samples). A change that alters pictures on purpose regenerates them:
-``NBRDF_UPDATE_GOLDEN=1 python -m pytest tests/viewer/test_golden.py``.
-"""
+"""Golden images: every view of the bundled materials against stored renders
+(``tests/viewer/goldens.py`` says what each is, how close a render must be,
+and how ``make goldens`` rewrites them; these tests only read them), and the
+comparison's power: a 10 % edit of a material's roughness is rejected."""
 from __future__ import annotations
 
-import os
-from pathlib import Path
+import copy
 
 import numpy as np
 import pytest
 
-from nbrdf.neural.material import load_material
-from nbrdf.viewer.offscreen import make_renderer
-from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
-from nbrdf.viewer.renderer import ViewState
+from goldens import CASES, TOLERANCE, Case, figure, material_doc, matches, render_case
 
-GOLDEN = Path(__file__).parent / "golden"
-MATERIALS = DEFAULT_MATERIAL.parent
-CASES = [  # name, material, brdf mode, mesh, view
-    ("copper_stack_object", "default.json", "neural", "sphere", "object"),
-    ("copper_stack_lobe", "default.json", "neural", "sphere", "lobe"),
-    ("copper_stack_slice", "default.json", "neural", "sphere", "slice"),
-    ("rough_gold_object", "rough_gold.json", "analytic", "sphere", "object"),
-    ("rough_gold_lobe", "rough_gold.json", "analytic", "sphere", "lobe"),
-    ("rough_gold_slice", "rough_gold.json", "analytic", "sphere", "slice"),
-    ("worn_tiles_object", "worn_tiles.json", "neural", "testmesh", "object"),
-]
+pytestmark = pytest.mark.gl
 
 
-@pytest.mark.parametrize("name,material,brdf,mesh,view", CASES, ids=[c[0] for c in CASES])
-def test_golden(gl_ctx, name, material, brdf, mesh, view):
-    opts = ViewOptions(material=MATERIALS / material, mesh=mesh, brdf=brdf)
-    r = make_renderer(gl_ctx, load_material(opts.material), opts)
-    img = r.render_linear(ViewState(view=view, theta_i=45.0), (40, 40), spp=8)
-    path = GOLDEN / f"{name}.npy"
-    if os.environ.get("NBRDF_UPDATE_GOLDEN"):
-        np.save(path, img.astype(np.float32))
-    ref = np.load(path)
-    assert img.shape == ref.shape and np.isfinite(img).all()
-    if view == "object":
-        diff = np.abs(img - ref).mean() / np.abs(ref).mean()
-        assert diff < 0.02, f"{name}: mean relative difference {diff:.4f} to the golden image"
-    else:
-        err = np.abs(img - ref) / (1 + np.abs(ref))
-        assert err.max() <= 1e-3, f"{name}: max scaled error {err.max():.3g} to the golden image"
+@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+def test_golden(gl_ctx, case: Case):
+    ok, f = matches(case.view, render_case(gl_ctx, case), np.load(case.path))
+    assert ok, f"{case.name}: figure {f:.3g} to the golden image (make goldens rewrites it after an intended change)"
+
+
+def _scaled(value, k: float):
+    """A roughness times k: a number, or a texture's range."""
+    return {**value, "range": [x * k for x in value["range"]]} if isinstance(value, dict) else value * k
+
+
+def _roughness_edits():
+    """(case, layer index, factor) for every roughness of every golden's material, times 1.1."""
+    out = []
+    for c in CASES:
+        doc, _ = material_doc(c)
+        out += [(c, i, k) for i, layer in enumerate(doc["layers"]) if "roughness" in layer for k in (1.1,)]
+    return out
+
+
+EDITS = _roughness_edits()
+
+
+@pytest.mark.parametrize("case,layer,factor", EDITS, ids=[f"{c.name}-layer{i}-x{k}" for c, i, k in EDITS])
+def test_a_10_percent_roughness_edit_fails_the_golden(gl_ctx, case: Case, layer: int, factor: float):
+    """The power of the comparison: each roughness of the material times 1.1
+    (a texture's range for a textured one) moves the render outside the
+    tolerance, by at least a factor 2."""
+    doc, _ = material_doc(case)
+    doc = copy.deepcopy(doc)
+    doc["layers"][layer]["roughness"] = _scaled(doc["layers"][layer]["roughness"], factor)
+    ok, f = matches(case.view, render_case(gl_ctx, case, doc), np.load(case.path))
+    assert not ok, f"{case.name}: roughness of layer {layer} x{factor} passes the golden comparison ({f:.3g})"
+    assert f > 2 * TOLERANCE[case.view], (case.name, f)
+
+
+def test_the_figures():
+    """Each view's figure on known differences."""
+    ref = np.full((4, 4, 3), 2.0, np.float32)
+    img = ref.copy()
+    img[0, 0, 0] = 2.6
+    assert figure("object", img, ref) == pytest.approx(0.6 / 48 / 2)
+    assert figure("lobe", img, ref) == pytest.approx(0.6 / 3)
+    assert figure("slice", ref[:2], ref) == float("inf")
+    img[1, 1, 1] = np.nan
+    assert figure("object", img, ref) == float("inf")

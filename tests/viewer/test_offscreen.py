@@ -48,14 +48,99 @@ def test_default_material_views(gl_ctx):
     assert sl[:, 0].mean() > sl[:, -1].mean()
 
 
-def test_progressive_passes_converge(gl_ctx):
-    r = Renderer(gl_ctx, load_material(DEFAULT_MATERIAL))
-    a = r.render_linear(ViewState(), (48, 48), spp=2)
-    b = r.render_linear(ViewState(), (48, 48), spp=32)
-    c = r.render_linear(ViewState(), (48, 48), spp=32)
-    np.testing.assert_array_equal(b, c)  # deterministic random numbers
-    mask = b.sum(-1) > 0
-    assert np.abs(a - b)[mask].mean() < 0.1 and np.abs(a - b)[mask].mean() > 0
+#: Progressive accumulation: image side, passes recorded one by one, passes of the reference.
+CONV_SIZE, CONV_PASSES, CONV_REF_FROM = 32, 256, 64
+#: Two-sided significance of the z-test (|z| beyond 3.29: p < 1e-3).
+Z_CRIT = 3.29
+
+
+class Passes:
+    """The default material's object view pass by pass: ``passes[i]`` is pass i
+    alone (the accumulation target read after each pass, differenced), ``mask``
+    the object's pixels (the background is an exact environment lookup, no noise)."""
+
+    def __init__(self, ctx):
+        self.r = Renderer(ctx, load_material(DEFAULT_MATERIAL))
+        self.state, n = ViewState(), CONV_SIZE
+        prev, out = np.zeros((n, n, 3)), []
+        for i in range(CONV_PASSES):
+            tex = self.r.accumulate(self.state, n, n, i, 1, slot="linear")
+            acc = np.frombuffer(tex.read(), dtype="f4").reshape(n, n, 4)[..., :3][::-1].astype(np.float64)
+            out.append(acc - prev)
+            prev = acc
+        self.passes = np.array(out)
+        self.mask = self.r.gbuffer(self.state, (n, n))[2]
+        #: The reference: the mean of passes CONV_REF_FROM.. (independent of the progressive images' passes).
+        self.ref = self.passes[CONV_REF_FROM:].mean(0)
+        #: Per-pixel variance of one pass.
+        self.var = self.passes.var(0, ddof=1)
+
+    def progressive(self, n: int) -> np.ndarray:
+        """What the viewer shows after n passes."""
+        return self.r.render_linear(self.state, (CONV_SIZE, CONV_SIZE), spp=n).astype(np.float64)
+
+    def var_of_difference(self, n: int) -> np.ndarray:
+        """Per pixel: the variance of (n-pass image - reference)."""
+        return self.var * (1 / n + 1 / (CONV_PASSES - CONV_REF_FROM))
+
+    def z(self, img: np.ndarray, n: int) -> float:
+        """z of the summed difference to the reference over the object's pixels
+        (a sum over 500 pixels x n passes: normal by the central limit theorem)."""
+        m = self.mask
+        return float((img - self.ref)[m].sum() / np.sqrt(self.var_of_difference(n)[m].sum()))
+
+    def mse_ratio(self, img: np.ndarray, n: int) -> float:
+        """Mean squared error over the object / its expectation for independent passes (1 when the error
+        falls as 1/sqrt(passes))."""
+        m = self.mask
+        return float(((img - self.ref) ** 2)[m].mean() / self.var_of_difference(n)[m].mean())
+
+
+@pytest.fixture(scope="module")
+def passes(gl_ctx):
+    return Passes(gl_ctx)
+
+
+def test_the_object_mask_holds_the_noise(passes):
+    """The z-test runs over the object: several hundred pixels, each with Monte Carlo noise."""
+    assert passes.mask.sum() > 300 and (passes.var[passes.mask].sum(-1) > 0).all()
+
+
+@pytest.mark.parametrize("n", [4, 16, 64])
+def test_progressive_image_is_the_mean_of_its_passes(passes, n):
+    """After n passes the image is unbiased against an independent reference
+    (z-test over the object's pixels, significance 1e-3), is the mean of the
+    first n passes, and its error has fallen as 1/sqrt(n)."""
+    img = passes.progressive(n)
+    assert abs(passes.z(img, n)) < Z_CRIT
+    np.testing.assert_allclose(img, passes.passes[:n].mean(0), rtol=1e-5, atol=1e-6)
+    assert 0.75 < passes.mse_ratio(img, n) < 1.33
+
+
+@pytest.mark.parametrize("n", [4, 16, 64])
+@pytest.mark.parametrize("divisor", [-1, +1])
+def test_an_off_by_one_pass_divisor_is_rejected(passes, n, divisor):
+    """The power of the z-test: the sum of n passes divided by n - 1 or n + 1
+    (a bias of 1/(n +- 1): 1.5 % at 64 passes) is rejected at every n."""
+    img = passes.progressive(n) * n / (n + divisor)
+    assert abs(passes.z(img, n)) > Z_CRIT
+
+
+def test_a_dropped_pass_is_rejected(passes, monkeypatch):
+    """An off-by-one in the pass loop (n - 1 passes summed, divided by n) is rejected."""
+    real = Renderer.accumulate
+
+    def one_short(self, state, w, h, first_pass, count, *a, **k):
+        return real(self, state, w, h, first_pass, count - 1, *a, **k)
+
+    monkeypatch.setattr(Renderer, "accumulate", one_short)
+    assert abs(passes.z(passes.progressive(16), 16)) > Z_CRIT
+
+
+def test_error_that_stops_falling_is_rejected(passes):
+    """The power of the 1/sqrt(n) check: a 16-pass image shown as the 64-pass one
+    (passes that repeat their random numbers) is four times too noisy."""
+    assert passes.mse_ratio(passes.progressive(16), 64) > 1.33
 
 
 @pytest.mark.parametrize("mesh", ["testmesh"])

@@ -30,17 +30,13 @@ def test_a_previous_version_file_parses():
 
 
 def test_a_previous_version_file_renders_as_it_did(gl_ctx):
-    from nbrdf.viewer.lookdev import LookDev
+    """Its object view against the stored render (tests/viewer/goldens.py; ``make goldens`` rewrites it)."""
+    from goldens import SESSION_RENDER, matches, render_session
 
-    ld = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
-    try:
-        assert ld.open_session(V1), ld.error
-        img = ld.renderer.render_linear(ld.main_state(), (24, 16), 2, ld.brdf)
-    finally:
-        ld.close()
-    ref = np.load(DATA / "session_v1_object.npy")
+    ref = np.load(SESSION_RENDER)
     assert ref.max() > 0.05
-    np.testing.assert_allclose(img, ref, rtol=1e-4, atol=1e-5)
+    ok, f = matches("session", render_session(gl_ctx), ref)
+    assert ok, f"figure {f:.3g} to the stored session render"
 
 
 def test_a_generated_environment_is_kept_by_name(gl_ctx, tmp_path):
@@ -134,3 +130,69 @@ def test_window_prefs_open_at_80_percent_and_remember(tmp_path):
     assert again.initial_size((800, 600)) == (640, 480)  # remembered on a larger screen: 80 % of this one
     path.write_text("{ not json")
     assert WindowPrefs.load(path).size is None  # a broken file never stops the window from opening
+
+
+def _number_paths(node, path=()):
+    """The path of every number (not a bool) in a JSON document."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _number_paths(v, path + (k,))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from _number_paths(v, path + (i,))
+    elif isinstance(node, (int, float)) and not isinstance(node, bool):
+        yield path
+
+
+def _full_document() -> dict:
+    """The previous-version file with every optional key present (backdrop)."""
+    data = json.loads(V1.read_text())
+    data["backdrop"] = {"mode": "flat", "flat_colour": [0.1, 0.2, 0.3], "ground": True}
+    return data
+
+
+NUMBER_PATHS = list(_number_paths(_full_document()))
+
+
+def test_the_document_has_the_float_fields_a_session_holds():
+    """The generated cases below reach camera, lights, view, compare, backdrop and both materials."""
+    tops = {p[0] for p in NUMBER_PATHS}
+    assert {"camera", "light", "lighting", "view", "interpolation", "backdrop", "material"} <= tops
+    assert len(NUMBER_PATHS) >= 25
+
+
+#: (path, value): NaN and both infinities everywhere; the string "nan" outside the
+#: material documents (the material schema refuses strings for numbers itself).
+NON_FINITE = [(p, v) for p in NUMBER_PATHS for v in (float("nan"), float("inf"), -float("inf"), "nan")
+              if not (isinstance(v, str) and p[0] in ("material", "interpolation"))]
+
+
+@pytest.mark.parametrize("path,value", NON_FINITE, ids=[".".join(map(str, p)) + f"={v}" for p, v in NON_FINITE])
+def test_a_non_finite_number_anywhere_is_one_line(tmp_path, path, value):
+    """NaN or Infinity in any numeric field of a session file (JSON reads both;
+    a string "nan" converts too) is refused in one line naming the file."""
+    data = _full_document()
+    node = data
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    f = tmp_path / "s.json"
+    f.write_text(json.dumps(data, allow_nan=True))
+    with pytest.raises(NbrdfError) as e:
+        SessionDoc.load(f)
+    msg = str(e.value)
+    assert msg.startswith(str(f)) and "\n" not in msg and ("finite" in msg or "outside" in msg), msg
+
+
+def test_nbrdf_view_refuses_a_session_with_nan_exposure(tmp_path, capsys):
+    """The command line: one line, exit 2, no image written."""
+    from nbrdf.cli.view import main
+
+    data = _full_document()
+    data["view"]["exposure"] = float("nan")
+    f = tmp_path / "s.json"
+    f.write_text(json.dumps(data, allow_nan=True))
+    rc = main(["--offscreen", "--session", str(f), "--out", str(tmp_path / "o.png"), "--size", "16x16"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "view.exposure is nan" in err[0], (rc, err)
+    assert not (tmp_path / "o.png").exists()
