@@ -217,9 +217,9 @@ def seeds(name: str) -> list[bytes]:
                 out.append(p.read_bytes())
         return out
     if name == "weights":
-        from nbrdf.neural.decoder import Decoder, DecoderSpec, save_decoder
-
         import torch
+
+        from nbrdf.neural.decoder import Decoder, DecoderSpec, save_decoder
 
         torch.manual_seed(0)
         with tempfile.TemporaryDirectory() as d:

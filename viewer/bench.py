@@ -271,10 +271,9 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
       threads (llvmpipe's included): what a pass needs of the machine, whatever else runs on it;
     - the machine's load average (1 minute) before and after: other work on the machine slows every figure."""
     import statistics
-
-    from nbrdf.viewer.app import App
     from dataclasses import replace
 
+    from nbrdf.viewer.app import App
     from nbrdf.viewer.noise import per_pixel_noise
     from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
 

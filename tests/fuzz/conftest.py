@@ -3,7 +3,6 @@ worker process shared by the session, so a crash of a native library or a
 hang is a failed test, never a dead suite. ``NBRDF_FUZZ_EXAMPLES`` raises the
 number of inputs per test (``make fuzz``); the suite's default keeps each test
 to a few seconds."""
-import os
 import sys
 from pathlib import Path
 

@@ -6,10 +6,9 @@ import copy
 import json
 import os
 
+import fuzz
 from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
-
-import fuzz
 
 #: Inputs per hypothesis test and per byte-mutation campaign (``make fuzz`` raises both).
 EXAMPLES = int(os.environ.get("NBRDF_FUZZ_EXAMPLES", "40"))

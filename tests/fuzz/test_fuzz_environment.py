@@ -3,13 +3,12 @@ files of random shapes, channels, pixel types and compressions, hostile
 headers, and byte-level mutations load or end in one line."""
 import io
 
+import fuzz
 import numpy as np
 import pytest
+from fuzzing import FUZZ, check, check_campaign
 from hypothesis import given
 from hypothesis import strategies as st
-
-import fuzz
-from fuzzing import FUZZ, check, check_campaign
 
 
 @pytest.mark.parametrize("fmt", ["hdr", "exr"])

@@ -2,11 +2,10 @@
 byte-level mutations, load or end in one NbrdfError line."""
 import json
 
-from hypothesis import given
-from hypothesis import strategies as st
-
 import fuzz
 from fuzzing import FUZZ, check, check_campaign, dumps, edited_json
+from hypothesis import given
+from hypothesis import strategies as st
 
 MATERIALS = [json.loads(s) for s in fuzz.seeds("material")]
 SESSIONS = [json.loads(s) for s in fuzz.seeds("session")]

@@ -4,12 +4,11 @@ OBJ files of random records, and byte-level mutations load or end in one line.""
 import json
 import struct
 
+import fuzz
 import pytest
+from fuzzing import FUZZ, check, check_campaign, dumps, edited_json
 from hypothesis import given
 from hypothesis import strategies as st
-
-import fuzz
-from fuzzing import FUZZ, check, check_campaign, dumps, edited_json
 
 GLTF = json.loads(fuzz.seeds("gltf")[0])
 

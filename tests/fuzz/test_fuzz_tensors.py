@@ -5,14 +5,13 @@ import io
 import json
 import struct
 
+import fuzz
 import numpy as np
 import pytest
+from fuzzing import FUZZ, check, check_campaign, json_values
 from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
-
-import fuzz
-from fuzzing import FUZZ, check, check_campaign, json_values
 
 
 @pytest.mark.parametrize("fmt", ["latent", "weights", "pairs"])
@@ -51,7 +50,6 @@ def test_latent_hostile_headers(worker, tensors, metadata, n):
        json_values.map(json.dumps) | meta_values)
 def test_weights_hostile_metadata(worker, key, value):
     """Every metadata field of a valid bundle replaced by any JSON text or non-JSON."""
-    from safetensors import safe_open
 
     raw = fuzz.seeds("weights")[0]
     hlen = struct.unpack("<Q", raw[:8])[0]

@@ -9,9 +9,8 @@ import math
 
 import numpy as np
 import pytest
-import torch
-
 import shipped_lobes as sl
+import torch
 
 #: Lobe PSNR floors (dB): the shipped bundle's measured PSNR less 2 dB, rounded
 #: down to 0.5 dB (measured 47.95, 51.54, 45.83, 43.87, 60.88, 59.24, 50.25,

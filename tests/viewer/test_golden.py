@@ -8,8 +8,7 @@ import copy
 
 import numpy as np
 import pytest
-
-from goldens import CASES, TOLERANCE, Case, figure, material_doc, matches, render_case
+from goldens import CASES, TOLERANCE, Case, figure, matches, material_doc, render_case
 
 pytestmark = pytest.mark.gl
 
