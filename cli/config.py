@@ -139,6 +139,11 @@ def _shown(value: Any) -> str:
     return str(value)
 
 
+def _typed(action: argparse.Action, tp: object) -> None:
+    """Records a flag's dataclass field type on its action (what the flag tests walk)."""
+    vars(action)["field_type"] = tp
+
+
 def add_arguments(parser: argparse.ArgumentParser, cls: type, *, only: Iterable[str] | None = None,
                   exclude: Iterable[str] = (), defaults: Mapping[str, Any] | None = None,
                   help: Mapping[str, str] | None = None, choices: Mapping[str, Sequence[str]] | None = None,
@@ -172,7 +177,7 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, *, only: Iterable[
                 kw.update(action="store_false", default=True)
             else:
                 kw.update(action="store_true", default=False)
-            parser.add_argument(*names, help=text, **kw).field_type = tp
+            _typed(parser.add_argument(*names, help=text, **kw), tp)
             added.append(f.name)
             continue
         words = choices.get(f.name, meta.get("choices"))
@@ -194,7 +199,7 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, *, only: Iterable[
             kw["default"] = default
             if default is not None:
                 text = f"{text} (default: {meta.get('shown', _shown(default))})".strip()
-        parser.add_argument(*names, help=text, **kw).field_type = tp
+        _typed(parser.add_argument(*names, help=text, **kw), tp)
         added.append(f.name)
     return added
 
