@@ -171,6 +171,13 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, *, only: Iterable[
             names, kw = [f.name], {"nargs": "?"}
         if "metavar" in meta:
             kw["metavar"] = meta["metavar"]
+        if tp is bool and optional and default is None:  # three states: --x, --no-x, or unset
+            g = parser.add_mutually_exclusive_group()
+            _typed(g.add_argument(*names, action="store_true", default=None, help=text), tp)
+            _typed(g.add_argument("--no-" + names[0][2:], dest=f.name, action="store_false",
+                                  help=meta.get("no_help", f"not {names[0]}")), tp)
+            added.append(f.name)
+            continue
         if tp is bool:
             if default is True:
                 names = [meta.get("flag", "--no-" + f.name.replace("_", "-"))]

@@ -20,20 +20,13 @@ def build_parser() -> Parser:
     """The ``nbrdf-view`` parser, one flag per ``ViewOptions`` field."""
     p = Parser(prog=PROG, description="Real-time neural BRDF previewer.")
     add_arguments(p, ViewOptions)
-    g = p.add_mutually_exclusive_group()
-    g.add_argument("--restore", action="store_true", default=None,
-                   help="restore the autosaved session (after a crash, or the last one) without asking")
-    g.add_argument("--no-restore", dest="restore", action="store_false",
-                   help="start afresh; a crashed session's autosave is kept aside, not offered")
     return p
 
 
 def parse_args(argv: Sequence[str] | None) -> ViewOptions:
     """Checked options from the command line (one-line ``NbrdfError`` otherwise)."""
     ns = build_parser().parse_args(argv)
-    opts = build(ViewOptions, ns).check()
-    opts.restore = ns.restore  # the window's autosave (viewer/autosave.py): True, False or None (ask)
-    return opts
+    return build(ViewOptions, ns).check()
 
 
 def main(argv: Sequence[str] | None = None) -> int:

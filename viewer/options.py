@@ -62,6 +62,9 @@ class ViewOptions:
     """incidence angle of the lobe view, degrees"""
     offscreen: bool = False
     """render through EGL to --out instead of opening a window"""
+    restore: bool | None = field(default=None, metadata={
+        "no_help": "start afresh; a crashed session's autosave is kept aside, not offered"})
+    """restore the autosaved session (after a crash, or the last one) without asking; unset: ask after a crash"""
     out: str | None = None
     """output image: .png (tone-mapped), .exr or .npy (linear float)"""
     size: tuple[int, int] | None = field(default=None, metadata={
