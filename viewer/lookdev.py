@@ -38,7 +38,7 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent_texture import LatentTexture, blend
 from nbrdf.neural.material import Material, load_material, material_to_dict, save_material
 from nbrdf.viewer.backdrop import Backdrop, BackdropSettings
-from nbrdf.viewer.compare import Compare, reference_state
+from nbrdf.viewer.compare import Compare
 from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, ToneMap, View
 from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, gpu_brdf, material_key
 from nbrdf.viewer.renderer import Renderer, ViewState
@@ -547,9 +547,9 @@ class LookDev:
         return self._compare_active() and self.compare == CompareMode.SIDE
 
     def main_state(self) -> ViewState:
-        """The view state of the neural image (compare mode on a stack's lit object:
-        the directional light alone, which is what its Monte Carlo reference shows)."""
-        return reference_state(self.state, self.material) if self._compare_active() else self.state
+        """The view state of the neural image (and of its reference: both sides of a
+        comparison are lit by what the view shows)."""
+        return self.state
 
     def render(self, target: moderngl.Framebuffer, size: tuple[int, int], passes: int = 1,
                scale: float = 1.0) -> None:
@@ -580,7 +580,9 @@ class LookDev:
         b, pb, weight = None, pa, None
         if comparing:
             b, pb = self.compare_part.reference(self.material, self.ref_brdf, self.brdf, lit, self.mesh,
-                                                vw, h, first, n, self.passes)
+                                                vw, h, first, n, self.passes,
+                                                view_size=(max(1, size[0] // 2) if self.side_by_side else size[0],
+                                                           size[1]))
         elif blending:
             b = (r.accumulate(lit, vw, h, first, n, self.other_brdf, "other") if n
                  else r.frame_texture(view, vw, h, "other"))
@@ -591,7 +593,7 @@ class LookDev:
         if view == View.OBJECT and not (comparing and s.mode in (CompareMode.ERROR, CompareMode.FLIP)):
             # The backdrop on what is shown (the error views score the object alone).
             a, pa = self.backdrop_part.apply(a, pa, state, self.backdrop), 1.0
-            if b is not None and (blending or (comparing and self.ref_brdf is not None)):
+            if b is not None and (blending or (comparing and b.size == a.size)):
                 b, pb = self.backdrop_part.apply(b, pb, state, self.backdrop, "other"), 1.0
         if b is None:
             b, pb = a, pa
