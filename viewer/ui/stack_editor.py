@@ -18,7 +18,7 @@ NEW_LAYER = {
     "conductor": {"type": "conductor", "roughness": 0.2, "r0": [0.95, 0.64, 0.54]},
     "diffuse": {"type": "diffuse", "albedo": [0.5, 0.5, 0.5]},
     "dielectric": {"type": "dielectric", "roughness": 0.05, "ior": 1.5},
-    "medium": {"type": "medium", "albedo": [0.9, 0.9, 0.9], "sigma_t": 0.5},
+    "medium": {"type": "medium", "albedo": [0.0, 0.0, 0.0], "sigma_t": 0.05},  # a clear varnish, not a milky slab
 }
 BASE_TYPES = ("conductor", "diffuse", "dielectric")
 #: Slider ranges per parameter: the material's own legal ranges (SPEC section 3).
@@ -58,8 +58,8 @@ class StackEditor:
     def set_name(self, name: str) -> Material:
         return self._apply({**copy.deepcopy(self.doc), "name": name})
 
-    def add_coat(self, medium: bool = True) -> Material:
-        """A clear coat on top: a dielectric interface (and a medium below it)."""
+    def add_coat(self, medium: bool = False) -> Material:
+        """A clear coat on top: a dielectric interface (with ``medium``, a clear varnish slab below it)."""
         doc = copy.deepcopy(self.doc)
         new = [copy.deepcopy(NEW_LAYER["dielectric"])] + ([copy.deepcopy(NEW_LAYER["medium"])] if medium else [])
         doc["layers"] = new + doc["layers"]
