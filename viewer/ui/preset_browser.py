@@ -64,10 +64,14 @@ class PresetBrowser:
         """Presets without a thumbnail yet."""
         return sum(1 for n in presets() if n not in self._textures and n not in self.failed)
 
-    def draw(self, columns: int = 3) -> None:
-        """The grid; at most one missing thumbnail is made per call."""
+    def draw(self, columns: int | None = None) -> None:
+        """The grid (``columns`` None: as many as fit the panel's width); at most one
+        missing thumbnail is made per call."""
         from imgui_bundle import imgui
 
+        if columns is None:
+            cell = THUMB_PX + 2 * imgui.get_style().frame_padding.x + imgui.get_style().item_spacing.x
+            columns = max(1, int((imgui.get_content_region_avail().x + imgui.get_style().item_spacing.x) // cell))
         made = False
         items = list(presets().items())
         for k, (name, path) in enumerate(items):
