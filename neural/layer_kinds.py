@@ -75,7 +75,7 @@ LATENT = "latent"
 KINDS: dict[str, LayerKind] = {k.name: k for k in (
     LayerKind(DIELECTRIC, (Param("roughness", "scalar", 0.05), Param("ior", "scalar", 1.5)),
               interface=True, base=True, base_code=2),
-    LayerKind(MEDIUM, (Param("albedo", "rgb", (0.9, 0.9, 0.9)), Param("sigma_t", "scalar", 0.5)),
+    LayerKind(MEDIUM, (Param("albedo", "rgb", (0.0, 0.0, 0.0)), Param("sigma_t", "scalar", 0.05)),  # a clear varnish
               interface=False, base=False),
     LayerKind(CONDUCTOR, (Param("roughness", "scalar", 0.2), Param("r0", "rgb", (0.95, 0.64, 0.54))),
               interface=False, base=True, base_code=0),

@@ -75,9 +75,13 @@ def single_layer_eval(layer, wi: Tensor, wo: Tensor) -> Tensor:
 
 def reference_eval(material: Material, wi: Tensor, wo: Tensor, spp: int = 256, seed: int = 0, *,
                    dtype: torch.dtype = torch.float32, stats: SimStats | None = None,
-                   progress: Callable[[int], None] | None = None) -> tuple[Tensor, Tensor]:
+                   progress: Callable[[int], None] | None = None,
+                   top_reflection: bool = True) -> tuple[Tensor, Tensor]:
     """Reference f(wi, wo) (N, 3) and its standard error (N, 3) for N pairs.
-    Pairs with a direction below the horizon give 0 (the BRDF's support)."""
+    Pairs with a direction below the horizon give 0 (the BRDF's support).
+    ``top_reflection=False`` (stacks only): the light that entered the stack
+    alone, without the top interface's closed-form single reflection (the
+    body of ``neural.coat``'s split)."""
     check_uniform(material)
     wi = wi.to(dtype)
     wo = wo.to(dtype)
@@ -104,7 +108,8 @@ def reference_eval(material: Material, wi: Tensor, wo: Tensor, spp: int = 256, s
     for k, start in enumerate(range(0, idx.numel(), chunk)):
         sel = idx[start:start + chunk]
         sp = stack_params(material, sel.numel())
-        m, e = simulate(sp, wi[sel], wo[sel], spp=spp, seed=seed * 1_000_003 + k, dtype=dtype, stats=stats)
+        m, e = simulate(sp, wi[sel], wo[sel], spp=spp, seed=seed * 1_000_003 + k, dtype=dtype, stats=stats,
+                        include_top_reflection=top_reflection)
         mean[sel], err[sel] = m, e
         if progress is not None:
             progress(sel.numel())

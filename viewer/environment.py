@@ -7,6 +7,12 @@ direction (sin theta cos phi, sin theta sin phi, cos theta).
 
 Sampling draws a texel from the piecewise-constant density proportional to
 luminance x sin(theta) (a marginal CDF over rows, a conditional CDF per row),
+the luminance taken as the largest of the texel and its eight neighbours: the
+shaders read the radiance bilinearly, so a direction in a dim texel next to a
+bright one (the sun's disc) sees up to that texel's radiance, and a density of
+its own luminance alone would give it a tiny pdf there -- radiance over pdf
+unbounded, fireflies that multiply as passes accumulate. With the dilated
+weight, radiance over pdf stays bounded by the map's total power;
 then a uniform point inside it; the solid-angle pdf of a direction in texel
 (i, j) is w_ij / (sum w * du dv * 2 pi^2 sin theta), exact for the point
 drawn. The same tables drive the GLSL sampler (``shaders/environment.glsl``)
@@ -43,6 +49,15 @@ def default_environment(width: int = 512, height: int = 256) -> np.ndarray:
     return img.astype(np.float32)
 
 
+def dilated_luminance(radiance: np.ndarray) -> np.ndarray:
+    """(H, W) float64: per texel the largest luminance of it and its eight
+    neighbours (wrapping in phi, clamped in theta): every radiance a bilinear
+    read inside the texel can return is at most this."""
+    lum = (radiance @ LUMA).astype(np.float64)
+    rows = np.maximum(lum, np.maximum(np.vstack([lum[:1], lum[:-1]]), np.vstack([lum[1:], lum[-1:]])))
+    return np.maximum(rows, np.maximum(np.roll(rows, 1, 1), np.roll(rows, -1, 1)))
+
+
 class EnvironmentMap:
     """An equirectangular map with its sampling tables."""
 
@@ -54,7 +69,7 @@ class EnvironmentMap:
         self.radiance = np.ascontiguousarray(radiance, dtype=np.float32)
         h, w = radiance.shape[:2]
         sin_t = np.sin((np.arange(h) + 0.5) / h * math.pi)
-        weight = (self.radiance @ LUMA).astype(np.float64) * sin_t[:, None]
+        weight = dilated_luminance(self.radiance) * sin_t[:, None]
         if weight.sum() <= 0:  # a black map: sample uniformly (pdf still exact)
             weight = np.ones_like(weight) * sin_t[:, None]
         self.weight = weight

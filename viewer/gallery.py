@@ -46,20 +46,47 @@ def _label(tile: np.ndarray, text: str) -> np.ndarray:
     return np.asarray(img)
 
 
+class TileRenderer:
+    """One material on the sphere, offscreen, under the previewer's defaults
+    (environment, backdrop, exposure, tone mapper): the gallery's tiles and the
+    preset browser's thumbnails (viewer/thumbnails.py). Owns an EGL context's resources."""
+
+    def __init__(self, ctx=None):
+        from nbrdf.viewer.backdrop import Backdrop
+        from nbrdf.viewer.env_presets import resolve_environment
+        from nbrdf.viewer.gl import offscreen_context
+        from nbrdf.viewer.options import ViewOptions
+        from nbrdf.viewer.pipeline import MaterialPipeline
+        from nbrdf.viewer.renderer import Renderer, ViewState
+
+        self.opts = ViewOptions()
+        self.ctx = ctx or offscreen_context()
+        self.pipeline = MaterialPipeline(self.ctx)
+        self.renderer = Renderer(self.ctx, mesh="sphere", environment=resolve_environment(self.opts.env))
+        self.backdrop = Backdrop(self.ctx, self.renderer)
+        self.state = ViewState(exposure=self.opts.exposure, tonemap=self.opts.tonemap)
+
+    def render(self, material, size: int, spp: int) -> np.ndarray:
+        """The tone-mapped tile, uint8 (size, size, 3), row 0 on top."""
+        from nbrdf.viewer.image_io import tonemap
+        from nbrdf.viewer.modes import BrdfMode
+
+        brdf = self.pipeline.build(material, BrdfMode.AUTO)
+        img = self.backdrop.render_linear(self.state, (size, size), spp, brdf, self.opts.backdrop())
+        return tonemap(img, self.opts.exposure, self.opts.tonemap.value)
+
+    def release(self) -> None:
+        self.backdrop.release()
+        self.pipeline.release()
+
+
 def render_gallery(cfg: GalleryConfig) -> Path:
     """Renders the tiles (a progress bar per material) and writes the grid; returns its path."""
     from tqdm import tqdm
 
     from nbrdf.neural.material import load_material
-    from nbrdf.viewer.backdrop import Backdrop
-    from nbrdf.viewer.env_presets import resolve_environment
-    from nbrdf.viewer.gl import offscreen_context
-    from nbrdf.viewer.image_io import check_output, tonemap
+    from nbrdf.viewer.image_io import check_output
     from nbrdf.viewer.lookdev import presets
-    from nbrdf.viewer.modes import BrdfMode
-    from nbrdf.viewer.options import ViewOptions
-    from nbrdf.viewer.pipeline import MaterialPipeline
-    from nbrdf.viewer.renderer import Renderer, ViewState
 
     if cfg.tile < 16 or cfg.spp < 1 or cfg.columns < 1:
         raise NbrdfError("gallery: --tile >= 16, --spp >= 1 and --columns >= 1")
@@ -69,17 +96,10 @@ def render_gallery(cfg: GalleryConfig) -> Path:
     check_output(out)
     paths = [Path(p) for p in cfg.materials] or list(presets().values())
     materials = [load_material(p) for p in paths]  # every file is read before minutes of rendering
-    opts = ViewOptions()  # the previewer's defaults: environment, backdrop, exposure, tone mapper
-    ctx = offscreen_context()
-    pipeline = MaterialPipeline(ctx)
-    renderer = Renderer(ctx, mesh="sphere", environment=resolve_environment(opts.env))
-    backdrop = Backdrop(ctx, renderer)
-    state = ViewState(exposure=opts.exposure, tonemap=opts.tonemap)
+    tiler = TileRenderer()
     tiles = []
     for path, m in tqdm(list(zip(paths, materials)), desc="gallery", unit="material"):
-        brdf = pipeline.build(m, BrdfMode.AUTO)
-        img = backdrop.render_linear(state, (cfg.tile, cfg.tile), cfg.spp, brdf, opts.backdrop())
-        tiles.append(_label(tonemap(img, opts.exposure, opts.tonemap.value), m.name or path.stem))
+        tiles.append(_label(tiler.render(m, cfg.tile, cfg.spp), m.name or path.stem))
     rows = math.ceil(len(tiles) / cfg.columns)
     grid = np.zeros((rows * cfg.tile, min(cfg.columns, len(tiles)) * cfg.tile, 3), np.uint8)
     for k, t in enumerate(tiles):
@@ -89,6 +109,5 @@ def render_gallery(cfg: GalleryConfig) -> Path:
 
     out.parent.mkdir(parents=True, exist_ok=True)
     iio.imwrite(out, grid)
-    backdrop.release()
-    pipeline.release()
+    tiler.release()
     return out

@@ -72,3 +72,37 @@ def _notice(line: str) -> None:
     if line not in _noticed:
         _noticed.add(line)
         print(line, file=sys.stderr)
+
+
+#: The context limits a render target's side must respect, with the names users can look up.
+SIZE_LIMITS = ("GL_MAX_RENDERBUFFER_SIZE", "GL_MAX_TEXTURE_SIZE", "GL_MAX_VIEWPORT_DIMS")
+
+
+def check_target_size(ctx: moderngl.Context, size: tuple[int, int], flag: str = "--size") -> None:
+    """One line (``NbrdfError``) when this context cannot render a (w, h) image:
+    a side beyond the context's reported limits, or a float render target of that
+    size the driver refuses (software OpenGL caps a texture's bytes below its
+    reported side limits: llvmpipe reports 16384 and refuses 12000 x 12000 RGBA32F)."""
+    w, h = (int(v) for v in size)
+    for name in SIZE_LIMITS:
+        limit = ctx.info.get(name)
+        if limit is None:
+            continue
+        lw, lh = (limit, limit) if isinstance(limit, int) else (int(limit[0]), int(limit[1]))
+        if w > lw or h > lh:
+            raise NbrdfError(f"{flag} {w}x{h}: this OpenGL context allows at most {lw}x{lh} ({name}, "
+                             f"{describe(ctx)})")
+    tex = depth = fbo = None
+    try:  # the largest attachment the renderer makes: an RGBA32F target with a depth buffer
+        tex = ctx.texture((w, h), 4, dtype="f4")
+        depth = ctx.depth_renderbuffer((w, h))
+        fbo = ctx.framebuffer([tex], depth)
+    except Exception as e:  # noqa: BLE001 - any refusal is the same one-line answer
+        gib = w * h * 16 / 2 ** 30
+        raise NbrdfError(f"{flag} {w}x{h}: this OpenGL context cannot make a float render target that large "
+                         f"({gib:.1f} GiB; reported limits {ctx.info.get('GL_MAX_RENDERBUFFER_SIZE')} per side, "
+                         f"{describe(ctx)}: {str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+    finally:
+        for r in (fbo, depth, tex):
+            if r is not None:
+                r.release()

@@ -40,7 +40,7 @@ from nbrdf.neural.latent_texture import LatentTexture, blend
 from nbrdf.neural.material import Material, load_material, material_to_dict, save_material
 from nbrdf.viewer.backdrop import Backdrop, BackdropSettings
 from nbrdf.viewer.body_source import BodySource
-from nbrdf.viewer.compare import Compare, reference_state
+from nbrdf.viewer.compare import Compare
 from nbrdf.viewer.history import History
 from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, ToneMap, View
 from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, gpu_brdf, material_key
@@ -673,9 +673,9 @@ class LookDev:
         return self._compare_active() and self.compare == CompareMode.SIDE
 
     def main_state(self) -> ViewState:
-        """The view state of the neural image (compare mode on a stack's lit object:
-        the directional light alone, which is what its Monte Carlo reference shows)."""
-        return reference_state(self.state, self.material) if self._compare_active() else self.state
+        """The view state of the neural image (and of its reference: both sides of a
+        comparison are lit by what the view shows)."""
+        return self.state
 
     def render(self, target: moderngl.Framebuffer, size: tuple[int, int], passes: int = 1,
                scale: float = 1.0, interactive: bool = False, quick: bool | None = None) -> None:
@@ -737,7 +737,9 @@ class LookDev:
             # The lobe and slice views are not accumulated: their reference is drawn with them each frame.
             rf, rn = (first, n) if view == View.OBJECT else (0, 1)
             b, pb = self.compare_part.reference(self.material, self.ref_brdf, self.brdf, lit, self.mesh,
-                                                vw, h, rf, rn, done)
+                                                vw, h, rf, rn, done,
+                                                view_size=(max(1, size[0] // 2) if self.side_by_side else size[0],
+                                                           size[1]))
         elif blending:
             b = self._accumulated(view, lit, vw, h, first, n, self.other_brdf, slots[1])
             weight = self.interp.t
@@ -747,7 +749,7 @@ class LookDev:
         if view == View.OBJECT and not (comparing and s.mode in (CompareMode.ERROR, CompareMode.FLIP)):
             # The backdrop on what is shown (the error views score the object alone).
             a, pa = self.backdrop_part.apply(a, pa, state, self.backdrop, slots[0]), 1.0
-            if b is not None and (blending or (comparing and self.ref_brdf is not None)):
+            if b is not None and (blending or (comparing and b.size == a.size)):
                 b, pb = self.backdrop_part.apply(b, pb, state, self.backdrop, slots[1]), 1.0
         if b is None:
             b, pb = a, pa

@@ -23,7 +23,7 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     preview: on software OpenGL at most 256 x 256 and 32 passes (the default
     32 take about 20 s on two cores with the compute lit pass and leave 0.93 %
     relative noise; full size costs minutes)."""
-    from nbrdf.viewer.gl import offscreen_context
+    from nbrdf.viewer.gl import check_target_size, offscreen_context
     from nbrdf.viewer.image_io import check_output, write_image
     from nbrdf.viewer.renderer import ViewState
 
@@ -47,6 +47,7 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
                 opts.size, opts.spp = size, spp
                 note = f" (software OpenGL: a {size[0]}x{size[1]}, {spp}-pass preview)"
         print(f"{PROG}: {fallback}; rendering offscreen to {out} instead{note}", file=sys.stderr)
+    check_target_size(ctx, opts.size)  # before any rendering: one line naming the limit
     if opts.session:
         from nbrdf.viewer.lookdev import LookDev
 

@@ -156,3 +156,35 @@ def test_a_gltf_mesh_brings_its_material(tmp_path, capsys):
     assert "occlusionTexture" in err and len(err.strip().splitlines()) == len(notes)
     img = np.load(out)
     assert np.isfinite(img).all() and (img[..., 0] > img[..., 2]).mean() > 0.2  # red car paint on screen
+
+
+class _LimitedContext:
+    """A context whose reported limits are those of ``ctx`` scaled down (the limit check alone)."""
+
+    def __init__(self, ctx, side: int):
+        self._ctx = ctx
+        self.info = dict(ctx.info, GL_MAX_RENDERBUFFER_SIZE=side)
+
+    def __getattr__(self, name):
+        return getattr(self._ctx, name)
+
+
+@pytest.mark.gl
+def test_a_size_beyond_the_renderbuffer_limit_names_the_limit(gl_ctx):
+    from nbrdf.neural.errors import NbrdfError
+    from nbrdf.viewer.gl import check_target_size
+
+    check_target_size(gl_ctx, (64, 48))  # within every limit: no error
+    with pytest.raises(NbrdfError, match=r"--size 65x48: .*at most 64x64 \(GL_MAX_RENDERBUFFER_SIZE"):
+        check_target_size(_LimitedContext(gl_ctx, 64), (65, 48))
+
+
+@pytest.mark.gl
+def test_cli_size_the_context_cannot_render_is_one_line_exit_2(gl_ctx, tmp_path, capsys, monkeypatch):
+    if "llvmpipe" not in gl_ctx.info.get("GL_RENDERER", ""):
+        pytest.skip("the 4 GiB float target is refused by llvmpipe; a GPU may allocate it")
+    monkeypatch.chdir(tmp_path)
+    assert main(["--offscreen", "--out", "x.png", "--size", "16384x16384"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--size 16384x16384" in err[0] and "internal error" not in err[0], err
+    assert not (tmp_path / "x.png").exists()

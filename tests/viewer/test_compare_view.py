@@ -133,4 +133,5 @@ def test_the_status_line_states_the_references_noise(gl_ctx):
     c._job = "k"
     assert c.status(parse_material(STANDARD_STACK), "lobe") == "reference: Monte Carlo, 512 paths per pixel, noise 2.0 %..."
     w._cache["k"] = ReferenceImage(img, 4096, True, None, se / 4)
-    assert c.status(parse_material(STANDARD_STACK), "object").endswith("directional light only, 4096 paths per pixel, noise 0.5 %")
+    assert c.status(parse_material(STANDARD_STACK), "object") == (
+        "reference: Monte Carlo lights and body, 4096 samples per pixel, noise 0.5 %; the coat in closed form on the GPU")

@@ -26,8 +26,19 @@ def test_set_param_validates(editor):
     assert json.dumps(editor.doc) == before
 
 
-def test_add_remove_move_and_media(editor):
+def test_add_clear_coat_adds_an_interface_without_a_medium(editor):
+    """A clear coat makes the object glossier: a bare interface on top, nothing
+    milky under it (it used to insert albedo 0.9, sigma_t 0.5)."""
+    before = editor.material
     m = editor.add_coat()
+    assert len(m.layers) == len(before.layers) + 1 and isinstance(m.layers[0], Dielectric)
+    assert m.interfaces[0][1] is None and not isinstance(m.layers[1], Medium)
+    m = editor.toggle_medium(0)  # a medium added later is a clear varnish: absorbs weakly, scatters nothing
+    assert isinstance(m.layers[1], Medium) and max(m.layers[1].albedo) == 0.0 and m.layers[1].sigma_t <= 0.1
+
+
+def test_add_remove_move_and_media(editor):
+    m = editor.add_coat(medium=True)
     assert len(m.interfaces) == 2 and isinstance(m.layers[0], Dielectric) and isinstance(m.layers[1], Medium)
     editor.set_param(0, "roughness", 0.3)
     m = editor.move(0, 1)  # the new coat (with its medium) goes below the old one

@@ -20,6 +20,7 @@ from nbrdf.viewer.camera import FOV_RANGE
 from nbrdf.viewer.env_presets import ENV_PRESETS
 from nbrdf.viewer.lookdev import LookDev, presets
 from nbrdf.viewer.modes import Background, CompareMode, ToneMap, View
+from nbrdf.viewer.ui.preset_browser import preset_browser
 from nbrdf.viewer.ui.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
 
 COMPARE_LABELS = {CompareMode.OFF: "off", CompareMode.SIDE: "side by side", CompareMode.WIPE: "A/B wipe",
@@ -142,6 +143,7 @@ class Panels:
                 if imgui.selectable(n, False)[0]:
                     ld.load_preset(n)
             imgui.end_combo()
+        preset_browser(ld)
         progress = ld.svbrdf_progress()
         if progress is not None:
             imgui.progress_bar(progress, None, "latent texture")

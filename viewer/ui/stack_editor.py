@@ -56,8 +56,8 @@ class StackEditor:
     def set_name(self, name: str) -> Material:
         return self._apply({**copy.deepcopy(self.doc), "name": name})
 
-    def add_coat(self, medium: bool = True) -> Material:
-        """A clear coat on top: a dielectric interface (and a medium below it)."""
+    def add_coat(self, medium: bool = False) -> Material:
+        """A clear coat on top: a dielectric interface (with ``medium``, a clear varnish slab below it)."""
         doc = copy.deepcopy(self.doc)
         new = [copy.deepcopy(NEW_LAYER[DIELECTRIC])] + ([copy.deepcopy(NEW_LAYER[MEDIUM])] if medium else [])
         doc["layers"] = new + doc["layers"]

@@ -1,0 +1,123 @@
+"""The preset browser: the bundled materials as a grid of thumbnails (the
+sphere under the previewer's default look, viewer/thumbnails.py); a click
+loads the preset.
+
+Thumbnails come from the cache folder; one not cached yet is rendered in the
+window's own OpenGL context, one per frame (a progress line shows how many
+are left), so the window stays responsive and the next start reads them all.
+"""
+from __future__ import annotations
+
+import weakref
+
+import moderngl
+import numpy as np
+
+from nbrdf.viewer.lookdev import LookDev, presets
+from nbrdf.viewer.thumbnails import ThumbnailCache
+
+THUMB_PX = 64      #: thumbnail side on screen and in the cache, pixels
+THUMB_SPP = 16     #: passes per thumbnail
+
+
+class PresetBrowser:
+    """A grid of preset thumbnails for the material panel (``draw`` each frame)."""
+
+    def __init__(self, ld: LookDev, cache: ThumbnailCache | None = None):
+        self.ld = ld
+        self.cache = cache or ThumbnailCache(size=THUMB_PX, spp=THUMB_SPP)
+        self._tiler = None
+        self._textures: dict[str, moderngl.Texture] = {}
+        self.failed: dict[str, str] = {}
+        """Presets whose thumbnail could not be made, with the one-line reason."""
+
+    def _renderer(self):
+        """The tile renderer in the window's context (made when a thumbnail is first missing)."""
+        if self._tiler is None:
+            from nbrdf.viewer.gallery import TileRenderer
+
+            self._tiler = TileRenderer(self.ld.ctx)
+            self.cache._render = self._tiler.render
+        return self._tiler
+
+    def _texture(self, name: str, path) -> moderngl.Texture | None:
+        """The thumbnail of preset ``name`` as a texture: cached, or read, or rendered now."""
+        if name in self._textures or name in self.failed:
+            return self._textures.get(name)
+        from nbrdf.neural.errors import NbrdfError
+        from nbrdf.neural.material import load_material
+
+        try:
+            m = load_material(path)
+            if not self.cache.path(m).is_file():
+                self._renderer()
+            img = self.cache.get(m)
+        except (NbrdfError, OSError, ValueError) as e:
+            self.failed[name] = str(e).splitlines()[0] if str(e) else type(e).__name__
+            return None
+        data = np.ascontiguousarray(np.dstack([img, np.full(img.shape[:2], 255, np.uint8)]))
+        tex = self.ld.ctx.texture((data.shape[1], data.shape[0]), 4, data.tobytes())
+        self._textures[name] = tex
+        return tex
+
+    def pending(self) -> int:
+        """Presets without a thumbnail yet."""
+        return sum(1 for n in presets() if n not in self._textures and n not in self.failed)
+
+    def draw(self, columns: int | None = None) -> None:
+        """The grid (``columns`` None: as many as fit the panel's width); at most one
+        missing thumbnail is made per call."""
+        from imgui_bundle import imgui
+
+        if columns is None:
+            cell = THUMB_PX + 2 * imgui.get_style().frame_padding.x + imgui.get_style().item_spacing.x
+            columns = max(1, int((imgui.get_content_region_avail().x + imgui.get_style().item_spacing.x) // cell))
+        made = False
+        items = list(presets().items())
+        for k, (name, path) in enumerate(items):
+            tex = self._textures.get(name)
+            if tex is None and not made and name not in self.failed:
+                tex, made = self._texture(name, path), True
+            if k % columns:
+                imgui.same_line()
+            imgui.begin_group()
+            if tex is not None:
+                # imgui draws uv (0, 0) at the top left; the texture's first row is the image's top.
+                clicked = imgui.image_button(f"preset_{name}", imgui.ImTextureRef(tex.glo),
+                                             imgui.ImVec2(THUMB_PX, THUMB_PX))
+            else:
+                clicked = imgui.button(f"{name[:9]}##preset_{name}", imgui.ImVec2(THUMB_PX + 8, THUMB_PX + 8))
+            if imgui.is_item_hovered():
+                imgui.set_tooltip(self.failed.get(name, name))
+            imgui.end_group()
+            if clicked:
+                self.ld.load_preset(name)
+        left = self.pending()
+        if left:
+            imgui.text(f"rendering thumbnails: {left} left")
+
+    def release(self) -> None:
+        for t in self._textures.values():
+            t.release()
+        self._textures.clear()
+        if self._tiler is not None:
+            self._tiler.release()
+            self._tiler = None
+
+
+#: Whether the browser's header starts open (closed: no thumbnail work until the user opens it).
+DEFAULT_OPEN = False
+_browsers: "weakref.WeakKeyDictionary[LookDev, PresetBrowser]" = weakref.WeakKeyDictionary()
+
+
+def preset_browser(ld: LookDev) -> None:
+    """The preset browser of ``ld``'s window under a collapsing header (the panel's one call)."""
+    from imgui_bundle import imgui
+
+    if DEFAULT_OPEN:
+        imgui.set_next_item_open(True, imgui.Cond_.once)
+    if imgui.collapsing_header("preset browser"):
+        browser = _browsers.get(ld)
+        if browser is None:
+            browser = _browsers[ld] = PresetBrowser(ld)
+        browser.draw()
