@@ -705,22 +705,25 @@ class LookDev:
             self.passes = 0
         self.renderer.quick = interactive if quick is None else quick  # the quick estimator (one pass per frame)
         before = self.passes
-        self.passes = self._draw(target, w, h, self.passes, passes, VIEW_SLOTS, body=body)
+        self.passes = self._draw(target, w, h, self.passes, passes, VIEW_SLOTS, body=body, view_size=size)
         self.timings.render_ms = (time.perf_counter() - t0) * 1000.0
         if View.parse(self.state.view) == View.OBJECT and self.passes > before:
             self._ms_per_pixel_pass = self.timings.render_ms / (w * h * (self.passes - before))
 
     def _draw(self, target: moderngl.Framebuffer, w: int, h: int, first: int, passes: int,
-              slots: tuple[str, str], camera=None, body: GpuBrdf | None = None) -> int:
+              slots: tuple[str, str], camera=None, body: GpuBrdf | None = None,
+              view_size: tuple[int, int] | None = None) -> int:
         """Adds up to ``passes`` passes after ``first`` into the accumulation
         ``slots`` (the image, the second image of a blend) at (w, h) and draws
         the composite into ``target``; returns the passes accumulated. The
         lobe and slice views are drawn once (``first`` 0) and shown from then on.
         ``camera``: another camera than the view's (a screenshot's tile); ``body``: the
-        BRDF the image is shaded with (None: the decoder's, ``brdf``)."""
+        BRDF the image is shaded with (None: the decoder's, ``brdf``); ``view_size``: the
+        view's full size before the render scale (the Monte Carlo reference's resolution)."""
         comparing = self._compare_active()
         blending = self.interp.brdf_blend and self.other_brdf is not None
         vw = max(1, w // 2) if self.side_by_side else w
+        full = view_size or (w, h)
         n = 0 if first >= MAX_PASSES else min(passes, MAX_PASSES - first)
         view = View.parse(self.state.view)
         if view != View.OBJECT:
@@ -738,8 +741,8 @@ class LookDev:
             rf, rn = (first, n) if view == View.OBJECT else (0, 1)
             b, pb = self.compare_part.reference(self.material, self.ref_brdf, self.brdf, lit, self.mesh,
                                                 vw, h, rf, rn, done,
-                                                view_size=(max(1, size[0] // 2) if self.side_by_side else size[0],
-                                                           size[1]))
+                                                view_size=(max(1, full[0] // 2) if self.side_by_side else full[0],
+                                                           full[1]))
         elif blending:
             b = self._accumulated(view, lit, vw, h, first, n, self.other_brdf, slots[1])
             weight = self.interp.t

@@ -279,28 +279,28 @@ def lit_samples(spec: LitSpec, material: Material, env, k: int, seed: int) -> np
         l_env = to_local(frame, _rotate_z(d_map, spec.env_rotation))
         r, ph = np.sqrt(u[:, 0]), 2 * math.pi * u[:, 1]
         l_cos = np.stack([r * np.cos(ph), r * np.sin(ph), np.sqrt(np.maximum(0.0, 1 - u[:, 0]))], -1)
-        l = np.where((pick == 0)[:, None], l_env, l_cos)
+        d = np.where((pick == 0)[:, None], l_env, l_cos)
         wo_t = torch.from_numpy(wo)
         if strategies == 3:
             alpha = torch.tensor(spec.lobe_alpha, dtype=torch.float64)
             m = sample_vndf(wo_t, alpha, torch.from_numpy(u[:, 0]), torch.from_numpy(u[:, 1]))
-            l = np.where((pick == 2)[:, None], reflect(wo_t, m).numpy(), l)
-        l = l / np.linalg.norm(l, axis=-1, keepdims=True)
-        lw = np.einsum("nij,nj->ni", frame, l)
+            d = np.where((pick == 2)[:, None], reflect(wo_t, m).numpy(), d)
+        d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        lw = np.einsum("nij,nj->ni", frame, d)
         d_lookup = _rotate_z(lw, -spec.env_rotation)
-        pdf = env.pdf(d_lookup) + np.maximum(l[:, 2], 0.0) / math.pi
+        pdf = env.pdf(d_lookup) + np.maximum(d[:, 2], 0.0) / math.pi
         if strategies == 3:
-            lt = torch.from_numpy(l)
+            lt = torch.from_numpy(d)
             h = torch.nn.functional.normalize(lt + wo_t, dim=-1)
             pv = vndf_pdf(wo_t, h, alpha) / (4 * (wo_t * h).sum(-1).abs().clamp_min(1e-12))
             pdf = pdf + torch.where(lt[:, 2] > 0, pv, torch.zeros_like(pv)).numpy()
         pdf = pdf / strategies
-        up = (l[:, 2] > 0) & (pdf > 0)
+        up = (d[:, 2] > 0) & (pdf > 0)
         if up.any():
-            f, _ = reference_eval(material, torch.from_numpy(l[up]), torch.from_numpy(wo[up]), spp=1,
+            f, _ = reference_eval(material, torch.from_numpy(d[up]), torch.from_numpy(wo[up]), spp=1,
                                   seed=2 * seed + 2, top_reflection=False)
             radiance = env_bilinear(env.radiance, d_lookup[up]) * spec.env_intensity
-            out[up] += f.double().numpy() * radiance * (l[up, 2:3] / pdf[up, None])
+            out[up] += f.double().numpy() * radiance * (d[up, 2:3] / pdf[up, None])
     return out.reshape(n, k, 3)
 
 
