@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from pathlib import Path
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import Material, _reject_constant, material_to_dict, parse_material
+from nbrdf.neural.material import Material, material_to_dict, parse_material
 from nbrdf.viewer.backdrop import BackdropSettings
 from nbrdf.viewer.camera import OrbitCamera
 from nbrdf.viewer.modes import CompareMode, ToneMap, View
@@ -202,7 +202,7 @@ class SessionDoc:
         if not p.is_file():
             raise NbrdfError(f"{p}: no such file")
         try:
-            data = json.loads(p.read_text(encoding="utf-8"), parse_constant=_reject_constant)
+            data = json.loads(p.read_text(encoding="utf-8"))  # NaN or Infinity: require_finite names the field
         except json.JSONDecodeError as e:
             raise NbrdfError(f"{p}: not JSON ({e.msg} at line {e.lineno})") from None
         except UnicodeDecodeError:
