@@ -373,11 +373,21 @@ _STOP = "stop"
 PAUSED_JOBS = 16  # interrupted jobs whose pooled paths the worker keeps
 
 
-def _next_request(requests, block: bool):
-    """The newest request in the queue (older ones are superseded), or None."""
+def _next_request(requests, block: bool, parent: int | None = None):
+    """The newest request in the queue (older ones are superseded), or None.
+    Blocking, it wakes every second and answers _STOP once the window's process
+    (``parent``) is gone: a window killed outright leaves no worker behind."""
     item = None
     try:
-        item = requests.get(block=block, timeout=None if block else 0)
+        while block and item is None:
+            if parent is not None and os.getppid() != parent:
+                return _STOP
+            try:
+                item = requests.get(timeout=1.0)
+            except queue.Empty:
+                continue
+        if item is None:
+            item = requests.get_nowait()
         while True:
             item = requests.get_nowait()
     except queue.Empty:
@@ -399,8 +409,9 @@ def _serve(requests, results, threads: int) -> None:
     # resumes where it stopped (two views that alternate both progress).
     paused: dict[str, object] = {}
     envs: dict = {}
+    parent = os.getppid()
     while True:
-        item = _next_request(requests, block=job is None)
+        item = _next_request(requests, block=job is None, parent=parent)
         if item == _STOP:
             return
         if item is not None:
@@ -420,7 +431,7 @@ def _serve(requests, results, threads: int) -> None:
                     job = None
                     break
                 newer = _next_request(requests, block=False)
-                if newer == _STOP:
+                if newer == _STOP or os.getppid() != parent:
                     return
                 if newer is not None and newer.key != job.key:
                     paused[job.key] = run

@@ -223,6 +223,20 @@ WINDOW = textwrap.dedent("""
 
 @pytest.mark.gl
 @pytest.mark.slow
+def _ppid(pid: int) -> int:
+    """The parent of ``pid`` (0 once it is gone or a zombie)."""
+    try:
+        fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0
+    return 0 if fields[0] == "Z" else int(fields[1])
+
+
+def _children(pid: int) -> list[int]:
+    """The live processes whose parent is ``pid``."""
+    return [int(d) for d in os.listdir("/proc") if d.isdigit() and _ppid(int(d)) == pid]
+
+
 def test_a_killed_window_restores_its_last_autosave_exactly(xvfb_display, tmp_path):
     env = dict(os.environ, DISPLAY=xvfb_display, NBRDF_STATE_DIR=str(tmp_path / "state"))
     args = [str(DEFAULT_MATERIAL), "--out", str(tmp_path / "x.png")]
@@ -236,12 +250,21 @@ def test_a_killed_window_restores_its_last_autosave_exactly(xvfb_display, tmp_pa
             if a.exists() and json.loads(a.read_text()) == expected:
                 break
             time.sleep(0.1)
+        children = _children(p.pid)  # the Monte Carlo worker
         p.send_signal(signal.SIGKILL)
         p.wait(30)
     finally:
         if p.poll() is None:
             p.kill()
     assert p.returncode == -signal.SIGKILL
+    assert children, "the window started no worker process"
+    left = set(children)
+    for _ in range(300):  # a worker notices its window is gone within a second or two
+        left = {c for c in left if os.path.exists(f"/proc/{c}") and _ppid(c) != 0}
+        if not left:
+            break
+        time.sleep(0.1)
+    assert not left, f"worker processes left behind by the killed window: {sorted(left)}"
     assert (tmp_path / "state" / "session.lock").exists()  # the kill left the lock: an abnormal end
     r = subprocess.run([sys.executable, "-c", WINDOW, *args, "--restore"], env=env, capture_output=True, text=True,
                        timeout=300)
