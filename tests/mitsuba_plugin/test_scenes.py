@@ -105,3 +105,47 @@ def test_teapot_ply_is_cached_and_readable(tmp_path, monkeypatch):
     mesh = mi.load_dict({"type": "ply", "filename": str(p)})
     verts, tris = teapot.tessellate(teapot.load_patches(), 4)
     assert mesh.vertex_count() == len(verts) and mesh.face_count() == len(tris)
+
+
+# --- nbrdf report scenes: the equal-time logic ------------------------------------------------
+def test_equal_time_spp_and_crossover():
+    from nbrdf.mitsuba.scene_report import crossover_seconds, equal_time_spp
+    from nbrdf.neural.errors import NbrdfError
+
+    assert equal_time_spp(10.0, 0.5, 4) == 20  # 20 spp fill 10 s at 0.5 s/spp
+    assert equal_time_spp(10.0, 0.3, 4) == 32  # 33.3 spp -> whole chunks of 4
+    assert equal_time_spp(0.1, 5.0, 4) == 4  # never fewer than one chunk
+    with pytest.raises(NbrdfError):
+        equal_time_spp(10.0, 0.0, 4)
+    # MSE ~ 1/t: 4e-3 after 10 s reaches 1e-3 after 40 s
+    assert crossover_seconds(4e-3, 10.0, 1e-3) == pytest.approx(40.0)
+    assert crossover_seconds(4e-3, 10.0, 0.0) == float("inf")
+
+
+@pytest.mark.slow
+def test_scene_report_on_a_tiny_scene(tmp_path):
+    """Both methods render; the MC's spp comes from its timing (whole chunks);
+    the MSEs are those of the saved images against the cached converged
+    reference, which a second run reads back instead of rendering."""
+    from nbrdf.mitsuba.scene_report import SceneReportConfig, converged_reference, mse, run_scene_report
+    from nbrdf.mitsuba.scenes import load_scene
+
+    coated = str(Path(__file__).resolve().parents[2] / "viewer/assets/materials/coated_copper.json")
+    scene = _tiny_scene(tmp_path / "tiny.json", coated)
+    cfg = SceneReportConfig(out=tmp_path / "rep", scenes=(scene,), size=(12, 9), time_budget=0.5, ref_spp=8,
+                            chunk=2)
+    result = run_scene_report(cfg, log=lambda s: None)
+    (row,) = result["scenes"]
+    assert row["scene"] == "tiny" and row["reference"]["spp"] == 8 and not row["reference"]["cached"]
+    assert row["mc"]["spp"] % 2 == 0 and row["mc"]["spp"] >= 2 and row["neural"]["spp"] >= 2
+    ref = converged_reference(load_scene(scene), cfg)
+    assert ref["cached"] and ref["image"].shape == (9, 12, 3)
+    for k in ("neural", "mc"):
+        img = np.load(tmp_path / "rep" / f"tiny-{k}.npy")
+        assert np.isfinite(img).all()
+        assert row[k]["mse"] == pytest.approx(mse(ref["image"], img), rel=1e-6)
+        assert 0 <= row[k]["flip"] <= 1
+    assert row["neural"]["mse"] > 0 and row["mc"]["mse"] > 0
+    assert row["reference"]["noise_mse"] == pytest.approx(mse(ref["half_a"], ref["half_b"]) / 4)
+    assert (tmp_path / "rep" / "scenes.png").is_file() and "tiny" in (tmp_path / "rep" / "scenes.md").read_text()
+    json.loads((tmp_path / "rep" / "scenes.json").read_text())
