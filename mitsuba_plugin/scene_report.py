@@ -122,7 +122,7 @@ def converged_reference(scene: Scene, cfg: SceneReportConfig, progress=None) -> 
 
 
 def _timed(scene: Scene, cfg: SceneReportConfig, spp: int | None, seed: int,
-           max_seconds: float | None = None) -> tuple[RenderResult, float]:
+           max_seconds: float | None = None, keep_chunks: bool = False) -> tuple[RenderResult, float]:
     """One untimed warm-up chunk (kernel compilation), then the timed render;
     returns it and the warm-up's seconds."""
     mscene = load(scene, cfg.size, cfg.chunk)
@@ -130,7 +130,17 @@ def _timed(scene: Scene, cfg: SceneReportConfig, spp: int | None, seed: int,
     render(scene, cfg.size, cfg.chunk, seed=seed + 777, chunk_spp=cfg.chunk, loaded=mscene)
     warm = time.perf_counter() - t0
     big = spp if spp is not None else 1 << 20
-    return render(scene, cfg.size, big, seed=seed, chunk_spp=cfg.chunk, loaded=mscene, max_seconds=max_seconds), warm
+    return render(scene, cfg.size, big, seed=seed, chunk_spp=cfg.chunk, loaded=mscene, max_seconds=max_seconds,
+                  keep_chunks=keep_chunks), warm
+
+
+def own_noise_mse(chunks: list[np.ndarray]) -> float:
+    """The noise variance of a render's average, from its even and odd chunks
+    (a quarter of the halves' squared difference); NaN with fewer than two."""
+    n = len(chunks) // 2 * 2
+    if n < 2:
+        return math.nan
+    return mse(np.mean(chunks[0:n:2], 0), np.mean(chunks[1:n:2], 0)) / 4
 
 
 def score_scene(name: str, cfg: SceneReportConfig, log=print) -> tuple[dict, dict]:
@@ -141,18 +151,18 @@ def score_scene(name: str, cfg: SceneReportConfig, log=print) -> tuple[dict, dic
     log(f"[{scene.name}] converged reference ({cfg.ref_spp} spp)")
     ref = converged_reference(scene, cfg)
     log(f"[{scene.name}] neural at {cfg.time_budget:g} s")
-    neural, _ = _timed(with_method(scene, "neural"), cfg, None, cfg.seed, max_seconds=cfg.time_budget)
+    neural, _ = _timed(with_method(scene, "neural"), cfg, None, cfg.seed, max_seconds=cfg.time_budget, keep_chunks=True)
     log(f"[{scene.name}] reference timing run")
     mc_scene = with_method(scene, "reference")
     timing, _ = _timed(mc_scene, cfg, cfg.chunk * cfg.timing_chunks, cfg.seed + 1)
     spp_mc = equal_time_spp(neural.seconds, timing.seconds / timing.spp, cfg.chunk)
     log(f"[{scene.name}] reference at {spp_mc} spp (equal time)")
-    mc, _ = _timed(mc_scene, cfg, spp_mc, cfg.seed + 2)
+    mc, _ = _timed(mc_scene, cfg, spp_mc, cfg.seed + 2, keep_chunks=True)
     if abs(mc.seconds / neural.seconds - 1) > TIME_TOLERANCE:
         # the short timing run misjudged the pace (a loaded machine): rescale by the measured one, render again
         spp_mc = equal_time_spp(neural.seconds, mc.seconds / mc.spp, cfg.chunk)
         log(f"[{scene.name}] reference took {mc.seconds:.1f} s, not {neural.seconds:.1f} s: again at {spp_mc} spp")
-        mc, _ = _timed(mc_scene, cfg, spp_mc, cfg.seed + 3)
+        mc, _ = _timed(mc_scene, cfg, spp_mc, cfg.seed + 3, keep_chunks=True)
     row: dict = {"scene": scene.name, "size": list(cfg.size),
                  "reference": {"spp": ref["spp"], "seconds": round(ref["seconds"], 2), "cached": ref["cached"],
                                "noise_mse": ref["noise_mse"],
@@ -162,7 +172,11 @@ def score_scene(name: str, cfg: SceneReportConfig, log=print) -> tuple[dict, dic
         fl, fmap = flip(ref["image"], r.image)
         m = mse(ref["image"], r.image)
         row[key] = {"spp": r.spp, "seconds": round(r.seconds, 2), "seconds_per_spp": r.seconds / r.spp,
-                    "mse": m, "mse_minus_ref_noise": max(m - ref["noise_mse"], 0.0), "flip": fl}
+                    "mse": m, "mse_minus_ref_noise": max(m - ref["noise_mse"], 0.0), "flip": fl,
+                    "noise_mse": own_noise_mse(r.chunks)}
+        # what is left of the error once both renders' noise is taken out: the bias (0 for the unbiased MC,
+        # up to its own noise estimate's error)
+        row[key]["bias_mse"] = max(m - ref["noise_mse"] - row[key]["noise_mse"], 0.0)
         images[key], images[f"err_{key}"], images[f"flip_{key}"] = r.image, np.mean((r.image - ref["image"]) ** 2, 2), fmap
     row["mc_timing"] = {"spp": timing.spp, "seconds": round(timing.seconds, 2)}
     row["mse_ratio_mc_over_neural"] = row["mc"]["mse"] / max(row["neural"]["mse"], 1e-30)
@@ -180,8 +194,9 @@ def markdown(result: dict) -> str:
              "this machine). Paper (Table 3, 1024x1024, Mitsuba on a workstation): neural vs Guo et al.",
              "",
              "| scene | neural spp | MC spp | time/frame (s) | MSE neural | MSE MC | MC/neural | FLIP neural | "
-             "FLIP MC | ref spp (noise MSE) | crossover (s, extrapolated) | paper neural / MC |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "FLIP MC | neural noise / bias MSE | MC noise / bias MSE | ref spp (noise MSE) | crossover (s, extrapolated) | "
+             "paper neural / MC |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in result["scenes"]:
         p = PAPER_TABLE3.get(r["scene"])
         paper = f"{p[0]:.1e} / {p[1]:.1e} ({p[1] / p[0]:.1f}x)" if p else "-"
@@ -190,10 +205,14 @@ def markdown(result: dict) -> str:
             f"| {r['scene']} | {r['neural']['spp']} | {r['mc']['spp']} | {r['neural']['seconds']:.1f} / "
             f"{r['mc']['seconds']:.1f} | {r['neural']['mse']:.2e} | {r['mc']['mse']:.2e} | "
             f"{r['mse_ratio_mc_over_neural']:.2f}x | {r['neural']['flip']:.3f} | {r['mc']['flip']:.3f} | "
+            f"{r['neural']['noise_mse']:.1e} / {r['neural']['bias_mse']:.1e} | "
+            f"{r['mc']['noise_mse']:.1e} / {r['mc']['bias_mse']:.1e} | "
             f"{r['reference']['spp']} ({r['reference']['noise_mse']:.1e}) | "
             f"{'never' if math.isinf(cross) else f'{cross:.0f}'} | {paper} |")
     lines += ["", "MSE ~ 1/time for the unbiased Monte Carlo: the crossover is the time at which it would reach the "
-              "neural material's error (both corrected for the reference's own noise). An extrapolation."]
+              "neural material's error (both corrected for the reference's own noise). An extrapolation. Noise: each "
+              "render's own, from its even and odd chunks; bias: the MSE left after both renders' noise (the neural "
+              "material's representation error; about 0 for the Monte Carlo)."]
     return "\n".join(lines) + "\n"
 
 
@@ -226,7 +245,8 @@ def save_figure(rows: list[dict], images: list[dict], path: Path) -> None:
             if c.startswith("err_"):
                 ax.imshow(im[c], cmap="magma", vmin=0, vmax=vmax, interpolation="nearest")
                 k = c[4:]
-                ax.set_title(f"sq. err {k}\nMSE {row[k]['mse']:.1e}", fontsize=7)
+                ax.set_title(f"sq. err {k}: MSE {row[k]['mse']:.1e}\n(noise {row[k]['noise_mse']:.1e}, "
+                             f"bias {row[k]['bias_mse']:.1e})", fontsize=6)
             else:
                 key = c.split()[-1]
                 img = im[key][y0:y0 + ch, x0:x0 + cw] if c.startswith("crop") else im[key]

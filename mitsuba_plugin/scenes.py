@@ -212,13 +212,13 @@ def uses_reference(scene: Scene) -> bool:
 ENV_TO_WORLD = [[0.0, 0.0, -1.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
 
 
-def environment_bitmap(preset: str, scale: float = 1.0):
-    """The preset as a Mitsuba RGB bitmap (linear radiance)."""
+def environment_bitmap(preset: str, scale: float = 1.0, size: tuple[int, int] = ENV_SIZE):
+    """The preset at ``size`` (w, h) as a Mitsuba RGB bitmap (linear radiance)."""
     import mitsuba as mi
 
     from nbrdf.viewer.env_presets import make_environment
 
-    img = make_environment(preset, *ENV_SIZE) * np.float32(scale)
+    img = make_environment(preset, *size) * np.float32(scale)
     return mi.Bitmap(np.ascontiguousarray(img, np.float32), mi.Bitmap.PixelFormat.RGB)
 
 
