@@ -146,6 +146,10 @@ def test_scene_report_on_a_tiny_scene(tmp_path):
         assert row[k]["mse"] == pytest.approx(mse(ref["image"], img), rel=1e-6)
         assert 0 <= row[k]["flip"] <= 1
     assert row["neural"]["mse"] > 0 and row["mc"]["mse"] > 0
+    assert row["mse_ratio_mc_over_neural"] == pytest.approx(row["mc"]["mse"] / row["neural"]["mse"])
+    assert np.isfinite(row["mse_ratio_mc_over_neural_time_matched"]) and row["crossover_is_extrapolated"]
+    for k in ("neural", "mc"):  # the bias is what is left of the MSE after both noises, never negative
+        assert 0 <= row[k]["bias_mse"] <= row[k]["mse"]
     assert row["reference"]["noise_mse"] == pytest.approx(mse(ref["half_a"], ref["half_b"]) / 4)
     assert (tmp_path / "rep" / "scenes.png").is_file() and "tiny" in (tmp_path / "rep" / "scenes.md").read_text()
     json.loads((tmp_path / "rep" / "scenes.json").read_text())
