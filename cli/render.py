@@ -25,7 +25,7 @@ class RenderConfig:
     """``nbrdf render``: a scene (JSON or preset) path traced in Mitsuba 3 with global illumination."""
 
     out: str
-    """output image: .exr (linear) or .png (tone-mapped as the previewer does)"""
+    """output image: .exr (linear) or .png (tone-mapped, see --tonemap)"""
     scene: str | None = field(default=None, metadata={"positional": True, "metavar": "SCENE"})
     """a scene JSON or a preset: still_life, teapot (required)"""
     spp: int = 64
@@ -38,6 +38,8 @@ class RenderConfig:
     """samples per pixel per Mitsuba pass (the progress bar's step)"""
     exposure: float = 0.0
     """PNG only: exposure in EV before tone mapping"""
+    tonemap: str = field(default="neutral", metadata={"choices": ("linear", "aces", "agx", "neutral")})
+    """PNG only: the display transform (the previewer's default: Khronos PBR Neutral)"""
 
 
 def cmd_render(a: argparse.Namespace) -> int:
@@ -68,7 +70,7 @@ def cmd_render(a: argparse.Namespace) -> int:
     with tqdm(total=c.spp, unit="spp", desc=f"render {scene.name}", leave=False) as bar:
         res = render(scene, c.size, c.spp, seed=c.seed, chunk_spp=c.chunk,
                      progress=lambda n: bar.update(min(n, c.spp) - bar.n))
-    write_image(out, res.image, exposure=c.exposure)
+    write_image(out, res.image, exposure=c.exposure, mode=c.tonemap)
     print(f"{out}: {c.size[0]}x{c.size[1]}, {res.spp} spp in {res.seconds:.1f} s")
     return 0
 
