@@ -8,16 +8,7 @@ from dataclasses import dataclass, field
 
 from nbrdf.cli.config import add_arguments, build
 from nbrdf.neural.errors import NbrdfError
-
-
-def _size(s: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in s.lower().split("x"))
-    except ValueError:
-        raise NbrdfError(f"--size {s}: expected WxH, e.g. 160x120") from None
-    if not (1 <= w <= 8192 and 1 <= h <= 8192):
-        raise NbrdfError(f"--size {s}: width and height must lie in [1, 8192]")
-    return w, h
+from nbrdf.viewer.options import parse_size
 
 
 @dataclass
@@ -30,7 +21,7 @@ class RenderConfig:
     """a scene JSON or a preset: still_life, teapot (required)"""
     spp: int = 64
     """samples per pixel"""
-    size: tuple[int, int] = field(default=(320, 240), metadata={"parse": _size, "metavar": "WxH", "shown": "320x240"})
+    size: tuple[int, int] = field(default=(320, 240), metadata={"parse": parse_size, "metavar": "WxH", "shown": "320x240"})
     """image size in pixels"""
     seed: int = 0
     """seed of the samplers"""

@@ -12,9 +12,9 @@ import numpy as np
 
 from nbrdf.cli.common import decoder_or_default, model_or_default
 from nbrdf.cli.config import Parser, add_arguments, build
-from nbrdf.cli.render import _size as _wxh
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
+from nbrdf.viewer.options import parse_size
 
 
 @dataclass
@@ -219,7 +219,7 @@ class ScenesReport:
     """folder for scenes.json, scenes.md, scenes.png and the images"""
     scenes: str = "still_life,teapot"
     """comma-separated scene presets or scene JSON files"""
-    size: tuple[int, int] = field(default=(96, 72), metadata={"parse": _wxh, "metavar": "WxH", "shown": "96x72"})
+    size: tuple[int, int] = field(default=(96, 72), metadata={"parse": parse_size, "metavar": "WxH", "shown": "96x72"})
     """image size in pixels"""
     time_budget: float = 20.0
     """seconds of the neural render: the equal time both methods get"""
