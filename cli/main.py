@@ -12,13 +12,13 @@ import os
 import sys
 from typing import Callable, Sequence
 
-from nbrdf.cli import bench, data, evaluate, export, project, report, train
+from nbrdf.cli import bench, data, evaluate, export, project, render, report, train
 from nbrdf.cli.config import Parser
 from nbrdf.neural.errors import NbrdfError
 
 PROG = "nbrdf"
 #: The command families, in the order ``nbrdf --help`` lists them.
-FAMILIES = (evaluate, data, train, project, report, bench, export)
+FAMILIES = (evaluate, data, train, project, render, report, bench, export)
 
 
 def run_guarded(prog: str, fn: Callable[[], int]) -> int:

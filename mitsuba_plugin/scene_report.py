@@ -1,0 +1,291 @@
+"""``nbrdf report scenes``: the paper's Table 3 on this project's scenes.
+
+Per scene: the neural material (``nbrdf``) and its Monte Carlo ground truth
+(``nbrdf_reference``, a fresh unbiased estimate of f per query, as Guo et al.
+2018) rendered at EQUAL TIME, each scored against a converged reference (the
+Monte Carlo at high spp, cached) by MSE and HDR-FLIP. The time: the neural
+render runs chunks of spp until the budget is spent (after one untimed chunk
+that compiles its kernels); a short timing run of the reference gives its
+seconds per spp, from which its spp for the same wall time follows.
+
+The converged reference is two independent halves (even and odd chunks): the
+MSE between them estimates its own noise (the full average's noise variance is
+a quarter of it), which is stated and subtracted from the scores' noise
+floor. The crossover extrapolates the unbiased Monte Carlo's MSE as
+(MSE at equal time) x t_eq / t: the render time at which it would reach the
+neural material's error. An extrapolation, stated as one.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from nbrdf.mitsuba.render import RenderResult, load, render
+from nbrdf.mitsuba.scenes import Scene, load_scene, with_method
+from nbrdf.neural.errors import NbrdfError
+
+#: The paper's Table 3: equal-time MSE, (neural, Guo et al. Monte Carlo), at 1024 x 1024.
+#: Equal time within this fraction, else the Monte Carlo render is redone once at its measured pace.
+TIME_TOLERANCE = 0.2
+PAPER_TABLE3 = {"still_life": (1.0e-3, 2.0e-3), "globe": (9.3e-4, 2.3e-3), "teapot": (6.0e-4, 5.4e-3)}
+
+
+@dataclass
+class SceneReportConfig:
+    """What ``run_scene_report`` renders and where it writes."""
+
+    out: Path
+    """folder for scenes.json, scenes.md, the figure and the images"""
+    scenes: tuple[str, ...] = ("still_life", "teapot")
+    """preset names or scene JSON files"""
+    size: tuple[int, int] = (96, 72)
+    """image size (w, h)"""
+    time_budget: float = 20.0
+    """seconds of the neural render (the equal time)"""
+    ref_spp: int = 512
+    """samples per pixel of the converged Monte Carlo reference"""
+    chunk: int = 4
+    """samples per pixel per Mitsuba pass"""
+    timing_chunks: int = 2
+    """chunks of the reference's timing run (after one untimed warm-up chunk)"""
+    cache: Path | None = None
+    """converged references are cached here (default: OUT/cache)"""
+    seed: int = 0
+    """seed of the renders (the converged reference uses seed + 1000)"""
+    figure: Path | None = field(default=None)
+    """the figure's path (default: OUT/scenes.png)"""
+
+
+def mse(a: np.ndarray, b: np.ndarray) -> float:
+    """Mean squared error over pixels and channels."""
+    return float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
+
+
+def equal_time_spp(seconds: float, seconds_per_spp: float, chunk: int) -> int:
+    """The spp (a whole number of chunks, at least one) that a render of
+    ``seconds_per_spp`` spends in ``seconds``."""
+    if not (seconds > 0 and seconds_per_spp > 0 and chunk >= 1):
+        raise NbrdfError(f"equal time: bad timing ({seconds} s, {seconds_per_spp} s/spp, chunk {chunk})")
+    return int(max(1, round(seconds / seconds_per_spp / chunk))) * chunk
+
+
+def crossover_seconds(mse_mc: float, seconds_mc: float, mse_target: float) -> float:
+    """Render time at which an unbiased Monte Carlo render with ``mse_mc``
+    after ``seconds_mc`` reaches ``mse_target`` (MSE ~ 1 / time)."""
+    if mse_target <= 0:
+        return math.inf
+    return seconds_mc * mse_mc / mse_target
+
+
+def _cache_key(scene: Scene, size: tuple[int, int], spp: int, chunk: int, seed: int) -> str:
+    files = sorted({next(iter(s["material"].values())) for s in scene.spec["shapes"]
+                    if "diffuse" not in s["material"]})
+    blob = json.dumps({"spec": scene.spec, "size": size, "spp": spp, "chunk": chunk, "seed": seed, "v": 1,
+                       "materials": [Path(f).read_text() for f in files]}, sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def converged_reference(scene: Scene, cfg: SceneReportConfig, progress=None) -> dict:
+    """The Monte Carlo reference at ``cfg.ref_spp``: image, halves, its noise,
+    from the cache when there (``cached`` says which)."""
+    cache = cfg.cache or cfg.out / "cache"
+    ref_scene = with_method(scene, "reference")
+    seed = cfg.seed + 1000
+    chunk = max(1, min(cfg.chunk * 4, cfg.ref_spp // 2))
+    path = cache / f"{scene.name}-{cfg.size[0]}x{cfg.size[1]}-{_cache_key(ref_scene, cfg.size, cfg.ref_spp, chunk, seed)}.npz"
+    if path.is_file():
+        z = np.load(path)
+        res = {k: z[k] for k in ("half_a", "half_b")}
+        res.update(spp=int(z["spp"]), seconds=float(z["seconds"]), cached=True)
+    else:
+        r = render(ref_scene, cfg.size, cfg.ref_spp, seed=seed, chunk_spp=chunk, keep_chunks=True, progress=progress)
+        if len(r.chunks) < 2:
+            raise NbrdfError(f"--ref-spp {cfg.ref_spp}: the converged reference needs at least two chunks of {chunk}")
+        n = len(r.chunks) // 2 * 2
+        res = {"half_a": np.mean(r.chunks[0:n:2], 0), "half_b": np.mean(r.chunks[1:n:2], 0),
+               "spp": n * chunk, "seconds": r.seconds, "cached": False}
+        cache.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez_compressed(tmp, half_a=res["half_a"], half_b=res["half_b"], spp=res["spp"], seconds=res["seconds"])
+        tmp.replace(path)
+    res["image"] = (0.5 * (res["half_a"] + res["half_b"])).astype(np.float32)
+    # the full average's noise variance: a quarter of the halves' squared difference
+    res["noise_mse"] = mse(res["half_a"], res["half_b"]) / 4
+    res["path"] = str(path)
+    return res
+
+
+def _timed(scene: Scene, cfg: SceneReportConfig, spp: int | None, seed: int,
+           max_seconds: float | None = None, keep_chunks: bool = False) -> tuple[RenderResult, float]:
+    """One untimed warm-up chunk (kernel compilation), then the timed render;
+    returns it and the warm-up's seconds."""
+    mscene = load(scene, cfg.size, cfg.chunk)
+    t0 = time.perf_counter()
+    render(scene, cfg.size, cfg.chunk, seed=seed + 777, chunk_spp=cfg.chunk, loaded=mscene)
+    warm = time.perf_counter() - t0
+    big = spp if spp is not None else 1 << 20
+    return render(scene, cfg.size, big, seed=seed, chunk_spp=cfg.chunk, loaded=mscene, max_seconds=max_seconds,
+                  keep_chunks=keep_chunks), warm
+
+
+def own_noise_mse(chunks: list[np.ndarray]) -> float:
+    """The noise variance of a render's average, from its even and odd chunks
+    (a quarter of the halves' squared difference); NaN with fewer than two."""
+    n = len(chunks) // 2 * 2
+    if n < 2:
+        return math.nan
+    return mse(np.mean(chunks[0:n:2], 0), np.mean(chunks[1:n:2], 0)) / 4
+
+
+def score_scene(name: str, cfg: SceneReportConfig, log=print) -> tuple[dict, dict]:
+    """One scene's row of the table and its images."""
+    from nbrdf.training.render_report import flip
+
+    scene = load_scene(name)
+    log(f"[{scene.name}] converged reference ({cfg.ref_spp} spp)")
+    ref = converged_reference(scene, cfg)
+    log(f"[{scene.name}] neural at {cfg.time_budget:g} s")
+    neural, _ = _timed(with_method(scene, "neural"), cfg, None, cfg.seed, max_seconds=cfg.time_budget, keep_chunks=True)
+    log(f"[{scene.name}] reference timing run")
+    mc_scene = with_method(scene, "reference")
+    timing, _ = _timed(mc_scene, cfg, cfg.chunk * cfg.timing_chunks, cfg.seed + 1)
+    spp_mc = equal_time_spp(neural.seconds, timing.seconds / timing.spp, cfg.chunk)
+    log(f"[{scene.name}] reference at {spp_mc} spp (equal time)")
+    mc, _ = _timed(mc_scene, cfg, spp_mc, cfg.seed + 2, keep_chunks=True)
+    if abs(mc.seconds / neural.seconds - 1) > TIME_TOLERANCE:
+        # the short timing run misjudged the pace (a loaded machine): rescale by the measured one, render again
+        spp_mc = equal_time_spp(neural.seconds, mc.seconds / mc.spp, cfg.chunk)
+        log(f"[{scene.name}] reference took {mc.seconds:.1f} s, not {neural.seconds:.1f} s: again at {spp_mc} spp")
+        mc, _ = _timed(mc_scene, cfg, spp_mc, cfg.seed + 3, keep_chunks=True)
+    row: dict = {"scene": scene.name, "size": list(cfg.size),
+                 "reference": {"spp": ref["spp"], "seconds": round(ref["seconds"], 2), "cached": ref["cached"],
+                               "noise_mse": ref["noise_mse"],
+                               "half_flip": flip(ref["half_a"], ref["half_b"])[0]}}
+    images = {"reference": ref["image"]}
+    for key, r in (("neural", neural), ("mc", mc)):
+        fl, fmap = flip(ref["image"], r.image)
+        m = mse(ref["image"], r.image)
+        row[key] = {"spp": r.spp, "seconds": round(r.seconds, 2), "seconds_per_spp": r.seconds / r.spp,
+                    "mse": m, "mse_minus_ref_noise": max(m - ref["noise_mse"], 0.0), "flip": fl,
+                    "noise_mse": own_noise_mse(r.chunks)}
+        # what is left of the error once both renders' noise is taken out: the bias (0 for the unbiased MC,
+        # up to its own noise estimate's error)
+        row[key]["bias_mse"] = max(m - ref["noise_mse"] - row[key]["noise_mse"], 0.0)
+        images[key], images[f"err_{key}"], images[f"flip_{key}"] = r.image, np.mean((r.image - ref["image"]) ** 2, 2), fmap
+    row["mc_timing"] = {"spp": timing.spp, "seconds": round(timing.seconds, 2)}
+    row["mse_ratio_mc_over_neural"] = row["mc"]["mse"] / max(row["neural"]["mse"], 1e-30)
+    # the equal time is only as equal as a loaded machine allows: the MC's MSE moved to the neural's time by
+    # MSE ~ 1/t (its noise part; the reference's noise stays)
+    mc_at_t = row["mc"]["mse_minus_ref_noise"] * mc.seconds / neural.seconds + ref["noise_mse"]
+    row["mse_ratio_mc_over_neural_time_matched"] = mc_at_t / max(row["neural"]["mse"], 1e-30)
+    # the crossover: MC's noise-corrected MSE ~ 1/t reaching the neural's noise-corrected MSE
+    mc_m, nn_m = row["mc"]["mse_minus_ref_noise"], row["neural"]["mse_minus_ref_noise"]
+    row["crossover_seconds"] = crossover_seconds(mc_m, max(mc.seconds, 1e-9), nn_m)
+    row["crossover_is_extrapolated"] = True
+    return row, images
+
+
+def markdown(result: dict) -> str:
+    """The table beside the paper's."""
+    w, h = result["config"]["size"]
+    lines = [f"Equal-time MSE against the converged Monte Carlo reference ({w}x{h}, path tracer max depth 8; "
+             "this machine). Paper (Table 3, 1024x1024, Mitsuba on a workstation): neural vs Guo et al.",
+             "",
+             "| scene | neural spp | MC spp | time/frame (s) | MSE neural | MSE MC | MC/neural (time-matched) | FLIP neural | "
+             "FLIP MC | neural noise / bias MSE | MC noise / bias MSE | ref spp (noise MSE) | crossover (s, extrapolated) | "
+             "paper neural / MC |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in result["scenes"]:
+        p = PAPER_TABLE3.get(r["scene"])
+        paper = f"{p[0]:.1e} / {p[1]:.1e} ({p[1] / p[0]:.1f}x)" if p else "-"
+        cross = r["crossover_seconds"]
+        lines.append(
+            f"| {r['scene']} | {r['neural']['spp']} | {r['mc']['spp']} | {r['neural']['seconds']:.1f} / "
+            f"{r['mc']['seconds']:.1f} | {r['neural']['mse']:.2e} | {r['mc']['mse']:.2e} | "
+            f"{r['mse_ratio_mc_over_neural']:.2f}x ({r['mse_ratio_mc_over_neural_time_matched']:.2f}x) | "
+            f"{r['neural']['flip']:.3f} | {r['mc']['flip']:.3f} | "
+            f"{r['neural']['noise_mse']:.1e} / {r['neural']['bias_mse']:.1e} | "
+            f"{r['mc']['noise_mse']:.1e} / {r['mc']['bias_mse']:.1e} | "
+            f"{r['reference']['spp']} ({r['reference']['noise_mse']:.1e}) | "
+            f"{'never' if math.isinf(cross) else f'{cross:.0f}'} | {paper} |")
+    lines += ["", "MSE ~ 1/time for the unbiased Monte Carlo: the crossover is the time at which it would reach the "
+              "neural material's error (both corrected for the reference's own noise). An extrapolation. Noise: each "
+              "render's own, from its even and odd chunks; bias: the MSE left after both renders' noise (the neural "
+              "material's representation error; about 0 for the Monte Carlo)."]
+    return "\n".join(lines) + "\n"
+
+
+def save_figure(rows: list[dict], images: list[dict], path: Path) -> None:
+    """Per scene: converged reference, neural, MC at equal time, a 2x crop of
+    each, and their per-pixel squared-error maps (shared scale per scene)."""
+    from nbrdf.training.plots import _plt
+    from nbrdf.viewer.image_io import tonemap
+
+    plt = _plt()
+    cols = ["reference", "neural", "mc", "crop reference", "crop neural", "crop mc", "err_neural", "err_mc"]
+    fig, axes = plt.subplots(len(rows), len(cols), figsize=(1.7 * len(cols), 1.6 * len(rows) + 0.3), dpi=80,
+                             squeeze=False)
+    for i, (row, im) in enumerate(zip(rows, images)):
+        h, w = im["reference"].shape[:2]
+        # the crop: the quarter of the image where the two errors differ most
+        diff = im["err_mc"] - im["err_neural"]
+        ch, cw = h // 2, w // 2
+        best, y0, x0 = -np.inf, 0, 0
+        for y in range(0, h - ch + 1, max(1, h // 8)):
+            for x in range(0, w - cw + 1, max(1, w // 8)):
+                s = diff[y:y + ch, x:x + cw].sum()
+                if s > best:
+                    best, y0, x0 = s, y, x
+        vmax = float(np.percentile(np.concatenate([im["err_neural"].ravel(), im["err_mc"].ravel()]), 99)) or 1.0
+        for j, c in enumerate(cols):
+            ax = axes[i, j]
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if c.startswith("err_"):
+                ax.imshow(im[c], cmap="magma", vmin=0, vmax=vmax, interpolation="nearest")
+                k = c[4:]
+                ax.set_title(f"sq. err {k}: MSE {row[k]['mse']:.1e}\n(noise {row[k]['noise_mse']:.1e}, "
+                             f"bias {row[k]['bias_mse']:.1e})", fontsize=6)
+            else:
+                key = c.split()[-1]
+                img = im[key][y0:y0 + ch, x0:x0 + cw] if c.startswith("crop") else im[key]
+                ax.imshow(tonemap(img), interpolation="nearest")
+                label = {"reference": f"reference {row['reference']['spp']} spp",
+                         "neural": f"neural {row['neural']['spp']} spp", "mc": f"MC {row['mc']['spp']} spp"}[key]
+                ax.set_title(("crop " if c.startswith("crop") else "") + label, fontsize=7)
+                if c == "reference":
+                    ax.add_patch(plt.Rectangle((x0 - 0.5, y0 - 0.5), cw, ch, fill=False, ec="c", lw=0.8))
+            if j == 0:
+                ax.set_ylabel(row["scene"], fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def run_scene_report(cfg: SceneReportConfig, log=print) -> dict:
+    """All scenes: scenes.json, scenes.md, the figure, and the images (.npy)."""
+    import platform
+
+    cfg.out.mkdir(parents=True, exist_ok=True)
+    rows, images = [], []
+    for name in cfg.scenes:
+        row, im = score_scene(name, cfg, log)
+        rows.append(row)
+        images.append(im)
+        for k in ("reference", "neural", "mc"):
+            np.save(cfg.out / f"{row['scene']}-{k}.npy", im[k])
+    result = {"config": {"scenes": list(cfg.scenes), "size": list(cfg.size), "time_budget": cfg.time_budget,
+                         "ref_spp": cfg.ref_spp, "chunk": cfg.chunk, "seed": cfg.seed},
+              "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine()},
+              "paper_table3": {k: {"neural": v[0], "mc": v[1]} for k, v in PAPER_TABLE3.items()},
+              "scenes": rows}
+    (cfg.out / "scenes.json").write_text(json.dumps(result, indent=2, default=float))
+    (cfg.out / "scenes.md").write_text(markdown(result))
+    save_figure(rows, images, cfg.figure or cfg.out / "scenes.png")
+    return result

@@ -1,0 +1,273 @@
+"""Scenes for ``nbrdf render`` and ``nbrdf report scenes``: a small JSON (or a
+preset name) -> a Mitsuba 3 scene, path traced with global illumination.
+
+A scene JSON::
+
+    {"camera": {"origin": [x, y, z], "target": [x, y, z], "up": [0, 0, 1], "fov": 30},
+     "environment": {"preset": "studio", "scale": 1.0},        # optional (or just "studio")
+     "point_light": {"position": [x, y, z], "intensity": 20},  # optional; intensity: W/sr, a number or RGB
+     "max_depth": 8,                                            # optional
+     "shapes": [{"type": "sphere", "center": [x, y, z], "radius": r, "material": M},
+                {"type": "rectangle", "center": [x, y, z], "size": [w, h], "material": M},
+                {"type": "teapot", "center": [x, y, z], "scale": s, "rotate_z": deg, "material": M}]}
+
+where a material ``M`` is a path (the ``nbrdf`` neural material), ``{"reference": PATH}``
+(its Monte Carlo ground truth, ``nbrdf_reference``) or ``{"diffuse": [r, g, b]}``.
+Relative paths are relative to the scene file; preset scenes use the bundled
+materials. World z is up; the environment is one of the project's generated
+presets (``viewer/env_presets.py``), oriented as the previewer shows it.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nbrdf.neural.errors import NbrdfError
+
+ASSETS = Path(__file__).resolve().parents[1] / "viewer" / "assets" / "materials"
+#: Size of the environment map handed to Mitsuba (texels ~0.7 degrees).
+ENV_SIZE = (512, 256)
+#: Path-tracing depth unless a scene sets ``max_depth``.
+MAX_DEPTH = 8
+
+PRESETS: dict[str, dict[str, Any]] = {
+    # three spheres with different nbrdf materials on a grey floor, studio environment and a point light
+    "still_life": {
+        "camera": {"origin": [0.0, -6.2, 2.2], "target": [0.0, 0.0, 0.55], "up": [0, 0, 1], "fov": 30},
+        "environment": {"preset": "studio", "scale": 1.0},
+        "point_light": {"position": [-2.5, -2.0, 4.0], "intensity": 12.0},
+        "shapes": [
+            {"type": "sphere", "center": [-1.25, 0.2, 0.6], "radius": 0.6, "material": "@coated_copper.json"},
+            {"type": "sphere", "center": [0.0, 0.6, 0.6], "radius": 0.6, "material": "@car_paint.json"},
+            {"type": "sphere", "center": [1.25, 0.2, 0.6], "radius": 0.6, "material": "@rough_gold.json"},
+            {"type": "rectangle", "center": [0.0, 0.5, 0.0], "size": [8.0, 6.0], "material": {"diffuse": [0.35, 0.35, 0.33]}},
+        ],
+    },
+    # the Utah teapot in a layered (varnished gold) material on a floor, studio environment and a point light
+    "teapot": {
+        "camera": {"origin": [0.0, -7.5, 3.6], "target": [0.15, 0.0, 0.75], "up": [0, 0, 1], "fov": 28},
+        "environment": {"preset": "studio", "scale": 1.0},
+        "point_light": {"position": [2.5, -3.0, 4.5], "intensity": 15.0},
+        "shapes": [
+            {"type": "teapot", "center": [0.0, 0.0, 0.0], "scale": 0.5, "rotate_z": -25.0,
+             "material": "@varnished_gold.json"},
+            {"type": "rectangle", "center": [0.0, 0.5, 0.0], "size": [8.0, 6.0], "material": {"diffuse": [0.35, 0.35, 0.33]}},
+        ],
+    },
+}
+SCENE_PRESETS = tuple(PRESETS)
+
+
+@dataclass
+class Scene:
+    """A parsed scene: the JSON's content with material paths made absolute."""
+
+    spec: dict[str, Any]
+    """the scene JSON (validated; material paths absolute)"""
+    name: str
+    """the preset name or the file's stem"""
+
+
+def _vec(x: Any, n: int, what: str) -> list[float]:
+    if (not isinstance(x, (list, tuple)) or len(x) != n
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in x)):
+        raise NbrdfError(f"{what}: expected {n} finite numbers, got {x!r}")
+    return [float(v) for v in x]
+
+
+def _num(x: Any, what: str, lo: float = 0.0) -> float:
+    if not isinstance(x, (int, float)) or isinstance(x, bool) or not math.isfinite(x) or x <= lo:
+        raise NbrdfError(f"{what}: expected a finite number above {lo:g}, got {x!r}")
+    return float(x)
+
+
+def _material(m: Any, base: Path, what: str) -> dict[str, Any]:
+    """A material entry -> {"neural": path} | {"reference": path} | {"diffuse": rgb}."""
+    def path(p: Any) -> str:
+        if not isinstance(p, str) or not p:
+            raise NbrdfError(f"{what}: expected a material path, got {p!r}")
+        q = ASSETS / p[1:] if p.startswith("@") else (base / p)
+        if not q.is_file():
+            raise NbrdfError(f"{what}: material file {p} not found")
+        return str(q.resolve())
+
+    if isinstance(m, str):
+        return {"neural": path(m)}
+    if isinstance(m, dict) and len(m) == 1:
+        (k, v), = m.items()
+        if k in ("neural", "reference"):
+            return {k: path(v)}
+        if k == "diffuse":
+            rgb = _vec([v] * 3 if isinstance(v, (int, float)) else v, 3, f"{what}.diffuse")
+            if not all(0 <= c <= 1 for c in rgb):
+                raise NbrdfError(f"{what}.diffuse: albedo must lie in [0, 1], got {rgb}")
+            return {"diffuse": rgb}
+    raise NbrdfError(f"{what}: expected a material path, {{\"reference\": path}} or {{\"diffuse\": rgb}}, got {m!r}")
+
+
+def parse_scene(spec: Any, base: Path, name: str) -> Scene:
+    """Validates a scene dict (one-line ``NbrdfError`` naming the bad field)."""
+    if not isinstance(spec, dict):
+        raise NbrdfError(f"scene {name}: expected a JSON object, got {type(spec).__name__}")
+    known = {"camera", "environment", "point_light", "shapes", "max_depth"}
+    extra = set(spec) - known
+    if extra:
+        raise NbrdfError(f"scene {name}: unknown key(s) {', '.join(sorted(extra))} (expected {', '.join(sorted(known))})")
+    cam = spec.get("camera")
+    if not isinstance(cam, dict):
+        raise NbrdfError(f"scene {name}: camera: expected an object with origin, target, up, fov")
+    out: dict[str, Any] = {"camera": {"origin": _vec(cam.get("origin"), 3, "camera.origin"),
+                                      "target": _vec(cam.get("target"), 3, "camera.target"),
+                                      "up": _vec(cam.get("up", [0, 0, 1]), 3, "camera.up"),
+                                      "fov": _num(cam.get("fov", 30), "camera.fov")}}
+    if out["camera"]["fov"] >= 170:
+        raise NbrdfError(f"camera.fov: expected below 170 degrees, got {out['camera']['fov']}")
+    env = spec.get("environment")
+    if env is not None:
+        from nbrdf.viewer.env_presets import ENV_PRESETS
+
+        env = {"preset": env} if isinstance(env, str) else env
+        if not isinstance(env, dict) or env.get("preset") not in ENV_PRESETS:
+            raise NbrdfError(f"environment: expected one of {', '.join(ENV_PRESETS)} (or {{\"preset\": ..., "
+                             f"\"scale\": s}}), got {spec.get('environment')!r}")
+        out["environment"] = {"preset": env["preset"], "scale": _num(env.get("scale", 1.0), "environment.scale")}
+    light = spec.get("point_light")
+    if light is not None:
+        if not isinstance(light, dict):
+            raise NbrdfError(f"point_light: expected an object with position and intensity, got {light!r}")
+        inten = light.get("intensity", 10.0)
+        inten = _vec([inten] * 3 if isinstance(inten, (int, float)) and not isinstance(inten, bool) else inten, 3,
+                     "point_light.intensity")
+        out["point_light"] = {"position": _vec(light.get("position"), 3, "point_light.position"), "intensity": inten}
+    if "environment" not in out and "point_light" not in out:
+        raise NbrdfError(f"scene {name}: no light (give an environment and/or a point_light)")
+    depth = spec.get("max_depth", MAX_DEPTH)
+    if not isinstance(depth, int) or isinstance(depth, bool) or not 1 <= depth <= 64:
+        raise NbrdfError(f"max_depth: expected an integer in [1, 64], got {depth!r}")
+    out["max_depth"] = depth
+    shapes = spec.get("shapes")
+    if not isinstance(shapes, list) or not shapes:
+        raise NbrdfError(f"scene {name}: shapes: expected a non-empty list")
+    out["shapes"] = []
+    for i, s in enumerate(shapes):
+        what = f"shapes[{i}]"
+        if not isinstance(s, dict) or s.get("type") not in ("sphere", "rectangle", "teapot"):
+            raise NbrdfError(f"{what}: expected an object with type sphere, rectangle or teapot, got {s!r}")
+        t = s["type"]
+        d: dict[str, Any] = {"type": t, "center": _vec(s.get("center", [0, 0, 0]), 3, f"{what}.center"),
+                             "material": _material(s.get("material"), base, f"{what}.material")}
+        if t == "sphere":
+            d["radius"] = _num(s.get("radius", 1.0), f"{what}.radius")
+        elif t == "rectangle":
+            d["size"] = _vec(s.get("size", [1, 1]), 2, f"{what}.size")
+            if min(d["size"]) <= 0:
+                raise NbrdfError(f"{what}.size: expected positive sizes, got {d['size']}")
+        else:
+            d["scale"] = _num(s.get("scale", 1.0), f"{what}.scale")
+            d["rotate_z"] = float(_vec([s.get("rotate_z", 0.0)], 1, f"{what}.rotate_z")[0])
+        out["shapes"].append(d)
+    return Scene(out, name)
+
+
+def load_scene(spec: str) -> Scene:
+    """A preset name or a scene JSON file -> ``Scene`` (one line on bad input)."""
+    if spec in PRESETS:
+        return parse_scene(PRESETS[spec], ASSETS, spec)
+    p = Path(spec)
+    if p.suffix.lower() != ".json":
+        raise NbrdfError(f"scene {spec}: not a preset ({', '.join(SCENE_PRESETS)}) nor a .json file")
+    try:
+        data = json.loads(p.read_text())
+    except OSError as e:
+        raise NbrdfError(f"scene {spec}: cannot read it ({e.strerror or e})") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise NbrdfError(f"scene {spec}: not valid JSON ({e})") from None
+    return parse_scene(data, p.parent, p.stem)
+
+
+def with_method(scene: Scene, method: str) -> Scene:
+    """The scene with every nbrdf material rendered as ``neural`` or ``reference``."""
+    shapes = []
+    for s in scene.spec["shapes"]:
+        m = s["material"]
+        if "diffuse" not in m:
+            m = {method: next(iter(m.values()))}
+        shapes.append({**s, "material": m})
+    return Scene({**scene.spec, "shapes": shapes}, scene.name)
+
+
+def uses_reference(scene: Scene) -> bool:
+    """Whether any shape uses ``nbrdf_reference`` (rendered in Dr.Jit's wavefront mode)."""
+    return any("reference" in s["material"] for s in scene.spec["shapes"])
+
+
+#: Mitsuba's envmap looks up local direction (x, y, z) at u = atan2(x, -z) / 2 pi, v = acos(y) / pi; the
+#: project's maps use world z up with u = atan2(y, x) / 2 pi, v = acos(z) / pi. This rotation maps Mitsuba's
+#: local frame to the world: world = (-z_l, x_l, y_l).
+ENV_TO_WORLD = [[0.0, 0.0, -1.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+
+
+def environment_bitmap(preset: str, scale: float = 1.0, size: tuple[int, int] = ENV_SIZE):
+    """The preset at ``size`` (w, h) as a Mitsuba RGB bitmap (linear radiance)."""
+    import mitsuba as mi
+
+    from nbrdf.viewer.env_presets import make_environment
+
+    img = make_environment(preset, *size) * np.float32(scale)
+    return mi.Bitmap(np.ascontiguousarray(img, np.float32), mi.Bitmap.PixelFormat.RGB)
+
+
+def _bsdf(m: dict[str, Any]) -> dict[str, Any]:
+    if "diffuse" in m:
+        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": m["diffuse"]}}
+    kind = "nbrdf" if "neural" in m else "nbrdf_reference"
+    return {"type": kind, "material": next(iter(m.values()))}
+
+
+def mitsuba_dict(scene: Scene, size: tuple[int, int], spp: int) -> dict[str, Any]:
+    """The ``mi.load_dict`` description of ``scene`` at ``size`` (w, h) with
+    ``spp`` samples per pixel per ``mi.render`` call."""
+    import mitsuba as mi
+
+    from nbrdf.mitsuba.teapot import teapot_ply
+
+    s = scene.spec
+    T = mi.ScalarTransform4f
+    cam = s["camera"]
+    w, h = size
+    d: dict[str, Any] = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": s["max_depth"]},
+        "camera": {"type": "perspective", "fov": cam["fov"], "fov_axis": "y",
+                   "to_world": T().look_at(origin=cam["origin"], target=cam["target"], up=cam["up"]),
+                   "film": {"type": "hdrfilm", "width": int(w), "height": int(h), "rfilter": {"type": "box"},
+                            "pixel_format": "rgb"},
+                   "sampler": {"type": "independent", "sample_count": int(spp)}},
+    }
+    if "environment" in s:
+        e = s["environment"]
+        d["environment"] = {"type": "envmap", "bitmap": environment_bitmap(e["preset"], e["scale"]),
+                            "to_world": T(ENV_TO_WORLD)}
+    if "point_light" in s:
+        p = s["point_light"]
+        d["point_light"] = {"type": "point", "position": p["position"],
+                            "intensity": {"type": "rgb", "value": p["intensity"]}}
+    for i, sh in enumerate(s["shapes"]):
+        # two-sided: a one-sided BSDF would render back faces black (the teapot's inside, a plane seen from below)
+        bsdf = {"type": "twosided", "material": _bsdf(sh["material"])}
+        c = sh["center"]
+        if sh["type"] == "sphere":
+            shape = {"type": "sphere", "center": c, "radius": sh["radius"], "bsdf": bsdf}
+        elif sh["type"] == "rectangle":
+            sx, sy = sh["size"]
+            shape = {"type": "rectangle", "to_world": T().translate(c).scale([sx / 2, sy / 2, 1.0]), "bsdf": bsdf}
+        else:
+            shape = {"type": "ply", "filename": str(teapot_ply()), "bsdf": bsdf,
+                     "to_world": T().translate(c).rotate([0, 0, 1], sh["rotate_z"]).scale(sh["scale"])}
+        d[f"shape_{i}"] = shape
+    return d

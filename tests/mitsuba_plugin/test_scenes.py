@@ -1,0 +1,155 @@
+"""``nbrdf render``: scenes (JSON or preset) path traced in Mitsuba 3; the
+Utah teapot tessellated from its Bezier patches; bad scenes exit 2 with one line."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nbrdf.cli.main import nbrdf_main
+
+pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
+
+GOLD = str(Path(__file__).resolve().parents[2] / "viewer/assets/materials/rough_gold.json")
+
+
+def _tiny_scene(path: Path, material) -> str:
+    path.write_text(json.dumps({
+        "camera": {"origin": [0, -4, 1], "target": [0, 0, 0.5], "fov": 30},
+        "environment": "studio", "point_light": {"position": [-2, -2, 3], "intensity": 5}, "max_depth": 3,
+        "shapes": [{"type": "sphere", "center": [0, 0, 0.5], "radius": 0.5, "material": material},
+                   {"type": "rectangle", "size": [4, 4], "material": {"diffuse": 0.4}}]}))
+    return str(path)
+
+
+@pytest.mark.slow
+def test_tiny_scene_renders_to_exr_and_png(tmp_path):
+    from nbrdf.viewer.image_io import read_exr
+
+    scene = _tiny_scene(tmp_path / "tiny.json", GOLD)
+    assert nbrdf_main(["render", scene, "--spp", "4", "--size", "16x12", "--out", str(tmp_path / "a.exr")]) == 0
+    img = read_exr(tmp_path / "a.exr")
+    assert img.shape == (12, 16, 3) and np.isfinite(img).all()
+    # lit: the sphere and floor reflect the environment and the point light
+    assert img.mean() > 0.02 and img.min() >= 0
+    assert nbrdf_main(["render", scene, "--spp", "4", "--size", "16x12", "--out", str(tmp_path / "a.png")]) == 0
+    import imageio.v3 as iio
+
+    png = iio.imread(tmp_path / "a.png")
+    assert png.shape == (12, 16, 3) and png.dtype == np.uint8 and png.max() > 0
+
+
+@pytest.mark.parametrize("content, words", [
+    ("{not json", "not valid JSON"),
+    ('{"camera": {"origin": [0, 0, 1], "target": [0, 0, 0]}, "shapes": []}', "no light"),
+    ('{"camera": {"origin": [0, -3, 1], "target": [0, 0, 0]}, "environment": "moon", '
+     '"shapes": [{"type": "sphere", "material": {"diffuse": 0.5}}]}', "environment"),
+    ('{"camera": {"origin": [0, -3, 1], "target": [0, 0, 0]}, "environment": "studio", '
+     '"shapes": [{"type": "cube", "material": {"diffuse": 0.5}}]}', "shapes[0]"),
+    ('{"camera": {"origin": [0, -3, 1], "target": [0, 0, 0]}, "environment": "studio", '
+     '"shapes": [{"type": "sphere", "material": "missing.json"}]}', "not found"),
+    ('{"camera": {"origin": [0, -3], "target": [0, 0, 0]}, "environment": "studio", '
+     '"shapes": [{"type": "sphere", "material": {"diffuse": 0.5}}]}', "camera.origin"),
+])
+def test_bad_scene_exits_2_with_one_line(tmp_path, capsys, content, words):
+    bad = tmp_path / "bad.json"
+    bad.write_text(content)
+    assert nbrdf_main(["render", str(bad), "--spp", "1", "--out", str(tmp_path / "x.exr")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and words in err, err
+    assert not (tmp_path / "x.exr").exists()
+
+
+def test_unknown_preset_and_bad_size_exit_2(tmp_path, capsys):
+    assert nbrdf_main(["render", "moon_landing", "--out", str(tmp_path / "x.png")]) == 2
+    assert nbrdf_main(["render", "teapot", "--size", "12by4", "--out", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "moon_landing" in err[0] and "WxH" in err[1]
+
+
+@pytest.mark.parametrize("n", [4, 8])
+def test_teapot_mesh_from_the_bezier_patches(n):
+    """32 patches; the classic bounding box (spout tip 3.43, handle -3,
+    height 3.15); closed but for the four open rims of the original model
+    (lid/body gap, the handle's and spout's ends into the body, the spout's
+    tip): 4 patches x n edges each; faces wound outward (positive volume)."""
+    from nbrdf.mitsuba import teapot
+
+    patches = teapot.load_patches()
+    assert patches.shape == (teapot.N_PATCHES, 4, 4, 3)
+    verts, tris = teapot.tessellate(patches, n)
+    lo, hi = verts.min(0), verts.max(0)
+    np.testing.assert_allclose(lo, [-3.0, -2.0, 0.0], atol=1e-5)
+    np.testing.assert_allclose(hi[1:], [2.0, 3.15], atol=1e-5)
+    assert 3.4 < hi[0] < 3.45
+    assert teapot.boundary_edges(tris) == 16 * n
+    a, b, c = (verts[tris[:, k]].astype(np.float64) for k in range(3))
+    assert np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6 > 20  # outward: positive enclosed volume
+    flipped = tris[:, ::-1]
+    assert np.einsum("ij,ij->i", verts[flipped[:, 0]].astype(np.float64),
+                     np.cross(verts[flipped[:, 1]], verts[flipped[:, 2]])).sum() < 0
+
+
+def test_teapot_ply_is_cached_and_readable(tmp_path, monkeypatch):
+    import mitsuba as mi
+
+    from nbrdf.mitsuba import teapot
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    p = teapot.teapot_ply(4)
+    assert p.is_file() and p.parent == tmp_path / "nbrdf" / "meshes"
+    mtime = p.stat().st_mtime_ns
+    assert teapot.teapot_ply(4).stat().st_mtime_ns == mtime
+    mesh = mi.load_dict({"type": "ply", "filename": str(p)})
+    verts, tris = teapot.tessellate(teapot.load_patches(), 4)
+    assert mesh.vertex_count() == len(verts) and mesh.face_count() == len(tris)
+
+
+# --- nbrdf report scenes: the equal-time logic ------------------------------------------------
+def test_equal_time_spp_and_crossover():
+    from nbrdf.mitsuba.scene_report import crossover_seconds, equal_time_spp
+    from nbrdf.neural.errors import NbrdfError
+
+    assert equal_time_spp(10.0, 0.5, 4) == 20  # 20 spp fill 10 s at 0.5 s/spp
+    assert equal_time_spp(10.0, 0.3, 4) == 32  # 33.3 spp -> whole chunks of 4
+    assert equal_time_spp(0.1, 5.0, 4) == 4  # never fewer than one chunk
+    with pytest.raises(NbrdfError):
+        equal_time_spp(10.0, 0.0, 4)
+    # MSE ~ 1/t: 4e-3 after 10 s reaches 1e-3 after 40 s
+    assert crossover_seconds(4e-3, 10.0, 1e-3) == pytest.approx(40.0)
+    assert crossover_seconds(4e-3, 10.0, 0.0) == float("inf")
+
+
+@pytest.mark.slow
+def test_scene_report_on_a_tiny_scene(tmp_path):
+    """Both methods render; the MC's spp comes from its timing (whole chunks);
+    the MSEs are those of the saved images against the cached converged
+    reference, which a second run reads back instead of rendering."""
+    from nbrdf.mitsuba.scene_report import SceneReportConfig, converged_reference, mse, run_scene_report
+    from nbrdf.mitsuba.scenes import load_scene
+
+    coated = str(Path(__file__).resolve().parents[2] / "viewer/assets/materials/coated_copper.json")
+    scene = _tiny_scene(tmp_path / "tiny.json", coated)
+    cfg = SceneReportConfig(out=tmp_path / "rep", scenes=(scene,), size=(12, 9), time_budget=0.5, ref_spp=8,
+                            chunk=2)
+    result = run_scene_report(cfg, log=lambda s: None)
+    (row,) = result["scenes"]
+    assert row["scene"] == "tiny" and row["reference"]["spp"] == 8 and not row["reference"]["cached"]
+    assert row["mc"]["spp"] % 2 == 0 and row["mc"]["spp"] >= 2 and row["neural"]["spp"] >= 2
+    ref = converged_reference(load_scene(scene), cfg)
+    assert ref["cached"] and ref["image"].shape == (9, 12, 3)
+    for k in ("neural", "mc"):
+        img = np.load(tmp_path / "rep" / f"tiny-{k}.npy")
+        assert np.isfinite(img).all()
+        assert row[k]["mse"] == pytest.approx(mse(ref["image"], img), rel=1e-6)
+        assert 0 <= row[k]["flip"] <= 1
+    assert row["neural"]["mse"] > 0 and row["mc"]["mse"] > 0
+    assert row["mse_ratio_mc_over_neural"] == pytest.approx(row["mc"]["mse"] / row["neural"]["mse"])
+    assert np.isfinite(row["mse_ratio_mc_over_neural_time_matched"]) and row["crossover_is_extrapolated"]
+    for k in ("neural", "mc"):  # the bias is what is left of the MSE after both noises, never negative
+        assert 0 <= row[k]["bias_mse"] <= row[k]["mse"]
+    assert row["reference"]["noise_mse"] == pytest.approx(mse(ref["half_a"], ref["half_b"]) / 4)
+    assert (tmp_path / "rep" / "scenes.png").is_file() and "tiny" in (tmp_path / "rep" / "scenes.md").read_text()
+    json.loads((tmp_path / "rep" / "scenes.json").read_text())
