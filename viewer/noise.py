@@ -16,6 +16,7 @@ import argparse
 import json
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
@@ -66,14 +67,15 @@ class NoiseReport:
         return out
 
 
-def default_setup(ctx):
+def default_setup(ctx, material: Path | None = None):
     """The default offscreen preview's renderer and state (``nbrdf-view --offscreen``:
-    varnished copper, studio environment, the framed three-quarter camera), object only."""
+    ``material``, default the default material, studio environment, the framed
+    three-quarter camera), object only."""
     from nbrdf.viewer.offscreen import make_renderer
     from nbrdf.viewer.options import ViewOptions
     from nbrdf.viewer.renderer import ViewState
 
-    opts = ViewOptions()
+    opts = ViewOptions() if material is None else ViewOptions(material=material)
     r = make_renderer(ctx, opts.load_material()[0], opts)
     state = ViewState(env_intensity=opts.env_intensity, env_rotation=opts.env_rotation, background=False)
     return r, state
