@@ -19,8 +19,8 @@ $(STAMP): pyproject.toml constraints.txt tools/setup_system.sh
 run: setup
 	@$(BIN)/nbrdf-view
 
-# The default suite (no wall-clock assertions; tests marked slow left out); CI runs
-# `make test test-slow`, so every test runs there.
+# The default suite (no wall-clock assertions; tests marked slow left out): what CI runs
+# (.ci/run), within its 20 minutes. The slow set takes about 25 minutes more: `make test-slow`.
 test: setup lint
 	@$(BIN)/python -m pytest -m "not slow"
 
