@@ -95,3 +95,22 @@ def test_paired_decoder_with_literal_weights_is_a_clear_error(gl_ctx):
     with pytest.raises(NbrdfError, match="pairs per invocation"):
         probe_compute(gl_ctx, GpuDecoder(gl_ctx, dec), dec.latent_mean.expand(3, -1), wi, wo,
                       WeightStorage.CONST, pairs_per_invocation=2)
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("size", [(64, 32), (32, 64)])
+def test_the_lobe_view_is_a_round_disk_in_a_view_of_any_shape(gl_ctx, size):
+    """A window's view is rarely square: the lobe's disk keeps its shape (radius half the
+    shorter side), nothing is drawn outside it, everything inside is lit (rough gold)."""
+    from nbrdf.viewer.offscreen import make_renderer
+    from nbrdf.viewer.options import ViewOptions
+
+    opts = ViewOptions(material=MATERIALS / "rough_gold.json", brdf="analytic")
+    r = make_renderer(gl_ctx, load_material(opts.material), opts)
+    w, h = size
+    tex = r.accumulate(ViewState(view="lobe", theta_i=30.0), w, h, 0, 1, None, slot="linear")
+    lum = np.frombuffer(tex.read(), dtype="f4").reshape(h, w, 4)[..., :3].sum(-1)
+    yy, xx = np.mgrid[0:h, 0:w] + 0.5
+    rr = np.hypot(xx - w / 2, yy - h / 2) / (min(w, h) / 2)
+    assert (lum[rr >= 1.0] == 0).all(), "lobe drawn outside its disk (stretched to the view)"
+    assert (lum[rr < 0.9] > 0).all()

@@ -8,6 +8,7 @@ uniform vec2 u_size;
 out vec4 frag;
 void main() {
     vec2 xy = gl_FragCoord.xy / u_size * 2.0 - 1.0;
+    xy *= u_size / min(u_size.x, u_size.y);  // a round disk in a view of any shape (x1 when square)
     float r2 = dot(xy, xy);
     if (r2 >= 1.0) { frag = vec4(0.0, 0.0, 0.0, 1.0); return; }
     vec3 wo = vec3(xy, sqrt(1.0 - r2));

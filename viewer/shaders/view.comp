@@ -16,6 +16,7 @@ void view_pair(ivec2 px, out vec3 wi, out vec3 wo, out float scale, out bool ins
 #ifdef VIEW_IS_LOBE
     // lobe.frag: wo over the projected disk, value f(wi, wo) cos(theta_o)
     vec2 xy = fc / u_size * 2.0 - 1.0;
+    xy *= u_size / min(u_size.x, u_size.y);  // a round disk in a view of any shape (x1 when square)
     float r2 = dot(xy, xy);
     inside = r2 < 1.0;
     wi = u_wi;
