@@ -375,13 +375,13 @@ PAUSED_JOBS = 16  # interrupted jobs whose pooled paths the worker keeps
 
 def _next_request(requests, block: bool, parent: int | None = None):
     """The newest request in the queue (older ones are superseded), or None.
-    Blocking, it wakes every second and answers _STOP once the window's process
+    Blocking, it wakes every second and ends the worker once the window's process
     (``parent``) is gone: a window killed outright leaves no worker behind."""
     item = None
     try:
         while block and item is None:
             if parent is not None and os.getppid() != parent:
-                return _STOP
+                _orphaned()
             try:
                 item = requests.get(timeout=1.0)
             except queue.Empty:
@@ -395,8 +395,15 @@ def _next_request(requests, block: bool, parent: int | None = None):
     return item
 
 
-def _serve(requests, results, threads: int) -> None:
-    """The worker process: runs the newest job in rounds, sends each pooled image."""
+def _orphaned() -> None:
+    """Ends a worker whose window's process is gone, at once: nobody reads its results,
+    so a normal exit would wait forever on the results pipe's feeder thread."""
+    os._exit(0)
+
+
+def _serve(requests, results, threads: int, parent: int) -> None:
+    """The worker process: runs the newest job in rounds, sends each pooled image;
+    ends itself once ``parent`` (the window's process) is gone."""
     try:
         os.nice(5)  # the window's process renders; this one fills idle cores
     except (AttributeError, OSError):
@@ -409,7 +416,8 @@ def _serve(requests, results, threads: int) -> None:
     # resumes where it stopped (two views that alternate both progress).
     paused: dict[str, object] = {}
     envs: dict = {}
-    parent = os.getppid()
+    if os.getppid() != parent:  # the window was gone before this process started serving
+        _orphaned()
     while True:
         item = _next_request(requests, block=job is None, parent=parent)
         if item == _STOP:
@@ -430,8 +438,10 @@ def _serve(requests, results, threads: int) -> None:
                 if done:
                     job = None
                     break
+                if os.getppid() != parent:
+                    _orphaned()
                 newer = _next_request(requests, block=False)
-                if newer == _STOP or os.getppid() != parent:
+                if newer == _STOP:
                     return
                 if newer is not None and newer.key != job.key:
                     paused[job.key] = run
@@ -485,7 +495,7 @@ class ReferenceWorker:
             return
         ctx = mp.get_context("spawn")
         self._requests, self._results = ctx.Queue(), ctx.Queue()
-        self._proc = ctx.Process(target=_serve, args=(self._requests, self._results, self.threads),
+        self._proc = ctx.Process(target=_serve, args=(self._requests, self._results, self.threads, os.getpid()),
                                  name="nbrdf-reference", daemon=True)
         self._proc.start()
         self._finalizer = weakref.finalize(self, _shutdown, self._proc, self._requests)
