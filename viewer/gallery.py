@@ -105,9 +105,9 @@ def render_gallery(cfg: GalleryConfig) -> Path:
     for k, t in enumerate(tiles):
         r, c = divmod(k, cfg.columns)
         grid[r * cfg.tile:(r + 1) * cfg.tile, c * cfg.tile:(c + 1) * cfg.tile] = t
-    import imageio.v3 as iio
+    from nbrdf.viewer.image_io import write_png8
 
     out.parent.mkdir(parents=True, exist_ok=True)
-    iio.imwrite(out, grid)
+    write_png8(out, grid)
     tiler.release()
     return out

@@ -31,6 +31,17 @@ def tonemap(img: np.ndarray, exposure: float = 0.0, mode: str = "aces") -> np.nd
     return to_display8(np.maximum(np.asarray(img, np.float64), 0.0), mode, exposure)
 
 
+def write_png8(path: str | Path, rgb8: np.ndarray) -> None:
+    """Writes display-referred uint8 (H, W, 3), row 0 at the top, as a PNG tagged
+    sRGB (its sRGB chunk, perceptual intent), so colour-managed viewers and
+    compositors show it as the window did instead of guessing."""
+    from PIL import Image, PngImagePlugin
+
+    info = PngImagePlugin.PngInfo()
+    info.add(b"sRGB", b"\x00")
+    Image.fromarray(np.ascontiguousarray(rgb8, dtype=np.uint8)).save(path, format="PNG", pnginfo=info)
+
+
 def write_image(path: str | Path, img: np.ndarray, exposure: float = 0.0, mode: str = "aces") -> None:
     """Writes linear (H, W, 3) float data, row 0 at the top, atomically: a
     full disk or an unwritable folder is one NbrdfError line and leaves any
@@ -45,9 +56,7 @@ def write_image(path: str | Path, img: np.ndarray, exposure: float = 0.0, mode: 
             with open(tmp, "wb") as f:
                 np.save(f, img)
         elif suffix == ".png":
-            import imageio.v3 as iio
-
-            iio.imwrite(tmp, tonemap(img, exposure, mode), extension=".png")
+            write_png8(tmp, tonemap(img, exposure, mode))
         else:
             import OpenEXR
 

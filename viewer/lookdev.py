@@ -877,10 +877,10 @@ class LookDev:
                     self.invalidate()
                     self.render(fbo_ldr, size, passes)
                     data = np.frombuffer(fbo_ldr.read(components=3), np.uint8).reshape(size[1], size[0], 3)[::-1]
-                    import imageio.v3 as iio
+                    from nbrdf.viewer.image_io import write_png8
 
                     p.parent.mkdir(parents=True, exist_ok=True)
-                    iio.imwrite(p, np.ascontiguousarray(data))
+                    write_png8(p, data)
                 finally:
                     fbo_ldr.release()
                     self.invalidate()

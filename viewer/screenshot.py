@@ -122,7 +122,7 @@ class ScreenshotJob:
 
 def write_display_png(path: Path, rgb8: np.ndarray) -> None:
     """Writes the displayed (tone-mapped) image, uint8 (H, W, 3) with row 0 at the top."""
-    import imageio.v3 as iio
+    from nbrdf.viewer.image_io import write_png8
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    iio.imwrite(path, np.ascontiguousarray(rgb8))
+    write_png8(path, rgb8)

@@ -84,6 +84,8 @@ class ThumbnailCache:
         """``material``'s thumbnail, uint8 (size, size, 3): read from the cache, or rendered once and stored."""
         import imageio.v3 as iio
 
+        from nbrdf.viewer.image_io import write_png8
+
         p = self.path(material)
         if p.is_file():
             try:
@@ -97,7 +99,7 @@ class ThumbnailCache:
             p.parent.mkdir(parents=True, exist_ok=True)
             fd, tmp = tempfile.mkstemp(suffix=".png", dir=p.parent)
             os.close(fd)
-            iio.imwrite(tmp, img, extension=".png")
+            write_png8(tmp, img)
             os.replace(tmp, p)
         except OSError:
             pass
