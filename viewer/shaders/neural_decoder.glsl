@@ -58,20 +58,12 @@ vec3 nb_inside(vec3 w) {
 }
 #endif
 
+//@INCLUDE half_diff.glsl
+
 void nb_encode(vec3 wi, vec3 wo, out vec4 e[NB_FEATS4]) {
-    vec3 h = wi + wo;
-    h = h / max(length(h), 1e-12);
-    float cos_d = clamp(dot(wi, h), -1.0, 1.0);
-    float theta_h = atan(length(h.xy), h.z);
-    float theta_d = atan(length(cross(wi, h)), cos_d);
-    vec3 t = wi - cos_d * h;
-    vec3 b = vec3(-h.y, h.x, 0.0);
-    float bn = length(b);
-    b = bn > 1e-7 ? b / max(bn, 1e-12) : vec3(0.0, 1.0, 0.0);
-    float tn2 = dot(t, t);
-    float ty = dot(t, b);
-    float cos2 = tn2 > 1e-14 ? 1.0 - 2.0 * ty * ty / max(tn2, 1e-30) : 1.0;
-    e[0] = vec4(sqrt(theta_h * (2.0 / PI)), theta_d * (2.0 / PI), cos2, wi.z * wo.z);
+    vec3 h;
+    vec3 a = nb_half_diff(wi, wo, h);  // theta_h, theta_d, cos(2 phi_d)
+    e[0] = vec4(sqrt(a.x * (2.0 / PI)), a.y * (2.0 / PI), a.z, wi.z * wo.z);
 #if NB_ENCODING == 1
     vec3 hi = nb_inside(wi) + nb_inside(wo);
     hi = hi / max(length(hi), 1e-12);
