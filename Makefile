@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test test-slow lint clean fuzz soak goldens
+.PHONY: setup run test test-slow lint clean fuzz soak goldens mutation
 
 setup: $(STAMP)
 
@@ -56,6 +56,14 @@ fuzz: setup
 # The window under Xvfb for 1,000 random edits: memory and live GL objects per 100 edits (tools/soak.py).
 soak: setup
 	@xvfb-run -a -s "-screen 0 640x480x24" nice $(BIN)/python tools/soak.py --edits 1000 --seed 1 --out soak.json
+
+# Mutation testing of the pure-Python core (material schema, stack translator, coat, microfacet, closed-form
+# BxDFs, tone mappers) with mutmut against their fast unit tests ([tool.mutmut] in pyproject.toml); prints the
+# kill rate per module. The staging tree build/mutation is kept, so a rerun tests only changed functions;
+# MUTATION_ARGS=--fresh starts over.
+MUTATION_ARGS ?=
+mutation: setup
+	@nice $(BIN)/python tools/mutation.py $(MUTATION_ARGS)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis
