@@ -29,11 +29,13 @@ test-slow: setup
 	@$(BIN)/python -m pytest -m slow
 
 # Rewrites every stored render or array the tests compare against (golden images, the
-# session render: tests/viewer/goldens.py; the look-development reference lobes the
-# shipped networks are held to: tests/training/shipped_lobes.py); nothing else writes them.
+# session render: tests/viewer/goldens.py; the look-development reference lobes and sphere
+# renders the shipped networks are held to: tests/training/shipped_lobes.py, shipped_renders.py);
+# nothing else writes them.
 goldens: setup
 	@$(BIN)/python tests/viewer/goldens.py
 	@$(BIN)/python tests/training/shipped_lobes.py
+	@$(BIN)/python tests/training/shipped_renders.py
 
 # The packages mypy checks; it sees the repository's folders under their installed names through links.
 MYPY_PACKAGES := nbrdf.neural nbrdf.cli
