@@ -11,6 +11,7 @@ from nbrdf.neural.stack import (
     PARAM_NAMES,
     P,
     material_stack,
+    params_coats,
     params_to_material,
     params_to_stack,
     stack_class,
@@ -66,3 +67,20 @@ def test_bad_input_is_one_clear_error():
         params_to_stack(torch.zeros(3, 4))
     with pytest.raises(NbrdfError, match="one colour channel"):
         stack_to_params(material_stack(_material({"type": "conductor", "roughness": 0.2, "r0": 0.5})))
+
+
+@pytest.mark.parametrize("cls", CLASSES)
+def test_the_coat_of_every_class_from_stacks_and_vectors_agrees(cls):
+    """The clear coat is the top interface, the bare dielectric itself, or NO_COAT for a bare conductor; the
+    stacks' and the flat vectors' readings agree for every class."""
+    from nbrdf.neural.coat import NO_COAT
+
+    p = _vectors(cls)
+    coat = params_to_stack(p).coat()
+    assert coat.shape == (5, 2)
+    assert torch.equal(params_coats(p), coat)
+    if cls == "conductor":
+        assert coat.tolist() == [list(NO_COAT)] * 5
+    else:
+        assert torch.equal(coat, p[:, [P["top_roughness"], P["top_ior"]]])
+        assert (coat[:, 1] > 1).all()
