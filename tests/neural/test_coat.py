@@ -141,6 +141,7 @@ def test_coated_material_sampler_follows_its_pdf(theta):
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_projection_fits_the_body_under_a_known_coat():
     """Samples of coat + a decoded body: the projection returns the coat in
     the code and a body that decodes to the samples' body."""
