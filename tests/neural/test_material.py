@@ -185,3 +185,31 @@ def test_mutations_fail_cleanly(data, where, what, tmp_path):
     except NbrdfError as e:
         msg = str(e)
         assert "\n" not in msg and msg.startswith(f"layers[{i}]"), msg
+
+
+def test_texture_reference_errors_name_the_place_and_the_fault(tmp_path):
+    (tmp_path / "r.png").write_bytes(b"")
+    place = r"^layers\[2\]\.roughness"
+
+    def rough(ref):
+        return parse_material(doc(D, M, {**C, "roughness": ref}), tmp_path).base.roughness
+
+    cases = [
+        ({"texture": "r.png", "gain": 2}, place + r"\.gain: unknown key$"),
+        ({"texture": ""}, place + r"\.texture: expected a file path, got "),
+        ({"texture": 3}, place + r"\.texture: expected a file path, got int$"),
+        ({"texture": "r\0.png"}, place + r"\.texture: expected a file path"),
+        ({"range": [0.1, 0.2]}, place + r"\.texture: expected a file path"),
+        ({"texture": "r.png", "channel": "x"}, place + r'\.channel: expected one of r, g, b, a, l, got the string "x"$'),
+        ({"texture": "r.png", "range": 0.5}, place + r"\.range: expected \[lo, hi\]$"),
+        ({"texture": "r.png", "range": [0.1]}, place + r"\.range: expected \[lo, hi\]$"),
+        ({"texture": "r.png", "range": [-1, 0.5]}, place + r"\.range\[0\]: -1 is outside"),
+        ({"texture": "r.png", "range": [0.5, 0.2]}, place + r"\.range: lo 0\.5 is above hi 0\.2$"),
+        ({"texture": "gone.png"}, place + r"\.texture: .*gone\.png not found$"),
+    ]
+    for ref, match in cases:
+        with pytest.raises(NbrdfError, match=match):
+            rough(ref)
+    flat = rough({"texture": "r.png", "channel": "g", "range": [0.3, 0.3]})  # a constant map is legal
+    assert flat.channel == "g" and flat.range == (0.3, 0.3)
+    assert rough({"texture": "r.png"}).channel == "r"
