@@ -54,7 +54,7 @@ def _stacks(n: int) -> dict:
         "unforced": (StackParams(f(0.1, n, 1), f(1.5, n, 1), f(0.9, n, 1, 3), f(1.0, n, 1), "conductor", f(0.3, n),
                                  base_r0=f(0.9, n, 3)), False),
     }
-    for cls, m in heldout_set():
+    for _cls, m in heldout_set():
         try:
             out[m.name] = (stack_params(m, n), True)
         except NbrdfError:
