@@ -32,7 +32,7 @@ def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndar
         # more grazing one, whose light refracts nearer the critical angle and
         # feeds the light trapped under the coat; the steeper one's exit lobe
         # is then reached by next-event estimation and the two-bounce
-        # connection instead of by rare paths (docs/RESULTS.md, Ground truth v2)
+        # connection instead of by rare paths (docs/decisions/003-estimator-v3.md)
         swap = (np.asarray(wo)[:, 2] < np.asarray(wi)[:, 2])[:, None]
         wi, wo = np.where(swap, wo, wi), np.where(swap, wi, wo)
     N = wi.shape[0]
@@ -63,7 +63,8 @@ def walk_device(requested: str | None = None) -> str:
     if walk_cuda.available():
         return "cuda"
     if want == "cuda":
-        raise NbrdfError(f"{source}=cuda, but Numba finds no CUDA device (install the cuda extra on a machine with one)")
+        raise NbrdfError(f"{source}=cuda, but Numba finds no CUDA device "
+                         "(install the cuda extra on a machine with one)")
     return "cpu"
 
 

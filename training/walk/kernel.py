@@ -23,32 +23,31 @@ from nbrdf.training.walk.rng import (
     uniform,
 )
 from nbrdf.training.walk.splitting import UNSPLIT, pop_copy, split_at_top, split_guide
-from nbrdf.training.walk.strategies import connection, strategies_on, top_of
+from nbrdf.training.walk.strategies import connection, pair_of, setup_of
 from nbrdf.training.walk.vertices import NO_CONNECTION, base_vertex, interior_vertex, scatter_vertex, top_vertex
 
 
 @njit(**JIT)
-def enter(P, q, s, T, conn, key, out):
-    """The path's start: the entry refraction at the top (the first uniform
-    stratified by the sample index s) and, with ``conn``, the two-bounce
-    connection from the entry (into ``out``, zeroed first). Returns (d, the
-    entry weight, the counter after the start, C4 of d)."""
-    ix, iy, iz = P.wi[q, 0], P.wi[q, 1], P.wi[q, 2]
-    u0 = (s + uniform(key, ENTRY)) / P.spp
+def enter(ix, iy, iz, s, spp, q, T, M, b_r0, key, out):
+    """The path's start from wi = (ix, iy, iz): the entry refraction at the
+    top (the first uniform stratified by the sample index s of spp) and, with
+    the connection, its two strategies from the entry (into ``out``, zeroed
+    first). Returns (d, the entry weight, the counter after the start, C4 of d)."""
+    u0 = (s + uniform(key, ENTRY)) / spp
     dx, dy, dz, w_entry, _ = ft_sample(T.a0, T.e0, ix, iy, iz, u0, uniform(key, ENTRY + 1))
     for c in range(out.shape[0]):
         out[c] = 0.0
-    if not conn:
+    if not M.conn:
         return dx, dy, dz, w_entry, START_DIMS, NO_CONNECTION
     u = (uniform(key, ENTRY_CONNECTION), uniform(key, ENTRY_CONNECTION + 1), uniform(key, ENTRY_CONNECTION + 2),
          uniform(key, ENTRY_CONNECTION + 3), uniform(key, ENTRY_CONNECTION + 4), uniform(key, ENTRY_CONNECTION + 5),
          uniform(key, ENTRY_CONNECTION + 6), uniform(key, ENTRY_CONNECTION + 7))
-    k, x, kd, xd = connection(ix, iy, iz, T, P.b_rough[q], 1.0, False, P.a_wide, P.agw, u, True)
+    k, x, kd, xd = connection(ix, iy, iz, T, 1.0, False, M.a_wide, M.agw, u, True)
     for c in range(out.shape[0]):
-        r0 = P.b_r0[q, c]
+        r0 = b_r0[q, c]
         out[c] += k * (x + r0 * (1.0 - x)) + kd * (xd + r0 * (1.0 - xd))
     C4 = (ft_pdf(T.a0, T.e0, ix, iy, iz, dx, dy, dz), ft_pdf(T.a0, T.e0, T.ox, T.oy, T.oz, -dx, -dy, dz),
-          ft_pdf(P.agw, T.e0, T.ox, T.oy, T.oz, -dx, -dy, dz), survival(T.tau0, 1.0, dz))
+          ft_pdf(M.agw, T.e0, T.ox, T.oy, T.oz, -dx, -dy, dz), survival(T.tau0, 1.0, dz))
     return dx, dy, dz, w_entry, START_DIMS_CONNECTION, C4
 
 
@@ -68,7 +67,7 @@ def flight(tau, slab, depth, dz, u):
 
 
 @njit(**JIT)
-def roulette(P, alive, bounces, kscale, beta, u):
+def roulette(M, alive, bounces, kscale, beta, u):
     """Whether the path stops after a vertex: dead, no weight left, or Russian
     roulette from ``rr_depth`` on (forced walk: the weight window on the
     unsplit weight; plain walk: survival min(weight, 0.95)). Survivors'
@@ -80,8 +79,8 @@ def roulette(P, alive, bounces, kscale, beta, u):
         bmax = max(bmax, beta[c])
     if not bmax > 0.0:
         return True
-    if bounces >= P.rr_depth:
-        qs = min(bmax * kscale / P.rr_weight, 1.0) if P.forced else min(bmax, 0.95)
+    if bounces >= M.rr_depth:
+        qs = min(bmax * kscale / M.rr_weight, 1.0) if M.forced else min(bmax, 0.95)
         if u >= qs:
             return True
         for c in range(beta.shape[0]):
@@ -94,16 +93,16 @@ def path(q, s, P, out, beta, stk):
     """Path s of pair q: writes its contribution per channel to ``out`` and
     returns the number of vertices (``beta``: scratch of C weights; ``stk``:
     scratch of the pending copies of a split path, (kmax - 1, 7 + C))."""
-    L = P.rough.shape[1]
+    rough, ior, sigma, alb, b_r0, b_alb = P.rough, P.ior, P.sigma, P.alb, P.b_r0, P.b_alb
+    L = rough.shape[1]
     key = key0 = lane_key(P.seed, q * P.spp + s)
-    T = top_of(P, q)
-    conn, split, chain, mirror = strategies_on(P, q)
-    dx, dy, dz, w_entry, ctr, C4 = enter(P, q, s, T, conn, key, out)
+    T, M = pair_of(P, q), setup_of(P, q)
+    dx, dy, dz, w_entry, ctr, C4 = enter(P.wi[q, 0], P.wi[q, 1], P.wi[q, 2], s, P.spp, q, T, M, b_r0, key, out)
     if w_entry <= 0.0:
         return 0
     for c in range(beta.shape[0]):
         beta[c] = w_entry
-    guide = split_guide(T, P.a_wide) if split else (0.0, 0.0, 0.0, 0.0)
+    guide = split_guide(T, M.a_wide) if M.split else (0.0, 0.0, 0.0, 0.0)
     sp = UNSPLIT
     depth, slab, pdf_last, vertices, bounces = 0.0, 0, 0.0, 0, 0
     scat = seg_on = resume = False
@@ -117,46 +116,46 @@ def path(q, s, P, out, beta, stk):
         bounces += 1
         vertices += 1
         z0 = depth
-        scatter, depth = flight(P.sigma[q, slab], slab, depth, dz, uniform(key, ctr))
+        scatter, depth = flight(sigma[q, slab], slab, depth, dz, uniform(key, ctr))
         ctr += FLIGHT_DIMS
         alive = True
         seg_in, seg_on = seg_on, False  # the segment reaches the top only without a vertex between
         scat_prev, scat = scat, scatter
         if scatter:
             C4 = NO_CONNECTION  # the connection makes only unscattered segments
-            dx, dy, dz, ctr = scatter_vertex(P, q, T, slab, depth, chain, mirror, key, ctr, out, beta)
+            dx, dy, dz, ctr = scatter_vertex(q, T, M, alb, b_r0, slab, depth, key, ctr, out, beta)
             pdf_last = INV_4PI
         else:
             k_if = slab + 1 if dz < 0.0 else slab
             depth = slab + 1.0 if dz < 0.0 else float(slab)
             wx, wy, wz = -dx, -dy, -dz
             if k_if == 0:
-                nx, ny, nz, wgt, p, ctr, C4n = top_vertex(P, q, T, wx, wy, wz, pdf_last, C4, seg_in, seg, scat_prev,
-                                                          resume, conn, mirror, key, ctr, out, beta)
-                if split and not resume:
-                    sp = split_at_top(wx, wy, wz, T, guide, P.a_wide, P.kmax, P.kstep, P.ifloor, bounces, sp, beta,
+                nx, ny, nz, wgt, p, ctr, C4n = top_vertex(q, T, M, b_r0, wx, wy, wz, pdf_last, C4, seg_in, seg,
+                                                          scat_prev, resume, key, ctr, out, beta)
+                if M.split and not resume:
+                    sp = split_at_top(wx, wy, wz, T, guide, M.a_wide, M.kmax, M.kstep, M.ifloor, bounces, sp, beta,
                                       stk)
                 C4 = C4n
                 alive = p > 0.0 and nz < 0.0 and wgt > 0.0
                 for c in range(beta.shape[0]):
                     beta[c] *= wgt
             elif k_if < L:
-                nx, ny, nz, wgt, p, t1, ctr = interior_vertex(P, q, T, k_if, wx, wy, wz, dz, z0, pdf_last, chain, key,
-                                                              ctr, out, beta)
+                nx, ny, nz, wgt, p, t1, ctr = interior_vertex(T, k_if, rough[q, k_if], ior[q, k_if], wx, wy, wz, dz,
+                                                              z0, pdf_last, M.chain, key, ctr, out, beta)
                 alive = p > 0.0 and wgt > 0.0
-                if chain and alive and wz < 0.0 and nz > 0.0:  # up through interface 1: the segment starts
+                if M.chain and alive and wz < 0.0 and nz > 0.0:  # up through interface 1: the segment starts
                     seg_on, seg = True, (-wx, -wy, -wz, pdf_last, t1)
                 if alive and wz * nz < 0.0:  # crossed: down into slab k, up into slab k - 1
                     slab = k_if if dz < 0.0 else k_if - 1
                 for c in range(beta.shape[0]):
                     beta[c] *= wgt
             else:
-                nx, ny, nz, p, alive, starts, ctr = base_vertex(P, q, T, wx, wy, wz, depth, pdf_last, C4, chain, conn,
-                                                                mirror, scat_prev, key, ctr, out, beta)
+                nx, ny, nz, p, alive, starts, ctr = base_vertex(q, T, M, b_r0, b_alb, L, wx, wy, wz, depth, pdf_last,
+                                                                C4, scat_prev, key, ctr, out, beta)
                 if starts:
                     seg_on, seg = True, (wx, wy, wz, pdf_last, seg[4])
             dx, dy, dz, pdf_last = nx, ny, nz, p
-        stop = roulette(P, alive, bounces, sp[0], beta, uniform(key, ctr))
+        stop = roulette(M, alive, bounces, sp[0], beta, uniform(key, ctr))
         ctr += ROULETTE_DIMS
         if stop:
             if sp[3] == 0:

@@ -29,29 +29,45 @@ from nbrdf.training.walk.interfaces import (
 )
 from nbrdf.training.walk.params import JIT, MIRROR_CHAIN_P, MIRROR_CHAIN_ROUGHNESS
 
-#: wo and the top interface of a pair, with wo's stretched view direction
-#: (sx, sy, sz) and G1 (g1o): next-event estimation samples from wo at every
-#: vertex. a0, e0, tau0: the top's roughness and index, slab 0's optical thickness.
-Top = namedtuple("Top", ["ox", "oy", "oz", "sx", "sy", "sz", "g1o", "a0", "e0", "tau0"])
+#: One pair's scalars, read once per path (the vertex code gets no arrays it
+#: does not index per channel): wo (ox, oy, oz) with its stretched view
+#: direction (sx, sy, sz) and G1 (g1o) for the top, which next-event
+#: estimation samples from at every vertex; the top's roughness, index and
+#: slab 0's optical thickness (a0, e0, tau0); interface 1 and slab 1 (a1, e1,
+#: tau1; 0 for one interface); the base's roughness and index (ba, be).
+Pair = namedtuple("Pair", ["ox", "oy", "oz", "sx", "sy", "sz", "g1o", "a0", "e0", "tau0", "a1", "e1", "tau1", "ba",
+                           "be"])
+#: A path's settings: the base kind, the forced top reflection, the
+#: strategies on (``strategies_on``), the top's mixtures (lam, lam_w, a_wide),
+#: the wide guide's roughness (agw), roulette (rr_depth, rr_weight) and
+#: splitting (kmax, kstep, ifloor), as ``WalkParams`` names them.
+Setup = namedtuple("Setup", ["base", "forced", "conn", "split", "chain", "mirror", "lam", "lam_w", "a_wide", "agw",
+                             "rr_depth", "rr_weight", "kmax", "kstep", "ifloor"])
 
 
 @njit(**JIT)
-def top_of(P, q):
-    """The ``Top`` record of pair q."""
+def pair_of(P, q):
+    """The ``Pair`` record of pair q."""
     ox, oy, oz = P.wo[q, 0], P.wo[q, 1], P.wo[q, 2]
     a0 = P.rough[q, 0]
     sx, sy, sz = norm3(a0 * ox, a0 * oy, oz)
-    return Top(ox, oy, oz, sx, sy, sz, g1_dir(ox, oy, oz, a0), a0, P.ior[q, 0], P.sigma[q, 0])
+    two = P.rough.shape[1] > 1
+    a1 = P.rough[q, 1] if two else 0.0
+    e1 = P.ior[q, 1] if two else 0.0
+    tau1 = P.sigma[q, 1] if two else 0.0
+    return Pair(ox, oy, oz, sx, sy, sz, g1_dir(ox, oy, oz, a0), a0, P.ior[q, 0], P.sigma[q, 0], a1, e1, tau1,
+                P.b_rough[q], P.b_ior[q])
 
 
 @njit(**JIT)
-def strategies_on(P, q):
-    """Which strategies pair q's stack uses (all need the forced top reflection):
-    conn, the two-bounce connection (one interface over a conductor, the top
-    slab empty or the base sharper than MIRROR_CHAIN_ROUGHNESS); split,
-    splitting by exit importance (the connection over an empty slab); chain,
-    next-event estimation through two interfaces; mirror, the chain by way
-    of the base (one interface over a medium and a sharp conductor)."""
+def setup_of(P, q):
+    """The ``Setup`` of pair q's paths. The strategies (all need the forced
+    top reflection): conn, the two-bounce connection (one interface over a
+    conductor, the top slab empty or the base sharper than
+    MIRROR_CHAIN_ROUGHNESS); split, splitting by exit importance (the
+    connection over an empty slab); chain, next-event estimation through two
+    interfaces; mirror, the chain by way of the base (one interface over a
+    medium and a sharp conductor)."""
     L = P.rough.shape[1]
     tau0 = P.sigma[q, 0]
     sharp = P.b_rough[q] < MIRROR_CHAIN_ROUGHNESS
@@ -60,7 +76,8 @@ def strategies_on(P, q):
     split = conn and P.kmax > 1 and tau0 == 0.0
     chain = P.forced and L == 2
     mirror = one_conductor and tau0 > 0.0 and sharp
-    return conn, split, chain, mirror
+    return Setup(P.base, P.forced, conn, split, chain, mirror, P.lam, P.lam_w, P.a_wide, P.agw, P.rr_depth,
+                 P.rr_weight, P.kmax, P.kstep, P.ifloor)
 
 
 # --- samplers of the strategies -------------------------------------------------------------
@@ -218,12 +235,12 @@ def scatter_nee(depth, T, u0, u1):
 
 
 @njit(**JIT)
-def scatter_mirror_chain(depth, T, ba, u0, u1, u2, u3):
+def scatter_mirror_chain(depth, T, u0, u1, u2, u3):
     """The chain by way of a sharp base from a scattering (drawn with
     probability MIRROR_CHAIN_P): (value, Schlick's x at the base); balance
     heuristic over the segment's strategies (the walk, next-event estimation
     at the base, the chain)."""
-    g, pn, pb, p_rev, x = mirror_chain_nee(depth, T.sx, T.sy, T.sz, T.g1o, T.ox, T.oy, T.oz, T.a0, T.e0, T.tau0, ba,
+    g, pn, pb, p_rev, x = mirror_chain_nee(depth, T.sx, T.sy, T.sz, T.g1o, T.ox, T.oy, T.oz, T.a0, T.e0, T.tau0, T.ba,
                                            u0, u1, u2, u3)
     if g > 0.0:
         return INV_4PI * g * pn * p_rev / (INV_4PI * pb + INV_4PI * pn + MIRROR_CHAIN_P * pn * p_rev), x
@@ -231,13 +248,13 @@ def scatter_mirror_chain(depth, T, ba, u0, u1, u2, u3):
 
 
 @njit(**JIT)
-def scatter_chain(depth, T, a1, e1, tau1, u0, u1, u2, u3):
+def scatter_chain(depth, T, u0, u1, u2, u3):
     """Next-event estimation through both interfaces from a scattering in
     slab 1; balance heuristic over the segment (d1, v0): the walk (whose
     densities carry its flights' survival t1, t0: it passes them by chance),
     next-event estimation at interface 1, the chain."""
     _, _, _, g, pn, p1, p_if, t1, t0 = chain_nee(depth, T.sx, T.sy, T.sz, T.g1o, T.ox, T.oy, T.oz, T.a0, T.e0,
-                                                 T.tau0, a1, e1, tau1, u0, u1, u2, u3)
+                                                 T.tau0, T.a1, T.e1, T.tau1, u0, u1, u2, u3)
     if g > 0.0:
         return INV_4PI * g * pn * p1 / (INV_4PI * t1 * t0 * p_if + INV_4PI * t1 * pn + pn * p1)
     return 0.0
@@ -262,15 +279,15 @@ def interior_nee(wx, wy, wz, T, a, e, pdf_last, chain_from_below, t1, u0, u1):
 
 
 @njit(**JIT)
-def base_chain(base, wx, wy, wz, depth, T, a1, e1, tau1, ba, be, g1w, u0, u1, u2, u3):
+def base_chain(base, wx, wy, wz, depth, T, g1w, u0, u1, u2, u3):
     """Next-event estimation through both interfaces from the base under
     slab 1: (value, Schlick's x of a conductor base); balance heuristic over
     the segment (d1, v0) as ``scatter_chain``, the base's density of d1 for
     the walk's."""
     d1x, d1y, d1z, g, pn, p1, p_if, t1, t0 = chain_nee(depth, T.sx, T.sy, T.sz, T.g1o, T.ox, T.oy, T.oz, T.a0, T.e0,
-                                                       T.tau0, a1, e1, tau1, u0, u1, u2, u3)
+                                                       T.tau0, T.a1, T.e1, T.tau1, u0, u1, u2, u3)
     if g > 0.0:
-        fb, pb, x = base_eval(base, wx, wy, wz, d1x, d1y, d1z, ba, be, g1w)
+        fb, pb, x = base_eval(base, wx, wy, wz, d1x, d1y, d1z, T.ba, T.be, g1w)
         if fb > 0.0:
             return fb * d1z * g * pn * p1 / (pb * t1 * t0 * p_if + pb * t1 * pn + pn * p1), x
     return 0.0, 0.0
@@ -302,7 +319,7 @@ def base_nee(base, wx, wy, wz, vx, vy, vz, sc, pn, ba, be, g1w, pdf_last, seg, C
 
 
 @njit(**JIT)
-def top_exit(wx, wy, wz, T, g1w, pdf_last, C4, tu, seg_in, mirror, chx, chy, chz, chp, cht1, ba, a1, e1):
+def top_exit(wx, wy, wz, T, g1w, pdf_last, C4, tu, seg_in, mirror, chx, chy, chz, chp, cht1):
     """The top seen from below: the exit toward wo in closed form, weighted
     against the strategies that make the same last segment. After the walk's
     segment by way of the base (``seg_in`` and ``mirror``): (the walk,
@@ -315,10 +332,10 @@ def top_exit(wx, wy, wz, T, g1w, pdf_last, C4, tu, seg_in, mirror, chx, chy, chz
     if not f > 0.0:
         return 0.0
     if seg_in and mirror:
-        p_rev = cond_pdf(-wx, -wy, -wz, chx, chy, chz, ba)
+        p_rev = cond_pdf(-wx, -wy, -wz, chx, chy, chz, T.ba)
         return f * chp * pdf_last / (chp * pdf_last + chp * pn + MIRROR_CHAIN_P * pn * p_rev)
     if seg_in:
-        p1 = ft_pdf(a1, e1, -wx, -wy, -wz, -chx, -chy, -chz)
+        p1 = ft_pdf(T.a1, T.e1, -wx, -wy, -wz, -chx, -chy, -chz)
         t0 = survival(T.tau0, 1.0, wz)
         return f * chp * cht1 * t0 * pdf_last / (chp * cht1 * t0 * pdf_last + chp * cht1 * pn + pn * p1)
     pm, pg, pw, tg = C4
@@ -327,12 +344,12 @@ def top_exit(wx, wy, wz, T, g1w, pdf_last, C4, tu, seg_in, mirror, chx, chy, chz
 
 
 @njit(**JIT)
-def connection(wx, wy, wz, T, ba, lam, wide, a_wide, agw, u, entry):
+def connection(wx, wy, wz, T, lam, wide, a_wide, agw, u, entry):
     """Both strategies of the two-bounce connection from a top vertex (C, then
     D; ``u``: their 8 uniforms): (C's value, its Schlick x, D's value, its x)."""
-    k, x = mirror_connection(wx, wy, wz, T.a0, T.e0, ba, lam, wide, a_wide, agw, T.ox, T.oy, T.oz, u[0], u[1], u[2],
+    k, x = mirror_connection(wx, wy, wz, T.a0, T.e0, T.ba, lam, wide, a_wide, agw, T.ox, T.oy, T.oz, u[0], u[1], u[2],
                              u[3], entry, T.tau0)
-    kd, xd = wide_connection(wx, wy, wz, T.a0, T.e0, ba, lam, wide, a_wide, agw, T.ox, T.oy, T.oz, T.sx, T.sy, T.sz,
+    kd, xd = wide_connection(wx, wy, wz, T.a0, T.e0, T.ba, lam, wide, a_wide, agw, T.ox, T.oy, T.oz, T.sx, T.sy, T.sz,
                              T.g1o, u[4], u[5], u[6], u[7], entry, T.tau0)
     return k, x, kd, xd
 

@@ -62,44 +62,45 @@ NO_CONNECTION = (1.0, 0.0, 0.0, 1.0)
 
 
 @njit(**JIT)
-def scatter_vertex(P, q, T, slab, depth, chain, mirror, key, ctr, out, beta):
+def scatter_vertex(q, T, M, alb, b_r0, slab, depth, key, ctr, out, beta):
     """A scattering at ``depth`` in ``slab``: next-event estimation (slab 0),
     the chain by way of the base (``mirror``) or through both interfaces
     (slab 1, ``chain``), the albedo into beta and the phase function's
-    direction. Returns (d, counter)."""
+    direction. Returns (d, counter). T: the pair's ``Pair``, M: the path's
+    ``Setup``; alb, b_r0: the slabs' albedos and the base's r0 (all pairs)."""
     C = out.shape[0]
     dims = SCATTER_DIMS
     if slab == 0:
         k = scatter_nee(depth, T, uniform(key, ctr + SCATTER_NEE), uniform(key, ctr + SCATTER_NEE + 1))
         if k != 0.0:
             for c in range(C):
-                out[c] += beta[c] * P.alb[q, slab, c] * k
-        if mirror and uniform(key, ctr + SCATTER_MIRROR_PICK) < MIRROR_CHAIN_P:
-            k, x = scatter_mirror_chain(depth, T, P.b_rough[q], uniform(key, ctr + SCATTER_MIRROR),
+                out[c] += beta[c] * alb[q, slab, c] * k
+        if M.mirror and uniform(key, ctr + SCATTER_MIRROR_PICK) < MIRROR_CHAIN_P:
+            k, x = scatter_mirror_chain(depth, T, uniform(key, ctr + SCATTER_MIRROR),
                                         uniform(key, ctr + SCATTER_MIRROR + 1), uniform(key, ctr + SCATTER_MIRROR + 2),
                                         uniform(key, ctr + SCATTER_MIRROR + 3))
             if k != 0.0:
                 for c in range(C):
-                    out[c] += beta[c] * P.alb[q, slab, c] * k * (x + P.b_r0[q, c] * (1.0 - x))
-        if mirror:
+                    out[c] += beta[c] * alb[q, slab, c] * k * (x + b_r0[q, c] * (1.0 - x))
+        if M.mirror:
             dims = SCATTER_DIMS_MIRROR
-    elif chain and slab == 1:
-        k = scatter_chain(depth, T, P.rough[q, 1], P.ior[q, 1], P.sigma[q, 1], uniform(key, ctr + SCATTER_CHAIN),
+    elif M.chain and slab == 1:
+        k = scatter_chain(depth, T, uniform(key, ctr + SCATTER_CHAIN),
                           uniform(key, ctr + SCATTER_CHAIN + 1), uniform(key, ctr + SCATTER_CHAIN + 2),
                           uniform(key, ctr + SCATTER_CHAIN + 3))
         if k != 0.0:
             for c in range(C):
-                out[c] += beta[c] * P.alb[q, slab, c] * k
+                out[c] += beta[c] * alb[q, slab, c] * k
         dims = SCATTER_DIMS_CHAIN
     for c in range(C):
-        beta[c] *= P.alb[q, slab, c]
+        beta[c] *= alb[q, slab, c]
     ctr += dims
     dx, dy, dz = phase_sample(uniform(key, ctr), uniform(key, ctr + 1))
     return dx, dy, dz, ctr + PHASE_DIMS
 
 
 @njit(**JIT)
-def top_vertex(P, q, T, wx, wy, wz, pdf_last, C4, seg_in, seg, scat_prev, resume, conn, mirror, key, ctr, out, beta):
+def top_vertex(q, T, M, b_r0, wx, wy, wz, pdf_last, C4, seg_in, seg, scat_prev, resume, key, ctr, out, beta):
     """The top seen from below (w toward where the light came from): the exit
     toward wo (unless ``resume``: a split copy, whose vertex was evaluated),
     the walk's reflection (forced) or its Fresnel-chosen sample (plain walk),
@@ -107,47 +108,44 @@ def top_vertex(P, q, T, wx, wy, wz, pdf_last, C4, seg_in, seg, scat_prev, resume
     density, counter, the new C4); beta is left for the caller (splitting
     comes first)."""
     C = out.shape[0]
-    L = P.rough.shape[1]
     g1w = g1_dir(wx, wy, wz, T.a0)
     if not resume:
-        tu = survival(T.tau0, 1.0, wz) if conn and not scat_prev else 1.0  # the walk's flight up (its density)
-        k = top_exit(wx, wy, wz, T, g1w, pdf_last, C4, tu, seg_in, mirror, seg[0], seg[1], seg[2], seg[3], seg[4],
-                     P.b_rough[q], P.rough[q, L - 1], P.ior[q, L - 1])
+        tu = survival(T.tau0, 1.0, wz) if M.conn and not scat_prev else 1.0  # the walk's flight up (its density)
+        k = top_exit(wx, wy, wz, T, g1w, pdf_last, C4, tu, seg_in, M.mirror, seg[0], seg[1], seg[2], seg[3], seg[4])
         if k != 0.0:
             for c in range(C):
                 out[c] += beta[c] * k
     u0, u1, u2 = uniform(key, ctr + TOP_SAMPLE), uniform(key, ctr + TOP_SAMPLE + 1), uniform(key, ctr + TOP_SAMPLE + 2)
-    if not P.forced:
+    if not M.forced:
         nx, ny, nz, wgt, p = diel_sample(wx, wy, wz, T.a0, T.e0, u0, u1, u2)
         return nx, ny, nz, wgt, p, ctr + TOP_DIMS, C4
-    nx, ny, nz, wgt, p, lm, wide = top_reflection(wx, wy, wz, T.a0, T.e0, T.tau0, conn, P.lam, P.lam_w, P.a_wide, g1w,
-                                                  T.ox, T.oy, T.oz, u0, u1, u2)
-    if not conn:
+    nx, ny, nz, wgt, p, lm, wide = top_reflection(wx, wy, wz, T.a0, T.e0, T.tau0, M.conn, M.lam, M.lam_w, M.a_wide,
+                                                  g1w, T.ox, T.oy, T.oz, u0, u1, u2)
+    if not M.conn:
         return nx, ny, nz, wgt, p, ctr + TOP_DIMS, C4
     if not resume:
         u = (uniform(key, ctr + TOP_CONNECTION), uniform(key, ctr + TOP_CONNECTION + 1),
              uniform(key, ctr + TOP_CONNECTION + 2), uniform(key, ctr + TOP_CONNECTION + 3),
              uniform(key, ctr + TOP_CONNECTION + 4), uniform(key, ctr + TOP_CONNECTION + 5),
              uniform(key, ctr + TOP_CONNECTION + 6), uniform(key, ctr + TOP_CONNECTION + 7))
-        k, x, kd, xd = connection(wx, wy, wz, T, P.b_rough[q], lm, wide, P.a_wide, P.agw, u, False)
+        k, x, kd, xd = connection(wx, wy, wz, T, lm, wide, M.a_wide, M.agw, u, False)
         for c in range(C):
-            r0 = P.b_r0[q, c]
+            r0 = b_r0[q, c]
             out[c] += beta[c] * (k * (x + r0 * (1.0 - x)) + kd * (xd + r0 * (1.0 - xd)))
-    C4 = connection_densities(T.a0, T.e0, P.agw, T.tau0, T.ox, T.oy, T.oz, p, nx, ny, nz)
+    C4 = connection_densities(T.a0, T.e0, M.agw, T.tau0, T.ox, T.oy, T.oz, p, nx, ny, nz)
     return nx, ny, nz, wgt, p, ctr + TOP_DIMS_CONNECTION, C4
 
 
 @njit(**JIT)
-def interior_vertex(P, q, T, k_if, wx, wy, wz, dz, z0, pdf_last, chain, key, ctr, out, beta):
-    """Interface ``k_if`` (> 0), reached along d (dz) from depth z0: next-event
+def interior_vertex(T, k_if, a, e, wx, wy, wz, dz, z0, pdf_last, chain, key, ctr, out, beta):
+    """Interface ``k_if`` (> 0; roughness a, index e), reached along d (dz) from depth z0: next-event
     estimation through the top (interface 1) and the interface's sample.
     Returns (n, weight factor, density, t1, counter); t1: the survival of the
     walk's flight from slab 1 (the chain's segment starts with it)."""
-    a, e = P.rough[q, k_if], P.ior[q, k_if]
     below = chain and wz < 0.0
     t1 = 1.0
     if k_if == 1:
-        t1 = survival(P.sigma[q, 1], z0 - 1.0, dz) if below else 1.0
+        t1 = survival(T.tau1, z0 - 1.0, dz) if below else 1.0
         k = interior_nee(wx, wy, wz, T, a, e, pdf_last, below, t1, uniform(key, ctr + INTERIOR_NEE),
                          uniform(key, ctr + INTERIOR_NEE + 1))
         if k != 0.0:
@@ -159,49 +157,49 @@ def interior_vertex(P, q, T, k_if, wx, wy, wz, dz, z0, pdf_last, chain, key, ctr
 
 
 @njit(**JIT)
-def base_vertex(P, q, T, wx, wy, wz, depth, pdf_last, C4, chain, conn, mirror, scat_prev, key, ctr, out, beta):
+def base_vertex(q, T, M, b_r0, b_alb, L, wx, wy, wz, depth, pdf_last, C4, scat_prev, key, ctr, out, beta):
     """The base (w toward where the light came from): next-event estimation
     through the top (one interface) or through both (two), and the base's
     sample with its weight into beta. Returns (n, density, alive, whether the
     walk's segment by way of the base starts here, counter)."""
     C = out.shape[0]
-    base, ba, be = P.base, P.b_rough[q], P.b_ior[q]
+    base, ba, be = M.base, T.ba, T.be
     sc = pn = vx = vy = vz = 0.0
-    if P.rough.shape[1] == 1:
+    if L == 1:
         vx, vy, vz, sc, pn = nee(1.0, T.sx, T.sy, T.sz, T.g1o, T.ox, T.oy, T.oz, T.a0, T.e0, T.tau0,
                                  uniform(key, ctr + BASE_NEE), uniform(key, ctr + BASE_NEE + 1))
     g1w = g1_dir(wx, wy, wz, ba) if base == CONDUCTOR else 0.0
-    if chain and wz > 0.0:
-        k, x = base_chain(base, wx, wy, wz, depth, T, P.rough[q, 1], P.ior[q, 1], P.sigma[q, 1], ba, be, g1w,
-                          uniform(key, ctr + BASE_CHAIN), uniform(key, ctr + BASE_CHAIN + 1),
+    if M.chain and wz > 0.0:
+        k, x = base_chain(base, wx, wy, wz, depth, T, g1w, uniform(key, ctr + BASE_CHAIN), uniform(key, ctr + BASE_CHAIN + 1),
                           uniform(key, ctr + BASE_CHAIN + 2), uniform(key, ctr + BASE_CHAIN + 3))
         if k != 0.0:
             for c in range(C):
-                col = (x + P.b_r0[q, c] * (1.0 - x)) if base == CONDUCTOR else (
-                    P.b_alb[q, c] if base == DIFFUSE else 1.0)
+                col = (x + b_r0[q, c] * (1.0 - x)) if base == CONDUCTOR else (
+                    b_alb[q, c] if base == DIFFUSE else 1.0)
                 out[c] += beta[c] * k * col
         ctr += BASE_CHAIN_DIMS
-    seg = base == CONDUCTOR and mirror and scat_prev and wz > 0.0  # the chain made this segment too
+    seg = base == CONDUCTOR and M.mirror and scat_prev and wz > 0.0  # the chain made this segment too
     if sc > 0.0:
-        k, x = base_nee(base, wx, wy, wz, vx, vy, vz, sc, pn, ba, be, g1w, pdf_last, seg, C4, conn, T.tau0)
-        for c in range(C if k != 0.0 else 0):
-            if base == CONDUCTOR:
-                out[c] += beta[c] * k * (x + P.b_r0[q, c] * (1.0 - x))
-            elif base == DIFFUSE:
-                out[c] += beta[c] * P.b_alb[q, c] * k
-            else:
-                out[c] += beta[c] * k
+        k, x = base_nee(base, wx, wy, wz, vx, vy, vz, sc, pn, ba, be, g1w, pdf_last, seg, C4, M.conn, T.tau0)
+        if k != 0.0:
+            for c in range(C):
+                if base == CONDUCTOR:
+                    out[c] += beta[c] * k * (x + b_r0[q, c] * (1.0 - x))
+                elif base == DIFFUSE:
+                    out[c] += beta[c] * b_alb[q, c] * k
+                else:
+                    out[c] += beta[c] * k
     u0, u1 = uniform(key, ctr + BASE_SAMPLE), uniform(key, ctr + BASE_SAMPLE + 1)
     if base == CONDUCTOR:
         nx, ny, nz, wgt, p, x = cond_sample(wx, wy, wz, ba, g1w, u0, u1)
         alive = p > 0.0 and wgt > 0.0
         for c in range(C):
-            beta[c] *= wgt * (x + P.b_r0[q, c] * (1.0 - x))
+            beta[c] *= wgt * (x + b_r0[q, c] * (1.0 - x))
     elif base == DIFFUSE:
         nx, ny, nz, p = diffuse_sample(u0, u1)
         alive = wz > 0.0 and p > 0.0
         for c in range(C):
-            beta[c] *= P.b_alb[q, c] if alive else 0.0
+            beta[c] *= b_alb[q, c] if alive else 0.0
     else:
         nx, ny, nz, wgt, p = diel_sample(wx, wy, wz, ba, be, u0, u1, uniform(key, ctr + BASE_SAMPLE + 2))
         alive = p > 0.0 and nz > 0.0 and wgt > 0.0  # what is transmitted leaves the stack
