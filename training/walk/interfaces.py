@@ -30,7 +30,7 @@ from nbrdf.training.walk.ggx import (
     vndf_pdf,
     vndf_std,
 )
-from nbrdf.training.walk.params import JIT
+from nbrdf.training.walk.params import JIT, JIT_INLINE
 
 #: Base kinds as the walk's record carries them (``WalkParams.base``).
 CONDUCTOR = BASE_CODES["conductor"]
@@ -268,7 +268,7 @@ def top_eval(wx, wy, wz, dx, dy, dz, a, eta, lam, wide, a_wide, ox, oy, oz):
 
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def top_reflection(wx, wy, wz, a, eta, tau, conn, lam, lam_w, a_wide, g1w, ox, oy, oz, u0, u1, u2):
     """The walk's internal reflection at the top seen from below (forced: F
     in the weight): beyond the critical angle (trapped light) from VNDF(a),
@@ -323,7 +323,7 @@ def cond_geo(ix, iy, iz, ox, oy, oz, a):
     return f, p, schlick5(ih)
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def cond_sample(wx, wy, wz, a, g1w, u0, u1):
     """The base's VNDF reflection of w (g1w = G1(w)): (n, weight f n_z / p with
     F = 1, p, Schlick's x). The sampled facet is the half vector: f n_z / p =
@@ -337,7 +337,7 @@ def cond_sample(wx, wy, wz, a, g1w, u0, u1):
 
 
 # --- diffuse base, isotropic medium, any base ---------------------------------------------
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def diffuse_sample(u0, u1):
     """A cosine-weighted direction up from the base: (n, its density)."""
     r = math.sqrt(u0)
@@ -346,7 +346,7 @@ def diffuse_sample(u0, u1):
     return r * cph, r * sph, nz, nz * INV_PI
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def phase_sample(u0, u1):
     """A uniform direction on the sphere (the isotropic phase function; its
     density is ggx.INV_4PI)."""
@@ -356,7 +356,7 @@ def phase_sample(u0, u1):
     return r * cph, r * sph, zz
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def base_eval(base, wx, wy, wz, dx, dy, dz, a, eta, g1w):
     """Any base kind from w (up, toward where the light came from) to d (up):
     (f, the density of d sampled from w, Schlick's x of a conductor, else 0);

@@ -11,7 +11,7 @@ from numba import njit, prange
 
 from nbrdf.training.walk.ggx import INV_4PI, survival
 from nbrdf.training.walk.interfaces import ft_pdf, ft_sample
-from nbrdf.training.walk.params import JIT
+from nbrdf.training.walk.params import JIT, JIT_INLINE
 from nbrdf.training.walk.rng import (
     ENTRY,
     ENTRY_CONNECTION,
@@ -27,7 +27,7 @@ from nbrdf.training.walk.strategies import connection, pair_of, setup_of
 from nbrdf.training.walk.vertices import NO_CONNECTION, base_vertex, interior_vertex, scatter_vertex, top_vertex
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def enter(ix, iy, iz, s, spp, q, T, M, b_r0, key, out):
     """The path's start from wi = (ix, iy, iz): the entry refraction at the
     top (the first uniform stratified by the sample index s of spp) and, with
@@ -51,7 +51,7 @@ def enter(ix, iy, iz, s, spp, q, T, M, b_r0, key, out):
     return dx, dy, dz, w_entry, START_DIMS_CONNECTION, C4
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def flight(tau, slab, depth, dz, u):
     """A free flight from ``depth`` along dz in a slab of optical thickness
     tau: (whether it scatters inside the slab, the depth it reaches if so)."""
@@ -66,7 +66,7 @@ def flight(tau, slab, depth, dz, u):
     return False, depth
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def roulette(M, alive, bounces, kscale, beta, u):
     """Whether the path stops after a vertex: dead, no weight left, or Russian
     roulette from ``rr_depth`` on (forced walk: the weight window on the

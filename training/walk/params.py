@@ -51,6 +51,8 @@ BLOCK = 32
 #: non-finite checks stay valid); contraction into FMAs and reassociation
 #: change results only by rounding, identically on every thread.
 JIT = dict(cache=True, fastmath={"contract", "arcp", "nsz", "reassoc"}, nogil=True)
+#: The same, inlined into the caller by Numba (the vertex-level functions).
+JIT_INLINE = dict(JIT, inline="always")
 
 #: The walk's input, one record for the CPU and the CUDA entry points (a
 #: namedtuple: Numba passes it to ``@njit`` and ``@cuda.jit`` code alike).

@@ -27,7 +27,7 @@ from nbrdf.training.walk.interfaces import (
     ft_sample,
     top_eval,
 )
-from nbrdf.training.walk.params import JIT, MIRROR_CHAIN_P, MIRROR_CHAIN_ROUGHNESS
+from nbrdf.training.walk.params import JIT, JIT_INLINE, MIRROR_CHAIN_P, MIRROR_CHAIN_ROUGHNESS
 
 #: One pair's scalars, read once per path (the vertex code gets no arrays it
 #: does not index per channel): wo (ox, oy, oz) with its stretched view
@@ -45,7 +45,7 @@ Setup = namedtuple("Setup", ["base", "forced", "conn", "split", "chain", "mirror
                              "rr_depth", "rr_weight", "kmax", "kstep", "ifloor"])
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def pair_of(P, q):
     """The ``Pair`` record of pair q."""
     ox, oy, oz = P.wo[q, 0], P.wo[q, 1], P.wo[q, 2]
@@ -59,7 +59,7 @@ def pair_of(P, q):
                 P.b_rough[q], P.b_ior[q])
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def setup_of(P, q):
     """The ``Setup`` of pair q's paths. The strategies (all need the forced
     top reflection): conn, the two-bounce connection (one interface over a
@@ -224,7 +224,7 @@ def wide_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, 
 
 
 # --- MIS-weighted contributions per unit path weight (0.0: none) ---------------------------
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def scatter_nee(depth, T, u0, u1):
     """Next-event estimation through the top from a scattering in slab 0 (at
     ``depth``), balance heuristic against the phase function's own sample."""
@@ -234,7 +234,7 @@ def scatter_nee(depth, T, u0, u1):
     return 0.0
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def scatter_mirror_chain(depth, T, u0, u1, u2, u3):
     """The chain by way of a sharp base from a scattering (drawn with
     probability MIRROR_CHAIN_P): (value, Schlick's x at the base); balance
@@ -247,7 +247,7 @@ def scatter_mirror_chain(depth, T, u0, u1, u2, u3):
     return 0.0, 0.0
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def scatter_chain(depth, T, u0, u1, u2, u3):
     """Next-event estimation through both interfaces from a scattering in
     slab 1; balance heuristic over the segment (d1, v0): the walk (whose
@@ -260,7 +260,7 @@ def scatter_chain(depth, T, u0, u1, u2, u3):
     return 0.0
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def interior_nee(wx, wy, wz, T, a, e, pdf_last, chain_from_below, t1, u0, u1):
     """Next-event estimation through the top from interface 1 (w toward
     where the light came from); ``chain_from_below`` (a two-interface stack,
@@ -278,7 +278,7 @@ def interior_nee(wx, wy, wz, T, a, e, pdf_last, chain_from_below, t1, u0, u1):
     return f * abs(vz) * sc * pn / (pn + pb)
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def base_chain(base, wx, wy, wz, depth, T, g1w, u0, u1, u2, u3):
     """Next-event estimation through both interfaces from the base under
     slab 1: (value, Schlick's x of a conductor base); balance heuristic over
@@ -293,7 +293,7 @@ def base_chain(base, wx, wy, wz, depth, T, g1w, u0, u1, u2, u3):
     return 0.0, 0.0
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def base_nee(base, wx, wy, wz, vx, vy, vz, sc, pn, ba, be, g1w, pdf_last, seg, C4, conn, tau0):
     """Next-event estimation through the top at the base (v, sc, pn from
     ``nee``): (value, Schlick's x of a conductor). A conductor's segment
@@ -318,7 +318,7 @@ def base_nee(base, wx, wy, wz, vx, vy, vz, sc, pn, ba, be, g1w, pdf_last, seg, C
     return f * abs(vz) * sc * pn / (pn + pb), 0.0
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def top_exit(wx, wy, wz, T, g1w, pdf_last, C4, tu, seg_in, mirror, chx, chy, chz, chp, cht1):
     """The top seen from below: the exit toward wo in closed form, weighted
     against the strategies that make the same last segment. After the walk's
@@ -343,7 +343,7 @@ def top_exit(wx, wy, wz, T, g1w, pdf_last, C4, tu, seg_in, mirror, chx, chy, chz
     return f * pa / (pa + pm * tg * pn + pg * pdf_last + pw * pn)
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def connection(wx, wy, wz, T, lam, wide, a_wide, agw, u, entry):
     """Both strategies of the two-bounce connection from a top vertex (C, then
     D; ``u``: their 8 uniforms): (C's value, its Schlick x, D's value, its x)."""
@@ -354,7 +354,7 @@ def connection(wx, wy, wz, T, lam, wide, a_wide, agw, u, entry):
     return k, x, kd, xd
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def connection_densities(a0, e0, agw, tau0, ox, oy, oz, p, nx, ny, nz):
     """(pm, pg, pw, tg) of a downward direction n that the walk drew with
     density p: the densities the connection's C and D give it and the

@@ -21,7 +21,7 @@ from nbrdf.training.walk.interfaces import (
     phase_sample,
     top_reflection,
 )
-from nbrdf.training.walk.params import JIT, MIRROR_CHAIN_P
+from nbrdf.training.walk.params import JIT_INLINE, MIRROR_CHAIN_P
 from nbrdf.training.walk.rng import (
     BASE_CHAIN,
     BASE_CHAIN_DIMS,
@@ -61,7 +61,7 @@ from nbrdf.training.walk.strategies import (
 NO_CONNECTION = (1.0, 0.0, 0.0, 1.0)
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def scatter_vertex(q, T, M, alb, b_r0, slab, depth, key, ctr, out, beta):
     """A scattering at ``depth`` in ``slab``: next-event estimation (slab 0),
     the chain by way of the base (``mirror``) or through both interfaces
@@ -99,7 +99,7 @@ def scatter_vertex(q, T, M, alb, b_r0, slab, depth, key, ctr, out, beta):
     return dx, dy, dz, ctr + PHASE_DIMS
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def top_vertex(q, T, M, b_r0, wx, wy, wz, pdf_last, C4, seg_in, seg, scat_prev, resume, key, ctr, out, beta):
     """The top seen from below (w toward where the light came from): the exit
     toward wo (unless ``resume``: a split copy, whose vertex was evaluated),
@@ -136,7 +136,7 @@ def top_vertex(q, T, M, b_r0, wx, wy, wz, pdf_last, C4, seg_in, seg, scat_prev, 
     return nx, ny, nz, wgt, p, ctr + TOP_DIMS_CONNECTION, C4
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def interior_vertex(T, k_if, a, e, wx, wy, wz, dz, z0, pdf_last, chain, key, ctr, out, beta):
     """Interface ``k_if`` (> 0; roughness a, index e), reached along d (dz) from depth z0: next-event
     estimation through the top (interface 1) and the interface's sample.
@@ -156,7 +156,7 @@ def interior_vertex(T, k_if, a, e, wx, wy, wz, dz, z0, pdf_last, chain, key, ctr
     return nx, ny, nz, wgt, p, t1, ctr + INTERIOR_DIMS
 
 
-@njit(**JIT)
+@njit(**JIT_INLINE)
 def base_vertex(q, T, M, b_r0, b_alb, L, wx, wy, wz, depth, pdf_last, C4, scat_prev, key, ctr, out, beta):
     """The base (w toward where the light came from): next-event estimation
     through the top (one interface) or through both (two), and the base's
