@@ -51,7 +51,10 @@ BLOCK = 32
 #: non-finite checks stay valid); contraction into FMAs and reassociation
 #: change results only by rounding, identically on every thread.
 JIT = dict(cache=True, fastmath={"contract", "arcp", "nsz", "reassoc"}, nogil=True)
-#: The same, inlined into the caller by Numba (the vertex-level functions).
+#: The same, inlined by Numba into the caller (the vertex, strategy and
+#: record functions, called once per vertex: as calls they pass their
+#: records and arrays through memory and cost a quarter of the throughput,
+#: docs/decisions/061-walk-as-parts.md).
 JIT_INLINE = dict(JIT, inline="always")
 
 #: The walk's input, one record for the CPU and the CUDA entry points (a
