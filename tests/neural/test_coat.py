@@ -17,6 +17,7 @@ from nbrdf.neural.coat import (
     coat_probability,
     coat_sample,
     code_coat,
+    code_size,
     with_coat,
 )
 from nbrdf.neural.decoder import Decoder, DecoderSpec
@@ -113,6 +114,8 @@ def test_coat_features_and_probability_values():
     torch.testing.assert_close(f[0], torch.tensor([0.5, 0.5, 0.04], dtype=torch.float64))
     torch.testing.assert_close(f[1], torch.tensor([0.005 ** (1 / 3), 0.0, 0.0], dtype=torch.float64))
     torch.testing.assert_close(f[2], torch.tensor([1.0, 2.0, 0.25], dtype=torch.float64))
+    torch.testing.assert_close(coat_features(torch.tensor([0.125, 1.5], dtype=torch.float64)), f[0])  # one coat
+    assert code_size(32, coat=True) == 34 and code_size(32, coat=False) == 32
     # the coat lobe's share: sqrt of the normal-incidence Fresnel term, held to [0.05, 0.95]
     up = torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64)
     assert coat_probability(torch.tensor([0.1, 1.5], dtype=torch.float64), up).item() == pytest.approx(0.2)

@@ -36,6 +36,8 @@ def test_vectors_round_trip_through_stacks_and_materials(cls):
     p = _vectors(cls)
     s = params_to_stack(p)
     assert stack_class(s) == cls and s.channels == 1 and s.n == 5
+    L = s.layers
+    assert s.roughness.shape == s.ior.shape == s.sigma_t.shape == (5, L) and s.albedo.shape == (5, L, 1)
     assert torch.equal(stack_to_params(s), p)
     m = params_to_material(p[2])
     back = material_stack(m)  # the material the vector describes has the same stack
@@ -110,6 +112,12 @@ def test_every_base_kind_gives_its_parameters_in_the_asked_dtype(tmp_path):
             unset = {"base_roughness", "base_r0", "base_ior", "base_albedo"} - set(want)
             assert all(getattr(s, k) is None for k in unset)
             assert s.base_path is None
+            one = s.per_channel()  # three single-channel stacks, a colour base parameter split by channel
+            assert one.n == 3 and one.channels == 1
+            for k in ("base_r0", "base_albedo"):
+                if k in want:
+                    assert getattr(one, k).shape == (3, 1)
+                    assert getattr(one, k)[:, 0].tolist() == pytest.approx(want[k][0])
     latent = tmp_path / "z.safetensors"
     latent.write_bytes(b"")
     s = material_stack(parse_material({"format": "nbrdf-material/1", "name": "t",
@@ -144,7 +152,7 @@ def test_per_texel_values_take_channel_0_of_shared_parameters_and_name_their_pla
     s = material_stack(m, values, dtype=torch.float32)
     assert sorted(seen) == sorted(code)
     assert seen[:2] == ["layers[4].roughness", "layers[4].r0"]  # the base first, then bottom up
-    assert s.n == 4 and s.roughness.dtype == torch.float32
+    assert s.n == 4 and all(t.dtype == torch.float32 for t in s.tensors().values())
     assert s.roughness.tolist() == [[1.0, 5.0 + 100 * t] for t in range(4)]
     assert s.ior[:, 0].tolist() == [2.0] * 4 and s.ior[:, 1].tolist() == [6.0] * 4
     assert s.sigma_t.tolist() == [[4.0, 8.0]] * 4

@@ -157,7 +157,7 @@ def test_every_operator_stays_in_the_unit_range_at_the_extremes():
     floor = agx(grey(0.0))
     np.testing.assert_allclose(agx(grey(1e-9)), floor, atol=1e-12)
     np.testing.assert_allclose(agx(grey(2.0 ** (AGX_MIN_EV - 1.0))), floor, atol=1e-12)
-    np.testing.assert_allclose(agx(grey(2.0 ** (AGX_MAX_EV + 1.0))), agx(grey(1e6)), atol=1e-12)
+    np.testing.assert_allclose(agx(grey(2.0 ** (AGX_MAX_EV + 0.01))), agx(grey(1e6)), atol=1e-12)
     assert agx(grey(1e6)).min() > agx(grey(2.0 ** (AGX_MAX_EV - 1.0))).max()
     assert agx(grey(2.0 ** (AGX_MIN_EV + 1.0))).min() > floor.max()
     # A bright saturated red leaves the outset matrix above 1 (1.10 at radiance 20): the last clamp holds it.
@@ -205,7 +205,7 @@ def test_tonemap_errors_name_the_function():
         tonemap(img, "aces")
     with pytest.raises(NbrdfError, match=r"^tonemap: the image holds NaN or infinite values$"):
         tonemap(np.array([np.inf, 0.0, 0.0]), "agx")
-    with pytest.raises(NbrdfError, match=r"tonemap"):
+    with pytest.raises(NbrdfError, match=r"^tonemap: 'filmic' is not one of"):
         tonemap(np.ones(3), "filmic")
     assert tonemap(np.array([0.5, 0.25, 1.0], np.float32), "linear").dtype == np.float32
     np.testing.assert_array_equal(tonemap(np.array([1, 0, 2]), "linear"), [1.0, 0.0, 1.0])  # integers accepted
