@@ -15,6 +15,7 @@ leaves more live GL objects behind, in the same state, is a leak. Prints a summa
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
 import os
 import random
@@ -49,6 +50,27 @@ def rss_mb() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
+class _MallInfo2(ctypes.Structure):
+    _fields_ = [(n, ctypes.c_size_t) for n in
+                ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
+                 "keepcost")]
+
+
+def malloc_mb() -> dict[str, float]:
+    """glibc's heap over all arenas (MB): ``system`` taken from the OS (sbrk/mmap heaps plus
+    large mmapped blocks), ``used`` handed out to the program, ``free`` held in the arenas'
+    free lists (fragmentation and not-yet-returned memory). Empty where glibc is not the allocator."""
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallinfo2.restype = _MallInfo2
+        m = libc.mallinfo2()
+    except (OSError, AttributeError):
+        return {}
+    mb = 2.0 ** -20
+    return {"system": (m.arena + m.hblkhd) * mb, "used": (m.uordblks + m.hblkhd) * mb, "free": m.fordblks * mb,
+            "mmapped": m.hblkhd * mb}
+
+
 def slope_per_100(x: list[int], y: list[float]) -> float:
     """Least-squares slope of y over x, per 100 units of x."""
     if len(x) < 2:
@@ -56,7 +78,9 @@ def slope_per_100(x: list[int], y: list[float]) -> float:
     return float(np.polyfit(np.asarray(x, float), np.asarray(y, float), 1)[0] * 100)
 
 
-def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=(96, 64)) -> dict:
+def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=(96, 64),
+        gl_per_edit: bool = False) -> dict:
+    """``gl_per_edit``: count the live GL objects around every edit (slow: 7 x 4096 glIs calls each)."""
     from nbrdf.viewer.app import App
     from nbrdf.viewer.lookdev import presets
     from nbrdf.viewer.options import ViewOptions
@@ -71,6 +95,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
     counts: dict[str, int] = {}
     failures: list[str] = []
     jumps: list[tuple[float, int, str]] = []  # (resident memory added by an edit and its frame, edit, kind)
+    trace: list[dict] = []  # per edit: what it was, and the memory (and GL objects) its edit and frame added
 
     def edit(k: int) -> str:
         r = rng.random()
@@ -80,18 +105,21 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
             key = rng.choice([k for k in ("roughness", "ior", "sigma_t") if hasattr(layer, k)] or ["roughness"])
             lo, hi = {"roughness": (0.02, 0.9), "ior": (1.1, 2.0), "sigma_t": (0.0, 3.0)}[key]
             ok = ld.set_param(i, key, round(rng.uniform(lo, hi), 3)) if hasattr(layer, key) else True
-            return "param" if ok else f"param failed: {ld.error}"
+            return f"param {key}" if ok else f"param failed: {ld.error}"
         if r < 0.65:
             ld.orbit(rng.uniform(-30, 30), rng.uniform(-10, 10))
             ld.zoom(rng.uniform(0.9, 1.1))
-            ld.set_view(rng.choice(["object", "object", "lobe", "slice"]))
-            return "view"
+            view = rng.choice(["object", "object", "lobe", "slice"])
+            ld.set_view(view)
+            return f"view {view}"
         if r < 0.8:
-            return "preset" if ld.load_preset(rng.choice(names)) else f"preset failed: {ld.error}"
+            name = rng.choice(names)
+            return f"preset {name}" if ld.load_preset(name) else f"preset failed: {ld.error}"
         if r < 0.92:
-            return "compare" if ld.set_compare(rng.choice(["off", "side", "wipe", "error", "off"])) \
-                else f"compare failed: {ld.error}"
-        return "mesh" if ld.set_mesh(rng.choice(meshes)) else f"mesh failed: {ld.error}"
+            mode = rng.choice(["off", "side", "wipe", "error", "off"])
+            return f"compare {mode}" if ld.set_compare(mode) else f"compare failed: {ld.error}"
+        mesh = rng.choice(meshes)
+        return f"mesh {Path(mesh).name}" if ld.set_mesh(mesh) else f"mesh failed: {ld.error}"
 
     def canonical() -> dict:
         """The same state every time (default preset, sphere, no compare, object view): GL objects
@@ -128,13 +156,21 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
             rng.seed(seed)
             for k in range(edits + 1):
                 if k % every == 0 and (p == 0 or k > 0):
-                    samples.append({"edit": p * edits + k, "rss_mb": rss_mb(), "gl": gl_objects()})
+                    samples.append({"edit": p * edits + k, "rss_mb": rss_mb(), "gl": gl_objects(),
+                                    "malloc_mb": malloc_mb()})
                 if k == edits:
                     break
-                before = rss_mb()
+                before, heap0 = rss_mb(), malloc_mb()
+                gl0 = sum(gl_objects().values()) if gl_per_edit else 0
                 what = edit(k)
                 app.step()
-                jumps.append((rss_mb() - before, p * edits + k, what.split()[0]))
+                heap1 = malloc_mb()
+                rec = {"edit": p * edits + k, "what": what, "rss_mb": rss_mb() - before,
+                       **{f"malloc_{key}_mb": heap1[key] - heap0[key] for key in heap1}}
+                if gl_per_edit:
+                    rec["gl"] = sum(gl_objects().values()) - gl0
+                trace.append(rec)
+                jumps.append((rec["rss_mb"], p * edits + k, what.split()[0]))
                 if "failed" in what:
                     failures.append(what)
                 counts[what.split()[0]] = counts.get(what.split()[0], 0) + 1
@@ -156,8 +192,29 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         "rss_after_warmup_mb": after[0]["rss_mb"], "rss_end_mb": after[-1]["rss_mb"],
         "passes": passes,
         "largest_memory_steps": sorted(jumps, reverse=True)[:8],
+        "attribution": attribution(trace, after[0]["edit"]),
+        "trace": trace,
         "samples": samples,
     }
+
+
+def attribution(trace: list[dict], start: int) -> list[dict]:
+    """Per action (kind and argument) after ``start`` edits: how many, and the resident
+    memory, the heap in use and the GL objects they added in all (each edit with its frame)."""
+    rows: dict[str, dict] = {}
+    for t in trace:
+        if t["edit"] < start:
+            continue
+        key = t["what"] if "failed" not in t["what"] else t["what"].split(":")[0]
+        r = rows.setdefault(key, {"action": key, "n": 0, "rss_mb": 0.0, "malloc_used_mb": 0.0,
+                                  "malloc_system_mb": 0.0, "steps_over_5mb": 0, "gl": 0})
+        r["n"] += 1
+        r["rss_mb"] += t["rss_mb"]
+        r["malloc_used_mb"] += t.get("malloc_used_mb", 0.0)
+        r["malloc_system_mb"] += t.get("malloc_system_mb", 0.0)
+        r["steps_over_5mb"] += t["rss_mb"] > 5.0
+        r["gl"] += t.get("gl", 0)
+    return sorted(rows.values(), key=lambda r: -r["rss_mb"])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -168,8 +225,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--warmup", type=float, default=0.2, help="the fraction of edits left out of the fit")
     ap.add_argument("--repeat", type=int, default=1, help="passes of the same edit sequence")
     ap.add_argument("--out", type=Path, help="JSON with every sample")
+    ap.add_argument("--gl-per-edit", action="store_true", help="count GL objects around every edit (slow)")
     a = ap.parse_args(argv)
-    res = run(a.edits, a.seed, a.every, a.warmup, a.repeat)
+    res = run(a.edits, a.seed, a.every, a.warmup, a.repeat, gl_per_edit=a.gl_per_edit)
     if a.out:
         a.out.write_text(json.dumps(res, indent=1))
     print(f"soak: {res['edits']} edits (seed {res['seed']}) in {res['seconds']:.0f} s {res['kinds']}; after "
@@ -183,6 +241,12 @@ def main(argv: list[str] | None = None) -> int:
           flush=True)
     print("soak: largest memory steps (MB, edit, kind): "
           + ", ".join(f"{mb:+.1f} at {k} ({kind})" for mb, k, kind in res["largest_memory_steps"][:5]), flush=True)
+    print("soak: per action after warm-up (n, resident MB, heap in use MB, heap from the OS MB, steps > 5 MB"
+          + (", GL objects" if a.gl_per_edit else "") + "):", flush=True)
+    for r in res["attribution"]:
+        print(f"  {r['action']:<32} {r['n']:4d} {r['rss_mb']:+8.1f} {r['malloc_used_mb']:+8.1f} "
+              f"{r['malloc_system_mb']:+8.1f} {r['steps_over_5mb']:3d}" + (f" {r['gl']:+4d}" if a.gl_per_edit else ""),
+              flush=True)
     if res["failures"]:
         print("soak: failed edits: " + "; ".join(res["failures"]), flush=True)
     return 0
