@@ -21,6 +21,7 @@ import os
 import random
 import sys
 import time
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -79,8 +80,10 @@ def slope_per_100(x: list[int], y: list[float]) -> float:
 
 
 def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=(96, 64),
-        gl_per_edit: bool = False) -> dict:
-    """``gl_per_edit``: count the live GL objects around every edit (slow: 7 x 4096 glIs calls each)."""
+        gl_per_edit: bool = False, trace_python: bool = False) -> dict:
+    """``gl_per_edit``: count the live GL objects around every edit (slow: 7 x 4096 glIs calls each);
+    ``trace_python``: tracemalloc from the end of the warm-up edits, its largest survivors at the end
+    (Python objects and numpy arrays; torch's and the GL driver's memory are not traced)."""
     from nbrdf.viewer.app import App
     from nbrdf.viewer.lookdev import presets
     from nbrdf.viewer.options import ViewOptions
@@ -160,6 +163,8 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
                                     "malloc_mb": malloc_mb()})
                 if k == edits:
                     break
+                if trace_python and p == 0 and k == int(warmup * edits):
+                    tracemalloc.start(6)
                 before, heap0 = rss_mb(), malloc_mb()
                 gl0 = sum(gl_objects().values()) if gl_per_edit else 0
                 what = edit(k)
@@ -176,6 +181,12 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
                 counts[what.split()[0]] = counts.get(what.split()[0], 0) + 1
             passes.append(canonical())
         seconds = time.perf_counter() - t0
+        survivors = []
+        if trace_python and tracemalloc.is_tracing():
+            stats = tracemalloc.take_snapshot().statistics("traceback")
+            tracemalloc.stop()
+            survivors = [{"mb": st.size / 2**20, "blocks": st.count, "where": [str(f) for f in st.traceback][-6:]}
+                         for st in stats[:12]]
     finally:
         app.close()
     start = next(i for i, s in enumerate(samples) if s["edit"] >= warmup * edits * repeat)
@@ -194,6 +205,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         "largest_memory_steps": sorted(jumps, reverse=True)[:8],
         "attribution": attribution(trace, after[0]["edit"]),
         "trace": trace,
+        "python_survivors": survivors,
         "samples": samples,
     }
 
@@ -226,8 +238,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=1, help="passes of the same edit sequence")
     ap.add_argument("--out", type=Path, help="JSON with every sample")
     ap.add_argument("--gl-per-edit", action="store_true", help="count GL objects around every edit (slow)")
+    ap.add_argument("--tracemalloc", action="store_true",
+                    help="trace Python allocations after the warm-up; print the largest survivors")
     a = ap.parse_args(argv)
-    res = run(a.edits, a.seed, a.every, a.warmup, a.repeat, gl_per_edit=a.gl_per_edit)
+    res = run(a.edits, a.seed, a.every, a.warmup, a.repeat, gl_per_edit=a.gl_per_edit, trace_python=a.tracemalloc)
     if a.out:
         a.out.write_text(json.dumps(res, indent=1))
     print(f"soak: {res['edits']} edits (seed {res['seed']}) in {res['seconds']:.0f} s {res['kinds']}; after "
@@ -247,6 +261,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {r['action']:<32} {r['n']:4d} {r['rss_mb']:+8.1f} {r['malloc_used_mb']:+8.1f} "
               f"{r['malloc_system_mb']:+8.1f} {r['steps_over_5mb']:3d}" + (f" {r['gl']:+4d}" if a.gl_per_edit else ""),
               flush=True)
+    for st in res["python_survivors"]:
+        print(f"soak: python survivor {st['mb']:.2f} MB in {st['blocks']} blocks from " + " <- ".join(
+            reversed(st["where"][-3:])), flush=True)
     if res["failures"]:
         print("soak: failed edits: " + "; ".join(res["failures"]), flush=True)
     return 0

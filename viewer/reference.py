@@ -36,6 +36,7 @@ import os
 import queue
 import time
 import weakref
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -471,6 +472,39 @@ def _shutdown(proc, requests) -> None:
     requests.cancel_join_thread()
 
 
+class ReferenceCache:
+    """The references received, by job key, for going back to a view already
+    computed. Bounded: every orbit, edit or resize of a compared view is a new
+    key, so the least recently stored are dropped beyond ``max_items`` references
+    or ``max_bytes`` of images (the one stored last and the ``keep`` key stay)."""
+
+    def __init__(self, max_items: int = 16, max_bytes: int = 256 * 2**20):
+        self.max_items, self.max_bytes = max_items, max_bytes
+        self._items: OrderedDict[str, ReferenceImage] = OrderedDict()
+
+    def get(self, key: str) -> ReferenceImage | None:
+        return self._items.get(key)
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def put(self, key: str, ref: ReferenceImage, keep: str | None = None) -> None:
+        """Stores ``ref`` under ``key`` (the most recent), then drops the oldest over the bounds."""
+        self._items.pop(key, None)
+        self._items[key] = ref
+        total = sum(_nbytes(r) for r in self._items.values())
+        for old in list(self._items):
+            if len(self._items) <= self.max_items and total <= self.max_bytes:
+                break
+            if old in (key, keep):
+                continue
+            total -= _nbytes(self._items.pop(old))
+
+
+def _nbytes(ref: ReferenceImage) -> int:
+    return ref.image.nbytes + (ref.stderr.nbytes if ref.stderr is not None else 0)
+
+
 class ReferenceWorker:
     """One worker process; ``request`` a job, poll ``result``. Neither blocks."""
 
@@ -479,7 +513,7 @@ class ReferenceWorker:
         per round; ``threads``: torch threads of the process (default: half the cores)."""
         self.start_spp, self.round_spp = start_spp, round_spp
         self.threads = threads or max(1, (os.cpu_count() or 2) // 2)
-        self._cache: dict[str, ReferenceImage] = {}
+        self._cache = ReferenceCache()
         self._current: str | None = None
         self._spec: JobSpec | None = None  # what was sent for ``_current``: sent again after a restart
         self._proc = None
@@ -554,8 +588,8 @@ class ReferenceWorker:
             n = self._job_deaths[key] = self._job_deaths.get(key, 0) + 1
             if n >= self.MAX_DEATHS_PER_JOB:
                 shape = (*spec.mask.shape, 3)
-                self._cache[key] = ReferenceImage(np.zeros(shape, np.float32), 0, True,
-                                                  f"{msg} {n} times on this job; not retried")
+                self._cache.put(key, ReferenceImage(np.zeros(shape, np.float32), 0, True,
+                                                    f"{msg} {n} times on this job; not retried"))
                 self._current = self._spec = None
                 self._last_death = (time.monotonic(), f"{msg} {n} times on this job; not retried")
                 return
@@ -573,7 +607,7 @@ class ReferenceWorker:
                 key, img, spp, done, err, se = self._results.get_nowait()
             except (queue.Empty, OSError, ValueError):
                 return
-            self._cache[key] = ReferenceImage(img, spp, done, err, se)
+            self._cache.put(key, ReferenceImage(img, spp, done, err, se), keep=self._current)
             if key == self._current and (done or err):
                 self._current = self._spec = None
 
