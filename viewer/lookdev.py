@@ -603,6 +603,9 @@ class LookDev:
                 job.result = latent_texture(model, m, progress=lambda d, n: setattr(job, "progress", d / n))
             except NbrdfError as e:
                 job.error = str(e)
+            except (MemoryError, RuntimeError) as e:  # torch's allocator raises RuntimeError
+                job.error = f"the latent texture: out of memory while building it ({type(e).__name__}); " \
+                    "use smaller maps"
         threading.Thread(target=build, name="nbrdf-svbrdf", daemon=True).start()
         self.notice = "building the latent texture..."
         return None
@@ -611,10 +614,23 @@ class LookDev:
         """Picks up finished background work (latent textures) and renders the
         next frame of a turntable capture."""
         if self._svbrdf is not None and (self._svbrdf.result is not None or self._svbrdf.error):
-            self._guard(self._apply_material)
+            if not self._guard(self._apply_material):
+                self._keep_shown_material()
             self.notice = ""
         if self._turntable is not None and self.brdf is not None:
             self._guard(self._turntable_step)
+
+    def _keep_shown_material(self) -> None:
+        """After a material whose latent texture could not be made (``error`` says why):
+        the editor goes back to the material still shown, and the failed edit leaves no undo step."""
+        if self.brdf is None or material_key(self.brdf.material) == material_key(self.material):
+            return
+        self.editor = StackEditor.from_material(self.brdf.material)
+        snap, h = self.snapshot(), self.history
+        if h.undo_stack and h.undo_stack[-1] == snap:
+            h.current = h.undo_stack.pop()
+        else:
+            h.commit(snap)
 
     # --- turntable capture (viewer/offscreen.py writes the file) -----------------------------
     def start_turntable(self, path: str | Path, frames: int = 36, size: tuple[int, int] = (480, 480),
