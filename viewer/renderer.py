@@ -343,6 +343,11 @@ class Renderer:
             return self.ctx.framebuffer([tex], self.ctx.depth_renderbuffer((w, h))), tex
         return self._fbo.get((slot, w, h), make)
 
+    def release_targets(self) -> None:
+        """Releases every accumulation target and G-buffer (made again on next use)."""
+        self._fbo.clear()
+        self._gbuf.clear()
+
     def frame_texture(self, view: View | str, w: int, h: int, slot: str = MAIN) -> moderngl.Texture:
         """The accumulation target of ``view`` at (w, h) in ``slot`` as the last ``accumulate`` left it."""
         lobe = View.parse(view) == View.LOBE

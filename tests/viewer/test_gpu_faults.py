@@ -6,6 +6,10 @@ not practical in the suite."""
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
+import textwrap
 
 import imageio.v3 as iio
 import numpy as np
@@ -75,3 +79,71 @@ def test_the_window_keeps_the_material_it_shows(gl_ctx, tmp_path, monkeypatch, l
         assert ld.error is None and ld.brdf.latent_texture is not None
     finally:
         ld.close()
+
+
+# ------------------------------------------------------------ a GL failure in a frame of the window
+# A real context loss cannot be provoked on llvmpipe: the failure is injected at the renderer
+# boundary (``LookDev.render`` raising moderngl.Error, as a draw on a lost context does).
+WINDOW = textwrap.dedent("""
+    import json, sys
+    import moderngl
+    from nbrdf.viewer.app import App
+    from nbrdf.viewer.gl_faults import GlContextLost
+    from nbrdf.viewer.lookdev import LookDev
+    from nbrdf.viewer.options import ViewOptions
+
+    def lost(*args, **kwargs):
+        raise moderngl.Error("GL_CONTEXT_LOST (injected)\\nsecond line")
+
+    out = {}
+    if sys.argv[1] == "window":
+        app = App(ViewOptions(size=(48, 32)), size=(48, 32))
+        ld = app.lookdev
+        app.step()
+        ld.render = lost  # one frame fails
+        app.step()
+        out["error"] = ld.error
+        del ld.render     # the GL answers again
+        app.step()
+        out["after"] = [ld.error, ld.notice, int(app.read_pixels().sum() > 0)]
+        ld.render = lost  # it never answers again: the third failing frame gives up
+        out["steps"] = []
+        try:
+            for _ in range(5):
+                app.step()
+                out["steps"].append(ld.error)
+        except GlContextLost as e:
+            out["gave_up"] = str(e)
+        app.close(abnormal=True)
+    else:  # the command line, its GL failing in every frame
+        from nbrdf.cli.view import main
+        LookDev.render = lost
+        out["rc"] = main(["--mesh", "sphere"])
+    print(json.dumps(out), flush=True)
+""")
+
+
+def _window(xvfb_display, tmp_path, mode: str) -> tuple[dict, str]:
+    env = dict(os.environ, DISPLAY=xvfb_display, NBRDF_STATE_DIR=str(tmp_path / "state"))
+    r = subprocess.run([sys.executable, "-c", WINDOW, mode], env=env, capture_output=True, text=True, timeout=600,
+                       cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return json.loads(r.stdout.strip().splitlines()[-1]), r.stderr
+
+
+def test_a_frame_the_gl_fails_is_one_line_and_the_window_recovers(xvfb_display, tmp_path):
+    out, _ = _window(xvfb_display, tmp_path, "window")
+    assert out["error"] == "OpenGL error while drawing (GL_CONTEXT_LOST (injected)); trying again"
+    assert out["after"] == [None, "recovered from an OpenGL error (GL_CONTEXT_LOST (injected))", 1]
+    assert len(out["steps"]) == 2 and "gave_up" in out  # the third failing frame in a row
+    assert out["gave_up"].startswith("OpenGL failed 3 frames in a row") and "\n" not in out["gave_up"]
+
+
+def test_the_command_line_exits_with_one_line_and_keeps_the_session(xvfb_display, tmp_path):
+    from nbrdf.viewer.autosave import Autosave
+
+    out, err = _window(xvfb_display, tmp_path, "cli")
+    lines = [x for x in err.strip().splitlines() if x.startswith("nbrdf-view:")]
+    assert out["rc"] == 2 and "Traceback" not in err, err[-3000:]
+    assert len(lines) == 1 and "OpenGL failed 3 frames in a row" in lines[0] and "restore" in lines[0]
+    assert Autosave(folder=tmp_path / "state").start()  # the next start offers the session back
