@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import functools
 import json
 import os
 import random
@@ -57,14 +58,19 @@ class _MallInfo2(ctypes.Structure):
                  "keepcost")]
 
 
+@functools.lru_cache(maxsize=1)
+def _libc():
+    libc = ctypes.CDLL("libc.so.6")
+    libc.mallinfo2.restype = _MallInfo2
+    return libc
+
+
 def malloc_mb() -> dict[str, float]:
     """glibc's heap over all arenas (MB): ``system`` taken from the OS (sbrk/mmap heaps plus
     large mmapped blocks), ``used`` handed out to the program, ``free`` held in the arenas'
     free lists (fragmentation and not-yet-returned memory). Empty where glibc is not the allocator."""
     try:
-        libc = ctypes.CDLL("libc.so.6")
-        libc.mallinfo2.restype = _MallInfo2
-        m = libc.mallinfo2()
+        m = _libc().mallinfo2()
     except (OSError, AttributeError):
         return {}
     mb = 2.0 ** -20
@@ -80,10 +86,13 @@ def slope_per_100(x: list[int], y: list[float]) -> float:
 
 
 def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=(96, 64),
-        gl_per_edit: bool = False, trace_python: bool = False) -> dict:
+        gl_per_edit: bool = False, trace_python: bool = False, in_state: bool = False) -> dict:
     """``gl_per_edit``: count the live GL objects around every edit (slow: 7 x 4096 glIs calls each);
     ``trace_python``: tracemalloc from the end of the warm-up edits, its largest survivors at the end
-    (Python objects and numpy arrays; torch's and the GL driver's memory are not traced)."""
+    (Python objects and numpy arrays; torch's and the GL driver's memory are not traced);
+    ``in_state``: at each sample, also go to one state (default preset, sphere, no compare, object
+    view; the edits after it start from there) and sample again: memory that a state holds
+    (a large mesh's, a compare view's) is then told apart from memory that grows."""
     from nbrdf.viewer.app import App
     from nbrdf.viewer.lookdev import presets
     from nbrdf.viewer.options import ViewOptions
@@ -98,6 +107,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
     counts: dict[str, int] = {}
     failures: list[str] = []
     jumps: list[tuple[float, int, str]] = []  # (resident memory added by an edit and its frame, edit, kind)
+    states: list[dict] = []  # in_state: the samples taken in one state (``canonical``)
     trace: list[dict] = []  # per edit: what it was, and the memory (and GL objects) its edit and frame added
 
     def edit(k: int) -> str:
@@ -133,7 +143,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         ld.set_view("object")
         for _ in range(2):
             app.step()
-        return {"rss_mb": rss_mb(), "gl": gl_objects()}
+        return {"rss_mb": rss_mb(), "gl": gl_objects(), "malloc_mb": malloc_mb()}
 
     try:
         # Warm-up: every view and compare mode for each kind of BRDF the presets give (analytic, neural),
@@ -161,16 +171,19 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
                 if k % every == 0 and (p == 0 or k > 0):
                     samples.append({"edit": p * edits + k, "rss_mb": rss_mb(), "gl": gl_objects(),
                                     "malloc_mb": malloc_mb()})
+                    if in_state:  # the same measurement in one state: what the state holds is left out
+                        states.append({"edit": p * edits + k, **canonical()})
                 if k == edits:
                     break
                 if trace_python and p == 0 and k == int(warmup * edits):
                     tracemalloc.start(6)
-                before, heap0 = rss_mb(), malloc_mb()
+                before, heap0, t_edit = rss_mb(), malloc_mb(), time.perf_counter()
                 gl0 = sum(gl_objects().values()) if gl_per_edit else 0
                 what = edit(k)
                 app.step()
                 heap1 = malloc_mb()
                 rec = {"edit": p * edits + k, "what": what, "rss_mb": rss_mb() - before,
+                       "seconds": time.perf_counter() - t_edit, "trim_ms": getattr(app, "trim_ms", 0.0),
                        **{f"malloc_{key}_mb": heap1[key] - heap0[key] for key in heap1}}
                 if gl_per_edit:
                     rec["gl"] = sum(gl_objects().values()) - gl0
@@ -204,6 +217,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         "passes": passes,
         "largest_memory_steps": sorted(jumps, reverse=True)[:8],
         "attribution": attribution(trace, after[0]["edit"]),
+        **in_state_slopes(states, after[0]["edit"]),
         "trace": trace,
         "python_survivors": survivors,
         "samples": samples,
@@ -229,6 +243,21 @@ def attribution(trace: list[dict], start: int) -> list[dict]:
     return sorted(rows.values(), key=lambda r: -r["rss_mb"])
 
 
+def in_state_slopes(states: list[dict], start: int) -> dict:
+    """The slopes of the samples taken in one state, after ``start`` edits."""
+    after = [s for s in states if s["edit"] >= start]
+    if len(after) < 2:
+        return {}
+    x = [s["edit"] for s in after]
+    gl = [sum(s["gl"].values()) for s in after]
+    return {"in_state": after,
+            "in_state_rss_slope_mb_per_100": slope_per_100(x, [s["rss_mb"] for s in after]),
+            "in_state_heap_used_slope_mb_per_100": slope_per_100(x, [s["malloc_mb"].get("used", 0.0) for s in after]),
+            "in_state_gl_slope_per_100": slope_per_100(x, gl),
+            "in_state_rss_mb": [after[0]["rss_mb"], after[-1]["rss_mb"], max(s["rss_mb"] for s in after)],
+            "in_state_gl": [gl[0], gl[-1], max(gl)]}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--edits", type=int, default=1000, help="random edits (one frame after each)")
@@ -238,10 +267,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=1, help="passes of the same edit sequence")
     ap.add_argument("--out", type=Path, help="JSON with every sample")
     ap.add_argument("--gl-per-edit", action="store_true", help="count GL objects around every edit (slow)")
+    ap.add_argument("--in-state", action="store_true",
+                    help="also sample in one state (default preset, sphere, object view) every --every edits")
     ap.add_argument("--tracemalloc", action="store_true",
                     help="trace Python allocations after the warm-up; print the largest survivors")
     a = ap.parse_args(argv)
-    res = run(a.edits, a.seed, a.every, a.warmup, a.repeat, gl_per_edit=a.gl_per_edit, trace_python=a.tracemalloc)
+    res = run(a.edits, a.seed, a.every, a.warmup, a.repeat, gl_per_edit=a.gl_per_edit, trace_python=a.tracemalloc, in_state=a.in_state)
     if a.out:
         a.out.write_text(json.dumps(res, indent=1))
     print(f"soak: {res['edits']} edits (seed {res['seed']}) in {res['seconds']:.0f} s {res['kinds']}; after "
@@ -253,6 +284,13 @@ def main(argv: list[str] | None = None) -> int:
     print("soak: in one state (default preset, sphere, object view) after warm-up and after each pass: "
           + "; ".join(f"GL objects {sum(c['gl'].values())}, memory {c['rss_mb']:.0f} MB" for c in res["passes"]),
           flush=True)
+    if "in_state" in res:
+        r0, r1, rmax = res["in_state_rss_mb"]
+        g0, g1, gmax = res["in_state_gl"]
+        print(f"soak: in one state every {a.every} edits after the warm-up: memory {r0:.0f} -> {r1:.0f} MB "
+              f"(max {rmax:.0f}), slope {res['in_state_rss_slope_mb_per_100']:+.2f} MB per 100 edits (heap in use "
+              f"{res['in_state_heap_used_slope_mb_per_100']:+.2f}); GL objects {g0} -> {g1} (max {gmax}), slope "
+              f"{res['in_state_gl_slope_per_100']:+.2f} per 100 edits", flush=True)
     print("soak: largest memory steps (MB, edit, kind): "
           + ", ".join(f"{mb:+.1f} at {k} ({kind})" for mb, k, kind in res["largest_memory_steps"][:5]), flush=True)
     print("soak: per action after warm-up (n, resident MB, heap in use MB, heap from the OS MB, steps > 5 MB"

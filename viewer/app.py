@@ -39,6 +39,7 @@ import glfw
 import moderngl
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer import allocator
 from nbrdf.viewer.autosave import WindowAutosave
 from nbrdf.viewer.gl import check_version
 from nbrdf.viewer.gl_faults import FrameGuard, GlContextLost, fault_types
@@ -88,6 +89,10 @@ class WindowUnavailable(RuntimeError):
     """No window could be opened (no display, no GL 3.3 visual)."""
 
 
+#: Seconds between two trims of the heaps (after edits only).
+TRIM_INTERVAL_S = 2.0
+
+
 class App:
     """The previewer window. ``lookdev`` is the session (its methods are the
     app's API: the panels and the tests call them); ``step`` runs one frame."""
@@ -95,6 +100,7 @@ class App:
     def __init__(self, opts, size: tuple[int, int] | None = None, visible: bool = True):
         if imgui is None:
             raise WindowUnavailable(f"imgui-bundle is not usable ({_IMGUI_ERROR})")
+        allocator.tune()  # large blocks in their own mappings: a session's memory follows what it holds
         self.opts = opts
         if not glfw.init():
             raise WindowUnavailable("glfw could not initialise")
@@ -154,6 +160,9 @@ class App:
         self._events: deque = deque()  # the view's mouse events since the last frame, in order
         self._cursor = glfw.get_cursor_pos(self.window)
         self.clock = FrameClock()
+        self._trim_due, self._trimmed_at = False, 0.0
+        self.trim_ms = 0.0
+        """The last ``malloc_trim``'s milliseconds (viewer/allocator.py)."""
         self.gl_guard = FrameGuard(self.lookdev, self._recover_gl)
         """A frame whose GL work fails is one line in the panel (viewer/gl_faults.py)."""
         imgui.get_io().config_input_trickle_event_queue = True  # one click per imgui pass: none is lost
@@ -308,6 +317,7 @@ class App:
             self.frame()
         self._mouse()
         ld = self.lookdev
+        self._trim_due |= ld.passes == 0  # an edit or a view change: its CPU work freed memory
         drew = self.gl_guard.run(lambda: self._draw_view(w, h, passes_per_frame))
         imgui.render()
         _ = self.ctx.error  # PyOpenGL (the panels' backend) raises on any error flag left behind
@@ -317,6 +327,7 @@ class App:
         if drew:
             self.gl_guard.frame_done()
         ld.frame_done()
+        self._trim()
         self.clock.presented()
         ld.timings.fps, ld.timings.frame_ms = self.clock.fps, self.clock.frame_ms
         self._measure((time.perf_counter() - t0) * 1000.0)
@@ -339,6 +350,14 @@ class App:
             ld.render(self.screen, (vw, vh), passes, scale=scale, interactive=self.interactive, quick=self.quick)
         self.screen.viewport = (0, 0, w, h)
         self.screen.use()
+
+    def _trim(self) -> None:
+        """After edits, at most every ``TRIM_INTERVAL_S``: the heaps' free pages back to the system."""
+        now = time.monotonic()
+        if self._trim_due and now - self._trimmed_at >= TRIM_INTERVAL_S:
+            allocator.trim()
+            self._trim_due, self._trimmed_at = False, time.monotonic()
+            self.trim_ms = (self._trimmed_at - now) * 1000.0
 
     def _recover_gl(self) -> None:
         """After a failed frame: fresh render targets, the accumulation restarted, error flags cleared."""
