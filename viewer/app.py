@@ -319,6 +319,7 @@ class App:
         ld = self.lookdev
         self._trim_due |= ld.passes == 0  # an edit or a view change: its CPU work freed memory
         drew = self.gl_guard.run(lambda: self._draw_view(w, h, passes_per_frame))
+        self.screen.viewport = (0, 0, w, h)  # the panels' pass covers the window (after a failed view too)
         imgui.render()
         _ = self.ctx.error  # PyOpenGL (the panels' backend) raises on any error flag left behind
         drew = self.gl_guard.run(lambda: self.gui.render(imgui.get_draw_data())) and drew
