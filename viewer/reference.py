@@ -36,7 +36,6 @@ import os
 import queue
 import time
 import weakref
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +43,7 @@ import torch
 
 from nbrdf.neural.geometry import incidence, lobe_grid
 from nbrdf.neural.material import Material, material_to_dict
+from nbrdf.viewer.reference_cache import ReferenceCache
 
 
 @dataclass
@@ -470,39 +470,6 @@ def _shutdown(proc, requests) -> None:
     # Jobs the process never read stay in the pipe: the queue's feeder thread, blocked writing them,
     # must not be joined at interpreter exit (it would wait forever).
     requests.cancel_join_thread()
-
-
-class ReferenceCache:
-    """The references received, by job key, for going back to a view already
-    computed. Bounded: every orbit, edit or resize of a compared view is a new
-    key, so the least recently stored are dropped beyond ``max_items`` references
-    or ``max_bytes`` of images (the one stored last and the ``keep`` key stay)."""
-
-    def __init__(self, max_items: int = 16, max_bytes: int = 256 * 2**20):
-        self.max_items, self.max_bytes = max_items, max_bytes
-        self._items: OrderedDict[str, ReferenceImage] = OrderedDict()
-
-    def get(self, key: str) -> ReferenceImage | None:
-        return self._items.get(key)
-
-    def __len__(self) -> int:
-        return len(self._items)
-
-    def put(self, key: str, ref: ReferenceImage, keep: str | None = None) -> None:
-        """Stores ``ref`` under ``key`` (the most recent), then drops the oldest over the bounds."""
-        self._items.pop(key, None)
-        self._items[key] = ref
-        total = sum(_nbytes(r) for r in self._items.values())
-        for old in list(self._items):
-            if len(self._items) <= self.max_items and total <= self.max_bytes:
-                break
-            if old in (key, keep):
-                continue
-            total -= _nbytes(self._items.pop(old))
-
-
-def _nbytes(ref: ReferenceImage) -> int:
-    return ref.image.nbytes + (ref.stderr.nbytes if ref.stderr is not None else 0)
 
 
 class ReferenceWorker:

@@ -200,7 +200,8 @@ def test_the_references_kept_in_the_window_are_bounded():
     assert w.result("job-39") is not None and w.result("job-0") is not None
     assert len(w._cache) == 16 and w.result("job-1") is None
 
-    from nbrdf.viewer.reference import ReferenceCache, ReferenceImage
+    from nbrdf.viewer.reference import ReferenceImage
+    from nbrdf.viewer.reference_cache import ReferenceCache
 
     c = ReferenceCache(max_items=100, max_bytes=3 * 8 * 8 * 3 * 4)  # room for three 8 x 8 images
     for k in range(5):
