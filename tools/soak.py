@@ -102,6 +102,9 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
     # Render sizes that do not depend on the machine's speed (the interactive scale steps up frame by frame
     # as on a fast machine, never down): the same edits make the same targets, the measurement is of leaks.
     app.refine.settings.budget_ms = 1e9
+    # The compare labels' textures are a cache of 16 texts (viewer/labels.py) whose texts follow the Monte
+    # Carlo worker's timing ("reference (MC, 24 spp)"): off, so the same edits leave the same GL objects.
+    app.lookdev.compare_part.show_labels = False
     ld = app.lookdev
     names = [n for n in presets() if n != "worn_tiles"]  # textured presets build a latent texture each
     meshes = ["sphere", "testmesh", str(ROOT / "viewer/assets/meshes/pebble_on_plinth.glb"), "sphere"]
