@@ -49,6 +49,29 @@ def code_kernel(material: str, weights: str | None = None) -> CodeKernel:
     return CodeKernel(decoder, Coat(float(r), float(ior)), Proxy(float(sigma), float(w)))
 
 
+SLOW_SYMBOLIC = ("nbrdf: traced symbolically on the LLVM backend, where Dr.Jit loads every decoder weight inside a "
+                 "symbolic call with a gather (about 10x slower); render inside nbrdf.mitsuba.wavefront_mode()")
+_warned_symbolic = False
+
+
+def wants_wavefront() -> bool:
+    """Whether ``nbrdf`` renders faster in ``wavefront_mode()`` under the
+    variant in force: on the LLVM backend, Dr.Jit's cooperative vectors
+    turn each weight load inside a symbolic call into a per-lane gather,
+    while an evaluated call runs the decoder at the top level of its kernel
+    (broadcast loads). CUDA's cooperative vectors have no such cost."""
+    return mi.variant() is not None and mi.variant().startswith("llvm")
+
+
+def _warn_if_slow() -> None:
+    """One warning per process when the decoder is traced where it runs slowly."""
+    global _warned_symbolic
+    if not _warned_symbolic and dr.flag(dr.JitFlag.SymbolicScope) and dr.flag(dr.JitFlag.SymbolicCalls) \
+            and wants_wavefront():
+        _warned_symbolic = True
+        mi.Log(mi.LogLevel.Warn, SLOW_SYMBOLIC)
+
+
 class NbrdfBSDF(mi.BSDF):
     """``{"type": "nbrdf", "material": PATH[, "weights": BUNDLE]}``."""
 
@@ -72,6 +95,7 @@ class NbrdfBSDF(mi.BSDF):
         return active & ctx.is_enabled(self._lobe, 0)
 
     def eval(self, ctx, si, wo, active=True):
+        _warn_if_slow()
         f = self.kernel.eval(wo, si.wi)
         ok = self._enabled(ctx, active) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
         return dr.select(ok, f * mi.Frame3f.cos_theta(wo), 0.0)
@@ -83,6 +107,7 @@ class NbrdfBSDF(mi.BSDF):
         return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
+        _warn_if_slow()
         wo, pdf = self.kernel.sample(si.wi, sample1, sample2.x, sample2.y)
         ok = (self._enabled(ctx, active) & (pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0)
               & (mi.Frame3f.cos_theta(wo) > 0))

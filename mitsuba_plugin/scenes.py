@@ -201,6 +201,11 @@ def with_method(scene: Scene, method: str) -> Scene:
     return Scene({**scene.spec, "shapes": shapes}, scene.name)
 
 
+def uses_neural(scene: Scene) -> bool:
+    """Whether any shape uses the neural ``nbrdf`` plugin."""
+    return any("neural" in s["material"] for s in scene.spec["shapes"])
+
+
 def uses_reference(scene: Scene) -> bool:
     """Whether any shape uses ``nbrdf_reference`` (rendered in Dr.Jit's wavefront mode)."""
     return any("reference" in s["material"] for s in scene.spec["shapes"])
