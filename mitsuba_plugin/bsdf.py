@@ -19,7 +19,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from nbrdf.mitsuba.kernel import Coat, CodeKernel, DecoderKernel, Proxy
+from nbrdf.mitsuba.kernel import Coat, CodeKernel, DecoderKernel, Proxy, TexturedCodeKernel
 
 FLAGS_GLOSSY = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
 #: A material without a coat whose proxy gives the cosine lobe more than this share is reported
@@ -35,12 +35,20 @@ def _prop(props, key: str, default=None):
     return props[key] if key in props else default
 
 
-def code_kernel(material: str, weights: str | None = None) -> CodeKernel:
-    """The Dr.Jit kernel of a material JSON or code file (``neural.material_code``)."""
+def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 0.0) -> CodeKernel:
+    """The Dr.Jit kernel of a material JSON or code file (``neural.material_code``);
+    a texture-mapped material JSON gives a ``TexturedCodeKernel`` over its
+    latent texture (mip-mapped by the ray cone of ``pixel_angle`` radians)."""
     from nbrdf.neural.errors import NbrdfError
     from nbrdf.neural.material_code import code_parts, load_code
 
     try:
+        if str(material).lower().endswith(".json"):
+            from nbrdf.neural.material import load_material
+
+            m = load_material(material)
+            if m.is_textured:
+                return _textured_kernel(m, weights, pixel_angle)
         model, code = load_code(material, weights)
         (r, ior), (sigma, w) = code_parts(model, code)
         decoder = DecoderKernel.from_torch(model.decoder, code)
@@ -72,8 +80,26 @@ def _warn_if_slow() -> None:
         mi.Log(mi.LogLevel.Warn, SLOW_SYMBOLIC)
 
 
+def _textured_kernel(material, weights: str | None, pixel_angle: float) -> TexturedCodeKernel:
+    """The latent texture of a texture-mapped material (``neural.svbrdf``) as a kernel."""
+    from nbrdf.mitsuba.textures import LatentTextureKernel
+    from nbrdf.neural.coat import NO_COAT
+    from nbrdf.neural.model import default_model, load_model
+    from nbrdf.neural.svbrdf import latent_texture
+
+    model = load_model(weights) if weights else default_model()
+    tex = latent_texture(model, material)
+    mean = tex.levels[-1][0, 0]  # (3, 34): the 1 x 1 mip level
+    spec = model.decoder.spec
+    kernel = LatentTextureKernel(model.decoder, tex, spec.coat and tex.levels[0].shape[-1] == spec.code, NO_COAT)
+    sigma, w = model.proxy(mean)
+    return TexturedCodeKernel(DecoderKernel.from_torch(model.decoder, mean), kernel, Proxy(sigma, w), pixel_angle)
+
+
 class NbrdfBSDF(mi.BSDF):
-    """``{"type": "nbrdf", "material": PATH[, "weights": BUNDLE]}``."""
+    """``{"type": "nbrdf", "material": PATH[, "weights": BUNDLE, "pixel_angle": RADIANS]}``:
+    ``pixel_angle`` (texture-mapped materials) is the camera's angle per pixel,
+    whose ray cone picks the latent texture's mip level per hit (0: the finest)."""
 
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
@@ -84,8 +110,9 @@ class NbrdfBSDF(mi.BSDF):
         if path is None:
             raise PluginError('nbrdf: the property "material" (a material JSON or a code file) is missing')
         self.path = str(path)
-        self.kernel = code_kernel(self.path, _prop(props, "weights"))
-        diffuse = not self.kernel.coat.present and self.kernel.proxy.w > DIFFUSE_W
+        self.kernel = code_kernel(self.path, _prop(props, "weights"), float(_prop(props, "pixel_angle", 0.0)))
+        textured = isinstance(self.kernel, TexturedCodeKernel)
+        diffuse = not textured and not self.kernel.coat.present and self.kernel.proxy.w > DIFFUSE_W
         self._lobe = mi.BSDFFlags.DiffuseReflection if diffuse else mi.BSDFFlags.GlossyReflection
         self.m_components = [self._lobe | mi.BSDFFlags.FrontSide]
         self.m_flags = self.m_components[0]
@@ -96,19 +123,19 @@ class NbrdfBSDF(mi.BSDF):
 
     def eval(self, ctx, si, wo, active=True):
         _warn_if_slow()
-        f = self.kernel.eval(wo, si.wi)
+        f = self.kernel.eval(wo, si.wi, si)
         ok = self._enabled(ctx, active) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
         return dr.select(ok, f * mi.Frame3f.cos_theta(wo), 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
-        return dr.select(self._enabled(ctx, active), self.kernel.pdf(si.wi, wo), 0.0)
+        return dr.select(self._enabled(ctx, active), self.kernel.pdf(si.wi, wo, si), 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
         return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         _warn_if_slow()
-        wo, pdf = self.kernel.sample(si.wi, sample1, sample2.x, sample2.y)
+        wo, pdf = self.kernel.sample(si.wi, sample1, sample2.x, sample2.y, si)
         ok = (self._enabled(ctx, active) & (pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0)
               & (mi.Frame3f.cos_theta(wo) > 0))
         bs = dr.zeros(mi.BSDFSample3f)
@@ -117,7 +144,7 @@ class NbrdfBSDF(mi.BSDF):
         bs.eta = 1.0
         bs.sampled_component = mi.UInt32(0)
         bs.sampled_type = mi.UInt32(+self._lobe)
-        f = self.kernel.eval(wo, si.wi) * mi.Frame3f.cos_theta(wo)
+        f = self.kernel.eval(wo, si.wi, si) * mi.Frame3f.cos_theta(wo)
         return bs, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0)
 
     def traverse(self, cb):
@@ -125,6 +152,9 @@ class NbrdfBSDF(mi.BSDF):
 
     def to_string(self):
         c, p = self.kernel.coat, self.kernel.proxy
+        if isinstance(self.kernel, TexturedCodeKernel):
+            return (f"NbrdfBSDF[material={self.path!r}, latent texture {self.kernel.texture.size}, "
+                    f"pixel_angle {self.kernel.pixel_angle:g}, proxy=(sigma {p.sigma:g}, w {p.w:g})]")
         return (f"NbrdfBSDF[material={self.path!r}, coat=(roughness {c.roughness:g}, ior {c.ior:g}), "
                 f"proxy=(sigma {p.sigma:g}, w {p.w:g})]")
 
