@@ -199,9 +199,26 @@ def _to_np(v):
     return _np3(v)
 
 
+def _texture_reference(material):
+    """(parameter maps, sampler) of a texture-mapped material's reference: a
+    layer stack per hit needs interfaces over a parametric base; the sampler
+    is the walk's defensive one at the sharpest top roughness any texel has."""
+    from nbrdf.mitsuba.textures import ParamMaps, sharpest_top_roughness
+    from nbrdf.neural.errors import NbrdfError
+    from nbrdf.neural.material import LatentBase, Measured
+    from nbrdf.training.brdfs import DefensiveSampler
+
+    if not material.interfaces or isinstance(material.base, (LatentBase, Measured)):
+        raise NbrdfError(f"{material.textures()[0][0]}: a texture-mapped reference needs a layer stack (interfaces "
+                         "over a conductor, diffuse or dielectric base)")
+    return ParamMaps(material), DefensiveSampler(sharpest_top_roughness(material))
+
+
 class NbrdfReferenceBSDF(mi.BSDF):
     """``{"type": "nbrdf_reference", "material": PATH[, "spp": N, "seed": S]}``:
-    every query draws ``spp`` new walk paths per lane (an unbiased, noisy f)."""
+    every query draws ``spp`` new walk paths per lane (an unbiased, noisy f).
+    A texture-mapped material gets its layer stack per hit from its maps at
+    the hit's uv (``textures.ParamMaps``)."""
 
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
@@ -218,22 +235,53 @@ class NbrdfReferenceBSDF(mi.BSDF):
             raise PluginError(f"nbrdf_reference: spp {self.spp} must be at least 1")
         try:
             self.material = load_material(self.path)
-            self.brdf = ReferenceBRDF(self.material, spp=self.spp)
+            if self.material.is_textured:
+                self.maps, self.sampler = _texture_reference(self.material)
+            else:
+                self.maps, self.sampler = None, ReferenceBRDF(self.material, spp=self.spp).sampler
         except NbrdfError as e:
             raise PluginError(f"nbrdf_reference: {e}") from None
         self._seeds = itertools.count(int(_prop(props, "seed", 0)) * 1_000_003 + 1)
         self.m_components = [FLAGS_GLOSSY]
         self.m_flags = FLAGS_GLOSSY
 
-    def _f(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        """A fresh estimate of f (N, 3) at the project's (wi, wo)."""
+    def _f(self, wi: np.ndarray, wo: np.ndarray, uv: np.ndarray | None = None) -> np.ndarray:
+        """A fresh estimate of f (N, 3) at the project's (wi, wo) (and the hits' uv
+        for a texture-mapped material)."""
         import torch
 
         from nbrdf.training.reference import reference_eval
 
+        if self.maps is not None:
+            return self._f_textured(wi, wo, uv)
         f, _ = reference_eval(self.material, torch.from_numpy(wi), torch.from_numpy(wo), spp=self.spp,
                               seed=next(self._seeds))
         return f.numpy().astype(np.float32)
+
+    def _f_textured(self, wi: np.ndarray, wo: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """The walk over one layer stack per hit, its parameters read at ``uv``."""
+        import torch
+
+        from nbrdf.neural.stack import material_stack
+        from nbrdf.training.layered import simulate
+        from nbrdf.training.reference import simulator_params
+
+        f = np.zeros((wi.shape[0], 3), np.float32)
+        idx = np.nonzero((wi[:, 2] > 0) & (wo[:, 2] > 0))[0]
+        if idx.size:
+            stack = material_stack(self.material, self.maps.at(uv[idx]), dtype=torch.float32)
+            m, _ = simulate(simulator_params(stack.expand(idx.size) if stack.n == 1 else stack),
+                            torch.from_numpy(wi[idx]), torch.from_numpy(wo[idx]), spp=self.spp,
+                            seed=next(self._seeds))
+            f[idx] = m.numpy()
+        return f
+
+    def _uv(self, si) -> np.ndarray | None:
+        """The hits' uv (N, 2) for a texture-mapped material, else None."""
+        if self.maps is None:
+            return None
+        dr.eval(si.uv)
+        return np.stack([np.asarray(si.uv.x, np.float32), np.asarray(si.uv.y, np.float32)], 1)
 
     @staticmethod
     def _color(f: np.ndarray):
@@ -243,7 +291,7 @@ class NbrdfReferenceBSDF(mi.BSDF):
         if _symbolic():
             return dr.zeros(mi.Color3f, dr.width(wo))
         light, view = _to_np(wo), _to_np(si.wi)
-        f = self._color(self._f(light, view))
+        f = self._color(self._f(light, view, self._uv(si)))
         ok = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
         return dr.select(ok, f * mi.Frame3f.cos_theta(wo), 0.0)
 
@@ -252,7 +300,7 @@ class NbrdfReferenceBSDF(mi.BSDF):
 
         if _symbolic():
             return dr.zeros(mi.Float, dr.width(wo))
-        p = self.brdf.pdf(torch.from_numpy(_to_np(si.wi)), torch.from_numpy(_to_np(wo))).numpy()
+        p = self.sampler.pdf(torch.from_numpy(_to_np(si.wi)), torch.from_numpy(_to_np(wo))).numpy()
         return dr.select(active, mi.Float(p.astype(np.float32)), 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
@@ -268,10 +316,10 @@ class NbrdfReferenceBSDF(mi.BSDF):
                                                            np.asarray(sample2.y, np.float32)], 1)
         s1 = np.broadcast_to(s1, (view.shape[0],))
         u = torch.from_numpy(np.ascontiguousarray(np.concatenate([s2, s1[:, None]], 1)))  # u[:, 2] picks the lobe
-        w, pdf = self.brdf.sampler.sample(torch.from_numpy(view), u)
+        w, pdf = self.sampler.sample(torch.from_numpy(view), u)
         light = w.numpy().astype(np.float32)
         pdf = pdf.numpy().astype(np.float32)
-        f = self._f(light, view)
+        f = self._f(light, view, self._uv(si))
         ok_np = pdf > 0
         weight = np.where(ok_np[:, None], f * light[:, 2:3] / np.where(ok_np, pdf, 1.0)[:, None], 0.0)
         bs = dr.zeros(mi.BSDFSample3f)

@@ -29,9 +29,13 @@ class RenderResult:
     spp: int
     """samples per pixel in the image"""
     seconds: float
-    """wall time of the sampling (scene loading excluded)"""
+    """wall time of the sampling (scene loading excluded), less ``compile_seconds``"""
     chunks: list[np.ndarray]
     """the per-chunk images (kept when asked, for noise estimates), else empty"""
+    compile_seconds: float = 0.0
+    """LLVM compilation of kernels missing from Dr.Jit's cache during the
+    sampling (a one-off cost per kernel, not per sample): excluded from
+    ``seconds`` when the render was asked to (``exclude_compile``), else 0"""
 
 
 def load(scene: Scene, size: tuple[int, int], chunk_spp: int = CHUNK_SPP):
@@ -45,10 +49,14 @@ def load(scene: Scene, size: tuple[int, int], chunk_spp: int = CHUNK_SPP):
 
 def render(scene: Scene, size: tuple[int, int], spp: int, seed: int = 0, chunk_spp: int = CHUNK_SPP,
            progress: Callable[[int], None] | None = None, keep_chunks: bool = False, loaded=None,
-           max_seconds: float | None = None) -> RenderResult:
+           max_seconds: float | None = None, exclude_compile: bool = False) -> RenderResult:
     """Renders ``spp`` samples per pixel (rounded up to whole chunks) in chunks
     of ``chunk_spp``, seeds ``seed * 100003 + k``; ``progress(spp_done)`` after
-    each chunk. With ``max_seconds`` it stops after the chunk that crosses it."""
+    each chunk. With ``max_seconds`` it stops after the chunk that crosses it.
+    ``exclude_compile``: the time spent compiling kernels that Dr.Jit had not
+    cached (its kernel history) is taken out of the time, so that a timing
+    measures sampling: in wavefront mode a wavefront that happens to hold one
+    lane gets kernels of its own, compiled the first time they occur."""
     import drjit as dr
     import mitsuba as mi
 
@@ -62,7 +70,12 @@ def render(scene: Scene, size: tuple[int, int], spp: int, seed: int = 0, chunk_s
     chunks: list[np.ndarray] = []
     done = 0
     t0 = time.perf_counter()
+    compile_s = 0.0
     wavefront = uses_reference(scene) or (uses_neural(scene) and wants_wavefront())
+    history = dr.flag(dr.JitFlag.KernelHistory)
+    if exclude_compile:
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        dr.kernel_history()  # drop what came before
     for k in range(n_chunks):
         if wavefront:
             with wavefront_mode():
@@ -71,13 +84,17 @@ def render(scene: Scene, size: tuple[int, int], spp: int, seed: int = 0, chunk_s
             img = mi.render(mscene, seed=seed * 100003 + k, spp=chunk_spp)
         dr.eval(img)
         arr = np.array(img, np.float32).reshape(size[1], size[0], 3)
+        if exclude_compile:
+            compile_s += sum(e.get("backend_time", 0.0) for e in dr.kernel_history()
+                             if e.get("type") == dr.KernelType.JIT and not e.get("cache_hit", True)) / 1000.0
         acc += arr
         if keep_chunks:
             chunks.append(arr)
         done += 1
         if progress is not None:
             progress(done * chunk_spp)
-        if max_seconds is not None and time.perf_counter() - t0 >= max_seconds:
+        if max_seconds is not None and time.perf_counter() - t0 - compile_s >= max_seconds:
             break
-    seconds = time.perf_counter() - t0
-    return RenderResult((acc / done).astype(np.float32), done * chunk_spp, seconds, chunks)
+    seconds = time.perf_counter() - t0 - compile_s
+    dr.set_flag(dr.JitFlag.KernelHistory, history)
+    return RenderResult((acc / done).astype(np.float32), done * chunk_spp, seconds, chunks, compile_s)
