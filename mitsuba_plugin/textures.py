@@ -71,16 +71,22 @@ class LatentTextureKernel:
                 self.levels.append((offset, h, w))
                 offset += h * w * self.stride
         self.buffer = mi.Float(np.concatenate(chunks).astype(np.float32))
+        #: per level: offset, height, width (gathered per lane by level index)
+        self._tables = tuple(mi.UInt32([lv[k] for lv in self.levels]) for k in range(3))
         self.size = tuple(texture.size)
 
-    def _bilinear(self, level: int, u, v, weight, out: list, active=True) -> None:
-        """Adds ``weight`` x the bilinear lookup on ``level`` to ``out`` (stride
-        floats per lane); gathers only where ``active``."""
-        off, h, w = self.levels[level]
-        x = u * w - 0.5
-        y = v * h - 0.5
+    def _bilinear(self, level, u, v, weight, out: list) -> None:
+        """Adds ``weight`` x the bilinear lookup on ``level`` (an int, or a
+        per-lane ``mi.UInt32``) to ``out`` (stride floats per lane)."""
+        if isinstance(level, int):
+            off, h, w = (mi.UInt32(x) for x in self.levels[level])
+        else:
+            off, h, w = (dr.gather(mi.UInt32, t, level) for t in self._tables)
+        x = u * mi.Float(w) - 0.5
+        y = v * mi.Float(h) - 0.5
         x0, y0 = dr.floor(x), dr.floor(y)
         fx, fy = x - x0, y - y0
+        hi, wi = mi.Int32(h), mi.Int32(w)
         xi, yi = mi.Int32(x0), mi.Int32(y0)
 
         def wrap(i, n):
@@ -89,18 +95,19 @@ class LatentTextureKernel:
         taps = []
         for dy, wy in ((0, 1.0 - fy), (1, fy)):
             for dx, wx in ((0, 1.0 - fx), (1, fx)):
-                idx = off + (wrap(yi + dy, h) * w + wrap(xi + dx, w)) * self.stride
+                idx = off + (wrap(yi + dy, hi) * w + wrap(xi + dx, wi)) * self.stride
                 taps.append((idx, weight * wy * wx))
         for c in range(self.stride):
             acc = out[c]
             for idx, wt in taps:
-                acc = dr.fma(dr.gather(mi.Float, self.buffer, idx + c, active), wt, acc)
+                acc = dr.fma(dr.gather(mi.Float, self.buffer, idx + c), wt, acc)
             out[c] = acc
 
     def lookup(self, uv, lod=None):
         """(shares [3][width] per lane, coat roughness, coat ior (unclamped))
-        at Mitsuba uv: trilinear between the two mip levels around ``lod``, the
-        finest level alone when ``lod`` is None."""
+        at Mitsuba uv: trilinear between the two mip levels around ``lod``
+        (their offsets and sizes gathered per lane), the finest level alone
+        when ``lod`` is None."""
         u, v = texture_rows_uv(uv.x, uv.y)
         u = u - dr.floor(u)
         v = v - dr.floor(v)
@@ -112,9 +119,9 @@ class LatentTextureKernel:
             lod = dr.clip(lod, 0.0, float(n - 1))
             lo = dr.floor(lod)
             t = lod - lo
-            for k in range(n):
-                wk = dr.select(lo == k, 1.0 - t, 0.0) + dr.select(lo + 1 == k, t, 0.0)
-                self._bilinear(k, u, v, wk, out, wk > 0)
+            lo_i = mi.UInt32(lo)
+            self._bilinear(lo_i, u, v, 1.0 - t, out)
+            self._bilinear(dr.minimum(lo_i + 1, n - 1), u, v, t, out)
         shares = [out[ch * self.width:(ch + 1) * self.width] for ch in range(3)]
         return shares, out[3 * self.width], out[3 * self.width + 1]
 
