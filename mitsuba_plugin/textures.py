@@ -82,20 +82,21 @@ class LatentTextureKernel:
             off, h, w = (mi.UInt32(x) for x in self.levels[level])
         else:
             off, h, w = (dr.gather(mi.UInt32, t, level) for t in self._tables)
-        x = u * mi.Float(w) - 0.5
-        y = v * mi.Float(h) - 0.5
+        # sizes as floats, at least 1: lanes a call masks off gather 0, and an integer modulo by 0 traps
+        hf, wf = dr.maximum(mi.Float(h), 1.0), dr.maximum(mi.Float(w), 1.0)
+        x = u * wf - 0.5
+        y = v * hf - 0.5
         x0, y0 = dr.floor(x), dr.floor(y)
         fx, fy = x - x0, y - y0
-        hi, wi = mi.Int32(h), mi.Int32(w)
-        xi, yi = mi.Int32(x0), mi.Int32(y0)
 
         def wrap(i, n):
-            return mi.UInt32(((i % n) + n) % n)
+            """i mod n for whole-number floats (repeat wrapping) as an index."""
+            return mi.UInt32(dr.clip(i - n * dr.floor(i / n), 0.0, n - 1.0))
 
         taps = []
         for dy, wy in ((0, 1.0 - fy), (1, fy)):
             for dx, wx in ((0, 1.0 - fx), (1, fx)):
-                idx = off + (wrap(yi + dy, hi) * w + wrap(xi + dx, wi)) * self.stride
+                idx = off + (wrap(y0 + dy, hf) * w + wrap(x0 + dx, wf)) * self.stride
                 taps.append((idx, weight * wy * wx))
         for c in range(self.stride):
             acc = out[c]
@@ -109,14 +110,15 @@ class LatentTextureKernel:
         (their offsets and sizes gathered per lane), the finest level alone
         when ``lod`` is None."""
         u, v = texture_rows_uv(uv.x, uv.y)
-        u = u - dr.floor(u)
-        v = v - dr.floor(v)
+        # lanes a call masks off may hold anything: a NaN index must not reach a gather
+        u = dr.select(dr.isfinite(u), u - dr.floor(u), 0.0)
+        v = dr.select(dr.isfinite(v), v - dr.floor(v), 0.0)
         out = [mi.Float(0.0) for _ in range(self.stride)]
         n = len(self.levels)
         if lod is None or n == 1:
             self._bilinear(0, u, v, mi.Float(1.0), out)
         else:
-            lod = dr.clip(lod, 0.0, float(n - 1))
+            lod = dr.clip(dr.select(dr.isfinite(lod), lod, 0.0), 0.0, float(n - 1))
             lo = dr.floor(lod)
             t = lod - lo
             lo_i = mi.UInt32(lo)

@@ -158,3 +158,22 @@ def test_textured_reference_refuses_a_single_textured_layer(mi, tmp_path):
         {"type": "diffuse", "albedo": {"texture": "a.png", "channel": "r", "range": [0, 1]}}]}))
     with pytest.raises(Exception, match="needs a layer stack"):
         mi.load_dict({"type": "nbrdf_reference", "material": str(tmp_path / "m.json")})
+
+
+@pytest.mark.slow
+def test_textured_scene_renders_in_wavefront_mode(mi, textured, tmp_path):
+    """A textured neural sphere path traced in wavefront mode with mip-mapping:
+    lanes that a call masks off gather level sizes of 0, which once made the
+    kernel divide by zero (SIGFPE, the interpreter killed)."""
+    from nbrdf.mitsuba.render import render
+    from nbrdf.mitsuba.scenes import load_scene
+
+    (tmp_path / "s.json").write_text(json.dumps({
+        "camera": {"origin": [0, -4, 1], "target": [0, 0, 0.5], "fov": 30},
+        "environment": "studio", "max_depth": 3,
+        "shapes": [{"type": "sphere", "center": [0, 0, 0.5], "radius": 0.5, "material": textured},
+                   {"type": "torus", "center": [0, 0, 0.2], "radius": 1.2, "tube": 0.2, "material": textured,
+                    "normal_map": {"name": "knurled", "tiles": [4, 1]}},
+                   {"type": "rectangle", "size": [4, 4], "material": {"diffuse": 0.4}}]}))
+    res = render(load_scene(str(tmp_path / "s.json")), (12, 9), 2, chunk_spp=1)
+    assert np.isfinite(res.image).all() and res.image.mean() > 0
