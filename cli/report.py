@@ -226,8 +226,8 @@ class ScenesReport:
     """seconds of the neural render: the equal time both methods get"""
     ref_spp: int = 512
     """samples per pixel of the converged Monte Carlo reference (cached)"""
-    chunk: int = 4
-    """samples per pixel per Mitsuba pass"""
+    chunk: int = 16
+    """samples per pixel per Mitsuba pass (larger passes amortise the wavefront mode's per-pass cost)"""
     cache: str | None = None
     """cache folder of the converged references (default: OUT/cache)"""
     figure: str | None = None
