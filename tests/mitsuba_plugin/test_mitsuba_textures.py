@@ -112,9 +112,12 @@ def test_textured_sampler_pdf_matches_its_samples(mi, textured):
 def test_textured_reference_is_the_walk_of_the_hits_texel(mi, textured, tmp_path):
     """At texel centres the maps' bilinear value is the texel's: the plugin's
     estimates equal ``reference_eval`` of the uniform material with those
-    values. z over 2 texels x 12 pairs x 3 channels: |mean z| < 4 / sqrt(72),
-    mean z^2 < 1.7 (99.9 % point for 72 normals: 1.56); a 10 % error in the
-    albedo read gives mean z about 3."""
+    values. 16 calls of 128 paths per pair (few paths per call give skewed,
+    heavy-tailed means: 24 x 16 paths read 0.5 sigma low on this scattering
+    stack, while 4096 paths agree within 0.5 %). z over 2 texels x 12 pairs x
+    3 channels (channels share paths: about 24 independent values): |mean z|
+    < 4 / sqrt(24), mean z^2 < 1.8 (z of 16 calls is t with 15 degrees of
+    freedom, variance 1.15). A 10 % error in the albedo read gives z about 7."""
     import imageio.v3 as iio
     import torch
 
@@ -126,7 +129,7 @@ def test_textured_reference_is_the_walk_of_the_hits_texel(mi, textured, tmp_path
     img = iio.imread(str(textured).replace("tex.json", "alb.png")).astype(np.float64) / 255
     rough = iio.imread(str(textured).replace("tex.json", "rough.png")).astype(np.float64) / 255
     rng = np.random.default_rng(11)
-    n, calls, spp = 12, 24, 16
+    n, calls, spp = 12, 16, 128
     bsdf = mi.load_dict({"type": "nbrdf_reference", "material": textured, "spp": spp, "seed": 2})
     zs = []
     for row, col in ((0, 1), (3, 4)):  # image rows from the top
@@ -146,8 +149,8 @@ def test_textured_reference_is_the_walk_of_the_hits_texel(mi, textured, tmp_path
                                      spp=4096, seed=5)
         zs.append((mean - ref.numpy()) / np.sqrt(se ** 2 + ref_se.numpy() ** 2))
     z = np.concatenate(zs)
-    assert abs(z.mean()) < 4 / np.sqrt(z.size), z.mean()
-    assert (z ** 2).mean() < 1.7, (z ** 2).mean()
+    assert abs(z.mean()) < 4 / np.sqrt(z.size / 3), z.mean()
+    assert (z ** 2).mean() < 1.8, (z ** 2).mean()
 
 
 def test_textured_reference_refuses_a_single_textured_layer(mi, tmp_path):
