@@ -258,7 +258,7 @@ class DecoderKernel:
         x = nn.CoopVec(*ENCODERS[self.encoding](wi, wo))
         up = (wi.z > 0) & (wo.z > 0)
         out = []
-        for k, share in enumerate(self.shares if shares is None else shares):
+        for share in self.shares if shares is None else shares:
             if shares is None:
                 h = dr.maximum(nn.matvec(self.w_dir, x, share), 0.0)
             else:

@@ -17,7 +17,7 @@ def test_strategies_set_the_direct_integrators_sample_counts(mi):
     from nbrdf.mitsuba.mis_figure import STRATEGIES, MisFigureConfig, scene_dict
 
     cfg = MisFigureConfig(out=Path("x.png"))
-    for name, (es, bs) in STRATEGIES.items():
+    for es, bs in STRATEGIES.values():
         d = scene_dict(cfg, es, bs)
         assert d["integrator"] == {"type": "direct", "emitter_samples": es, "bsdf_samples": bs}
     assert STRATEGIES["MIS"] == (1, 1) and {STRATEGIES["light sampling"], STRATEGIES["BSDF sampling"]} == {(1, 0), (0, 1)}

@@ -98,9 +98,6 @@ def test_a_code_file_renders_as_its_material(mi, materials, tmp_path):
     ({"material": "GOLD", "weights": "BROKEN"}, "safetensors"),
 ])
 def test_bad_input_is_one_clear_line(mi, materials, tmp_path, props, message):
-    from pathlib import Path
-
-    assets = Path(materials["car_paint"]).parent
     if props.get("material") == "MAPPED":  # a texture-mapped material whose map is missing
         import json
 
