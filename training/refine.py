@@ -207,8 +207,7 @@ class Refiner:
         self._network_code = code
         self._pool: list[tuple[Tensor, Tensor, Tensor]] = []
         self._heldout: HeldOut | None = None
-        self._t0 = time.perf_counter()
-        self._c0 = time.process_time()
+        self._spent = (0.0, 0.0)  # (wall, processor) seconds inside start and step: a set-aside run is not charged
         self._round_seconds = 0.0
         self._stale = 0
         self.state: RefineState | None = None
@@ -217,29 +216,34 @@ class Refiner:
         wi, wo = placed_pairs(n, self.g, self.roughness)
         return wi, wo, body_values(self.material, wi, wo, self.cfg.spp, seed)
 
-    def _tick(self) -> None:
-        st = self.state
-        st.seconds = time.perf_counter() - self._t0
-        st.cpu_seconds = time.process_time() - self._c0
+    def _tick(self, t0: float, c0: float) -> None:
+        """Charges the time since (t0, c0) (``perf_counter``, ``process_time``) to the refinement."""
+        w, c = self._spent
+        self._spent = (w + time.perf_counter() - t0, c + time.process_time() - c0)
+        if self.state is not None:
+            self.state.seconds, self.state.cpu_seconds = self._spent
 
     def start(self) -> RefineState:
         """Simulates the held-out set and scores the network's code."""
         if self.state is None:
+            t0, c0 = time.perf_counter(), time.process_time()
             wi, wo, body = self._simulate(self.cfg.heldout_pairs, self.cfg.seed * 7919 + 1)
             coat = coat_eval(self.coat.expand(3, -1)[:, None, :], wi[None].expand(3, -1, -1),
                              wo[None].expand(3, -1, -1)).T
             self._heldout = HeldOut(wi, wo, body + coat.float())
             e = heldout_error(self.dec, self._network_code, self._heldout)
             self.state = RefineState(self._network_code, e, e, pairs=self.cfg.heldout_pairs, history=[e])
-            self._tick()
+            self._tick(t0, c0)
         return self.state
 
     def step(self, stop: Callable[[], bool] | None = None) -> RefineState:
         """One round (module docstring); a round cut short by ``stop`` changes nothing."""
         st = self.start()
+        if st.seconds >= self.cfg.budget:  # the held-out set alone spent it
+            st.done = True
         if st.done:
             return st
-        c, t0 = self.cfg, time.perf_counter()
+        c, t0, c0 = self.cfg, time.perf_counter(), time.process_time()
         k = st.rounds
         self._pool.append(self._simulate(c.round_pairs, c.seed * 7919 + 2 + k))
         wi, wo, f = (torch.cat(x) for x in zip(*self._pool))
@@ -257,7 +261,7 @@ class Refiner:
 
         z = project(self.dec, wi, wo, f, ProjectionConfig(steps=c.steps, lr=c.lr), z0=st.code, stop=hook)
         if cut[0]:
-            self._tick()
+            self._tick(t0, c0)
             return st
         code = with_coat(z[:, :self.dec.spec.latent], self.coat.expand(3, -1))
         e = heldout_error(self.dec, code, self._heldout)
@@ -270,7 +274,7 @@ class Refiner:
         if e < st.error:
             st.code, st.error = code, e
         self._round_seconds = max(self._round_seconds, time.perf_counter() - t0)
-        self._tick()
+        self._tick(t0, c0)
         if self._stale >= c.patience:
             st.done = st.converged = True
         elif st.rounds >= c.max_rounds or st.seconds + self._round_seconds * (1 + 0.1 * st.rounds) > c.budget:

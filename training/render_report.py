@@ -368,6 +368,8 @@ def run_render_report(config: RenderReportConfig) -> dict:
     unknown = [x for x in config.methods if x not in METHODS]
     if unknown:
         raise NbrdfError(f"methods: {unknown[0]!r} is not one of {', '.join(METHODS)}")
+    if "refined" in config.methods and not (math.isfinite(config.refine_budget) and config.refine_budget > 0):
+        raise NbrdfError(f"budget: {config.refine_budget} seconds must be positive")
     if config.spp < 2:
         raise NbrdfError(f"spp: {config.spp} is too few (at least 2: two independent halves)")
     model = load_model(config.model) if config.model else default_model()
