@@ -31,10 +31,10 @@ from typing import Callable
 
 import torch
 
-from nbrdf.neural.coat import COAT_PARAMS, coat_eval, with_coat
+from nbrdf.neural.coat import coat_eval, with_coat
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import Conductor, Dielectric, LatentBase, Material, material_to_dict
+from nbrdf.neural.material import Conductor, Dielectric, LatentBase, Material, Measured, material_to_dict
 from nbrdf.neural.projection import ProjectionConfig, project
 
 Tensor = torch.Tensor
@@ -311,7 +311,7 @@ def material_hash(material: Material) -> str:
     d = material_to_dict(material)
     d.pop("name", None)
     blob = {"m": d}
-    if any("path" in str(v) or "file" in str(v) for v in d.get("layers", [])):
+    if any(isinstance(layer, (LatentBase, Measured)) for layer in material.layers):
         blob["dir"] = str(Path(material.base_dir).resolve())
     return hashlib.sha256(json.dumps(blob, sort_keys=True).encode()).hexdigest()[:24]
 

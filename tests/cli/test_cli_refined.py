@@ -1,8 +1,6 @@
 """``nbrdf eval --method refined`` and its ``--budget`` flag."""
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 import torch
