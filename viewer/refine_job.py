@@ -13,6 +13,7 @@ rebuilds the BRDF with the code either returns.
 """
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -28,8 +29,9 @@ from nbrdf.training.refine import RefineConfig, load_cached, material_hash, serv
 class IdleRefineSettings:
     """When and how the previewer refines."""
 
-    enabled: bool = True
-    """Refine still materials at all."""
+    enabled: bool = field(default_factory=lambda: os.environ.get("NBRDF_IDLE_REFINE", "1") != "0")
+    """Refine still materials, and show cached refined codes, at all (default on; the environment
+    variable NBRDF_IDLE_REFINE=0 turns it off: the test suite's windows show the network's codes)."""
     still_seconds: float = 0.5
     """Seconds without an edit before the refinement starts."""
     config: RefineConfig = field(default_factory=RefineConfig)

@@ -52,7 +52,7 @@ class Clock:
 def setup(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     w, clock = FakeWorker(), Clock()
-    r = IdleRefiner(lambda: w, FakeDecoder, IdleRefineSettings(still_seconds=0.5), clock)
+    r = IdleRefiner(lambda: w, FakeDecoder, IdleRefineSettings(enabled=True, still_seconds=0.5), clock)
     return r, w, clock
 
 
@@ -122,6 +122,17 @@ def test_untextured_uniform_materials_only(setup, tmp_path):
     assert r.poll() is None and not w.requests
 
 
+def test_the_environment_switch_turns_it_off(monkeypatch, tmp_path):
+    monkeypatch.setenv("NBRDF_IDLE_REFINE", "0")
+    w, clock = FakeWorker(), Clock()
+    r = IdleRefiner(lambda: w, FakeDecoder, IdleRefineSettings(still_seconds=0.0), clock)
+    assert r.edited(load_material(BLACK), torch.zeros(3, 34)) is None
+    clock.t = 5.0
+    assert r.poll() is None and not w.requests
+    monkeypatch.setenv("NBRDF_IDLE_REFINE", "1")
+    assert IdleRefineSettings().enabled
+
+
 # --- through LookDev and the real worker process -------------------------------------------
 TINY = RefineConfig(budget=600.0, round_pairs=256, heldout_pairs=256, spp=32, steps=40, max_rounds=1)
 
@@ -131,7 +142,7 @@ def _lookdev(gl_ctx, monkeypatch, tmp_path, config=TINY):
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))  # before the worker process starts
     ld = LookDev(gl_ctx, load_material(BLACK))
-    ld.idle_refine.settings = IdleRefineSettings(still_seconds=0.0, config=config)
+    ld.idle_refine.settings = IdleRefineSettings(enabled=True, still_seconds=0.0, config=config)
     ld.edit("set_name", "car paint black")  # an edit under these settings (the first was made before them)
     return ld
 
