@@ -12,6 +12,9 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from nbrdf.viewer.reference import ReferenceImage
+    from nbrdf.viewer.refine_job import RefineResult
+
+    Result = ReferenceImage | RefineResult
 
 
 class ReferenceCache:
@@ -20,15 +23,15 @@ class ReferenceCache:
 
     def __init__(self, max_items: int = 16, max_bytes: int = 256 * 2**20):
         self.max_items, self.max_bytes = max_items, max_bytes
-        self._items: OrderedDict[str, ReferenceImage] = OrderedDict()
+        self._items: OrderedDict[str, "Result"] = OrderedDict()
 
-    def get(self, key: str) -> ReferenceImage | None:
+    def get(self, key: str) -> "Result | None":
         return self._items.get(key)
 
     def __len__(self) -> int:
         return len(self._items)
 
-    def put(self, key: str, ref: ReferenceImage, keep: str | None = None) -> None:
+    def put(self, key: str, ref: "Result", keep: str | None = None) -> None:
         """Stores ``ref`` under ``key`` (the most recent), then drops the oldest over the bounds."""
         self._items.pop(key, None)
         self._items[key] = ref
@@ -41,8 +44,10 @@ class ReferenceCache:
             total -= _nbytes(self._items.pop(old))
 
 
-def _nbytes(ref: ReferenceImage) -> int:
-    return ref.image.nbytes + (ref.stderr.nbytes if ref.stderr is not None else 0)
+def _nbytes(ref) -> int:
+    """The bytes of a result's arrays (a reference image and its error, or a refined code)."""
+    arrays = (getattr(ref, name, None) for name in ("image", "stderr", "code"))
+    return sum(int(a.nbytes) for a in arrays if a is not None)
 
 
 __all__ = ["ReferenceCache"]
