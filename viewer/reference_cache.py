@@ -31,6 +31,9 @@ class ReferenceCache:
     def __len__(self) -> int:
         return len(self._items)
 
+    def __setitem__(self, key: str, ref: "Result") -> None:
+        self.put(key, ref)
+
     def put(self, key: str, ref: "Result", keep: str | None = None) -> None:
         """Stores ``ref`` under ``key`` (the most recent), then drops the oldest over the bounds."""
         self._items.pop(key, None)
