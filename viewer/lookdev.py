@@ -44,6 +44,7 @@ from nbrdf.viewer.compare import Compare
 from nbrdf.viewer.history import History
 from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, ToneMap, View
 from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, gpu_brdf, material_key
+from nbrdf.viewer.refine_job import IdleRefiner
 from nbrdf.viewer.renderer import Renderer, ViewState
 from nbrdf.viewer.screenshot import SHOT_LINEAR_SLOT, SHOT_SLOTS, ScreenshotJob, TileCamera, write_display_png
 from nbrdf.viewer.session import CompareSettings, Interpolation, SessionDoc
@@ -172,6 +173,8 @@ class LookDev:
         self.backdrop = backdrop or BackdropSettings()
         self.backdrop_part = Backdrop(ctx, self.renderer)
         self.bodies = BodySource(ctx)  # the window's frames: decoder or baked body table (viewer/body_source.py)
+        # A still uniform material's code refined in the worker process (viewer/refine_job.py).
+        self.idle_refine = IdleRefiner(lambda: self.worker, lambda: self.pipeline.model.decoder)
         self._body: GpuBrdf | None = None  # the BRDF the accumulation was shaded with
         self._apply_material()
         self.history.reset(self.snapshot())
@@ -566,8 +569,11 @@ class LookDev:
             z = tex.mean_latent
             brdf = gpu_brdf(self.ctx, m, self.pipeline.decoder, z, self.pipeline.proxy(z), tex,
                             self.pipeline.normal_maps)
+            self.idle_refine.edited(None, None)
         else:
-            brdf = self.pipeline.build(m, BrdfMode.NEURAL, latent=self.latent())
+            z = self.latent()
+            refined = self.idle_refine.edited(None if self.interp.active else m, z)  # a cached refined code
+            brdf = self.pipeline.build(m, BrdfMode.NEURAL, latent=z if refined is None else refined)
         other = self.interp.other_material() if self.interp.brdf_blend else None
         self.other_brdf = None if other is None else self.pipeline.build(other, BrdfMode.NEURAL)
         self.ref_brdf = self.pipeline.build(m, BrdfMode.ANALYTIC) if analytic_capable(m) else None
@@ -603,6 +609,9 @@ class LookDev:
                 job.result = latent_texture(model, m, progress=lambda d, n: setattr(job, "progress", d / n))
             except NbrdfError as e:
                 job.error = str(e)
+            except (MemoryError, RuntimeError) as e:  # torch's allocator raises RuntimeError
+                job.error = f"the latent texture: out of memory while building it ({type(e).__name__}); " \
+                    "use smaller maps"
         threading.Thread(target=build, name="nbrdf-svbrdf", daemon=True).start()
         self.notice = "building the latent texture..."
         return None
@@ -611,10 +620,27 @@ class LookDev:
         """Picks up finished background work (latent textures) and renders the
         next frame of a turntable capture."""
         if self._svbrdf is not None and (self._svbrdf.result is not None or self._svbrdf.error):
-            self._guard(self._apply_material)
+            if not self._guard(self._apply_material):
+                self._keep_shown_material()
             self.notice = ""
+        refined = self.idle_refine.poll()
+        if refined is not None:  # a code that beats the network's on the material's own simulation
+            self.brdf = self.pipeline.build(self.material, BrdfMode.NEURAL, latent=refined)
+            self.invalidate()
         if self._turntable is not None and self.brdf is not None:
             self._guard(self._turntable_step)
+
+    def _keep_shown_material(self) -> None:
+        """After a material whose latent texture could not be made (``error`` says why):
+        the editor goes back to the material still shown, and the failed edit leaves no undo step."""
+        if self.brdf is None or material_key(self.brdf.material) == material_key(self.material):
+            return
+        self.editor = StackEditor.from_material(self.brdf.material)
+        snap, h = self.snapshot(), self.history
+        if h.undo_stack and h.undo_stack[-1] == snap:
+            h.current = h.undo_stack.pop()
+        else:
+            h.commit(snap)
 
     # --- turntable capture (viewer/offscreen.py writes the file) -----------------------------
     def start_turntable(self, path: str | Path, frames: int = 36, size: tuple[int, int] = (480, 480),

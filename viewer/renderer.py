@@ -49,6 +49,7 @@ from nbrdf.viewer.mesh import Mesh, named_mesh
 from nbrdf.viewer.modes import ToneMap, View
 from nbrdf.viewer.neural_gpu import SHARE_UNIT
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf, NormalMaps, gpu_brdf
+from nbrdf.viewer.size_cache import SizeCache, release_all
 
 if TYPE_CHECKING:
     import torch
@@ -138,11 +139,12 @@ class Renderer:
         self.table_sampling: LitSampling | None = None
         """The sampling of draws whose body is a baked table (None: ``sampling``; the window's
         choice, viewer/body_source.py ``BodySource.sampling``)."""
-        self._gbuf: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = {}
+        self._gbuf: SizeCache[tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = SizeCache(release_all)
         self.neural = neural
         self._programs: dict[tuple, moderngl.Program] = {}
         self._mesh_vaos: dict[tuple, moderngl.VertexArray] = {}
-        self._fbo: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, moderngl.Texture]] = {}
+        self._fbo: SizeCache[tuple[moderngl.Framebuffer, moderngl.Texture]] = SizeCache(
+            lambda t: release_all(t[0], t[0].depth_attachment, t[1]), on_evict=self._gbuf.evict)
         self.tone = self._build("fullscreen.vert", "tonemap.frag", None)
         self.background_prog = self._build("fullscreen.vert", "background.frag", None)
         self.empty_tone = ctx.vertex_array(self.tone, [])
@@ -336,12 +338,15 @@ class Renderer:
 
     # --- frames -------------------------------------------------------------------
     def _target(self, w: int, h: int, slot: str = MAIN):
-        key = (slot, w, h)
-        if key not in self._fbo:
+        def make():
             tex = self.ctx.texture((w, h), 4, dtype="f4")
-            depth = self.ctx.depth_renderbuffer((w, h))
-            self._fbo[key] = (self.ctx.framebuffer([tex], depth), tex)
-        return self._fbo[key]
+            return self.ctx.framebuffer([tex], self.ctx.depth_renderbuffer((w, h))), tex
+        return self._fbo.get((slot, w, h), make)
+
+    def release_targets(self) -> None:
+        """Releases every accumulation target and G-buffer (made again on next use)."""
+        self._fbo.clear()
+        self._gbuf.clear()
 
     def frame_texture(self, view: View | str, w: int, h: int, slot: str = MAIN) -> moderngl.Texture:
         """The accumulation target of ``view`` at (w, h) in ``slot`` as the last ``accumulate`` left it."""
@@ -387,14 +392,13 @@ class Renderer:
     def _gbuffer_target(self, w: int, h: int, slot: str) -> tuple[moderngl.Framebuffer, list[moderngl.Texture]]:
         """The G-buffer of ``slot`` at (w, h): three RGBA32F targets sharing the
         accumulation target's depth buffer (the background pass then fills the rest)."""
-        key = (slot, w, h)
-        if key not in self._gbuf:
+        def make():
             depth = self._target(w, h, slot)[0].depth_attachment
             texs = [self.ctx.texture((w, h), 4, dtype="f4") for _ in GBUFFER_UNITS]
             for t in texs:
                 t.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            self._gbuf[key] = (self.ctx.framebuffer(texs, depth), texs)
-        return self._gbuf[key]
+            return self.ctx.framebuffer(texs, depth), texs
+        return self._gbuf.get((slot, w, h), make)
 
     def _deferred_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
                          slot: str) -> np.ndarray:
