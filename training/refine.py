@@ -51,12 +51,12 @@ class RefineConfig:
 
     budget: float = DEFAULT_BUDGET
     """Seconds of wall-clock time the refinement may spend, simulation and fitting together."""
-    round_pairs: int = 1024
+    round_pairs: int = 512
     """New direction pairs simulated per round."""
     heldout_pairs: int = 1024
     """Direction pairs of the held-out set that scores every code (never fitted)."""
-    spp: int = 64
-    """Monte Carlo paths per pair."""
+    spp: int = 256
+    """Monte Carlo paths per pair (at 64 the held-out error is mostly the references' own noise and rounds stop early)."""
     steps: int = 120
     """Projection steps per round."""
     fit_pairs: int = 3072
@@ -65,7 +65,7 @@ class RefineConfig:
     """Adam learning rate of the rounds (a warm start: half the projection's from the latent mean)."""
     min_gain: float = 0.02
     """A round must lower the held-out error by this share of it to count as falling."""
-    patience: int = 1
+    patience: int = 3
     """Rounds in a row that may fail to fall before the refinement stops."""
     max_rounds: int = 24
     """Rounds at most (the pool then holds ``round_pairs * max_rounds`` pairs)."""
