@@ -113,7 +113,8 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
     from nbrdf.viewer.gl import COMPUTE_VERSION, describe, half_float_extensions, offscreen_context
     from nbrdf.viewer.neural_gpu import ComputeDecoderPass, GpuDecoder, WeightStorage
     from nbrdf.viewer.options import DEFAULT_MATERIAL
-    from nbrdf.viewer.renderer import Renderer, ViewState
+    from nbrdf.viewer.renderer import Renderer
+    from nbrdf.viewer.view_settings import ViewState
 
     try:
         chosen = [WeightStorage(x) for x in storages]
@@ -379,7 +380,8 @@ def bench_body_table(sizes: tuple[str, ...] = ("32x16x8", "48x24x12"), size: int
     from nbrdf.viewer.body_table_gpu import BodyTables
     from nbrdf.viewer.gl import offscreen_context
     from nbrdf.viewer.pipeline import MaterialPipeline
-    from nbrdf.viewer.renderer import Renderer, ViewState
+    from nbrdf.viewer.renderer import Renderer
+    from nbrdf.viewer.view_settings import ViewState
 
     root = Path(materials) if materials else Path(__file__).resolve().parents[1] / "training" / "sets" / "lookdev"
     tables = [TableSize(*(int(x) for x in s.split("x"))) for s in sizes]

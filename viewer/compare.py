@@ -47,7 +47,8 @@ from nbrdf.viewer.reference import (
     slice_job,
     to_local,
 )
-from nbrdf.viewer.renderer import Renderer, ViewState
+from nbrdf.viewer.renderer import Renderer
+from nbrdf.viewer.view_settings import ViewState
 
 OBJECT_REF_SIZE = 160  # the Monte Carlo object reference's longest side, pixels
 SLICE_REF_SIZE = 96    # the Monte Carlo slice reference's longest side, pixels

@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -73,11 +73,10 @@ def default_setup(ctx, material: Path | None = None):
     three-quarter camera), object only."""
     from nbrdf.viewer.offscreen import make_renderer
     from nbrdf.viewer.options import ViewOptions
-    from nbrdf.viewer.renderer import ViewState
 
     opts = ViewOptions() if material is None else ViewOptions(material=material)
     r = make_renderer(ctx, opts.load_material()[0], opts)
-    state = ViewState(env_intensity=opts.env_intensity, env_rotation=opts.env_rotation, background=False)
+    state = replace(opts.state, background=False)
     return r, state
 
 

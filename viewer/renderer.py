@@ -32,7 +32,6 @@ of all ranges first, then shades each range with its own program. One range
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Sequence
 
 import moderngl
@@ -41,7 +40,6 @@ import numpy as np
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
 from nbrdf.viewer import shaders
-from nbrdf.viewer.camera import OrbitCamera
 from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
 from nbrdf.viewer.gl import use_compute
 from nbrdf.viewer.lit_sampling import LitSampling
@@ -49,6 +47,7 @@ from nbrdf.viewer.mesh import Mesh, named_mesh
 from nbrdf.viewer.modes import ToneMap, View
 from nbrdf.viewer.neural_gpu import SHARE_UNIT
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf, NormalMaps, gpu_brdf
+from nbrdf.viewer.view_settings import ViewState
 
 if TYPE_CHECKING:
     import torch
@@ -64,45 +63,6 @@ TABLE_UNIT = 13  # texture unit of a material's baked body table
 LIT_GROUP = 8     # lit.comp's work group is LIT_GROUP x LIT_GROUP pixels
 LIT_CHUNK = 8     # passes per compute dispatch (bounds one dispatch's duration)
 MAIN = "main"    # the default accumulation slot
-
-
-@dataclass
-class ViewState:
-    """Everything that decides a frame besides the material and the mesh."""
-
-    view: View = View.OBJECT
-    """object, lobe or slice."""
-    theta_i: float = 30.0
-    """The lobe view's incidence, degrees."""
-    camera: OrbitCamera = field(default_factory=OrbitCamera)
-    """The orbit camera of the object view."""
-    light_dir: tuple[float, float, float] = (0.4, -0.6, 0.7)
-    """Toward the directional light, world space."""
-    light_radiance: float = 3.0
-    """The directional light's radiance."""
-    point_light: tuple[float, float, float] | None = None
-    """A point light's world position (None: off)."""
-    point_intensity: float = 20.0
-    """The point light's radiant intensity."""
-    env_intensity: float = 0.6
-    """The environment's radiance scale."""
-    env_rotation: float = 0.0
-    """The environment's rotation about world z, degrees."""
-    env_on: bool = True
-    """False: the directional (and point) light alone."""
-    background: bool = True
-    """The environment behind the object."""
-    exposure: float = 0.0
-    """Stops."""
-    tonemap: ToneMap = ToneMap.NEUTRAL
-    """The display transform (Khronos PBR Neutral keeps base colours)."""
-
-    def __post_init__(self) -> None:
-        try:
-            self.view = View.parse(self.view, "--view")
-            self.tonemap = ToneMap.parse(self.tonemap, "--tonemap")
-        except ValueError as e:
-            raise NbrdfError(str(e)) from None
 
 
 class Renderer:

@@ -144,7 +144,7 @@ class Panels:
                     ld.load_preset(n)
             imgui.end_combo()
         preset_browser(ld)
-        progress = ld.svbrdf_progress()
+        progress = ld.textures.progress
         if progress is not None:
             imgui.progress_bar(progress, None, "latent texture")
         imgui.text_wrapped(ld.material.name)
@@ -185,7 +185,7 @@ class Panels:
         if hit == "add clear coat":
             ld.edit("add_coat")
         elif hit == "save curve":
-            ld.save_curve()
+            ld.curves.save()
         changed, self.material_path = imgui.input_text("material file", self.material_path)
         hit = self._wrap_buttons(["open material", "save material"], small=False)
         if hit == "open material":
@@ -353,7 +353,7 @@ class Panels:
                 ld.clear_interpolation()
 
     def _polar_plot(self) -> None:
-        curves = self.ld.plane_curves()
+        curves = self.ld.curves.curves()
         if not curves:
             return
         imgui.text_wrapped("plane of incidence: f cos / (1 + f cos)")  # the title above: the plot is narrow
@@ -460,19 +460,19 @@ class Panels:
         if imgui.button("save session"):
             ld.save_session(self.session_path)
         _, self.shot_path = imgui.input_text("screenshot", self.shot_path)
-        shot = ld.screenshot_progress()
+        shot = ld.shots.progress
         if shot is None:
             if imgui.button("screenshot (.png/.exr)"):
                 w, h = self.view_size
-                ld.start_screenshot(self.shot_path, (max(w, 1), max(h, 1)), 16)
+                ld.shots.start(self.shot_path, (max(w, 1), max(h, 1)), 16)
         else:
             imgui.progress_bar(shot, imgui.ImVec2(-1, 0), f"screenshot {shot * 100:.0f} %")
             if imgui.small_button("cancel screenshot"):
-                ld.cancel_screenshot()
+                ld.shots.cancel()
         imgui.separator()
         _, self.turntable_path = imgui.input_text("turntable file", self.turntable_path)
         _, self.turntable_frames = imgui.slider_int("frames", self.turntable_frames, 4, 240)
-        progress = ld.turntable_progress()
+        progress = ld.turntables.progress
         if progress is None:
             imgui.push_style_color(imgui.Col_.text, DIM)
             imgui.text_wrapped("turntable file: .mp4, .gif or name_%03d.png")
@@ -480,7 +480,7 @@ class Panels:
             if imgui.button("capture turntable"):
                 w, h = self.view_size
                 k = min(1.0, TURNTABLE_MAX_SIDE / max(w, h, 1))  # the view's shape, at most 480 pixels a side
-                ld.start_turntable(self.turntable_path, self.turntable_frames,
+                ld.turntables.start(self.turntable_path, self.turntable_frames,
                                    (max(2, round(w * k)), max(2, round(h * k))))
         else:
             imgui.progress_bar(progress, imgui.ImVec2(-1, 0), "turntable")
