@@ -98,7 +98,7 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
     run; and (``frames``) the lit sphere filling the frame per lit path
     (deferred compute with its default storage, fragment fallback): ms per frame with one directional light and ms per
     environment pass (the default resampled estimator; the balance heuristic
-    over three environment strategies and over two, ``Renderer.strategies``
+    over three environment strategies and over two, ``LitSampling.strategies``
     3), the first frame's seconds (shader
     compilation included), and the same per 1080p frame (scaled by pixel
     count when ``size`` is another). Also which half-precision arithmetic
@@ -204,9 +204,9 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
                 if key == "env_pass_ms":  # the balance heuristic instead of resampling: three and two strategies
                     ris, r.sampling.ris_samples = r.sampling.ris_samples, 0
                     out["env_pass_balance_ms"] = round(1000 * _time(shade_frame, repeats), 2)
-                    r.strategies = 3
+                    r.sampling.strategies = 3
                     out["env_pass_two_strategies_ms"] = round(1000 * _time(shade_frame, repeats), 2)
-                    r.strategies, r.sampling.ris_samples = 4, ris
+                    r.sampling.strategies, r.sampling.ris_samples = 4, ris
             out["storage"] = gdec.compute_storage.value if comp else "texture"
             scale = FRAME_1080P / n
             out["per_1080p_frame"] = {k: round(val * scale, 1) for k, val in out.items()

@@ -192,12 +192,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.clamp is not None:
         r.sampling.clamp = args.clamp
     if args.strategies is not None:
-        r.strategies = args.strategies
+        r.sampling.strategies = args.strategies
     cfg = NoiseConfig(size=(args.size, args.size), spp=args.spp, renders=args.renders, terms=args.terms)
     out = measure_noise(r, state, cfg, progress=True).as_dict()
     out.update(size=f"{args.size}x{args.size}", spp=args.spp, renders=args.renders,
                ris=r.sampling.ris_samples, candidates=r.sampling.ris_candidates,
-               coat_samples=r.sampling.coat_samples, clamp=r.sampling.clamp, strategies=r.strategies)
+               coat_samples=r.sampling.coat_samples, clamp=r.sampling.clamp, strategies=r.sampling.strategies)
     if args.bias:
         out["clamp_bias"] = clamp_bias(r, state, r.sampling.clamp, (args.size, args.size), args.spp, progress=True)
     print(json.dumps(out))

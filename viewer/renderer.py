@@ -39,14 +39,15 @@ import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
-from nbrdf.viewer import shaders
 from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
 from nbrdf.viewer.gl import use_compute
+from nbrdf.viewer.gl_state import accumulating, depth_tested, flat, masked
 from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.mesh import Mesh, named_mesh
 from nbrdf.viewer.modes import ToneMap, View
 from nbrdf.viewer.neural_gpu import SHARE_UNIT
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf, NormalMaps, gpu_brdf
+from nbrdf.viewer.programs import GLSL_430, ProgramCache, ProgramKey
 from nbrdf.viewer.view_settings import ViewState
 
 if TYPE_CHECKING:
@@ -83,16 +84,9 @@ class Renderer:
         path (None: wherever OpenGL 4.3 exists, see gl.use_compute)."""
         self.ctx = ctx
         self.deferred = use_compute(ctx, compute)
-        self.strategies = 4
-        """With ``sampling.ris_samples`` 0 only (the default resamples, lit_sampling.py):
-        the environment strategies of the balance heuristic, 4 = environment CDF, the
-        BRDF's lobe and the cosine lobe, 3 = without the cosine lobe (issue 12 measured
-        0.68x the time to equal noise)."""
-        self.one_sample_mis = False
-        """With ``sampling.ris_samples`` 0 only: one environment sample per pass from the
-        strategies' mixture (fewer BRDF evaluations, more noise, issue 12)."""
         self.sampling = LitSampling()
-        """The lit pass's sampling: coat samples per pass, firefly clamp, seed (viewer/lit_sampling.py)."""
+        """The lit pass's sampling: resampling, strategies, coat samples per pass, firefly
+        clamp, seed (viewer/lit_sampling.py)."""
         self.quick = False
         """True: passes use ``sampling.quick()`` (the window's interactive frames, viewer/refinement.py)."""
         self.table_sampling: LitSampling | None = None
@@ -100,11 +94,11 @@ class Renderer:
         choice, viewer/body_source.py ``BodySource.sampling``)."""
         self._gbuf: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = {}
         self.neural = neural
-        self._programs: dict[tuple, moderngl.Program] = {}
+        self.programs = ProgramCache(ctx)
         self._mesh_vaos: dict[tuple, moderngl.VertexArray] = {}
         self._fbo: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, moderngl.Texture]] = {}
-        self.tone = self._build("fullscreen.vert", "tonemap.frag", None)
-        self.background_prog = self._build("fullscreen.vert", "background.frag", None)
+        self.tone = self.programs.get(ProgramKey("tonemap.frag"))
+        self.background_prog = self.programs.get(ProgramKey("background.frag"))
         self.empty_tone = ctx.vertex_array(self.tone, [])
         self.empty_background = ctx.vertex_array(self.background_prog, [])
         self._empty: dict[tuple, moderngl.VertexArray] = {}
@@ -122,49 +116,15 @@ class Renderer:
             self.set_material(material, latent, proxy, latent_texture)
 
     # --- programs -------------------------------------------------------------------------
-    def _build(self, vert: str, frag: str, brdf: GpuBrdf | None) -> moderngl.Program:
-        """A program whose ``//@INCLUDE brdf`` is ``brdf``'s kind (closed form,
-        the decoder at a uniform latent, or at a latent texture); None: no BRDF."""
-        if brdf is None:
-            fs = shaders.source(frag)
-        elif brdf.kind == BrdfKind.ANALYTIC:
-            fs = shaders.source(frag, {"brdf": shaders.read("analytic_brdf.glsl")})
-        else:
-            snippets, defines = _neural_snippets(brdf)
-            fs = brdf.decoder.source(frag, snippets, defines=defines)
-        try:
-            return self.ctx.program(vertex_shader=shaders.source(vert), fragment_shader=fs)
-        except moderngl.Error as e:
-            raise NbrdfError(f"shader build failed on {self.ctx.info.get('GL_RENDERER', '?')}: "
-                             f"{str(e).splitlines()[0]}") from None
-
     def compute_program(self, brdf: GpuBrdf, name: str = "lit.comp",
                         defines: dict | None = None) -> moderngl.ComputeShader:
         """Compute shader ``name`` (lit.comp; view.comp: lobe and slice) for ``brdf``'s
         kind (neural: weights in the decoder's ``compute_storage``), kept."""
-        storage = brdf.decoder.compute_storage if brdf.neural else None
-        key = (name, brdf.kind, id(brdf.decoder) if brdf.neural else 0, storage, tuple(sorted((defines or {}).items())))
-        if key not in self._programs:
-            version = "#version 430 core"
-            if brdf.kind == BrdfKind.ANALYTIC:
-                src = shaders.source(name, {"brdf": shaders.read("analytic_brdf.glsl")}, version=version,
-                                     defines=defines)
-            else:
-                snippets, extra = _neural_snippets(brdf)
-                src = brdf.decoder.source(name, snippets, storage=storage, defines={**extra, **(defines or {})})
-            try:
-                self._programs[key] = self.ctx.compute_shader(src)
-            except moderngl.Error as e:
-                raise NbrdfError(f"compute shader build failed on {self.ctx.info.get('GL_RENDERER', '?')}: "
-                                 f"{str(e).splitlines()[0]}") from None
-        return self._programs[key]
+        return self.programs.get(ProgramKey.of(name, brdf, vertex=None, defines=defines), brdf)
 
     def program(self, frag: str, brdf: GpuBrdf, vert: str = "fullscreen.vert") -> moderngl.Program:
         """The program of ``frag`` for ``brdf``'s kind, built on first use and kept."""
-        key = (vert, frag, brdf.kind, id(brdf.decoder) if brdf.neural else 0)
-        if key not in self._programs:
-            self._programs[key] = self._build(vert, frag, brdf)
-        return self._programs[key]
+        return self.programs.get(ProgramKey.of(frag, brdf, vertex=vert), brdf)
 
     def _fullscreen(self, prog: moderngl.Program) -> moderngl.VertexArray:
         key = (id(prog),)
@@ -328,8 +288,8 @@ class Renderer:
             if view == View.LOBE:
                 p["u_wi"].value = _incidence(state.theta_i)
             p["u_size"].value = (float(w), float(h))
-            self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
-            self._fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
+            with flat(self.ctx):
+                self._fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
         return tex
 
     def _view_compute(self, view: View, state: ViewState, w: int, h: int, brdf: GpuBrdf,
@@ -362,32 +322,25 @@ class Renderer:
         (gbuffer_lit.frag); then ``passes`` passes of lit.comp over it into the
         slot's accumulation image. Returns the view-projection matrix."""
         gfbo, gtex = self._gbuffer_target(w, h, slot)
-        key = ("object.vert", "gbuffer_lit.frag", None, 0)
-        if key not in self._programs:
-            self._programs[key] = self.ctx.program(vertex_shader=shaders.source("object.vert"),
-                                                   fragment_shader=shaders.source("gbuffer_lit.frag",
-                                                                                  version="#version 430 core"))
-        g = self._programs[key]
+        g = self.programs.get(ProgramKey("gbuffer_lit.frag", "object.vert", version=GLSL_430))
         draws = self._draws(brdf)
         vp = self._surface_uniforms(g, state, w, h, draws[0][2].normal_map)
         if first == 0:
             gfbo.use()
             gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self.ctx.enable(moderngl.DEPTH_TEST)
-            self.ctx.disable(moderngl.BLEND)
-            self.ctx.depth_func = "<"
             # A sampler array on unit 0 beside the normal map's 2D sampler would void the draw.
             g["u_nb_share_tex"].value = SHARE_UNIT
-            for part, (start, count, b) in enumerate(draws):
-                if part:
-                    self._surface_uniforms(g, state, w, h, b.normal_map)
-                textured = b.latent_texture is not None
-                if textured:
-                    b.latent_texture.bind(g)
-                g["u_textured"].value = int(textured)
-                if "u_material_id" in g:
-                    g["u_material_id"].value = part
-                self._mesh_vao(g).render(moderngl.TRIANGLES, vertices=count, first=start)
+            with depth_tested(self.ctx):
+                for part, (start, count, b) in enumerate(draws):
+                    if part:
+                        self._surface_uniforms(g, state, w, h, b.normal_map)
+                    textured = b.latent_texture is not None
+                    if textured:
+                        b.latent_texture.bind(g)
+                    g["u_textured"].value = int(textured)
+                    if "u_material_id" in g:
+                        g["u_material_id"].value = part
+                    self._mesh_vao(g).render(moderngl.TRIANGLES, vertices=count, first=start)
         tex = self._target(w, h, slot)[1]
         for part, (_, _, b) in enumerate(draws):
             c = self.compute_program(b)
@@ -410,44 +363,32 @@ class Renderer:
         self.unbind_textures(*GBUFFER_UNITS)
         return vp
 
-    def _fragment_passes(self, state: ViewState, w: int, h: int, first: int, passes: int,
-                         brdf: GpuBrdf) -> tuple[np.ndarray, moderngl.Framebuffer]:
-        """The fallback lit path: ``passes`` passes of object.frag blended into the
-        bound target (per draw range its BRDF's program); returns the
-        view-projection matrix and that target."""
+    def _fragment_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
+                         fbo: moderngl.Framebuffer) -> np.ndarray:
+        """The fallback lit path: ``passes`` passes of object.frag added into
+        ``fbo`` (per draw range its BRDF's program); returns the view-projection matrix."""
         draws = [(self.program("object.frag", b, "object.vert"), start, count, b)
                  for start, count, b in self._draws(brdf)]
-        fbo = self.ctx.fbo
         vp = None
         for p, _, _, b in draws:
             self._bind_brdf(p, b)
             vp = self._surface_uniforms(p, state, w, h, b.normal_map)
-        self.ctx.enable(moderngl.DEPTH_TEST)
-        self.ctx.disable(moderngl.BLEND)
         if first == 0:
             # Depth pre-pass of every range: the shading passes then add exactly the visible surface.
-            # (moderngl applies a framebuffer's masks when it is bound, hence use().)
-            fbo.color_mask = (False, False, False, False)
-            fbo.use()
-            self.ctx.depth_func = "<"
-            for p, start, count, _ in draws:
-                self._mesh_vao(p).render(moderngl.TRIANGLES, vertices=count, first=start)
-        fbo.color_mask = (True, True, True, True)
-        fbo.depth_mask = False
-        fbo.use()
-        self.ctx.depth_func = "<="
-        self.ctx.enable(moderngl.BLEND)
-        self.ctx.blend_func = moderngl.ONE, moderngl.ONE
-        for p, start, count, b in draws:
-            if len(draws) > 1:  # programs may be shared by two ranges: this range's BRDF
-                self._bind_brdf(p, b)
-                self._surface_uniforms(p, state, w, h, b.normal_map)
-            self._lit_uniforms(p, state, b)
-            vao = self._mesh_vao(p)
-            for k in range(first, first + passes):
-                p["u_pass"].value = k
-                vao.render(moderngl.TRIANGLES, vertices=count, first=start)
-        return vp, fbo
+            with depth_tested(self.ctx), masked(fbo, color=False):
+                for p, start, count, _ in draws:
+                    self._mesh_vao(p).render(moderngl.TRIANGLES, vertices=count, first=start)
+        with accumulating(self.ctx, fbo):
+            for p, start, count, b in draws:
+                if len(draws) > 1:  # programs may be shared by two ranges: this range's BRDF
+                    self._bind_brdf(p, b)
+                    self._surface_uniforms(p, state, w, h, b.normal_map)
+                self._lit_uniforms(p, state, b)
+                vao = self._mesh_vao(p)
+                for k in range(first, first + passes):
+                    p["u_pass"].value = k
+                    vao.render(moderngl.TRIANGLES, vertices=count, first=start)
+        return vp
 
     def _lit_uniforms(self, p: moderngl.Program | moderngl.ComputeShader, state: ViewState,
                       brdf: GpuBrdf | None = None) -> None:
@@ -460,8 +401,6 @@ class Renderer:
         p["u_point_intensity"].value = (state.point_intensity,) * 3
         p["u_env_intensity"].value = state.env_intensity
         p["u_env_on"].value = int(state.env_on)
-        p["u_strategies"].value = self.strategies
-        p["u_one_sample"].value = int(self.one_sample_mis)
         table = brdf is not None and brdf.kind == BrdfKind.TABLE and self.table_sampling is not None
         sampling = self.table_sampling if table else self.sampling
         (sampling.quick() if self.quick else sampling).bind(p)
@@ -469,28 +408,20 @@ class Renderer:
 
     def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
                        slot: str = MAIN) -> None:
-        cam = state.camera
+        fbo = self._target(w, h, slot)[0]
         if self.deferred:
             vp = self._deferred_passes(state, w, h, first, passes, brdf, slot)
-            fbo = self._target(w, h, slot)[0]
-            fbo.depth_mask = False
-            fbo.use()
-            self.ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
-            self.ctx.depth_func = "<="
-            self.ctx.blend_func = moderngl.ONE, moderngl.ONE
         else:
-            vp, fbo = self._fragment_passes(state, w, h, first, passes, brdf)
+            vp = self._fragment_passes(state, w, h, first, passes, brdf, fbo)
         if state.background and state.env_on:
             bg = self.background_prog
             self.env.bind(bg, math.radians(state.env_rotation))
             bg["u_inv_view_proj"].write(np.linalg.inv(vp).T.astype("f4").tobytes())
-            bg["u_eye"].value = tuple(cam.eye())
+            bg["u_eye"].value = tuple(state.camera.eye())
             bg["u_env_intensity"].value = state.env_intensity * passes  # as many passes as the object
-            self.empty_background.render(moderngl.TRIANGLES, vertices=3)
-        self.ctx.disable(moderngl.BLEND)
-        fbo.depth_mask = True
-        fbo.use()
-        self.ctx.depth_func = "<"
+            with accumulating(self.ctx, fbo):
+                self.empty_background.render(moderngl.TRIANGLES, vertices=3)
+        fbo.use()  # the target stays bound (a first deferred pass bound the G-buffer)
 
     def render_linear(self, state: ViewState, size: tuple[int, int] = (256, 256), spp: int = 1,
                       brdf: GpuBrdf | None = None) -> np.ndarray:
@@ -514,10 +445,7 @@ class Renderer:
         w, h = size
         own = brdf if brdf is not None else self.brdf
         normal_map = own.normal_map if own is not None else None
-        key = ("object.vert", "gbuffer.frag", None, 0)
-        if key not in self._programs:
-            self._programs[key] = self._build("object.vert", "gbuffer.frag", None)
-        p = self._programs[key]
+        p = self.programs.get(ProgramKey("gbuffer.frag", "object.vert"))
         vao = self._mesh_vao(p)
         targets = [self.ctx.texture((w, h), 4, dtype="f4") for _ in range(2)]
         depth = self.ctx.depth_renderbuffer((w, h))
@@ -525,11 +453,9 @@ class Renderer:
         try:
             fbo.use()
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self.ctx.enable(moderngl.DEPTH_TEST)
-            self.ctx.disable(moderngl.BLEND)
-            self.ctx.depth_func = "<"
             self._surface_uniforms(p, state, w, h, normal_map)
-            vao.render(moderngl.TRIANGLES)
+            with depth_tested(self.ctx):
+                vao.render(moderngl.TRIANGLES)
             wi, wo = (np.frombuffer(t.read(), np.float32).reshape(h, w, 4)[::-1] for t in targets)
             return np.ascontiguousarray(wi[..., :3]), np.ascontiguousarray(wo[..., :3]), wi[..., 3] > 0.5
         finally:
@@ -541,10 +467,7 @@ class Renderer:
         of the visible draw range (material; ``Mesh.draw_ranges``), -1 off the object
         (picking a material by clicking, tests). Works on OpenGL 3.3."""
         w, h = size
-        key = ("object.vert", "gbuffer.frag", None, 0)
-        if key not in self._programs:
-            self._programs[key] = self._build("object.vert", "gbuffer.frag", None)
-        p = self._programs[key]
+        p = self.programs.get(ProgramKey("gbuffer.frag", "object.vert"))
         vao = self._mesh_vao(p)
         target = self.ctx.texture((w, h), 4, dtype="f4")
         spare = self.ctx.texture((w, h), 4, dtype="f4")
@@ -554,36 +477,31 @@ class Renderer:
         try:
             fbo.use()
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self.ctx.enable(moderngl.DEPTH_TEST)
-            self.ctx.disable(moderngl.BLEND)
-            self.ctx.depth_func = "<"
             self._surface_uniforms(p, state, w, h, None)
-            vao.render(moderngl.TRIANGLES)  # the depth of the nearest surface
-            fbo.depth_mask = False
-            self.ctx.depth_func = "<="
-            for part, (start, count) in enumerate(self.mesh.draw_ranges):
-                fbo.use()
-                fbo.clear(0.0, 0.0, 0.0, 0.0)
-                vao.render(moderngl.TRIANGLES, vertices=count, first=start)
-                hit = np.frombuffer(target.read(), np.float32).reshape(h, w, 4)[::-1, :, 3] > 0.5
-                ids[hit] = part
+            with depth_tested(self.ctx):
+                vao.render(moderngl.TRIANGLES)  # the depth of the nearest surface
+                with masked(fbo, depth=False):
+                    self.ctx.depth_func = "<="
+                    for part, (start, count) in enumerate(self.mesh.draw_ranges):
+                        fbo.clear(0.0, 0.0, 0.0, 0.0)
+                        vao.render(moderngl.TRIANGLES, vertices=count, first=start)
+                        hit = np.frombuffer(target.read(), np.float32).reshape(h, w, 4)[::-1, :, 3] > 0.5
+                        ids[hit] = part
             return ids
         finally:
-            fbo.depth_mask = True
-            self.ctx.depth_func = "<"
             for r in (fbo, depth, target, spare):
                 r.release()
 
     def tonemap_to(self, target: moderngl.Framebuffer, tex: moderngl.Texture, passes: int, state: ViewState) -> None:
         """Draws the accumulation ``tex`` (sum of ``passes``) to ``target`` as sRGB."""
         target.use()
-        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
         tex.use(0)
         self.tone["u_hdr"].value = 0
         self.tone["u_passes"].value = float(passes)
         self.tone["u_exposure"].value = state.exposure
         self.tone["u_tonemap"].value = ToneMap.parse(state.tonemap).code
-        self.empty_tone.render(moderngl.TRIANGLES, vertices=3)
+        with flat(self.ctx):
+            self.empty_tone.render(moderngl.TRIANGLES, vertices=3)
         # Unbind the accumulation texture: rendering into a texture that is still
         # bound for sampling is a feedback loop (llvmpipe then drops the blending).
         self.unbind_textures(0)
@@ -592,18 +510,6 @@ class Renderer:
         """Binds a dummy texture to ``units`` (ends sampling from accumulation targets)."""
         for u in units:
             self._dummy.use(u)
-
-
-def _neural_snippets(brdf: GpuBrdf) -> tuple[dict[str, str], dict[str, object]]:
-    """The ``brdf`` snippet of a neural kind and its defines: the decoder (at a
-    uniform latent or a latent texture), or the baked body table (NB_BODY_TABLE,
-    no decoder compiled in)."""
-    code = shaders.read("neural_brdf.glsl")
-    if brdf.kind == BrdfKind.TEXTURED:
-        code = shaders.read("latent_texture.glsl") + "\n" + code
-    if brdf.kind == BrdfKind.TABLE:
-        return {"brdf": code, "neural_decoder.glsl": ""}, {"NB_BODY_TABLE": 1}
-    return {"brdf": code, "body_table.glsl": ""}, {}
 
 
 def _incidence(theta_deg: float) -> tuple[float, float, float]:
