@@ -168,7 +168,7 @@ class Compare:
             self.ctx.disable(moderngl.BLEND)
             self.ctx.depth_func = "<"
             a = aspect if aspect is not None else w / h
-            r._surface_uniforms(p, state, a * h, h, brdf.normal_map if brdf is not None else None)
+            r.surface_uniforms(p, state, a * h, h, brdf.normal_map if brdf is not None else None)
             vao.render(moderngl.TRIANGLES)
             n, x = (np.frombuffer(t.read(), np.float32).reshape(h, w, 4)[::-1] for t in targets)
             return np.ascontiguousarray(n[..., :3]), np.ascontiguousarray(x[..., :3]), n[..., 3] > 0.5

@@ -6,15 +6,14 @@ Everything renders linear radiance into a float framebuffer; the object view
 accumulates ``spp`` passes with different random numbers (progressive).
 
 The object view is deferred where OpenGL 4.3 exists: a raster pass writes a
-G-buffer (gbuffer_lit.frag: shading normal, position, uv, coverage, latent mip
-level) and a compute pass (lit.comp) shades every pixel with the BRDF into the
+G-buffer and a compute pass (lit.comp) shades every pixel with the BRDF into the
 float accumulation image, so the decoder runs in compute shaders (all of a
 data-centre GPU; weights in a uniform buffer by default: a broadcast read). On OpenGL
 3.3-4.2 (macOS) the fragment path object.frag shades instead, with a one-line
-notice; both call lit_shade.glsl with the same random numbers.
+notice; both call lit_shade.glsl with the same random numbers (viewer/lit_passes.py).
 
-One ``Renderer`` owns the scene's GPU resources -- programs (built once per
-BRDF kind), the mesh buffers, the environment's sampling tables and the
+One ``Renderer`` owns the scene's GPU resources -- programs (viewer/programs.py:
+built once per ``ProgramKey``), the mesh buffers, the environment's sampling tables and the
 accumulation targets -- and draws with the BRDF it is handed per draw (a
 ``GpuBrdf`` from viewer/pipeline.py), so the neural image, its reference and
 a second material share them. A renderer made with a material keeps that
@@ -27,7 +26,8 @@ edited). The deferred path rasterises every range into one depth-tested
 G-buffer with the range's index in the uv target's z, then runs lit.comp once
 per range over the pixels of that index; the fragment path writes the depth
 of all ranges first, then shades each range with its own program. One range
-(every mesh but a multi-material glTF) is one draw and one dispatch, as before.
+(every mesh but a multi-material glTF) is one draw and one dispatch. GL state
+is set through the scopes of viewer/gl_state.py.
 """
 from __future__ import annotations
 
@@ -42,12 +42,12 @@ from nbrdf.neural.material import Material
 from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
 from nbrdf.viewer.gl import use_compute
 from nbrdf.viewer.gl_state import accumulating, depth_tested, flat, masked
+from nbrdf.viewer.lit_passes import LitPasses, incidence
 from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.mesh import Mesh, named_mesh
 from nbrdf.viewer.modes import ToneMap, View
-from nbrdf.viewer.neural_gpu import SHARE_UNIT
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf, NormalMaps, gpu_brdf
-from nbrdf.viewer.programs import GLSL_430, ProgramCache, ProgramKey
+from nbrdf.viewer.programs import ProgramCache, ProgramKey
 from nbrdf.viewer.view_settings import ViewState
 
 if TYPE_CHECKING:
@@ -59,10 +59,7 @@ if TYPE_CHECKING:
 VIEWS = View.words()
 LOBE_SIZE = 64
 NORMAL_UNIT = 9  # texture unit of a material's normal map
-GBUFFER_UNITS = (10, 11, 12)  # texture units of the G-buffer in the compute lit pass
 TABLE_UNIT = 13  # texture unit of a material's baked body table
-LIT_GROUP = 8     # lit.comp's work group is LIT_GROUP x LIT_GROUP pixels
-LIT_CHUNK = 8     # passes per compute dispatch (bounds one dispatch's duration)
 MAIN = "main"    # the default accumulation slot
 
 
@@ -92,9 +89,10 @@ class Renderer:
         self.table_sampling: LitSampling | None = None
         """The sampling of draws whose body is a baked table (None: ``sampling``; the window's
         choice, viewer/body_source.py ``BodySource.sampling``)."""
-        self._gbuf: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = {}
         self.neural = neural
         self.programs = ProgramCache(ctx)
+        self.lit = LitPasses(self)
+        """The lit passes of the object view (deferred compute or fragment) and the compute lobe / slice."""
         self._mesh_vaos: dict[tuple, moderngl.VertexArray] = {}
         self._fbo: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, moderngl.Texture]] = {}
         self.tone = self.programs.get(ProgramKey("tonemap.frag"))
@@ -132,7 +130,7 @@ class Renderer:
             self._empty[key] = self.ctx.vertex_array(prog, [])
         return self._empty[key]
 
-    def _mesh_vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
+    def mesh_vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
         """The mesh as drawn by ``prog`` (rebuilt after a mesh change)."""
         key = (id(prog),)
         if key not in self._mesh_vaos:
@@ -142,7 +140,7 @@ class Renderer:
                 skip_errors=True)
         return self._mesh_vaos[key]
 
-    def _bind_brdf(self, prog: moderngl.Program, brdf: GpuBrdf, compute: bool = False) -> None:
+    def bind_brdf(self, prog: moderngl.Program, brdf: GpuBrdf, compute: bool = False) -> None:
         """Makes ``brdf`` the program's BRDF: weights, latent share (or latent texture), uniforms."""
         if brdf.kind == BrdfKind.TABLE:
             brdf.body_table.use(TABLE_UNIT)
@@ -187,7 +185,7 @@ class Renderer:
             raise NbrdfError(f"the mesh has {len(self.mesh.draw_ranges)} material parts, got {len(brdfs)} BRDFs")
         self.part_brdfs = list(brdfs)
 
-    def _draws(self, brdf: GpuBrdf) -> list[tuple[int, int, GpuBrdf]]:
+    def draws(self, brdf: GpuBrdf) -> list[tuple[int, int, GpuBrdf]]:
         """(first index, index count, BRDF) of each draw: consecutive ranges with the
         same BRDF merged, so a mesh of one material is one draw of everything (count -1)."""
         out: list[tuple[int, int, GpuBrdf]] = []
@@ -235,7 +233,7 @@ class Renderer:
         if self.latent_tex is not None:
             self.latent_tex.set_mipmapped(on)
 
-    def _surface_uniforms(self, p: moderngl.Program, state: ViewState, w: int, h: int,
+    def surface_uniforms(self, p: moderngl.Program, state: ViewState, w: int, h: int,
                           normal_map: moderngl.Texture | None) -> np.ndarray:
         """Camera, light direction and normal map of a program over the mesh
         (shading_frame.glsl); returns the view-projection matrix."""
@@ -255,7 +253,7 @@ class Renderer:
         return vp
 
     # --- frames -------------------------------------------------------------------
-    def _target(self, w: int, h: int, slot: str = MAIN):
+    def target(self, w: int, h: int, slot: str = MAIN):
         key = (slot, w, h)
         if key not in self._fbo:
             tex = self.ctx.texture((w, h), 4, dtype="f4")
@@ -266,7 +264,7 @@ class Renderer:
     def frame_texture(self, view: View | str, w: int, h: int, slot: str = MAIN) -> moderngl.Texture:
         """The accumulation target of ``view`` at (w, h) in ``slot`` as the last ``accumulate`` left it."""
         lobe = View.parse(view) == View.LOBE
-        return self._target(*((LOBE_SIZE, LOBE_SIZE) if lobe else (w, h)), slot)[1]
+        return self.target(*((LOBE_SIZE, LOBE_SIZE) if lobe else (w, h)), slot)[1]
 
     def accumulate(self, state: ViewState, w: int, h: int, first_pass: int, passes: int,
                    brdf: GpuBrdf | None = None, slot: str = MAIN) -> moderngl.Texture:
@@ -274,145 +272,31 @@ class Renderer:
         (w, h) float target of ``slot`` (one per image shown at once); returns it."""
         brdf = self._brdf(brdf)
         view = View.parse(state.view, "--view")
-        fbo, tex = self._target(w, h, slot)
+        fbo, tex = self.target(w, h, slot)
         fbo.use()
         if first_pass == 0:
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         if view == View.OBJECT:
             self._object_passes(state, w, h, first_pass, passes, brdf, slot)
         elif first_pass == 0 and self.deferred:
-            self._view_compute(view, state, w, h, brdf, tex)
+            self.lit.view_compute(view, state, w, h, brdf, tex)
         elif first_pass == 0:
             p = self.program("lobe.frag" if view == View.LOBE else "slice.frag", brdf)
-            self._bind_brdf(p, brdf)
+            self.bind_brdf(p, brdf)
             if view == View.LOBE:
-                p["u_wi"].value = _incidence(state.theta_i)
+                p["u_wi"].value = incidence(state.theta_i)
             p["u_size"].value = (float(w), float(h))
             with flat(self.ctx):
                 self._fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
         return tex
 
-    def _view_compute(self, view: View, state: ViewState, w: int, h: int, brdf: GpuBrdf,
-                      tex: moderngl.Texture) -> None:
-        """The lobe or slice view in view.comp (the compute decoder, one pixel per invocation) into ``tex``."""
-        c = self.compute_program(brdf, "view.comp", {"VIEW_IS_LOBE": 1} if view == View.LOBE else None)
-        self._bind_brdf(c, brdf, compute=True)
-        if view == View.LOBE:
-            c["u_wi"].value = _incidence(state.theta_i)
-        c["u_size"].value = (float(w), float(h))
-        tex.bind_to_image(0, read=False, write=True)
-        c.run(-(-w // LIT_GROUP), -(-h // LIT_GROUP))
-        self.ctx.memory_barrier()
-
-    def _gbuffer_target(self, w: int, h: int, slot: str) -> tuple[moderngl.Framebuffer, list[moderngl.Texture]]:
-        """The G-buffer of ``slot`` at (w, h): three RGBA32F targets sharing the
-        accumulation target's depth buffer (the background pass then fills the rest)."""
-        key = (slot, w, h)
-        if key not in self._gbuf:
-            depth = self._target(w, h, slot)[0].depth_attachment
-            texs = [self.ctx.texture((w, h), 4, dtype="f4") for _ in GBUFFER_UNITS]
-            for t in texs:
-                t.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            self._gbuf[key] = (self.ctx.framebuffer(texs, depth), texs)
-        return self._gbuf[key]
-
-    def _deferred_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
-                         slot: str) -> np.ndarray:
-        """The deferred lit path: on a slot's first pass, rasterise its G-buffer
-        (gbuffer_lit.frag); then ``passes`` passes of lit.comp over it into the
-        slot's accumulation image. Returns the view-projection matrix."""
-        gfbo, gtex = self._gbuffer_target(w, h, slot)
-        g = self.programs.get(ProgramKey("gbuffer_lit.frag", "object.vert", version=GLSL_430))
-        draws = self._draws(brdf)
-        vp = self._surface_uniforms(g, state, w, h, draws[0][2].normal_map)
-        if first == 0:
-            gfbo.use()
-            gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            # A sampler array on unit 0 beside the normal map's 2D sampler would void the draw.
-            g["u_nb_share_tex"].value = SHARE_UNIT
-            with depth_tested(self.ctx):
-                for part, (start, count, b) in enumerate(draws):
-                    if part:
-                        self._surface_uniforms(g, state, w, h, b.normal_map)
-                    textured = b.latent_texture is not None
-                    if textured:
-                        b.latent_texture.bind(g)
-                    g["u_textured"].value = int(textured)
-                    if "u_material_id" in g:
-                        g["u_material_id"].value = part
-                    self._mesh_vao(g).render(moderngl.TRIANGLES, vertices=count, first=start)
-        tex = self._target(w, h, slot)[1]
-        for part, (_, _, b) in enumerate(draws):
-            c = self.compute_program(b)
-            self._bind_brdf(c, b, compute=True)
-            self._lit_uniforms(c, state, b)
-            c["u_eye"].value = tuple(state.camera.eye())
-            if "u_material_id" in c:  # -1: every covered pixel (one material)
-                c["u_material_id"].value = part if len(draws) > 1 else -1
-            for t, unit, name in zip(gtex, GBUFFER_UNITS, ("u_gb_normal", "u_gb_world", "u_gb_uv")):
-                t.use(unit)
-                if name in c:
-                    c[name].value = unit
-            tex.bind_to_image(0, read=True, write=True)
-            self.ctx.memory_barrier()
-            for k in range(first, first + passes, LIT_CHUNK):
-                c["u_first_pass"].value = k
-                c["u_passes"].value = min(LIT_CHUNK, first + passes - k)
-                c.run(-(-w // LIT_GROUP), -(-h // LIT_GROUP))
-                self.ctx.memory_barrier()
-        self.unbind_textures(*GBUFFER_UNITS)
-        return vp
-
-    def _fragment_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
-                         fbo: moderngl.Framebuffer) -> np.ndarray:
-        """The fallback lit path: ``passes`` passes of object.frag added into
-        ``fbo`` (per draw range its BRDF's program); returns the view-projection matrix."""
-        draws = [(self.program("object.frag", b, "object.vert"), start, count, b)
-                 for start, count, b in self._draws(brdf)]
-        vp = None
-        for p, _, _, b in draws:
-            self._bind_brdf(p, b)
-            vp = self._surface_uniforms(p, state, w, h, b.normal_map)
-        if first == 0:
-            # Depth pre-pass of every range: the shading passes then add exactly the visible surface.
-            with depth_tested(self.ctx), masked(fbo, color=False):
-                for p, start, count, _ in draws:
-                    self._mesh_vao(p).render(moderngl.TRIANGLES, vertices=count, first=start)
-        with accumulating(self.ctx, fbo):
-            for p, start, count, b in draws:
-                if len(draws) > 1:  # programs may be shared by two ranges: this range's BRDF
-                    self._bind_brdf(p, b)
-                    self._surface_uniforms(p, state, w, h, b.normal_map)
-                self._lit_uniforms(p, state, b)
-                vao = self._mesh_vao(p)
-                for k in range(first, first + passes):
-                    p["u_pass"].value = k
-                    vao.render(moderngl.TRIANGLES, vertices=count, first=start)
-        return vp
-
-    def _lit_uniforms(self, p: moderngl.Program | moderngl.ComputeShader, state: ViewState,
-                      brdf: GpuBrdf | None = None) -> None:
-        """The lights and the environment of lit_shade.glsl, and the sampling of ``brdf``'s draw."""
-        ld = np.asarray(state.light_dir, dtype=np.float64)
-        p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
-        p["u_light_radiance"].value = (state.light_radiance,) * 3
-        p["u_point_on"].value = int(state.point_light is not None)
-        p["u_point_pos"].value = tuple(state.point_light or (0.0, 0.0, 0.0))
-        p["u_point_intensity"].value = (state.point_intensity,) * 3
-        p["u_env_intensity"].value = state.env_intensity
-        p["u_env_on"].value = int(state.env_on)
-        table = brdf is not None and brdf.kind == BrdfKind.TABLE and self.table_sampling is not None
-        sampling = self.table_sampling if table else self.sampling
-        (sampling.quick() if self.quick else sampling).bind(p)
-        self.env.bind(p, math.radians(state.env_rotation))
-
     def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
                        slot: str = MAIN) -> None:
-        fbo = self._target(w, h, slot)[0]
+        fbo = self.target(w, h, slot)[0]
         if self.deferred:
-            vp = self._deferred_passes(state, w, h, first, passes, brdf, slot)
+            vp = self.lit.deferred(state, w, h, first, passes, brdf, slot)
         else:
-            vp = self._fragment_passes(state, w, h, first, passes, brdf, fbo)
+            vp = self.lit.fragment(state, w, h, first, passes, brdf, fbo)
         if state.background and state.env_on:
             bg = self.background_prog
             self.env.bind(bg, math.radians(state.env_rotation))
@@ -446,14 +330,14 @@ class Renderer:
         own = brdf if brdf is not None else self.brdf
         normal_map = own.normal_map if own is not None else None
         p = self.programs.get(ProgramKey("gbuffer.frag", "object.vert"))
-        vao = self._mesh_vao(p)
+        vao = self.mesh_vao(p)
         targets = [self.ctx.texture((w, h), 4, dtype="f4") for _ in range(2)]
         depth = self.ctx.depth_renderbuffer((w, h))
         fbo = self.ctx.framebuffer(targets, depth)
         try:
             fbo.use()
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self._surface_uniforms(p, state, w, h, normal_map)
+            self.surface_uniforms(p, state, w, h, normal_map)
             with depth_tested(self.ctx):
                 vao.render(moderngl.TRIANGLES)
             wi, wo = (np.frombuffer(t.read(), np.float32).reshape(h, w, 4)[::-1] for t in targets)
@@ -468,7 +352,7 @@ class Renderer:
         (picking a material by clicking, tests). Works on OpenGL 3.3."""
         w, h = size
         p = self.programs.get(ProgramKey("gbuffer.frag", "object.vert"))
-        vao = self._mesh_vao(p)
+        vao = self.mesh_vao(p)
         target = self.ctx.texture((w, h), 4, dtype="f4")
         spare = self.ctx.texture((w, h), 4, dtype="f4")
         depth = self.ctx.depth_renderbuffer((w, h))
@@ -477,7 +361,7 @@ class Renderer:
         try:
             fbo.use()
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self._surface_uniforms(p, state, w, h, None)
+            self.surface_uniforms(p, state, w, h, None)
             with depth_tested(self.ctx):
                 vao.render(moderngl.TRIANGLES)  # the depth of the nearest surface
                 with masked(fbo, depth=False):
@@ -510,8 +394,3 @@ class Renderer:
         """Binds a dummy texture to ``units`` (ends sampling from accumulation targets)."""
         for u in units:
             self._dummy.use(u)
-
-
-def _incidence(theta_deg: float) -> tuple[float, float, float]:
-    t = math.radians(theta_deg)
-    return (math.sin(t), 0.0, math.cos(t))
