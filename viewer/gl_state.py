@@ -36,17 +36,23 @@ def flat(ctx: moderngl.Context) -> Iterator[None]:
         _rest(ctx)
 
 
+def _colour_mask(fbo: moderngl.Framebuffer, on: bool):
+    """moderngl's colour mask: one RGBA tuple, or one per attachment when there are several."""
+    n = len(fbo.color_attachments)
+    return (on,) * 4 if n <= 1 else [(on,) * 4] * n
+
+
 @contextmanager
 def masked(fbo: moderngl.Framebuffer, color: bool = True, depth: bool = True) -> Iterator[moderngl.Framebuffer]:
     """``fbo`` bound with these write masks (moderngl applies a framebuffer's masks
     when it is bound); afterwards both masks on and ``fbo`` bound again."""
-    fbo.color_mask = (color,) * 4
+    fbo.color_mask = _colour_mask(fbo, color)
     fbo.depth_mask = depth
     fbo.use()
     try:
         yield fbo
     finally:
-        fbo.color_mask = (True,) * 4
+        fbo.color_mask = _colour_mask(fbo, True)
         fbo.depth_mask = True
         fbo.use()
 

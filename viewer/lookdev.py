@@ -2,8 +2,9 @@
 offscreen renders alike, without any GUI.
 
 ``LookDev`` holds what an artist edits -- the layer stack, the scene, the
-lighting, the view settings, the compare and interpolation settings -- and
-turns every edit into what the one renderer draws with. ``from_options`` opens
+lighting, the view settings, the compare and interpolation settings, as the
+guarded, undoable edits of viewer/session_edits.py -- and turns every edit
+into what the one renderer draws with. ``from_options`` opens
 it from the command line's options: the window (viewer/app.py) and the
 offscreen path (viewer/offscreen.py) both start there. It delegates each job:
 
@@ -25,10 +26,9 @@ as it was (and is one undo step).
 """
 from __future__ import annotations
 
-import json
-import math
+import copy
 import time
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
@@ -38,20 +38,20 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent_texture import blend
-from nbrdf.neural.material import Material, load_material, material_to_dict, save_material
+from nbrdf.neural.material import Material
 from nbrdf.viewer.backdrop import Backdrop, BackdropSettings
 from nbrdf.viewer.body_source import BodySource
 from nbrdf.viewer.compare import Compare
 from nbrdf.viewer.env_presets import resolve_environment
-from nbrdf.viewer.history import GuardedEdits, History
 from nbrdf.viewer.material_parts import MaterialParts, PartMaterial
 from nbrdf.viewer.mesh import GLTF_SUFFIXES, named_mesh
-from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, View
+from nbrdf.viewer.modes import BrdfMode, CompareMode, View
 from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, gpu_brdf
 from nbrdf.viewer.plane_curves import PlaneCurves
 from nbrdf.viewer.renderer import Renderer
 from nbrdf.viewer.screenshot import Screenshots
-from nbrdf.viewer.session import SESSION_FORMAT, CompareSettings, Interpolation, SessionDoc
+from nbrdf.viewer.session import SessionDoc
+from nbrdf.viewer.session_edits import SessionEdits, presets
 from nbrdf.viewer.texture_jobs import TextureJobs
 from nbrdf.viewer.turntable import Turntables
 from nbrdf.viewer.ui.stack_editor import StackEditor
@@ -63,18 +63,6 @@ if TYPE_CHECKING:
     from nbrdf.viewer.options import ViewOptions
 
 __all__ = ["MAX_PASSES", "LookDev", "PartMaterial", "Timings", "presets"]
-
-PRESETS_DIR = Path(__file__).parent / "assets" / "materials"
-#: Drop targets by file suffix (``open_file``).
-ENV_SUFFIXES = (".hdr", ".exr")
-MESH_SUFFIXES = (".glb", ".gltf", ".obj")
-#: View-state fields that change only the display transform (no new accumulation).
-DISPLAY_FIELDS = ("exposure", "tonemap")
-
-
-def presets() -> dict[str, Path]:
-    """The bundled materials by name (file stem)."""
-    return {p.stem: p for p in sorted(PRESETS_DIR.glob("*.json"))}
 
 
 @dataclass
@@ -93,7 +81,7 @@ class Timings:
     """From an edit to the end of the first frame showing it."""
 
 
-class LookDev:
+class LookDev(SessionEdits):
     """One look-development session: the edited material, scene and view, their
     GPU resources, and the jobs that render them (frames, screenshots, turntables)."""
 
@@ -106,17 +94,10 @@ class LookDev:
         on the whole mesh. ``brdf``: how the materials are shaded (the window: the
         decoder; offscreen renders: any ``BrdfMode``). ``threaded``: latent textures
         build in a worker thread (the window) rather than at once."""
+        super().__init__(material, mesh, env, state, backdrop)
         self.ctx = ctx
         self.brdf_mode = BrdfMode.parse(brdf, "--brdf")
         self.pipeline = MaterialPipeline(ctx)
-        self.editor = StackEditor.from_material(material)
-        self.state = state or ViewState()
-        self.mesh, self.env_path = mesh, env
-        self.compare_settings = CompareSettings()
-        self.interp = Interpolation()
-        self.mipmapping = True
-        self.error: str | None = None
-        self.notice: str = ""
         self.notes: list[str] = []
         """One line per property of the opened file without an equivalent (a glTF file's materials)."""
         self.timings = Timings()
@@ -130,15 +111,11 @@ class LookDev:
         self.frames = ViewFrames(self)
         self.shots = Screenshots(self)
         self.curves = PlaneCurves(self)
-        self.history = History()
-        """Undo / redo over the session's snapshots (``undo``, ``redo``)."""
-        self.edits = GuardedEdits(self.history, self.snapshot)
         self.renderer = Renderer(ctx, mesh=mesh, environment=resolve_environment(str(env)) if env else None)
         if parts is not None:
             self.editor = StackEditor.from_material(
                 self.material_parts.set(parts, len(self.renderer.mesh.draw_ranges), mesh))
         self.compare_part = Compare(ctx, self.renderer)
-        self.backdrop = backdrop or BackdropSettings()
         self.backdrop_part = Backdrop(ctx, self.renderer)
         self.bodies = BodySource(ctx)  # the window's frames: decoder or baked body table (viewer/body_source.py)
         self._apply_material()
@@ -151,7 +128,7 @@ class LookDev:
         file's materials, whose notes become ``notes``), mesh, environment, view
         settings and backdrop, then their session file if any (a bad one: ``NbrdfError``)."""
         material, notes = opts.load_material()
-        ld = cls(ctx, material, opts.mesh, opts.env, replace(opts.state), opts.backdrop(),
+        ld = cls(ctx, material, opts.mesh, opts.env, copy.deepcopy(opts.state), opts.backdrop(),
                  parts=opts.file_materials(), brdf=brdf, threaded=threaded)
         ld.notes = notes
         ld.notice = "; ".join(notes)
@@ -184,131 +161,10 @@ class LookDev:
         """Passes accumulated in the view so far."""
         return self.frames.passes
 
-    # --- guarded user actions and undo ---------------------------------------------------
-    def guarded(self, fn, *args) -> bool:
-        """Runs an edit; a bad input becomes ``error`` (one line) and changes nothing.
-        A change it made is one undo step (``history``; an edit made of edits, such
-        as opening a session, is one step)."""
-        self.error = self.edits.run(fn, *args)
-        return self.error is None
-
-    def snapshot(self) -> dict:
-        """The session as the undo history keeps it: the document less the camera's
-        place (orbit, pan and zoom are navigation, not edits; the field of view is kept)."""
-        d = self.document().to_dict()
-        d["camera"] = {"fov": d["camera"]["fov"]}
-        return d
-
-    def coalescing(self, group: str | None):
-        """Edits made inside join the open step of ``group`` (one slider drag is one
-        undo step); the panels close it with ``end_group`` when the widget is let go."""
-        return self.edits.coalescing(group)
-
-    def end_group(self) -> None:
-        """The next edit is a new undo step."""
-        self.history.close_group()
-
-    def undo(self) -> bool:
-        """Goes back one edit (False: nothing to undo)."""
-        return self._travel(self.history.undo, "undo")
-
-    def redo(self) -> bool:
-        """Makes the edit undone last again (False: nothing to redo)."""
-        return self._travel(self.history.redo, "redo")
-
-    def _travel(self, step, what: str) -> bool:
-        snap = step()
-        if snap is None:
-            self.notice = f"nothing to {what}"
-            return False
-        doc = SessionDoc.parse({**snap, "camera": asdict(self.state.camera)}, what)
-        self.edits.restoring = True
-        try:
-            ok = self.guarded(lambda: self.restore(doc))
-        finally:
-            self.edits.restoring = False
-        if ok:
-            self.state.camera.set_fov(float(snap["camera"]["fov"]))
-            self.history.current = self.snapshot()  # as restored (the same document)
-            self.notice = f"{what}: {len(self.history.undo_stack)} steps back, {len(self.history.redo_stack)} ahead"
-        return ok
-
-    @property
-    def material(self) -> Material:
-        return self.editor.material
-
-    @property
-    def compare(self) -> CompareMode:
-        return self.compare_settings.mode
-
-    @property
-    def wipe(self) -> float:
-        return self.compare_settings.wipe
-
-    @property
-    def err_scale(self) -> float:
-        return self.compare_settings.error_scale
-
     @property
     def flip_mean(self) -> float | None:
         """The mean HDR-FLIP of the FLIP compare view (None until there is a reference)."""
         return self.compare_part.flip_mean
-
-    # --- the material --------------------------------------------------------------------
-    def set_param(self, index: int, key: str, value) -> bool:
-        return self.guarded(lambda: (self.editor.set_param(index, key, value), self._apply_material()))
-
-    def edit(self, op: str, *args) -> bool:
-        """A stack edit of ``StackEditor`` by name: add_coat, remove, move, toggle_medium, set_base_type, set_name."""
-        return self.guarded(lambda: (getattr(self.editor, op)(*args), self._apply_material()))
-
-    def _edit_material(self, m: Material) -> None:
-        self.editor = StackEditor.from_material(m)
-        self._apply_material()
-
-    def open_material(self, path: str | Path) -> bool:
-        return self.guarded(lambda: self._edit_material(load_material(path)))
-
-    def open_file(self, path: str | Path) -> bool:
-        """Opens a file dropped on the window by its kind: a material or a session
-        .json (told apart by content), an .hdr/.exr environment, a .glb/.gltf/.obj mesh."""
-        p = Path(path)
-        suffix = p.suffix.lower()
-        if suffix == ".json":
-            ok = self.guarded(lambda: self._open_json(p))
-        elif suffix in ENV_SUFFIXES:
-            ok = self.set_environment(str(p))
-        elif suffix in MESH_SUFFIXES:
-            ok = self.set_mesh(str(p))
-        else:
-            self.error = (f"{p.name}: cannot open a {suffix or 'file without a suffix'} (a material or session "
-                          f".json, an {'/'.join(ENV_SUFFIXES)} environment, a {'/'.join(MESH_SUFFIXES)} mesh)")
-            return False
-        if ok:
-            self.notice = f"opened {p.name}"
-        return ok
-
-    def _open_json(self, p: Path) -> None:
-        if not p.is_file():
-            raise NbrdfError(f"{p}: no such file")
-        try:
-            data = json.loads(p.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            raise NbrdfError(f"{p}: not JSON ({getattr(e, 'msg', e)})") from None
-        if isinstance(data, dict) and data.get("format") == SESSION_FORMAT:
-            self.restore(SessionDoc.parse(data, str(p)))
-        else:
-            self._edit_material(load_material(p))
-
-    def save_material(self, path: str | Path) -> bool:
-        return self.guarded(lambda: save_material(self.material, path))
-
-    def load_preset(self, name: str) -> bool:
-        table = presets()
-        if name not in table:
-            self.error = f"no preset {name!r} (one of {', '.join(table)})"
-            return False
-        return self.open_material(table[name])
 
     # --- the scene -------------------------------------------------------------------------
     def set_mesh(self, mesh: str) -> bool:
@@ -370,110 +226,12 @@ class LookDev:
             self.invalidate()
         return self.guarded(go)
 
-    # --- view settings (the panels and the mouse call these) ---------------------------------
-    def update_state(self, **changes) -> bool:
-        """Sets view settings (``view``, ``theta_i``, ``env_on``, ``light_dir``,
-        ``exposure``, ...); restarts the accumulation unless only the display changed."""
-        def go():
-            unknown = set(changes) - {f.name for f in fields(ViewState)}
-            if unknown:
-                raise NbrdfError(f"no view setting {sorted(unknown)[0]!r}")
-            new = replace(self.state, **changes)
-            moved = [k for k in changes if getattr(new, k) != getattr(self.state, k)]
-            self.state = new
-            if any(k not in DISPLAY_FIELDS for k in moved):
-                self.invalidate()
-        return self.guarded(go)
-
-    def set_backdrop(self, mode: Background | str | None = None, flat_colour=None, ground: bool | None = None) -> bool:
-        """The background behind the object (env, blur, flat, none), its flat
-        colour and the ground's contact shadow; None keeps a setting."""
-        def go():
-            b = self.backdrop
-            self.backdrop = BackdropSettings(b.mode if mode is None else mode,
-                                             b.flat_colour if flat_colour is None else flat_colour,
-                                             b.ground if ground is None else ground)
-        return self.guarded(go)  # display only: the accumulation goes on
-
-    def set_view(self, view: View | str) -> bool:
-        return self.update_state(view=view)
-
-    def _navigate(self, fn, *args) -> None:
-        fn(*args)
-        self.invalidate()
-
-    def orbit(self, d_yaw: float, d_pitch: float) -> None:
-        self._navigate(self.state.camera.orbit, d_yaw, d_pitch)
-
-    def pan(self, dx: float, dy: float) -> None:
-        self._navigate(self.state.camera.pan, dx, dy)
-
-    def zoom(self, factor: float) -> None:
-        self._navigate(self.state.camera.zoom, factor)
-
-    def frame(self, aspect: float = 1.0) -> None:
-        """Fits the object into a view of ``aspect`` (w / h) with a margin."""
-        self._navigate(self.state.camera.frame, aspect)
-
-    def set_fov(self, fov: float) -> bool:
-        """The camera's vertical field of view, degrees (the object keeps its size)."""
-        def go():
-            if not math.isfinite(float(fov)):
-                raise NbrdfError(f"field of view {fov} is not a number")
-            self._navigate(self.state.camera.set_fov, float(fov))
-        return self.guarded(go)
-
-    def set_compare(self, mode: CompareMode | str) -> bool:
-        def go():
-            try:
-                parsed = CompareMode.parse(mode, "compare mode")
-            except ValueError as e:
-                raise NbrdfError(str(e)) from None
-            self.compare_settings = CompareSettings(parsed, self.wipe, self.err_scale)
-            self.invalidate()
-        return self.guarded(go)
-
-    def set_wipe(self, x: float) -> bool:
-        return self.guarded(lambda: setattr(self, "compare_settings",
-                                           CompareSettings(self.compare, x, self.err_scale)))
-
-    def set_error_scale(self, scale: float) -> bool:
-        return self.guarded(lambda: setattr(self, "compare_settings",
-                                           CompareSettings(self.compare, self.wipe, scale)))
-
     def set_mipmapping(self, on: bool) -> bool:
         def go():
             self.mipmapping = bool(on)
             if self.brdf is not None and self.brdf.latent_texture is not None:
                 self.brdf.latent_texture.set_mipmapped(self.mipmapping)
             self.invalidate()
-        return self.guarded(go)
-
-    def set_interpolation(self, other: str | Path | None = None, t: float | None = None,
-                          mode: str | None = None) -> bool:
-        """The second material (a preset name or a JSON file; None keeps it), the weight t, the mode."""
-        def go():
-            doc, where = self.interp.other, self.interp.other_dir
-            if other is not None:
-                path = presets().get(str(other), Path(other))
-                m = load_material(path)
-                if m.is_textured:
-                    raise NbrdfError(f"{path}: interpolation takes uniform materials")
-                doc, where = material_to_dict(m), str(m.base_dir)
-            new = Interpolation(doc, where, self.interp.t if t is None else t,
-                                self.interp.mode if mode is None else mode)
-            old, self.interp = self.interp, new
-            try:
-                self._apply_material()
-            except NbrdfError:
-                self.interp = old
-                raise
-        return self.guarded(go)
-
-    def clear_interpolation(self) -> bool:
-        def go():
-            self.interp = Interpolation()
-            self._apply_material()
         return self.guarded(go)
 
     def invalidate(self) -> None:
@@ -584,25 +342,6 @@ class LookDev:
         with at least ``spp`` paths (waits for the worker)."""
         return self.compare_part.reference_linear(self.material, self.ref_brdf, self.brdf, self.main_state(),
                                                   self.mesh, size, spp, timeout)
-
-    # --- files -----------------------------------------------------------------------------
-    def document(self) -> SessionDoc:
-        """The session as a document."""
-        return SessionDoc(self.material, self.mesh, self.env_path, self.state, self.compare_settings,
-                          self.mipmapping, self.interp, self.backdrop)
-
-    def session(self) -> dict:
-        return self.document().to_dict()
-
-    def save_session(self, path: str | Path) -> bool:
-        return self.guarded(lambda: self.document().save(path))
-
-    def open_session(self, path: str | Path) -> bool:
-        return self.guarded(lambda: self.restore(SessionDoc.load(path)))
-
-    def apply_session(self, data: dict, source: str = "session") -> None:
-        """Restores a session dict; validates everything before changing anything."""
-        self.restore(SessionDoc.parse(data, source))
 
     def restore(self, doc: SessionDoc) -> None:
         """Makes ``doc`` the session (a failure puts the previous one back)."""
