@@ -22,7 +22,7 @@ from nbrdf.viewer.modes import View
 from nbrdf.viewer.neural_gpu import SHARE_UNIT
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf
 from nbrdf.viewer.programs import GLSL_430, ProgramKey
-from nbrdf.viewer.view_settings import ViewState
+from nbrdf.viewer.view_settings import ViewState, bind_uniforms
 
 if TYPE_CHECKING:
     from nbrdf.viewer.renderer import Renderer
@@ -145,15 +145,9 @@ class LitPasses:
 
     def lit_uniforms(self, p: moderngl.Program | moderngl.ComputeShader, state: ViewState,
                       brdf: GpuBrdf | None = None) -> None:
-        """The lights and the environment of lit_shade.glsl, and the sampling of ``brdf``'s draw."""
-        ld = np.asarray(state.light_dir, dtype=np.float64)
-        p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
-        p["u_light_radiance"].value = (state.light_radiance,) * 3
-        p["u_point_on"].value = int(state.point_light is not None)
-        p["u_point_pos"].value = tuple(state.point_light or (0.0, 0.0, 0.0))
-        p["u_point_intensity"].value = (state.point_intensity,) * 3
-        p["u_env_intensity"].value = state.env_intensity
-        p["u_env_on"].value = int(state.env_on)
+        """The lights and the environment of lit_shade.glsl (the view settings' uniforms,
+        viewer/view_settings.py), and the sampling of ``brdf``'s draw."""
+        bind_uniforms(p, state)
         table = brdf is not None and brdf.kind == BrdfKind.TABLE and self.r.table_sampling is not None
         sampling = self.r.table_sampling if table else self.r.sampling
         (sampling.quick() if self.r.quick else sampling).bind(p)

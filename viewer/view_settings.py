@@ -9,10 +9,13 @@ each setting goes besides the renderer:
 - ``cli``: a ``nbrdf-view`` flag (``cli/config.py`` makes it from the field,
   its type and the docstring under it; ``bounds`` are checked by ``check_flags``);
 - ``row``: a panel row (``Row``: which panel, the label, the widget and its range;
-  viewer/ui/panels.py draws every row of a panel in field order).
+  viewer/ui/panels.py draws every row of a panel in field order);
+- ``uniform``: (name, form) of the lit shader's uniform it sets (``bind_uniforms``;
+  the lit passes call it for every lit program).
 
-A new view setting is then one field here and the code that uses it (the
-renderer's uniform, say).
+A new view setting of the lit pass is then one field here and the shader code
+that reads its uniform (and, when it changes the light, the Monte Carlo
+reference's model of it, viewer/compare.py).
 """
 from __future__ import annotations
 
@@ -21,6 +24,8 @@ import types
 import typing
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
+
+import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.camera import OrbitCamera
@@ -63,12 +68,14 @@ class Row:
 
 def setting(default: Any = None, *, session: tuple[str, str] | None = None, cli: bool = False,
             row: Row | None = None, bounds: tuple[float, float, bool] | None = None, optional: bool = False,
-            factory: Any = None, **meta: Any) -> Any:
+            uniform: tuple[str, str] | None = None, factory: Any = None, **meta: Any) -> Any:
     """A ``ViewState`` field: ``session`` (section, key) in the session document
     (``optional``: older files may lack it, the default is used); ``cli``: a
     flag; ``row``: a panel row; ``bounds`` (lo, hi, hi inclusive) checked on the
-    flag; further ``meta`` goes to cli/config.py (``parse``, ``metavar``)."""
-    md = {"session": session, "cli": cli, "row": row, "bounds": bounds, "optional": optional, **meta}
+    flag; ``uniform``: (name, form) of the lit shader's uniform, form one of
+    ``UNIFORM_FORMS``; further ``meta`` goes to cli/config.py (``parse``, ``metavar``)."""
+    md = {"session": session, "cli": cli, "row": row, "bounds": bounds, "optional": optional,
+          "uniform": uniform, **meta}
     if factory is not None:
         return field(default_factory=factory, metadata=md)
     return field(default=default, metadata=md)
@@ -89,26 +96,31 @@ class ViewState:
     """incidence angle of the lobe view, degrees"""
     camera: OrbitCamera = setting(factory=OrbitCamera, session=("camera", ""))
     """The orbit camera of the object view."""
-    env_on: bool = setting(True, session=("lighting", "env_on"), row=Row("scene", "environment light", "check"))
+    env_on: bool = setting(True, session=("lighting", "env_on"), uniform=("u_env_on", "int"),
+                           row=Row("scene", "environment light", "check"))
     """False: the directional (and point) light alone."""
     env_rotation: float = setting(0.0, session=("lighting", "env_rotation"), cli=True,
                                   bounds=(-math.inf, math.inf, False),
                                   row=Row("scene", "env rotation", lo=-180.0, hi=180.0))
     """environment rotation about the up axis, degrees"""
     env_intensity: float = setting(0.6, session=("lighting", "env_intensity"), cli=True,
-                                   bounds=(0.0, math.inf, False), row=Row("scene", "env intensity", hi=4.0))
+                                   bounds=(0.0, math.inf, False), uniform=("u_env_intensity", "float"),
+                                   row=Row("scene", "env intensity", hi=4.0))
     """environment radiance scale"""
     light_dir: tuple[float, float, float] = setting((0.4, -0.6, 0.7), session=("light", "direction"),
+                                                    uniform=("u_light_dir", "direction"),
                                                     row=Row("scene", "light", "direction"))
     """Toward the directional light, world space."""
-    light_radiance: float = setting(3.0, session=("light", "radiance"), row=Row("scene", "light intensity", hi=20.0))
+    light_radiance: float = setting(3.0, session=("light", "radiance"), uniform=("u_light_radiance", "rgb"),
+                                    row=Row("scene", "light intensity", hi=20.0))
     """The directional light's radiance."""
     point_light: tuple[float, float, float] | None = setting(
         None, session=("light", "point"), optional=True, cli=True, parse=parse_point, metavar="X,Y,Z",
+        uniform=("u_point_pos", "point"),
         row=Row("scene", "point light", "point", lo=-20.0, hi=20.0))
     """a point light at this world position (z up)"""
     point_intensity: float = setting(20.0, session=("light", "point_intensity"), optional=True, cli=True,
-                                     bounds=(0.0, math.inf, False),
+                                     bounds=(0.0, math.inf, False), uniform=("u_point_intensity", "rgb"),
                                      row=Row("scene", "point intensity", hi=200.0, when="point_light"))
     """the point light's radiant intensity"""
     background: bool = setting(True, session=("lighting", "background"))
@@ -129,9 +141,38 @@ class ViewState:
             raise NbrdfError(str(e)) from None
 
 
+#: How a setting's value becomes its uniform: int (a switch), float, rgb (a grey
+#: vec3), direction (normalised vec3), point (a position, or off: its ``_on``
+#: uniform, named as the position's with ``_pos`` replaced, says which).
+UNIFORM_FORMS = ("int", "float", "rgb", "direction", "point")
+
+
+def bind_uniforms(prog, state: ViewState) -> None:
+    """Sets the uniforms of every setting marked ``uniform`` on a lit program."""
+    for f in fields(ViewState):
+        spec = f.metadata.get("uniform")
+        if spec is None:
+            continue
+        name, form = spec
+        x = getattr(state, f.name)
+        if form == "int":
+            prog[name].value = int(x)
+        elif form == "float":
+            prog[name].value = float(x)
+        elif form == "rgb":
+            prog[name].value = (float(x),) * 3
+        elif form == "direction":
+            d = np.asarray(x, dtype=np.float64)
+            prog[name].value = tuple(d / np.linalg.norm(d))
+        else:
+            prog[name.replace("_pos", "_on")].value = int(x is not None)
+            prog[name].value = tuple(x or (0.0, 0.0, 0.0))
+
+
 def rows(panel: str) -> list:
-    """The (field, ``Row``) of every setting shown in ``panel``, in declaration order."""
-    return [(f, f.metadata["row"]) for f in fields(ViewState)
+    """(name, ``Row``, type) of every setting shown in ``panel``, in declaration order."""
+    hints = typing.get_type_hints(ViewState)
+    return [(f.name, f.metadata["row"], hints[f.name]) for f in fields(ViewState)
             if f.metadata.get("row") is not None and f.metadata["row"].panel == panel]
 
 

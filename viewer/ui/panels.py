@@ -361,15 +361,18 @@ class Panels:
         ld, s = self.ld, self.ld.state
         changes: dict = {}
         held: list[str] = []
-        for f, row in rows(panel):
+        for name, row, tp in rows(panel):
             if row.when is not None and getattr(s, row.when) is None:
                 continue
-            changed, value, active = setting_row(row, getattr(s, f.name))
+            value = getattr(s, name)
+            if row.widget in ("choice", "radio"):
+                value = tp.parse(value)  # a mode's word (scripts may set one) as its enum
+            changed, value, active = setting_row(row, value)
             if active:  # a slider being dragged: its values are one undo step
                 self._grouped = True
-                held.append(f.name)
+                held.append(name)
             if changed:
-                changes[f.name] = value
+                changes[name] = value
         if changes:
             with ld.coalescing(held[0] if held else None):
                 ld.update_state(**changes)
