@@ -71,8 +71,8 @@ def default_setup(ctx, material: Path | None = None):
     """The default offscreen preview's renderer and state (``nbrdf-view --offscreen``:
     ``material``, default the default material, studio environment, the framed
     three-quarter camera), object only."""
-    from nbrdf.viewer.offscreen import make_renderer
     from nbrdf.viewer.options import ViewOptions
+    from nbrdf.viewer.renderer import make_renderer
 
     opts = ViewOptions() if material is None else ViewOptions(material=material)
     r = make_renderer(ctx, opts.load_material()[0], opts)

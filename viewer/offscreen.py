@@ -71,18 +71,3 @@ def _preview(ctx, opts: ViewOptions) -> str:
     opts.size, opts.spp = size, spp
     return f" (software OpenGL: a {size[0]}x{size[1]}, {spp}-pass preview)"
 
-
-def make_renderer(ctx, material, opts: ViewOptions, others=()):
-    """A bare renderer of ``material`` in ``opts.brdf`` (noise measurements and
-    tests that draw one material without a session). ``others``: the materials
-    of the mesh's further draw ranges (a glTF file's second, third, ...)."""
-    from nbrdf.viewer.env_presets import resolve_environment
-    from nbrdf.viewer.pipeline import MaterialPipeline
-    from nbrdf.viewer.renderer import Renderer
-
-    env = resolve_environment(str(opts.env)) if opts.env is not None else None
-    pipeline = MaterialPipeline(ctx)
-    r = Renderer(ctx, mesh=opts.mesh, environment=env, brdf=pipeline.build(material, opts.brdf))
-    if others:
-        r.set_part_brdfs([None] + [pipeline.build(m, opts.brdf) for m in others])
-    return r

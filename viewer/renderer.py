@@ -39,6 +39,7 @@ import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
+from nbrdf.viewer.env_presets import resolve_environment
 from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
 from nbrdf.viewer.gl import use_compute
 from nbrdf.viewer.gl_state import accumulating, depth_tested, flat, masked
@@ -46,7 +47,7 @@ from nbrdf.viewer.lit_passes import LitPasses, incidence
 from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.mesh import Mesh, named_mesh
 from nbrdf.viewer.modes import ToneMap, View
-from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf, NormalMaps, gpu_brdf
+from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf, MaterialPipeline, NormalMaps, gpu_brdf
 from nbrdf.viewer.programs import ProgramCache, ProgramKey
 from nbrdf.viewer.view_settings import ViewState
 
@@ -55,6 +56,7 @@ if TYPE_CHECKING:
 
     from nbrdf.neural.latent_texture import LatentTexture
     from nbrdf.viewer.neural_gpu import GpuDecoder, GpuLatentTexture
+    from nbrdf.viewer.options import ViewOptions
 
 VIEWS = View.words()
 LOBE_SIZE = 64
@@ -394,3 +396,16 @@ class Renderer:
         """Binds a dummy texture to ``units`` (ends sampling from accumulation targets)."""
         for u in units:
             self._dummy.use(u)
+
+
+def make_renderer(ctx: moderngl.Context, material: Material, opts: "ViewOptions", others=()) -> "Renderer":
+    """A renderer of ``material`` alone in ``opts.brdf``, on ``opts``' mesh and
+    environment (noise measurements, benchmarks and tests that draw one material
+    without a session). ``others``: the materials of the mesh's further draw
+    ranges (a glTF file's second, third, ...)."""
+    env = resolve_environment(str(opts.env)) if opts.env is not None else None
+    pipeline = MaterialPipeline(ctx)
+    r = Renderer(ctx, mesh=opts.mesh, environment=env, brdf=pipeline.build(material, opts.brdf))
+    if others:
+        r.set_part_brdfs([None] + [pipeline.build(m, opts.brdf) for m in others])
+    return r

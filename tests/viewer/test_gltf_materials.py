@@ -68,8 +68,7 @@ def renders(gl_ctx):
     """The scene's two materials through the compute path (both ranges; all in
     one material; all in the other) and through the fragment path, plus the
     picked material per pixel and the coverage of each range drawn alone."""
-    from nbrdf.viewer.offscreen import make_renderer
-    from nbrdf.viewer.renderer import Renderer, ViewState
+    from nbrdf.viewer.renderer import Renderer, ViewState, make_renderer
 
     if gl_ctx.version_code < gl.COMPUTE_VERSION:
         pytest.skip("no OpenGL 4.3 here")
