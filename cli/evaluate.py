@@ -32,11 +32,14 @@ class EvalConfig:
     """float32 (N, 3) .npy of RGB BRDF values (no cosine)"""
     method: Method = Method.REFERENCE
     """reference: closed form or Monte Carlo; neural: leaf encoders, layering and the decoder; projected: the
-    decoder at a latent fitted to the reference; belcour: Belcour 2018's analytic layered model"""
+    decoder at a latent fitted to the reference; refined: the network's code refined against the material's own
+    simulation within --budget seconds (cached per user); belcour: Belcour 2018's analytic layered model"""
     spp: int = 256
     """Monte Carlo paths per pair (reference of a stack)"""
     seed: int = 0
     """random seed of the Monte Carlo paths and of projection"""
+    budget: float = 10.0
+    """seconds --method refined may spend refining (a cached code that converged or had as long is used at once)"""
 
 
 @dataclass
@@ -80,14 +83,16 @@ class SampleConfig:
 Evaluator = Callable[["torch.Tensor", "torch.Tensor"], tuple["torch.Tensor", "torch.Tensor | None"]]
 
 
-def make_evaluator(material, method: Method, spp: int, seed: int) -> Evaluator:
+def make_evaluator(material, method: Method, spp: int, seed: int, budget: float | None = None) -> Evaluator:
     """fn(wi, wo) -> (f (N, 3), stderr (N, 3) or None) for a method of SPEC section 8:
     the material's BRDF from the one factory, ``training.brdfs.brdf_for``, after
-    the checks every evaluating command shares."""
+    the checks every evaluating command shares (``budget``: the refinement's seconds)."""
     at_least("--spp", spp)
+    if budget is not None and not budget > 0:
+        raise NbrdfError(f"--budget: {budget} seconds must be positive")
     from nbrdf.training.brdfs import ReferenceBRDF, brdf_for
 
-    brdf = brdf_for(material, Method.parse(method, "--method").value, spp=spp, seed=seed)
+    brdf = brdf_for(material, Method.parse(method, "--method").value, spp=spp, seed=seed, budget=budget)
     if not isinstance(brdf, ReferenceBRDF):  # the Monte Carlo reference alone reports its progress
         return brdf.eval_with_error
 
@@ -111,7 +116,7 @@ def cmd_eval(a: argparse.Namespace) -> int:
     material = load_material(c.material)
     wi, wo = load_pairs(c.pairs)
     out = out_path(c.out, (".npy",))
-    fn = make_evaluator(material, c.method, c.spp, c.seed)
+    fn = make_evaluator(material, c.method, c.spp, c.seed, c.budget)
     f, se = fn(torch.from_numpy(wi), torch.from_numpy(wo))
     np.save(out, f.detach().numpy().astype(np.float32))
     if c.method == Method.REFERENCE and se is not None:

@@ -78,7 +78,10 @@ class RenderReport:
     held-out set), or paths of material JSON files / folders"""
     methods: str = "neural,projected"
     """comma-separated methods: neural (the full neural path), projected (the decoder at a fitted latent),
-    belcour (Belcour 2018's analytic layered model, a baseline)"""
+    refined (the network's code refined within --budget seconds), belcour (Belcour 2018's analytic layered
+    model, a baseline)"""
+    budget: float = 10.0
+    """seconds the refined method spends per material (a cached refined code that serves it is used at once)"""
     size: int = 96
     """sphere image size in pixels (square)"""
     spp: int = 384
@@ -105,7 +108,7 @@ def cmd_report_render(ns: argparse.Namespace) -> int:
     cfg = RenderReportConfig(sets=words(c.set), out=Path(c.out), size=c.size, spp=c.spp, max_spp=c.max_spp,
                              noise_target=c.noise_target, cache=Path(c.cache) if c.cache else None,
                              model=c.model, methods=words(c.methods), heldout_per_class=c.heldout_per_class,
-                             seed=c.seed)
+                             seed=c.seed, refine_budget=c.budget)
     from nbrdf.training.render_report import markdown_tables
 
     print(markdown_tables(run_render_report(cfg)))

@@ -10,6 +10,7 @@ geometric mean.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import torch
 
@@ -50,12 +51,15 @@ def check_samples(wi: Tensor, wo: Tensor, f: Tensor) -> None:
 
 
 def project(dec: Decoder, wi: Tensor, wo: Tensor, f: Tensor, cfg: ProjectionConfig = ProjectionConfig(),
-            z0: Tensor | None = None, weight: Tensor | None = None, coat: Tensor | None = None) -> Tensor:
+            z0: Tensor | None = None, weight: Tensor | None = None, coat: Tensor | None = None,
+            stop: Callable[[int], bool] | None = None) -> Tensor:
     """Codes (B, 34) for B BRDFs sampled at (B, n) pairs (latents (B, 32)
     for a decoder without the coat split). Under the coat split the latent is
     fitted to the body, the samples minus the closed-form reflection of
     ``coat`` (B, 2) (each BRDF's top interface; None: no coat, e.g. a
-    measured table), and the code carries the coat."""
+    measured table), and the code carries the coat. ``z0`` warm-starts the
+    fit (codes or latents); ``stop(step)`` True ends it before that step
+    (a cancelled refinement), returning the latents as they are."""
     check_samples(wi, wo, f)
     if coat is not None and not dec.spec.coat:
         raise NbrdfError("projection: this decoder predates the coat split and cannot take a coat")
@@ -79,6 +83,8 @@ def project(dec: Decoder, wi: Tensor, wo: Tensor, f: Tensor, cfg: ProjectionConf
     switch = cfg.steps - int(round(cfg.unbiased_share * cfg.steps))
     try:
         for step in range(cfg.steps):
+            if stop is not None and stop(step):
+                break
             y = dec.log_f(z[:, None, :], feats)
             if step < switch:  # the training loss first (robust far from the solution) ...
                 err = (predicted_target(y, cos_o, dec.spec.loss_scale) - target) ** 2

@@ -11,7 +11,9 @@
 - ``belcour``: Belcour 2018's layered model (``training.belcour``), single
   layers included (it reduces to their closed form);
 - ``neural``: the full neural path (leaf encoders, layering, decoder);
-- ``projected``: the decoder at latents fitted to the reference.
+- ``projected``: the decoder at latents fitted to the reference;
+- ``refined``: the network's code with its body latent fitted further to
+  the simulated body within a time budget (``training.refine``, cached per user).
 
 Closed forms sample their own lobes; the others sample a defensive mixture
 of a cosine lobe and the GGX reflection lobe of the top layer's roughness
@@ -173,11 +175,12 @@ class BelcourBRDF(ExactRGB, _DefensivelySampled):
 
 
 def brdf_for(material: Material, method: str, spp: int = 256, seed: int = 0, model=None,
-             projection_pairs: int = 2048, projection_spp: int = 64) -> RGBBRDF:
+             projection_pairs: int = 2048, projection_spp: int = 64, budget: float | None = None) -> RGBBRDF:
     """The material's BRDF by ``method`` (one of METHODS). ``spp`` and ``seed``
     drive the Monte Carlo reference; ``seed`` also the projection's samples
-    (``projection_pairs`` reference values of ``projection_spp`` paths each);
-    ``model`` is the neural bundle (default: the shipped one)."""
+    (``projection_pairs`` reference values of ``projection_spp`` paths each)
+    and the refinement's; ``budget``: the refinement's seconds (None: its
+    default); ``model`` is the neural bundle (default: the shipped one)."""
     if method not in METHODS:
         raise NbrdfError(f"unknown method {method!r} (one of {', '.join(METHODS)})")
     if spp < 1:
@@ -199,6 +202,10 @@ def brdf_for(material: Material, method: str, spp: int = 256, seed: int = 0, mod
             dec = default_decoder()
         samples = material_samples(material, n=projection_pairs, spp=projection_spp, seed=seed)
         return latent_brdf(dec, fit(dec, samples), material)
+    if method == "refined":
+        from nbrdf.training.refine import refined_brdf
+
+        return refined_brdf(material, model, budget=budget, seed=seed)
     if method == "belcour":
         return BelcourBRDF(material)
     # analytic

@@ -162,10 +162,17 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     _check(p, wi, wo, spp)
     N, L = p.roughness.shape
     npy = lambda t: t.detach().cpu().numpy()
-    s1, s2, blocks, verts, dropped = run_walk(
-        npy(wi), npy(wo), spp, seed, npy(p.roughness), npy(p.ior), npy(p.sigma_t), npy(p.albedo), p.base,
-        npy(p.base_roughness), npy(p.base_r0), npy(p.base_ior), npy(p.base_albedo), rr_depth=rr_depth,
-        max_depth=max_depth, forced=forced_top_reflection, device=device)
+    torch_threads = torch.get_num_threads()
+    try:
+        s1, s2, blocks, verts, dropped = run_walk(
+            npy(wi), npy(wo), spp, seed, npy(p.roughness), npy(p.ior), npy(p.sigma_t), npy(p.albedo), p.base,
+            npy(p.base_roughness), npy(p.base_r0), npy(p.base_ior), npy(p.base_albedo), rr_depth=rr_depth,
+            max_depth=max_depth, forced=forced_top_reflection, device=device)
+    finally:
+        # Numba's OpenMP layer sets the OpenMP runtime's thread count it shares with torch: put torch's
+        # back, or every torch operation after a walk (a projection's fit) runs on the walk's threads,
+        # up to 15 times slower on a loaded machine (docs/decisions/056-refinement-on-idle.md).
+        torch.set_num_threads(torch_threads)
     mean = s1 / spp
     if spp > 1:
         var_paths = np.maximum(s2 / spp - mean * mean, 0.0) * spp / (spp - 1)

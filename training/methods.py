@@ -35,6 +35,7 @@ class Method(WordEnum):
     REFERENCE = "reference"  #: ground truth: closed form or Monte Carlo
     NEURAL = "neural"        #: the full neural path the viewer uses
     PROJECTED = "projected"  #: the decoder at a latent fitted to the reference
+    REFINED = "refined"      #: the network's code refined against the Monte Carlo walk within a time budget
     ANALYTIC = "analytic"    #: closed form; the analytic layering approximation for stacks
     BELCOUR = "belcour"      #: Belcour 2018's layered model (statistical operators), a baseline
 

@@ -15,6 +15,8 @@ Methods scored against the reference:
 - ``projected``: the decoder at a body latent fitted to the reference minus
   the top interface's reflection, plus that coat (its capacity alone, no
   operation networks);
+- ``refined``: the network's code refined against the material's own
+  simulation within ``refine_budget`` seconds (``training.refine``);
 - ``belcour``: Belcour 2018's analytic layered model (``training.belcour``),
   the baseline real-time renderers use.
 
@@ -51,7 +53,7 @@ LIGHT = (-0.45, 0.55, 0.70)
 SETS_DIR = Path(__file__).resolve().parent / "sets"
 #: Bumped when a change makes cached reference renders stale.
 CACHE_VERSION = 1
-METHODS = ("neural", "projected", "belcour")
+METHODS = ("neural", "projected", "refined", "belcour")
 
 
 @dataclass
@@ -80,6 +82,8 @@ class RenderReportConfig:
     """Reference samples a projection fits to (drawn like the training data)."""
     projection_spp: int = 64
     """Monte Carlo paths per projection sample of a stack."""
+    refine_budget: float = 10.0
+    """Seconds the ``refined`` method may spend per material."""
     noise_target: float = 0.1
     """Refine a stack's reference (doubling its paths) while the FLIP between
     its two independent halves exceeds this (0 = a single round of ``spp``)."""
@@ -321,13 +325,15 @@ def _slug(name: str) -> str:
 
 # --- methods ------------------------------------------------------------------------------
 def method_evaluators(m: Material, model, methods: tuple[str, ...], pairs: int, spp: int,
-                      seed: int) -> dict[str, EvalFn]:
-    """fn(wi, wo) of every method for one material, from the one BRDF factory
+                      seed: int, budget: float | None = None) -> dict:
+    """The BRDF of every method for one material, from the one BRDF factory
     (``training.brdfs.brdf_for``); the projection fits ``pairs`` reference
-    values of ``spp`` paths under the material's own coat (``neural.coat``)."""
+    values of ``spp`` paths under the material's own coat (``neural.coat``);
+    the refinement spends ``budget`` seconds (or reads the per-user cache of refined codes)."""
     from nbrdf.training.brdfs import brdf_for
 
-    return {name: brdf_for(m, name, seed=seed + 1, model=model, projection_pairs=pairs, projection_spp=spp).eval
+    return {name: brdf_for(m, name, seed=seed + 1, model=model, projection_pairs=pairs, projection_spp=spp,
+                           budget=budget)
             for name in METHODS if name in methods}
 
 
@@ -362,6 +368,8 @@ def run_render_report(config: RenderReportConfig) -> dict:
     unknown = [x for x in config.methods if x not in METHODS]
     if unknown:
         raise NbrdfError(f"methods: {unknown[0]!r} is not one of {', '.join(METHODS)}")
+    if "refined" in config.methods and not (math.isfinite(config.refine_budget) and config.refine_budget > 0):
+        raise NbrdfError(f"budget: {config.refine_budget} seconds must be positive")
     if config.spp < 2:
         raise NbrdfError(f"spp: {config.spp} is too few (at least 2: two independent halves)")
     model = load_model(config.model) if config.model else default_model()
@@ -386,15 +394,20 @@ def run_render_report(config: RenderReportConfig) -> dict:
                    "reference": {"spp": ref.spp, "noise_psnr": noise_psnr(ref.image, ref.stderr, mask),
                                  "half_flip": ref.half_flip, "seconds": round(ref.seconds, 2)}}
             t0 = time.perf_counter()
-            fns = method_evaluators(m, model, config.methods, config.projection_pairs, config.projection_spp,
-                                    config.seed)
+            brdfs = method_evaluators(m, model, config.methods, config.projection_pairs, config.projection_spp,
+                                      config.seed, config.refine_budget)
             imgs = {"reference": ref.image}
-            for meth, fn in fns.items():
-                img = shade(fn, geo)
+            for meth, brdf in brdfs.items():
+                img = shade(brdf.eval, geo)
                 fl, fmap = flip(ref.image, img)
                 row[meth] = {"flip": fl, "flip_disk": float(fmap[mask].mean()),
                              "psnr": compressed_psnr(img, ref.image, mask)}
                 imgs[meth], imgs[f"flip_{meth}"] = img, fmap
+                how = getattr(brdf, "refinement", None)
+                if how is not None:  # what the refinement spent (a shared machine gives it less processor time)
+                    row[meth]["refinement"] = {k: getattr(how, k) for k in ("seconds", "cpu_seconds", "rounds",
+                                                                            "pairs", "converged", "error",
+                                                                            "network_error") if hasattr(how, k)}
             row["method_seconds"] = round(time.perf_counter() - t0, 2)
             rows.append(row)
             images.append(imgs)

@@ -1,7 +1,7 @@
 """The compiled walk on a CUDA device: the same per-path code, one GPU thread
 per ``PATHS_PER_THREAD`` paths of a pair.
 
-``training.walk._path`` is ordinary ``@njit`` code; Numba's CUDA target
+``training.walk.kernel.path`` is ordinary ``@njit`` code; Numba's CUDA target
 compiles a CPU dispatcher called from a kernel into a device function from
 the same Python source, so the GPU walk has no second copy of the physics.
 The threads' sums are added back into the CPU walk's work items (pair, block
@@ -18,19 +18,19 @@ installed.
 from __future__ import annotations
 
 import functools
-import math
 
 import numpy as np
 from numba import cuda, float64
 
-from nbrdf.training.walk import SPLIT_MAX, _path
+from nbrdf.training.walk.kernel import add_path, path
+from nbrdf.training.walk.params import SPLIT_MAX, WalkParams
 
 #: Colour channels a GPU path can carry (per-thread scratch is a fixed-size
 #: local array); stacks with more channels run on the CPU walk.
 MAX_CHANNELS = 4
 #: Threads per CUDA block.
 THREADS_PER_BLOCK = 128
-#: Paths per GPU thread: a CPU work item's ``walk.BLOCK`` paths are split over
+#: Paths per GPU thread: a CPU work item's ``BLOCK`` paths are split over
 #: ``BLOCK / PATHS_PER_THREAD`` threads (more threads in flight: a 4096-pair,
 #: 64-path lobe is 32k threads instead of 8k) and summed back into the CPU's
 #: blocks on the host, so batch means see the same blocks.
@@ -50,14 +50,13 @@ def available() -> bool:
 
 
 @cuda.jit(cache=True)
-def _run_kernel(wi, wo, spp, seed, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, b_alb, rr_depth, max_depth,
-                forced, rr_weight, a_wide, lam, lam_w, agw, kmax, kstep, ifloor, block, s1, s2, verts, dropped):
-    """One thread per (pair, ``block`` paths): ``training.walk._run``'s loop
-    body with per-thread scratch in local memory."""
+def _run_kernel(P, s1, s2, verts, dropped):
+    """One thread per (pair, ``P.block`` paths): ``training.walk.kernel.run``'s
+    loop body with per-thread scratch in local memory."""
     it = cuda.grid(1)
-    C = alb.shape[2]
-    nb = (spp + block - 1) // block
-    if it >= wi.shape[0] * nb:
+    C = P.alb.shape[2]
+    nb = (P.spp + P.block - 1) // P.block
+    if it >= P.wi.shape[0] * nb:
         return
     q = it // nb
     b = it - q * nb
@@ -71,61 +70,45 @@ def _run_kernel(wi, wo, spp, seed, rough, ior, sigma, alb, base, b_rough, b_r0, 
     for c in range(C):
         s1[it, c] = 0.0
         s2[it, c] = 0.0
-    for s in range(b * block, min(spp, (b + 1) * block)):
-        n_verts += _path(q, s, spp, seed, wi, wo, rough, ior, sigma, alb, base, b_rough, b_r0, b_ior, b_alb,
-                         rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, agw, kmax, kstep, ifloor,
-                         out, beta, stk)
-        finite = True
-        for c in range(C):
-            if not math.isfinite(out[c]):
-                finite = False
-        if not finite:
-            n_dropped += 1
-            continue
-        for c in range(C):
-            s1[it, c] += out[c]
-            s2[it, c] += out[c] * out[c]
+    for s in range(b * P.block, min(P.spp, (b + 1) * P.block)):
+        n_verts += path(q, s, P, out, beta, stk)
+        n_dropped += add_path(out, s1, s2, it)
     verts[it] = n_verts
     dropped[it] = n_dropped
 
 
-def run_items(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndarray, ior: np.ndarray,
-              sigma: np.ndarray, alb: np.ndarray, base: int, b_rough: np.ndarray, b_r0: np.ndarray,
-              b_ior: np.ndarray, b_alb: np.ndarray, rr_depth: int, max_depth: int, forced: bool,
-              rr_weight: float, a_wide: float, lam: float, lam_w: float, agw: float, kmax: int, kstep: int,
-              ifloor: float, block: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``training.walk._run`` on the CUDA device: per work item the sum and the
-    sum of squares of the path contributions per channel, the vertex count
-    and the dropped paths (arrays on the host)."""
-    if alb.shape[2] > MAX_CHANNELS:
-        raise ValueError(f"the CUDA walk carries at most {MAX_CHANNELS} channels (got {alb.shape[2]})")
-    if kmax - 1 > _STK_ROWS:
-        raise ValueError(f"the CUDA walk keeps at most {_STK_ROWS + 1} copies of a split path (got {kmax})")
-    if block % PATHS_PER_THREAD:
-        raise ValueError(f"the walk's block ({block}) must be a multiple of {PATHS_PER_THREAD}")
-    N, C = wi.shape[0], alb.shape[2]
-    nb = (spp + block - 1) // block
+#: The record's array fields (copied to the device).
+_ARRAYS = ("wi", "wo", "rough", "ior", "sigma", "alb", "b_rough", "b_r0", "b_ior", "b_alb")
+
+
+def run_items(P: WalkParams) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``training.walk.kernel.run`` on the CUDA device: per work item (pair,
+    ``P.block`` paths) the sum and the sum of squares of the path contributions
+    per channel, the vertex count and the dropped paths (arrays on the host)."""
+    N, C = P.wi.shape[0], P.alb.shape[2]
+    if C > MAX_CHANNELS:
+        raise ValueError(f"the CUDA walk carries at most {MAX_CHANNELS} channels (got {C})")
+    if P.kmax - 1 > _STK_ROWS:
+        raise ValueError(f"the CUDA walk keeps at most {_STK_ROWS + 1} copies of a split path (got {P.kmax})")
+    if P.block % PATHS_PER_THREAD:
+        raise ValueError(f"the walk's block ({P.block}) must be a multiple of {PATHS_PER_THREAD}")
+    nb = (P.spp + P.block - 1) // P.block
     if N * nb == 0:
         z = np.zeros((0, C))
         return z, z.copy(), np.zeros(0, np.int64), np.zeros(0, np.int64)
     fine = PATHS_PER_THREAD
-    nf = (spp + fine - 1) // fine
+    nf = (P.spp + fine - 1) // fine
     items = N * nf
-    dev = [cuda.to_device(np.ascontiguousarray(a)) for a in (wi, wo, rough, ior, sigma, alb, b_rough, b_r0, b_ior,
-                                                             b_alb)]
+    dev = P._replace(block=fine, **{k: cuda.to_device(np.ascontiguousarray(getattr(P, k))) for k in _ARRAYS})
     s1 = cuda.device_array((items, C), np.float64)
     s2 = cuda.device_array((items, C), np.float64)
     verts = cuda.device_array(items, np.int64)
     dropped = cuda.device_array(items, np.int64)
     grid = (items + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
-    d_wi, d_wo, d_rough, d_ior, d_sigma, d_alb, d_brough, d_br0, d_bior, d_balb = dev
-    _run_kernel[grid, THREADS_PER_BLOCK](
-        d_wi, d_wo, spp, seed, d_rough, d_ior, d_sigma, d_alb, base, d_brough, d_br0, d_bior, d_balb,
-        rr_depth, max_depth, forced, rr_weight, a_wide, lam, lam_w, agw, kmax, kstep, ifloor, fine,
-        s1, s2, verts, dropped)
+    _run_kernel[grid, THREADS_PER_BLOCK](dev, s1, s2, verts, dropped)
     cuda.synchronize()
     # the CPU's items: block // fine consecutive threads of a pair make one block
-    first = (np.arange(N)[:, None] * nf + np.arange(0, nf, block // fine)[None, :]).ravel()
+    first = (np.arange(N)[:, None] * nf + np.arange(0, nf, P.block // fine)[None, :]).ravel()
     return tuple(np.add.reduceat(a.copy_to_host(), first, axis=0) for a in (s1, s2, verts, dropped))
 
 

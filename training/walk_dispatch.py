@@ -14,8 +14,8 @@ import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import BASE_CODES
-from nbrdf.training import walk as W
 from nbrdf.training import walk_cuda
+from nbrdf.training.walk import kernel, walk_params
 
 
 def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndarray, ior: np.ndarray,
@@ -27,25 +27,22 @@ def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndar
     Returns per pair the sum and sum of squares of the path contributions
     (N, C), the per-block sums (N, n_blocks, C) for batch means, the vertex
     count and the number of dropped paths."""
-    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)
     if forced:
         # reciprocity (both directions lie above the stack): walk from the
         # more grazing one, whose light refracts nearer the critical angle and
         # feeds the light trapped under the coat; the steeper one's exit lobe
         # is then reached by next-event estimation and the two-bounce
-        # connection instead of by rare paths (docs/RESULTS.md, Ground truth v2)
+        # connection instead of by rare paths (docs/decisions/003-estimator-v3.md)
         swap = (np.asarray(wo)[:, 2] < np.asarray(wi)[:, 2])[:, None]
         wi, wo = np.where(swap, wo, wi), np.where(swap, wi, wo)
     N = wi.shape[0]
     C = alb.shape[2]
-    args = (f64(wi), f64(wo), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, f64(rough), f64(ior), f64(sigma), f64(alb),
-            BASE_CODES[base], f64(b_rough), f64(b_r0), f64(b_ior), f64(b_alb), int(rr_depth), int(max_depth),
-            bool(forced), W.RR_WEIGHT, W.WIDE_ROUGHNESS, W.GUIDE_LAM, W.WIDE_LAM, W.WIDE_GUIDE_ROUGHNESS,
-            int(W.SPLIT_MAX), int(W.SPLIT_STEP), float(W.SPLIT_FLOOR), W.BLOCK)
+    P = walk_params(wi, wo, spp, seed, rough, ior, sigma, alb, BASE_CODES[base], b_rough, b_r0, b_ior, b_alb, rr_depth,
+                    max_depth, forced)
     if walk_device(device) == "cuda":
-        s1, s2, verts, dropped = walk_cuda.run_items(*args)
+        s1, s2, verts, dropped = walk_cuda.run_items(P)
     else:
-        s1, s2, verts, dropped = W._run(*args)
+        s1, s2, verts, dropped = kernel.run(P)
     nb = s1.shape[0] // max(N, 1)
     blocks = s1.reshape(N, nb, C)
     return blocks.sum(1), s2.reshape(N, nb, C).sum(1), blocks, int(verts.sum()), int(dropped.sum())
@@ -66,7 +63,8 @@ def walk_device(requested: str | None = None) -> str:
     if walk_cuda.available():
         return "cuda"
     if want == "cuda":
-        raise NbrdfError(f"{source}=cuda, but Numba finds no CUDA device (install the cuda extra on a machine with one)")
+        raise NbrdfError(f"{source}=cuda, but Numba finds no CUDA device "
+                         "(install the cuda extra on a machine with one)")
     return "cpu"
 
 

@@ -4,6 +4,7 @@ throughput against the torch CPU decoder's on the same machine, and the
 look-development window's frame time and edit latency (one JSON object each)."""
 from __future__ import annotations
 
+import math
 import os
 import time
 from dataclasses import replace
@@ -279,10 +280,13 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
       on screen (the refinement's preview: one pass of the quick estimator);
     - ``still_converged_s``: from the last edit until the accumulated image's relative
       noise is under ``noise_target``: the full-resolution preview, then as many
-      passes of the still view's estimator as the noise needs at the measured time per pass. The noise per pass is
+      passes of the still view's estimator as the noise needs at the measured time per pass. The noise is
       measured on the still view's own estimator and body, as viewer/noise.py
-      defines it (``noise_renders`` renders of ``noise_spp`` passes that differ
-      only in their seed, at half the view's size), and falls as 1 / sqrt(passes);
+      defines it (``noise_renders`` renders that differ only in their seed, at half the
+      view's size); the passes it needs are measured, not extrapolated
+      (``passes_to_target``: the passes are stratified, so the noise falls faster than
+      1 / sqrt(passes); ``noise_exponent`` is the measured rate, ``passes_to_converge_sqrt_law``
+      the count the square-root law would give from ``noise_spp`` passes, an upper bound);
     - ``edit_to_frame_cpu_ms_median``, ``full_res_pass_cpu_ms_median``: CPU time of an edit's
       frame and of a full-resolution frame, all
       threads (llvmpipe's included): what a pass needs of the machine, whatever else runs on it;
@@ -314,32 +318,20 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
             scales.append(app.scale)
             latent.append(ld.timings.latent_ms)
             bake.append(ld.bodies.tables.bake_ms)
-        # Still: refine until a full-resolution frame is shown.
-        steps = 0
-        while True:
-            app.step()
-            steps += 1
-            if app.scale >= 1.0 and not app.interactive:
-                break
-            if steps > 16:
-                raise RuntimeError("bench app: the still view did not reach full resolution in 16 frames")
+        _until_full_resolution(app)
         full_res_s = time.perf_counter() - t_edit
-        passes, cpu = [], []
-        for _ in range(3):  # passes at full resolution
-            t, c = time.perf_counter(), time.process_time()
-            app.step()
-            passes.append((time.perf_counter() - t) * 1000.0)
-            cpu.append((time.process_time() - c) * 1000.0)
+        passes, cpu = _frame_ms(app, 3)  # passes at full resolution
         # The noise of the still view's estimator, per pass.
         _, _, vw, vh = app.viewport()
         r = ld.renderer
         body = ld.bodies.for_frame(ld.brdf, interactive=False)
         state = replace(ld.main_state(), background=False)
         r.quick = False
-        imgs, mask, _ = _seeds(r, state, vw, vh, noise_spp, noise_renders, body)
-        rel = float(per_pixel_noise(imgs, mask).mean())
+        noise = lambda spp: float(per_pixel_noise(*_seeds(r, state, vw, vh, spp, noise_renders, body)[:2]).mean())
+        rel = noise(noise_spp)
         per_pass = rel * noise_spp ** 0.5
-        need = max(1, int(np.ceil((per_pass / noise_target) ** 2)))
+        need_sqrt = max(1, int(np.ceil((per_pass / noise_target) ** 2)))
+        need, rate = passes_to_target(noise, noise_spp, noise_target)
         pass_ms = statistics.median(passes)
         converged_s = full_res_s + need * pass_ms / 1000.0  # the full-resolution preview is not accumulated
         return {
@@ -359,11 +351,64 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
             "full_res_pass_cpu_ms_median": round(statistics.median(cpu), 1),
             "relative_noise_per_pass": round(per_pass, 4),
             "passes_to_converge": need,
+            "noise_exponent": round(rate, 3),
+            "passes_to_converge_sqrt_law": need_sqrt,
             "still_converged_s": round(converged_s, 1),
             "load_average_1min": [round(load0, 2), round(os.getloadavg()[0], 2)],
         }
     finally:
         app.close()
+
+
+def _until_full_resolution(app, frames: int = 16) -> None:
+    """Steps a still window until it shows a full-resolution frame (the refinement's preview)."""
+    for _ in range(frames):
+        app.step()
+        if app.scale >= 1.0 and not app.interactive:
+            return
+    raise RuntimeError(f"bench app: the still view did not reach full resolution in {frames} frames")
+
+
+def _frame_ms(app, frames: int) -> tuple[list[float], list[float]]:
+    """Wall and CPU milliseconds of each of ``frames`` window frames."""
+    wall, cpu = [], []
+    for _ in range(frames):
+        t, c = time.perf_counter(), time.process_time()
+        app.step()
+        wall.append((time.perf_counter() - t) * 1000.0)
+        cpu.append((time.process_time() - c) * 1000.0)
+    return wall, cpu
+
+
+def passes_to_target(noise, spp0: int, target: float, rounds: int = 4) -> tuple[int, float]:
+    """The fewest passes whose accumulated image has relative noise under ``target``,
+    and the noise's measured rate (noise ~ passes^-rate). ``noise(passes)`` measures
+    the noise of that many passes. The rate is fitted from ``spp0`` and 4 ``spp0``
+    passes, the count predicted from it is measured, and the prediction is refined
+    from the nearest measurements (at most ``rounds`` more) until the count is
+    bracketed: a measured count under the target and (where it is above 4 ``spp0``)
+    one pass fewer by the local rate over it."""
+    measured = {spp0: noise(spp0), 4 * spp0: noise(4 * spp0)}
+    rate = max(0.25, math.log(measured[spp0] / measured[4 * spp0]) / math.log(4.0))
+
+    def predict(n: int) -> int:
+        return max(1, math.ceil(n * (measured[n] / target) ** (1.0 / rate)))
+
+    n = predict(4 * spp0)
+    for _ in range(rounds):
+        if n not in measured:
+            measured[n] = noise(n)
+        below = [k for k, v in measured.items() if v < target]
+        above = [k for k, v in measured.items() if v >= target]
+        lo, hi = (max(above) if above else 0), (min(below) if below else None)
+        if hi is not None and hi - lo <= max(2, hi // 16):  # bracketed to within 1/16 of the count
+            return hi, rate
+        ref = hi if hi is not None else max(measured)
+        if lo and hi:  # the local rate between the bracket's ends
+            rate = max(0.25, math.log(measured[lo] / measured[hi]) / math.log(hi / lo))
+        n = min(max(predict(ref), lo + 1), hi - 1) if hi is not None else max(predict(ref), ref + 1)
+    hi = min((k for k, v in measured.items() if v < target), default=None)
+    return (hi if hi is not None else predict(max(measured))), rate
 
 
 def _seeds(renderer, state, vw: int, vh: int, spp: int, renders: int, brdf) -> tuple:

@@ -19,6 +19,12 @@ decoder, and the decoder runs at one of them. For the default render (studio,
 varnished copper) this cut the relative noise at 16 passes from 5.6 % (the
 balance heuristic over three strategies, same decoder evaluations) to 1.4 %.
 
+Where the body is a baked table (the window on software OpenGL), a body
+evaluation is one texture fetch, so ``every_candidate`` evaluates it at every
+candidate and combines them by the balance heuristic instead of resampling:
+the candidates' full information, not one pick's (viewer/body_source.py
+``table_sampling``, docs/decisions/051).
+
 The firefly clamp (``clamp`` > 0) scales any one environment sample's
 contribution down to that luminance. It is off by default: with the split,
 resampled estimator no sample of the default render reaches luminance 1 (a
@@ -57,6 +63,14 @@ class LitSampling:
     ris_candidates: int = 16
     """Candidates per resampled sample, half from the environment CDF, half from
     the body's lobe (even; each costs an environment lookup, no decoder)."""
+    every_candidate: bool = False
+    """No resampling: the body is evaluated at every candidate and they are combined by
+    the balance heuristic over the two strategies. Right where the body is cheap (the
+    baked table: one fetch): the candidates' full information instead of ``ris_samples``
+    picks. The decoder keeps resampling (each evaluation costs the network)."""
+    lobe_candidates: int = 2
+    """With ``every_candidate``: how many of the ``ris_candidates`` come from the body's
+    lobe (the rest from the environment's CDF; at least one of each)."""
     coat_samples: int = 4
     """Coat visible-normal samples per pass (split BRDFs): each is a closed-form
     GGX evaluation and an environment lookup, no decoder. 4 measured the best
@@ -86,6 +100,9 @@ class LitSampling:
                              f"{self.ris_candidates} (2..64), coat_samples {self.coat_samples} (0..16)")
         if self.strategies not in (3, 4):
             raise NbrdfError(f"lit sampling: strategies {self.strategies} (3 or 4)")
+        if self.every_candidate and not 1 <= self.lobe_candidates < self.ris_candidates:
+            raise NbrdfError(f"lit sampling: lobe_candidates {self.lobe_candidates} must be 1..ris_candidates - 1 "
+                             f"({self.ris_candidates - 1})")
         if not (math.isfinite(self.clamp) and self.clamp >= 0):
             raise NbrdfError(f"lit sampling: clamp {self.clamp} must be finite and >= 0 (0: off)")
         return self
@@ -95,13 +112,14 @@ class LitSampling:
         one resampled body sample from 4 candidates and one coat sample per pass, about
         a third of the default's time on llvmpipe (the table body), noisier per pass."""
         return replace(self, ris_samples=min(self.ris_samples, 1), ris_candidates=min(self.ris_candidates, 4),
-                       coat_samples=min(self.coat_samples, 1))
+                       lobe_candidates=min(self.lobe_candidates, 1), coat_samples=min(self.coat_samples, 1))
 
     def bind(self, prog) -> None:
         """Sets the lit program's sampling uniforms (those it has)."""
         self.check()
         values = {"u_ris_samples": int(self.ris_samples), "u_ris_candidates": int(self.ris_candidates),
-                  "u_coat_samples": int(self.coat_samples), "u_clamp": float(self.clamp),
+                  "u_coat_samples": int(self.coat_samples),
+                  "u_body_every": int(self.lobe_candidates) if self.every_candidate else 0, "u_clamp": float(self.clamp),
                   "u_seed": int(self.seed) & 0xFFFFFFFF, "u_terms": int(self.terms),
                   "u_strategies": int(self.strategies), "u_one_sample": int(self.one_sample_mis)}
         for name, value in values.items():

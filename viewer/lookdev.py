@@ -48,6 +48,7 @@ from nbrdf.viewer.mesh import GLTF_SUFFIXES, named_mesh
 from nbrdf.viewer.modes import BrdfMode, CompareMode, View
 from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, gpu_brdf
 from nbrdf.viewer.plane_curves import PlaneCurves
+from nbrdf.viewer.refine_job import IdleRefiner
 from nbrdf.viewer.renderer import Renderer
 from nbrdf.viewer.screenshot import Screenshots
 from nbrdf.viewer.session import SessionDoc
@@ -118,6 +119,8 @@ class LookDev(SessionEdits):
         self.compare_part = Compare(ctx, self.renderer)
         self.backdrop_part = Backdrop(ctx, self.renderer)
         self.bodies = BodySource(ctx)  # the window's frames: decoder or baked body table (viewer/body_source.py)
+        # A still uniform material's code refined in the worker process (viewer/refine_job.py).
+        self.idle_refine = IdleRefiner(lambda: self.worker, lambda: self.pipeline.model.decoder)
         self._apply_material()
         self.history.reset(self.snapshot())
 
@@ -265,9 +268,13 @@ class LookDev(SessionEdits):
             z = tex.mean_latent
             brdf = gpu_brdf(self.ctx, m, self.pipeline.decoder, z, self.pipeline.proxy(z), tex,
                             self.pipeline.normal_maps)
+            self.idle_refine.edited(None, None)
         elif mode == BrdfMode.NEURAL:
-            brdf = self.pipeline.build(m, BrdfMode.NEURAL, latent=self.latent())
+            z = self.latent()
+            refined = self.idle_refine.edited(None if self.interp.active else m, z)  # a cached refined code
+            brdf = self.pipeline.build(m, BrdfMode.NEURAL, latent=z if refined is None else refined)
         else:
+            self.idle_refine.edited(None, None)
             brdf = self.pipeline.build(m, mode)
         other = self.interp.other_material() if self.interp.brdf_blend else None
         self.other_brdf = None if other is None else self.pipeline.build(other, BrdfMode.NEURAL)
@@ -284,6 +291,10 @@ class LookDev(SessionEdits):
         if self.textures.finished:
             self.guarded(self._apply_material)
             self.notice = ""
+        refined = self.idle_refine.poll()
+        if refined is not None:  # a code that beats the network's on the material's own simulation
+            self.brdf = self.pipeline.build(self.material, BrdfMode.NEURAL, latent=refined)
+            self.invalidate()
         if self.turntables.capture is not None and self.brdf is not None:
             self.guarded(self.turntables.step)
 

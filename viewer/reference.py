@@ -21,7 +21,12 @@ their spread. It is a process
 (multiprocessing, spawn context) so that the simulation never competes with
 the window's thread for the interpreter: the UI only polls a queue. A new
 request never waits: the process sets the running job aside at its next
-round (it resumes with its pooled paths if requested again).
+round (it resumes with its pooled paths if requested again), and ``cancel``
+sets it aside without another. Other modules may define jobs of their own
+(viewer/refine_job.py: a material's refinement on idle): a spec with
+``start(interrupted)``, whose run's ``step`` returns (payload, count, done,
+None) and which checks ``interrupted()`` to stop a long round, and
+``failed(message)``, the payload of a failure; such payloads are cached as they are.
 Results are cached by the job's key in the window's process, so returning to
 a material or a view shows its reference at once. The process ends with
 ``close`` (and at interpreter exit).
@@ -370,6 +375,7 @@ class _LitRun:
 
 # --- the worker process ------------------------------------------------------------------
 _STOP = "stop"
+_CANCEL = "cancel"
 PAUSED_JOBS = 16  # interrupted jobs whose pooled paths the worker keeps
 
 
@@ -422,14 +428,17 @@ def _serve(requests, results, threads: int, parent: int) -> None:
         item = _next_request(requests, block=job is None, parent=parent)
         if item == _STOP:
             return
-        if item is not None:
+        if item == _CANCEL:
+            job = None
+        elif item is not None:
             job = item
         if job is None:
             continue
         try:
             run = paused.pop(job.key, None)
             if run is None:
-                run = _LitRun(job, envs) if isinstance(job, LitSpec) else _PairRun(job)
+                run = (_LitRun(job, envs) if isinstance(job, LitSpec) else _PairRun(job) if isinstance(job, JobSpec)
+                       else job.start(lambda: not requests.empty()))
             else:
                 run.job = job  # the same pairs; the request's own limit (max_spp)
             while True:
@@ -443,15 +452,17 @@ def _serve(requests, results, threads: int, parent: int) -> None:
                 newer = _next_request(requests, block=False)
                 if newer == _STOP:
                     return
-                if newer is not None and newer.key != job.key:
+                if newer is not None and (newer == _CANCEL or newer.key != job.key):
                     paused[job.key] = run
                     while len(paused) > PAUSED_JOBS:
                         paused.pop(next(iter(paused)))
-                    job = newer
+                    job = None if newer == _CANCEL else newer
                     break
         except Exception as e:  # noqa: BLE001 - shown in the UI, the worker keeps serving
             msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-            results.put((job.key, np.zeros((*job.mask.shape, 3), np.float32), 0, True, msg, None))
+            blank = (np.zeros((*job.mask.shape, 3), np.float32) if isinstance(job, (JobSpec, LitSpec))
+                     else job.failed(msg))
+            results.put((job.key, blank, 0, True, msg, None))
             job = None
 
 
@@ -506,8 +517,9 @@ class ReferenceWorker:
         """The worker process (None before the first request)."""
         return self._proc
 
-    def request(self, job: ReferenceJob | LitJob) -> None:
-        """Makes ``job`` the one being computed (a finished or failed key is not redone)."""
+    def request(self, job) -> None:
+        """Makes ``job`` (a ``ReferenceJob``, a ``LitJob``, or another module's job:
+        see the module docstring) the one being computed (a finished or failed key is not redone)."""
         self._drain()
         cached = self._cache.get(job.key)
         if cached is not None and (cached.done or cached.error):
@@ -517,7 +529,7 @@ class ReferenceWorker:
             return
         self._ensure()
         self._current = job.key
-        self._spec = job.spec(self.start_spp, self.round_spp)
+        self._spec = job.spec(self.start_spp, self.round_spp) if hasattr(job, "spec") else job
         self._requests.put(self._spec)
 
     #: A job that the process dies on this many times is reported failed, not retried.
@@ -531,6 +543,14 @@ class ReferenceWorker:
         if self._last_death is None or time.monotonic() - self._last_death[0] > self.NOTICE_SECONDS:
             return None
         return self._last_death[1]
+
+    def cancel(self) -> None:
+        """Sets the running job aside (its work is kept: requested again, it resumes); never blocks."""
+        self._drain()
+        if self._current is None or self._proc is None:
+            return
+        self._requests.put(_CANCEL)
+        self._current = self._spec = None
 
     def _supervise(self) -> None:
         """A process that died while open (SIGKILL, out of memory, a native crash) is
@@ -553,9 +573,9 @@ class ReferenceWorker:
         if key is not None and spec is not None:
             n = self._job_deaths[key] = self._job_deaths.get(key, 0) + 1
             if n >= self.MAX_DEATHS_PER_JOB:
-                shape = (*spec.mask.shape, 3)
-                self._cache[key] = ReferenceImage(np.zeros(shape, np.float32), 0, True,
-                                                  f"{msg} {n} times on this job; not retried")
+                why = f"{msg} {n} times on this job; not retried"
+                self._cache[key] = (ReferenceImage(np.zeros((*spec.mask.shape, 3), np.float32), 0, True, why)
+                                    if isinstance(spec, (JobSpec, LitSpec)) else spec.failed(why))
                 self._current = self._spec = None
                 self._last_death = (time.monotonic(), f"{msg} {n} times on this job; not retried")
                 return
@@ -573,7 +593,7 @@ class ReferenceWorker:
                 key, img, spp, done, err, se = self._results.get_nowait()
             except (queue.Empty, OSError, ValueError):
                 return
-            self._cache[key] = ReferenceImage(img, spp, done, err, se)
+            self._cache[key] = ReferenceImage(img, spp, done, err, se) if isinstance(img, np.ndarray) else img
             if key == self._current and (done or err):
                 self._current = self._spec = None
 

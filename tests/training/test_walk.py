@@ -171,14 +171,14 @@ def test_importance_splitting_keeps_the_estimate_and_lowers_the_variance(monkeyp
     Bonferroni) and the per-path relative variance is lower where the trapped
     light must turn back (here 11 % lower, max |z| 2.2 against a limit of 4.3;
     17-27 % in single directions, docs/RESULTS.md; asserted >= 5 %)."""
-    from nbrdf.training import walk
+    from nbrdf.training.walk import params
 
     n = 16
     wo = _back_scatter_dirs(n, 8)
     s1, s2 = SimStats(), SimStats()
     m2, e2 = simulate(trap_stack(n), _wi(n), wo, spp=40_000, seed=14, dtype=D, include_top_reflection=False,
                       stats=s2)
-    monkeypatch.setattr(walk, "SPLIT_MAX", 1)
+    monkeypatch.setattr(params, "SPLIT_MAX", 1)
     m1, e1 = simulate(trap_stack(n), _wi(n), wo, spp=40_000, seed=13, dtype=D, include_top_reflection=False,
                       stats=s1)
     z = (m1 - m2) / (e1 ** 2 + e2 ** 2).sqrt()
@@ -191,11 +191,11 @@ def test_importance_splitting_keeps_the_estimate_and_lowers_the_variance(monkeyp
 def test_importance_splitting_leaves_other_stacks_unchanged(monkeypatch):
     """The splitting applies only to the connection's stacks: the standard
     stack's estimates are bit-identical with it switched off."""
-    from nbrdf.training import walk
+    from nbrdf.training.walk import params
 
     wo = _dirs(24, 9)
     a = simulate(standard_stack(24), _wi(24, 30.0), wo, spp=64, seed=5, dtype=D)
-    monkeypatch.setattr(walk, "SPLIT_MAX", 1)
+    monkeypatch.setattr(params, "SPLIT_MAX", 1)
     b = simulate(standard_stack(24), _wi(24, 30.0), wo, spp=64, seed=5, dtype=D)
     assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
 

@@ -112,12 +112,12 @@ def test_the_kernel_compiles_for_an_h100():
         from numba import cuda
         import numba.cuda.dispatcher as D
         D.get_current_device = lambda: types.SimpleNamespace(compute_capability=(9, 0))  # no device here
-        from nbrdf.training import walk, walk_cuda
+        from nbrdf.training import walk_cuda
+        from nbrdf.training.walk import walk_params
         f = lambda *s: np.zeros(s)
-        args = (f(4, 3), f(4, 3), 64, 7, f(4, 1), f(4, 1), f(4, 1), f(4, 1, 3), 0, f(4), f(4, 3), f(4), f(4, 3), 4,
-                100000, True, walk.RR_WEIGHT, walk.WIDE_ROUGHNESS, walk.GUIDE_LAM, walk.WIDE_LAM,
-                walk.WIDE_GUIDE_ROUGHNESS, walk.SPLIT_MAX, walk.SPLIT_STEP, float(walk.SPLIT_FLOOR), walk.BLOCK,
-                f(8, 3), f(8, 3), np.zeros(8, np.int64), np.zeros(8, np.int64))
+        P = walk_params(f(4, 3), f(4, 3), 64, 7, f(4, 1), f(4, 1), f(4, 1), f(4, 1, 3), 0, f(4), f(4, 3), f(4), f(4, 3),
+                        4, 100000, True)
+        args = (P, f(8, 3), f(8, 3), np.zeros(8, np.int64), np.zeros(8, np.int64))
         ptx, _ = cuda.compile_ptx(walk_cuda._run_kernel.py_func, tuple(numba.typeof(a) for a in args), cc=(9, 0))
         assert ".target sm_90" in ptx, ptx[:400]
         print(len(ptx))

@@ -12,7 +12,8 @@ from numba import njit
 from scipy import stats
 from stattools import z_threshold
 
-from nbrdf.training import walk as W
+from nbrdf.training.walk import ggx, interfaces, params, strategies
+from nbrdf.training.walk.rng import lane_key, uniform
 
 
 def _rand_dir(rng, upper: bool, lo: float = 0.02):
@@ -25,7 +26,7 @@ def _rand_dir(rng, upper: bool, lo: float = 0.02):
 def test_polynomial_sincos_matches_libm():
     u = np.concatenate([np.random.default_rng(0).random(20000), np.arange(9) / 8.0, [1 - 2.0 ** -53]])
     err = max(max(abs(c - math.cos(2 * math.pi * x)), abs(s - math.sin(2 * math.pi * x)))
-              for x in u for c, s in [W._cos_sin_2pi(x)])
+              for x in u for c, s in [ggx.cos_sin_2pi(x)])
     assert err < 2e-15, err
 
 
@@ -36,14 +37,14 @@ def test_fused_next_event_equals_the_generic_evaluation(a, eta):
     checked = 0
     for _ in range(400):
         ox, oy, oz = _rand_dir(rng, True)
-        sx, sy, sz = W._norm3(a * ox, a * oy, oz)
-        g1o = W._g1_dir(ox, oy, oz, a)
-        vx, vy, vz, sc, pn = W._nee(0.0, sx, sy, sz, g1o, ox, oy, oz, a, eta, 0.0, rng.random(), rng.random())
+        sx, sy, sz = ggx.norm3(a * ox, a * oy, oz)
+        g1o = ggx.g1_dir(ox, oy, oz, a)
+        vx, vy, vz, sc, pn = strategies.nee(0.0, sx, sy, sz, g1o, ox, oy, oz, a, eta, 0.0, rng.random(), rng.random())
         if sc <= 0.0:
             continue
         tx, ty, tz = -vx, -vy, -vz
-        f, _ = W._diel_eval_pdf(tx, ty, tz, ox, oy, oz, a, eta)
-        p = W._ft_pdf(a, eta, ox, oy, oz, tx, ty, tz)
+        f, _ = interfaces.diel_eval_pdf(tx, ty, tz, ox, oy, oz, a, eta)
+        p = interfaces.ft_pdf(a, eta, ox, oy, oz, tx, ty, tz)
         assert pn == pytest.approx(p, rel=1e-9)
         assert sc == pytest.approx(f / p, rel=1e-9)
         checked += 1
@@ -58,14 +59,15 @@ def test_fused_exit_equals_the_generic_evaluation(a, eta):
         ox, oy, oz = _rand_dir(rng, True)
         wx, wy, wz = _rand_dir(rng, False)
         if i % 2:  # a direction refracted from wo: inside the exit lobe
-            tx, ty, tz, _, p = W._ft_sample(a, eta, ox, oy, oz, rng.random(), rng.random())
+            tx, ty, tz, _, p = interfaces.ft_sample(a, eta, ox, oy, oz, rng.random(), rng.random())
             if p > 0.0:
                 wx, wy, wz = tx, ty, tz
-        f, pn = W._exit_eval(wx, wy, wz, ox, oy, oz, W._g1_dir(wx, wy, wz, a), W._g1_dir(ox, oy, oz, a), a, eta)
-        f_ref, _ = W._diel_eval_pdf(wx, wy, wz, ox, oy, oz, a, eta)
+        f, pn = interfaces.exit_eval(wx, wy, wz, ox, oy, oz, ggx.g1_dir(wx, wy, wz, a), ggx.g1_dir(ox, oy, oz, a), a,
+                                     eta)
+        f_ref, _ = interfaces.diel_eval_pdf(wx, wy, wz, ox, oy, oz, a, eta)
         assert f == pytest.approx(f_ref, rel=1e-9, abs=1e-300)
         if f_ref > 0.0:
-            assert pn == pytest.approx(W._ft_pdf(a, eta, ox, oy, oz, wx, wy, wz), rel=1e-9)
+            assert pn == pytest.approx(interfaces.ft_pdf(a, eta, ox, oy, oz, wx, wy, wz), rel=1e-9)
             nonzero += 1
     assert nonzero > 150
 
@@ -80,9 +82,9 @@ def test_fused_top_reflection_equals_the_generic_one(lam, wide):
     for _ in range(400):
         wx, wy, wz = _rand_dir(rng, False)
         u = rng.random(3)
-        got = W._top_reflect_vndf(wx, wy, wz, a, eta, u[0], u[1], u[2], lam, max(a, a_wide) if wide else a,
-                                  W._g1_dir(wx, wy, wz, a))
-        ref = W._top_reflect(wx, wy, wz, a, eta, u[0], u[1], u[2], lam, wide, a_wide, ox, oy, oz)
+        got = interfaces.top_reflect_vndf(wx, wy, wz, a, eta, u[0], u[1], u[2], lam, max(a, a_wide) if wide else a,
+                                  ggx.g1_dir(wx, wy, wz, a))
+        ref = interfaces.top_reflect(wx, wy, wz, a, eta, u[0], u[1], u[2], lam, wide, a_wide, ox, oy, oz)
         np.testing.assert_allclose(got[:3], ref[:3], rtol=1e-9, atol=1e-12)
         assert got[3] == pytest.approx(ref[3], rel=1e-9, abs=1e-300)
         assert got[4] == pytest.approx(ref[4], rel=1e-9, abs=1e-300)
@@ -96,8 +98,8 @@ def test_fused_conductor_evaluation_equals_the_generic_one():
         for _ in range(300):
             ix, iy, iz = _rand_dir(rng, True)
             ox, oy, oz = _rand_dir(rng, True)
-            got = W._cond_eval(ix, iy, iz, ox, oy, oz, a, W._g1_dir(ix, iy, iz, a))
-            ref = W._cond_geo(ix, iy, iz, ox, oy, oz, a)
+            got = interfaces.cond_eval(ix, iy, iz, ox, oy, oz, a, ggx.g1_dir(ix, iy, iz, a))
+            ref = interfaces.cond_geo(ix, iy, iz, ox, oy, oz, a)
             np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-300)
 
 
@@ -105,9 +107,9 @@ def test_fused_conductor_evaluation_equals_the_generic_one():
 def _sample_bins(wx, wy, wz, a, n, nt, nphi, seed):
     """Counts of n VNDF facets in (cos theta_m, phi_m) bins."""
     counts = np.zeros((nt, nphi))
-    key = W._lane_key(seed, 0)
+    key = lane_key(seed, 0)
     for i in range(n):
-        mx, my, mz = W._sample_vndf(wx, wy, wz, a, W._uniform(key, 2 * i), W._uniform(key, 2 * i + 1))
+        mx, my, mz = ggx.sample_vndf(wx, wy, wz, a, uniform(key, 2 * i), uniform(key, 2 * i + 1))
         ph = math.atan2(my, mx) % (2 * math.pi)
         it = min(int(mz * nt), nt - 1)
         ip = min(int(ph / (2 * math.pi) * nphi), nphi - 1)
@@ -127,7 +129,7 @@ def _bin_probs(wx, wy, wz, a, nt, nphi, sub):
                 r = math.sqrt(max(1 - z * z, 0.0))
                 for k in range(sub):
                     ph = (ip + (k + 0.5) / sub) / nphi * 2 * math.pi
-                    acc += W._vndf_pdf(wx, wy, wz, r * math.cos(ph), r * math.sin(ph), z, a)
+                    acc += ggx.vndf_pdf(wx, wy, wz, r * math.cos(ph), r * math.sin(ph), z, a)
             probs[it, ip] = acc * (1.0 / nt) * (2 * math.pi / nphi) / (sub * sub)
     return probs
 
@@ -159,60 +161,60 @@ def _three_vertex_estimates(w, o, a0, e0, ba, lam, wide, a_wide, agw, n, seed):
     walk (A: reflection and the base's VNDF sampled, exit evaluated), B
     (next-event estimation at the base) and C (the narrow guide): without D
     (the estimator before strategy D, C's sample drawn here from the same
-    building blocks as ``_mirror_connection``) and with D (the walk's code:
-    ``_mirror_connection`` and ``_wide_connection``). Returns the sums of
+    building blocks as ``strategies.mirror_connection``) and with D (the walk's code:
+    ``strategies.mirror_connection`` and ``strategies.wide_connection``). Returns the sums of
     each, of their squares and of their product."""
     wx, wy, wz = w
     ox, oy, oz = o
-    sx, sy, sz = W._norm3(a0 * ox, a0 * oy, oz)
-    g1o = W._g1_dir(ox, oy, oz, a0)
-    g1w = W._g1_dir(wx, wy, wz, a0)
-    key = W._lane_key(seed, 0)
+    sx, sy, sz = ggx.norm3(a0 * ox, a0 * oy, oz)
+    g1o = ggx.g1_dir(ox, oy, oz, a0)
+    g1w = ggx.g1_dir(wx, wy, wz, a0)
+    key = lane_key(seed, 0)
     s = np.zeros(5)
     u = np.empty(19)
     for i in range(n):
         for j in range(19):
-            u[j] = W._uniform(key, 19 * i + j)
+            u[j] = uniform(key, 19 * i + j)
         ref = 0.0
         new = 0.0
-        nx, ny, nz, wgt, pm = W._top_reflect_vndf(wx, wy, wz, a0, e0, u[0], u[1], u[2], lam,
-                                                   max(a0, a_wide) if wide else a0, g1w)
+        nx, ny, nz, wgt, pm = interfaces.top_reflect_vndf(wx, wy, wz, a0, e0, u[0], u[1], u[2], lam,
+                                                          max(a0, a_wide) if wide else a0, g1w)
         if pm > 0.0 and wgt > 0.0 and nz < 0.0:
-            pg = W._ft_pdf(a0, e0, ox, oy, oz, -nx, -ny, nz)
-            pw = W._ft_pdf(agw, e0, ox, oy, oz, -nx, -ny, nz)
+            pg = interfaces.ft_pdf(a0, e0, ox, oy, oz, -nx, -ny, nz)
+            pw = interfaces.ft_pdf(agw, e0, ox, oy, oz, -nx, -ny, nz)
             bx, by, bz = -nx, -ny, -nz  # at the base, toward where the light came from
-            g1b = W._g1_dir(bx, by, bz, ba)
-            vx, vy, vz, sc, pn = W._nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, 0.0, u[3], u[4])
+            g1b = ggx.g1_dir(bx, by, bz, ba)
+            vx, vy, vz, sc, pn = strategies.nee(1.0, sx, sy, sz, g1o, ox, oy, oz, a0, e0, 0.0, u[3], u[4])
             if sc > 0.0:  # B
-                f, pb, _ = W._cond_eval(bx, by, bz, vx, vy, vz, ba, g1b)
+                f, pb, _ = interfaces.cond_eval(bx, by, bz, vx, vy, vz, ba, g1b)
                 ref += wgt * f * vz * sc * pm * pn / (pm * pn + pm * pb + pg * pb)
                 new += wgt * f * vz * sc * pm * pn / (pm * pn + pm * pb + pg * pb + pw * pn)
-            mx, my, mz = W._sample_vndf(bx, by, bz, ba, u[5], u[6])
-            ux, uy, uz = W._reflect(bx, by, bz, mx, my, mz)
+            mx, my, mz = ggx.sample_vndf(bx, by, bz, ba, u[5], u[6])
+            ux, uy, uz = ggx.reflect(bx, by, bz, mx, my, mz)
             if bz > 0.0 and uz > 0.0 and bx * mx + by * my + bz * mz > 0.0:  # A
-                pc = g1b * W._ggx_d(mx, my, mz, ba) / (4.0 * bz)
-                f, pn = W._exit_eval(-ux, -uy, -uz, ox, oy, oz, W._g1_dir(ux, uy, uz, a0), g1o, a0, e0)
+                pc = g1b * ggx.ggx_d(mx, my, mz, ba) / (4.0 * bz)
+                f, pn = interfaces.exit_eval(-ux, -uy, -uz, ox, oy, oz, ggx.g1_dir(ux, uy, uz, a0), g1o, a0, e0)
                 if f > 0.0:
-                    f *= wgt * W._g1_dir(ux, uy, uz, ba)
+                    f *= wgt * ggx.g1_dir(ux, uy, uz, ba)
                     ref += f * pm * pc / (pm * pc + pm * pn + pg * pc)
                     new += f * pm * pc / (pm * pc + pm * pn + pg * pc + pw * pn)
         # C without D's density in its weight
-        tx, ty, tz, _, pg = W._ft_sample(a0, e0, ox, oy, oz, u[7], u[8])
+        tx, ty, tz, _, pg = interfaces.ft_sample(a0, e0, ox, oy, oz, u[7], u[8])
         if pg > 0.0:
             gx, gy, gz = -tx, -ty, tz
-            fr, pm = W._top_eval(wx, wy, wz, gx, gy, gz, a0, e0, lam, wide, a_wide, ox, oy, oz)
+            fr, pm = interfaces.top_eval(wx, wy, wz, gx, gy, gz, a0, e0, lam, wide, a_wide, ox, oy, oz)
             if fr > 0.0:
-                mx, my, mz = W._sample_vndf(-gx, -gy, -gz, ba, u[9], u[10])
-                ux, uy, uz = W._reflect(-gx, -gy, -gz, mx, my, mz)
-                fc, pc, _ = W._cond_geo(-gx, -gy, -gz, ux, uy, uz, ba)
+                mx, my, mz = ggx.sample_vndf(-gx, -gy, -gz, ba, u[9], u[10])
+                ux, uy, uz = ggx.reflect(-gx, -gy, -gz, mx, my, mz)
+                fc, pc, _ = interfaces.cond_geo(-gx, -gy, -gz, ux, uy, uz, ba)
                 if fc > 0.0 and pc > 0.0:
-                    fe, _ = W._diel_eval_pdf(-ux, -uy, -uz, ox, oy, oz, a0, e0)
-                    pn = W._ft_pdf(a0, e0, ox, oy, oz, -ux, -uy, -uz)
+                    fe, _ = interfaces.diel_eval_pdf(-ux, -uy, -uz, ox, oy, oz, a0, e0)
+                    pn = interfaces.ft_pdf(a0, e0, ox, oy, oz, -ux, -uy, -uz)
                     ref += fr * fc * uz * fe / (pm * pc + pm * pn + pg * pc)
-        k, _ = W._mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, u[11], u[12], u[13],
-                                    u[14], False, 0.0)
-        kd, _ = W._wide_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, sx, sy, sz, g1o,
-                                   u[15], u[16], u[17], u[18], False, 0.0)
+        k, _ = strategies.mirror_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, u[11], u[12],
+                                            u[13], u[14], False, 0.0)
+        kd, _ = strategies.wide_connection(wx, wy, wz, a0, e0, ba, lam, wide, a_wide, agw, ox, oy, oz, sx, sy, sz,
+                                           g1o, u[15], u[16], u[17], u[18], False, 0.0)
         new += k + kd
         s[0] += ref
         s[1] += ref * ref
@@ -235,7 +237,7 @@ def test_wide_guide_connection_keeps_the_estimate(theta, phi, lam, wide):
     w = (-math.sin(t) * math.cos(p), -math.sin(t) * math.sin(p), -math.cos(t))  # points down into the stack
     o = (math.sin(math.radians(20.0)), 0.0, math.cos(math.radians(20.0)))
     n = 400_000
-    s = _three_vertex_estimates(w, o, 0.15, 1.5, 0.02, lam, wide, 0.4, W.WIDE_GUIDE_ROUGHNESS, n, 7)
+    s = _three_vertex_estimates(w, o, 0.15, 1.5, 0.02, lam, wide, 0.4, params.WIDE_GUIDE_ROUGHNESS, n, 7)
     m_ref, m_new = s[0] / n, s[2] / n
     v_ref, v_new = s[1] / n - m_ref ** 2, s[3] / n - m_new ** 2
     v_diff = v_ref + v_new - 2.0 * (s[4] / n - m_ref * m_new)

@@ -5,8 +5,11 @@ not hold: an independent render (another seed of the per-pixel sequences)
 does not reproduce it. The genuine glints of the directional light and of the
 sun on the default material's smooth coat are also isolated bright pixels at
 this size, and every render reproduces them. The window's accumulated image
-(read through its API under Xvfb, panels hidden, 256 passes) is checked
-against an offscreen render with another seed."""
+(read through its API under Xvfb, panels hidden, its own refinement to full
+resolution, 256 passes at full resolution) is checked against an offscreen
+render with another seed. Measured at 128 x 128: 6 pixels exceed 3x their 5x5
+median, all in two small clusters (2 x 2 and 2 x 1: glints on the smooth
+coat, luminance 6-22), none a lone pixel."""
 from __future__ import annotations
 
 import os
@@ -19,7 +22,7 @@ import pytest
 
 pytestmark = [pytest.mark.gl, pytest.mark.slow]
 
-SIZE = (96, 72)
+SIZE = (128, 128)  # the issue's size
 PASSES = 256
 
 SCRIPT = textwrap.dedent("""
@@ -30,7 +33,7 @@ SCRIPT = textwrap.dedent("""
     from nbrdf.viewer.options import ViewOptions
     size = (int(sys.argv[1]), int(sys.argv[2]))
     app = App(ViewOptions(size=size), size=size)
-    app.BUDGET_STILL_MS = app.BUDGET_DRAG_MS = 1e9  # full resolution: compared pixel for pixel
+    # The window's own refinement (a preview, then full resolution): what a user gets.
     app.panels.visible = False
     app.frame()
     ld = app.lookdev

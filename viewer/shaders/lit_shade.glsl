@@ -12,6 +12,8 @@
 //   decoder); with u_ris_samples 0, one sample each of the environment CDF,
 //   the body's lobe and the cosine lobe, balance heuristic (u_strategies = 3
 //   drops the cosine lobe; u_one_sample draws one sample from their mixture).
+//   Where the body is cheap (the baked table), u_body_every > 0: no resampling,
+//   the body at every candidate (every_body_samples, balance heuristic).
 // - BRDFs split into a closed-form clear coat and a body (neural materials,
 //   NB_SPLIT_COAT): the coat (no decoder; the sharp reflections of the
 //   studio's panels) apart, from u_coat_samples samples of its GGX visible
@@ -40,6 +42,7 @@ uniform int u_coat_samples;  // coat visible-normal samples per pass (split BRDF
 uniform float u_clamp;       // > 0: a sample's contribution is scaled down to this luminance at most
 uniform int u_ris_samples;   // > 0: the body's environment light by resampling, this many decoder samples per pass
 uniform int u_ris_candidates;  // candidates per resampled sample (even: half environment, half body lobe)
+uniform int u_body_every;      // > 0: no resampling, the body at every candidate, this many of them from its lobe
 
 // Terms of the estimator (u_terms bits), as viewer/lit_sampling.py Term.
 const int TERM_LIGHT = 1;      // the directional and the point light
@@ -138,6 +141,35 @@ vec3 ris_body_sample(mat3 tbn, vec3 wo, uvec2 px, uint draw, int m, inout vec3 c
     return kept;
 }
 
+// The body where it is cheap (the baked table): no resampling, ``m`` directions
+// per draw -- ``n_lobe`` from the body's lobe, the rest from the environment's
+// CDF, each strategy a contiguous run of its Sobol sequence -- and the body at
+// every one, balance heuristic over the two strategies (the mixture's pdf).
+// Returns the draw's estimate of the body's environment light; every direction
+// also feeds the coat's estimator (``coat_sum``).
+vec3 every_body_samples(mat3 tbn, vec3 wo, uvec2 px, uint draw, int m, int n_lobe, inout vec3 coat_sum) {
+    int n_env = m - n_lobe;
+    vec3 sum = vec3(0.0);
+    for (int i = 0; i < m; ++i) {
+        bool env = i < n_env;
+        vec3 l;
+        float unused;
+        if (env) l = transpose(tbn) * sample_env(rand3(px, draw * uint(n_env) + uint(i), STREAM_ENV, u_seed).xy, unused);
+        else l = sample_body(wo, rand3(px, draw * uint(n_lobe) + uint(i - n_env), STREAM_LOBE, u_seed));
+        if (l.z <= 0.0) continue;
+        vec3 lw = tbn * l;
+        float pe = pdf_env(lw), pb = pdf_body(wo, l);
+        float q = float(n_env) * pe + float(n_lobe) * pb;  // m x the mixture's pdf
+        if (q <= 0.0) continue;
+        vec3 radiance = env_radiance(lw) * u_env_intensity;
+#ifdef NB_SPLIT_COAT
+        coat_sum += coat_candidate(wo, l, radiance, pe, pb);
+#endif
+        sum += clamp_contribution(body_brdf(l, wo) * (l.z / q) * radiance * float(m)) / float(m);
+    }
+    return sum;
+}
+
 // ``tbn``: the shading frame (columns tangent, bitangent, normal; world);
 // ``view``: unit vector to the eye; ``world``: the surface point.
 vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
@@ -146,6 +178,9 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
     vec3 color = vec3(0.0);
     bool ris = u_ris_samples > 0 && u_ris_candidates > 1;
     int m = ris ? u_ris_candidates - u_ris_candidates % 2 : 0;
+    bool every = ris && u_body_every > 0;
+    int n_lobe = every ? min(u_body_every, u_ris_candidates - 1) : 0;
+    if (every) m = u_ris_candidates;
     int count = u_env_on == 0 ? 1 : ris ? 1 + u_ris_samples : u_one_sample != 0 ? 2 : u_strategies;
     bool cosine = u_strategies > 3 || u_one_sample != 0;
 #ifdef NB_SPLIT_COAT
@@ -153,7 +188,8 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
     bool coated = u_env_on != 0 && coat_params(coat).y > 1.0 + 1e-4;
     coat_n = coated ? max(u_coat_samples, 0) : 0;
     // The coat estimator's sample counts per strategy (environment, body lobe, coat).
-    coat_counts = ris ? vec3(float(m / 2 * u_ris_samples), float(m / 2 * u_ris_samples), float(coat_n))
+    coat_counts = every ? vec3(float((m - n_lobe) * u_ris_samples), float(n_lobe * u_ris_samples), float(coat_n))
+                : ris ? vec3(float(m / 2 * u_ris_samples), float(m / 2 * u_ris_samples), float(coat_n))
                       : vec3(u_one_sample != 0 ? 1.0 / 3.0 : 1.0, 0.0, float(coat_n));
     coat_pass = coated ? coat : vec2(0.05, 1.0);
 #endif
@@ -171,6 +207,12 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
         else if (s == 1) l = to_local * sample_env(rand3(px, pass_index, STREAM_ENV, u_seed).xy, unused);
         else if (s == 2) l = sample_body(wo, rand3(px, pass_index, STREAM_LOBE, u_seed));
         else if (s == 3) l = sample_cosine(rand3(px, pass_index, STREAM_COS, u_seed).xy, unused);
+        else if (every) {  // the body's directions, evaluated and summed
+            vec3 e = every_body_samples(tbn, wo, px, pass_index * uint(u_ris_samples) + uint(k - 1), m, n_lobe,
+                                        coat_sum);
+            if ((u_terms & TERM_ENV_BODY) != 0) color += e / float(u_ris_samples);
+            continue;
+        }
         else l = ris_body_sample(tbn, wo, px, pass_index * uint(u_ris_samples) + uint(k - 1), m, coat_sum, ris_weight);
         if (l.z <= 0.0) continue;
         int term = s <= 0 ? TERM_LIGHT : s == 1 || s == 4 ? TERM_ENV_BODY : s == 2 ? TERM_LOBE_BODY : TERM_COS_BODY;

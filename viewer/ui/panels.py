@@ -421,6 +421,8 @@ class Panels:
         imgui.text(f"view {t.render_ms:6.1f} ms, passes {ld.passes}")
         imgui.text(f"latent {t.latent_ms:5.2f} ms")
         imgui.text(f"edit -> frame {t.edit_to_frame_ms:6.1f} ms")
+        if ld.idle_refine.status:  # "refined, N s" (viewer/refine_job.py)
+            imgui.text(ld.idle_refine.status)
         if ld.notice:
             imgui.text_wrapped(ld.notice)
         if ld.error:
