@@ -38,15 +38,8 @@ from nbrdf.viewer.labels import Label, Labels
 from nbrdf.viewer.lit_sampling import Term
 from nbrdf.viewer.modes import CompareMode, ToneMap, View
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf, analytic_capable
-from nbrdf.viewer.reference import (
-    LitJob,
-    ReferenceJob,
-    ReferenceWorker,
-    frames_from_normals,
-    lobe_job,
-    slice_job,
-    to_local,
-)
+from nbrdf.viewer.reference import ReferenceJob, ReferenceWorker, lobe_job, slice_job
+from nbrdf.viewer.reference_lit import LitJob, frames_from_normals, to_local
 from nbrdf.viewer.renderer import Renderer
 from nbrdf.viewer.view_settings import ViewState
 
