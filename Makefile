@@ -53,9 +53,10 @@ fuzz: setup
 	@nice $(BIN)/python tools/fuzz.py --count $(FUZZ_COUNT) --seed $(FUZZ_SEED)
 	@NBRDF_FUZZ_EXAMPLES=1000 NBRDF_FUZZ_MUTATIONS=1000 nice $(BIN)/python -m pytest tests/fuzz -q
 
-# The window under Xvfb for 1,000 random edits: memory and live GL objects per 100 edits (tools/soak.py).
+# The window under Xvfb for 1,000 random edits: memory and live GL objects per 100 edits, as the states come
+# and in one state every 25 edits (tools/soak.py).
 soak: setup
-	@xvfb-run -a -s "-screen 0 640x480x24" nice $(BIN)/python tools/soak.py --edits 1000 --seed 1 --out soak.json
+	@xvfb-run -a -s "-screen 0 640x480x24" nice $(BIN)/python tools/soak.py --edits 1000 --seed 1 --in-state --out soak.json
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis

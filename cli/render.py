@@ -18,7 +18,7 @@ class RenderConfig:
     out: str
     """output image: .exr (linear) or .png (tone-mapped, see --tonemap)"""
     scene: str | None = field(default=None, metadata={"positional": True, "metavar": "SCENE"})
-    """a scene JSON or a preset: still_life, teapot (required)"""
+    """a scene JSON or a preset: still_life, teapot, globe, torus (required)"""
     spp: int = 64
     """samples per pixel"""
     size: tuple[int, int] = field(default=(320, 240), metadata={"parse": parse_size, "metavar": "WxH", "shown": "320x240"})
@@ -38,7 +38,7 @@ def cmd_render(a: argparse.Namespace) -> int:
 
     c: RenderConfig = build(RenderConfig, a)
     if not c.scene:
-        raise NbrdfError("render: give a SCENE (a scene JSON or a preset: still_life, teapot)")
+        raise NbrdfError("render: give a SCENE (a scene JSON or a preset: still_life, teapot, globe, torus)")
     out = check_output(c.out)
     if out.suffix.lower() not in (".exr", ".png"):
         raise NbrdfError(f"{c.out}: expected an .exr or .png output")

@@ -19,7 +19,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from nbrdf.mitsuba.kernel import Coat, CodeKernel, DecoderKernel, Proxy
+from nbrdf.mitsuba.kernel import Coat, CodeKernel, DecoderKernel, Proxy, TexturedCodeKernel
 
 FLAGS_GLOSSY = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
 #: A material without a coat whose proxy gives the cosine lobe more than this share is reported
@@ -35,12 +35,20 @@ def _prop(props, key: str, default=None):
     return props[key] if key in props else default
 
 
-def code_kernel(material: str, weights: str | None = None) -> CodeKernel:
-    """The Dr.Jit kernel of a material JSON or code file (``neural.material_code``)."""
+def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 0.0) -> CodeKernel:
+    """The Dr.Jit kernel of a material JSON or code file (``neural.material_code``);
+    a texture-mapped material JSON gives a ``TexturedCodeKernel`` over its
+    latent texture (mip-mapped by the ray cone of ``pixel_angle`` radians)."""
     from nbrdf.neural.errors import NbrdfError
     from nbrdf.neural.material_code import code_parts, load_code
 
     try:
+        if str(material).lower().endswith(".json"):
+            from nbrdf.neural.material import load_material
+
+            m = load_material(material)
+            if m.is_textured:
+                return _textured_kernel(m, weights, pixel_angle)
         model, code = load_code(material, weights)
         (r, ior), (sigma, w) = code_parts(model, code)
         decoder = DecoderKernel.from_torch(model.decoder, code)
@@ -49,8 +57,49 @@ def code_kernel(material: str, weights: str | None = None) -> CodeKernel:
     return CodeKernel(decoder, Coat(float(r), float(ior)), Proxy(float(sigma), float(w)))
 
 
+SLOW_SYMBOLIC = ("nbrdf: traced symbolically on the LLVM backend, where Dr.Jit loads every decoder weight inside a "
+                 "symbolic call with a gather (about 10x slower); render inside nbrdf.mitsuba.wavefront_mode()")
+_warned_symbolic = False
+
+
+def wants_wavefront() -> bool:
+    """Whether ``nbrdf`` renders faster in ``wavefront_mode()`` under the
+    variant in force: on the LLVM backend, Dr.Jit's cooperative vectors
+    turn each weight load inside a symbolic call into a per-lane gather,
+    while an evaluated call runs the decoder at the top level of its kernel
+    (broadcast loads). CUDA's cooperative vectors have no such cost."""
+    return mi.variant() is not None and mi.variant().startswith("llvm")
+
+
+def _warn_if_slow() -> None:
+    """One warning per process when the decoder is traced where it runs slowly."""
+    global _warned_symbolic
+    if not _warned_symbolic and dr.flag(dr.JitFlag.SymbolicScope) and dr.flag(dr.JitFlag.SymbolicCalls) \
+            and wants_wavefront():
+        _warned_symbolic = True
+        mi.Log(mi.LogLevel.Warn, SLOW_SYMBOLIC)
+
+
+def _textured_kernel(material, weights: str | None, pixel_angle: float) -> TexturedCodeKernel:
+    """The latent texture of a texture-mapped material (``neural.svbrdf``) as a kernel."""
+    from nbrdf.mitsuba.textures import LatentTextureKernel
+    from nbrdf.neural.coat import NO_COAT
+    from nbrdf.neural.model import default_model, load_model
+    from nbrdf.neural.svbrdf import latent_texture
+
+    model = load_model(weights) if weights else default_model()
+    tex = latent_texture(model, material)
+    mean = tex.levels[-1][0, 0]  # (3, 34): the 1 x 1 mip level
+    spec = model.decoder.spec
+    kernel = LatentTextureKernel(model.decoder, tex, spec.coat and tex.levels[0].shape[-1] == spec.code, NO_COAT)
+    sigma, w = model.proxy(mean)
+    return TexturedCodeKernel(DecoderKernel.from_torch(model.decoder, mean), kernel, Proxy(sigma, w), pixel_angle)
+
+
 class NbrdfBSDF(mi.BSDF):
-    """``{"type": "nbrdf", "material": PATH[, "weights": BUNDLE]}``."""
+    """``{"type": "nbrdf", "material": PATH[, "weights": BUNDLE, "pixel_angle": RADIANS]}``:
+    ``pixel_angle`` (texture-mapped materials) is the camera's angle per pixel,
+    whose ray cone picks the latent texture's mip level per hit (0: the finest)."""
 
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
@@ -61,8 +110,9 @@ class NbrdfBSDF(mi.BSDF):
         if path is None:
             raise PluginError('nbrdf: the property "material" (a material JSON or a code file) is missing')
         self.path = str(path)
-        self.kernel = code_kernel(self.path, _prop(props, "weights"))
-        diffuse = not self.kernel.coat.present and self.kernel.proxy.w > DIFFUSE_W
+        self.kernel = code_kernel(self.path, _prop(props, "weights"), float(_prop(props, "pixel_angle", 0.0)))
+        textured = isinstance(self.kernel, TexturedCodeKernel)
+        diffuse = not textured and not self.kernel.coat.present and self.kernel.proxy.w > DIFFUSE_W
         self._lobe = mi.BSDFFlags.DiffuseReflection if diffuse else mi.BSDFFlags.GlossyReflection
         self.m_components = [self._lobe | mi.BSDFFlags.FrontSide]
         self.m_flags = self.m_components[0]
@@ -72,18 +122,20 @@ class NbrdfBSDF(mi.BSDF):
         return active & ctx.is_enabled(self._lobe, 0)
 
     def eval(self, ctx, si, wo, active=True):
-        f = self.kernel.eval(wo, si.wi)
+        _warn_if_slow()
+        f = self.kernel.eval(wo, si.wi, si)
         ok = self._enabled(ctx, active) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
         return dr.select(ok, f * mi.Frame3f.cos_theta(wo), 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
-        return dr.select(self._enabled(ctx, active), self.kernel.pdf(si.wi, wo), 0.0)
+        return dr.select(self._enabled(ctx, active), self.kernel.pdf(si.wi, wo, si), 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
         return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
-        wo, pdf = self.kernel.sample(si.wi, sample1, sample2.x, sample2.y)
+        _warn_if_slow()
+        wo, pdf = self.kernel.sample(si.wi, sample1, sample2.x, sample2.y, si)
         ok = (self._enabled(ctx, active) & (pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0)
               & (mi.Frame3f.cos_theta(wo) > 0))
         bs = dr.zeros(mi.BSDFSample3f)
@@ -92,7 +144,7 @@ class NbrdfBSDF(mi.BSDF):
         bs.eta = 1.0
         bs.sampled_component = mi.UInt32(0)
         bs.sampled_type = mi.UInt32(+self._lobe)
-        f = self.kernel.eval(wo, si.wi) * mi.Frame3f.cos_theta(wo)
+        f = self.kernel.eval(wo, si.wi, si) * mi.Frame3f.cos_theta(wo)
         return bs, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0)
 
     def traverse(self, cb):
@@ -100,6 +152,9 @@ class NbrdfBSDF(mi.BSDF):
 
     def to_string(self):
         c, p = self.kernel.coat, self.kernel.proxy
+        if isinstance(self.kernel, TexturedCodeKernel):
+            return (f"NbrdfBSDF[material={self.path!r}, latent texture {self.kernel.texture.size}, "
+                    f"pixel_angle {self.kernel.pixel_angle:g}, proxy=(sigma {p.sigma:g}, w {p.w:g})]")
         return (f"NbrdfBSDF[material={self.path!r}, coat=(roughness {c.roughness:g}, ior {c.ior:g}), "
                 f"proxy=(sigma {p.sigma:g}, w {p.w:g})]")
 
@@ -144,9 +199,26 @@ def _to_np(v):
     return _np3(v)
 
 
+def _texture_reference(material):
+    """(parameter maps, sampler) of a texture-mapped material's reference: a
+    layer stack per hit needs interfaces over a parametric base; the sampler
+    is the walk's defensive one at the sharpest top roughness any texel has."""
+    from nbrdf.mitsuba.textures import ParamMaps, sharpest_top_roughness
+    from nbrdf.neural.errors import NbrdfError
+    from nbrdf.neural.material import LatentBase, Measured
+    from nbrdf.training.brdfs import DefensiveSampler
+
+    if not material.interfaces or isinstance(material.base, (LatentBase, Measured)):
+        raise NbrdfError(f"{material.textures()[0][0]}: a texture-mapped reference needs a layer stack (interfaces "
+                         "over a conductor, diffuse or dielectric base)")
+    return ParamMaps(material), DefensiveSampler(sharpest_top_roughness(material))
+
+
 class NbrdfReferenceBSDF(mi.BSDF):
     """``{"type": "nbrdf_reference", "material": PATH[, "spp": N, "seed": S]}``:
-    every query draws ``spp`` new walk paths per lane (an unbiased, noisy f)."""
+    every query draws ``spp`` new walk paths per lane (an unbiased, noisy f).
+    A texture-mapped material gets its layer stack per hit from its maps at
+    the hit's uv (``textures.ParamMaps``)."""
 
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
@@ -163,22 +235,53 @@ class NbrdfReferenceBSDF(mi.BSDF):
             raise PluginError(f"nbrdf_reference: spp {self.spp} must be at least 1")
         try:
             self.material = load_material(self.path)
-            self.brdf = ReferenceBRDF(self.material, spp=self.spp)
+            if self.material.is_textured:
+                self.maps, self.sampler = _texture_reference(self.material)
+            else:
+                self.maps, self.sampler = None, ReferenceBRDF(self.material, spp=self.spp).sampler
         except NbrdfError as e:
             raise PluginError(f"nbrdf_reference: {e}") from None
         self._seeds = itertools.count(int(_prop(props, "seed", 0)) * 1_000_003 + 1)
         self.m_components = [FLAGS_GLOSSY]
         self.m_flags = FLAGS_GLOSSY
 
-    def _f(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        """A fresh estimate of f (N, 3) at the project's (wi, wo)."""
+    def _f(self, wi: np.ndarray, wo: np.ndarray, uv: np.ndarray | None = None) -> np.ndarray:
+        """A fresh estimate of f (N, 3) at the project's (wi, wo) (and the hits' uv
+        for a texture-mapped material)."""
         import torch
 
         from nbrdf.training.reference import reference_eval
 
+        if self.maps is not None:
+            return self._f_textured(wi, wo, uv)
         f, _ = reference_eval(self.material, torch.from_numpy(wi), torch.from_numpy(wo), spp=self.spp,
                               seed=next(self._seeds))
         return f.numpy().astype(np.float32)
+
+    def _f_textured(self, wi: np.ndarray, wo: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """The walk over one layer stack per hit, its parameters read at ``uv``."""
+        import torch
+
+        from nbrdf.neural.stack import material_stack
+        from nbrdf.training.layered import simulate
+        from nbrdf.training.reference import simulator_params
+
+        f = np.zeros((wi.shape[0], 3), np.float32)
+        idx = np.nonzero((wi[:, 2] > 0) & (wo[:, 2] > 0))[0]
+        if idx.size:
+            stack = material_stack(self.material, self.maps.at(uv[idx]), dtype=torch.float32)
+            m, _ = simulate(simulator_params(stack.expand(idx.size) if stack.n == 1 else stack),
+                            torch.from_numpy(wi[idx]), torch.from_numpy(wo[idx]), spp=self.spp,
+                            seed=next(self._seeds))
+            f[idx] = m.numpy()
+        return f
+
+    def _uv(self, si) -> np.ndarray | None:
+        """The hits' uv (N, 2) for a texture-mapped material, else None."""
+        if self.maps is None:
+            return None
+        dr.eval(si.uv)
+        return np.stack([np.asarray(si.uv.x, np.float32), np.asarray(si.uv.y, np.float32)], 1)
 
     @staticmethod
     def _color(f: np.ndarray):
@@ -188,7 +291,7 @@ class NbrdfReferenceBSDF(mi.BSDF):
         if _symbolic():
             return dr.zeros(mi.Color3f, dr.width(wo))
         light, view = _to_np(wo), _to_np(si.wi)
-        f = self._color(self._f(light, view))
+        f = self._color(self._f(light, view, self._uv(si)))
         ok = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
         return dr.select(ok, f * mi.Frame3f.cos_theta(wo), 0.0)
 
@@ -197,7 +300,7 @@ class NbrdfReferenceBSDF(mi.BSDF):
 
         if _symbolic():
             return dr.zeros(mi.Float, dr.width(wo))
-        p = self.brdf.pdf(torch.from_numpy(_to_np(si.wi)), torch.from_numpy(_to_np(wo))).numpy()
+        p = self.sampler.pdf(torch.from_numpy(_to_np(si.wi)), torch.from_numpy(_to_np(wo))).numpy()
         return dr.select(active, mi.Float(p.astype(np.float32)), 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
@@ -213,10 +316,10 @@ class NbrdfReferenceBSDF(mi.BSDF):
                                                            np.asarray(sample2.y, np.float32)], 1)
         s1 = np.broadcast_to(s1, (view.shape[0],))
         u = torch.from_numpy(np.ascontiguousarray(np.concatenate([s2, s1[:, None]], 1)))  # u[:, 2] picks the lobe
-        w, pdf = self.brdf.sampler.sample(torch.from_numpy(view), u)
+        w, pdf = self.sampler.sample(torch.from_numpy(view), u)
         light = w.numpy().astype(np.float32)
         pdf = pdf.numpy().astype(np.float32)
-        f = self._f(light, view)
+        f = self._f(light, view, self._uv(si))
         ok_np = pdf > 0
         weight = np.where(ok_np[:, None], f * light[:, 2:3] / np.where(ok_np, pdf, 1.0)[:, None], 0.0)
         bs = dr.zeros(mi.BSDFSample3f)

@@ -92,14 +92,16 @@ def reflect(w, m):
 # --- the clear coat (neural.coat) --------------------------------------------------------
 @dataclass(frozen=True)
 class Coat:
-    """A code's clear coat, already clamped to its legal range; ior 1: none."""
+    """A code's clear coat, already clamped to its legal range; ior 1: none.
+    Floats for a uniform material, per-lane arrays for a textured one."""
 
     roughness: float
     ior: float
 
     @property
     def present(self) -> bool:
-        return self.ior > 1.0 + 1e-4
+        """Whether any lane may have a coat (per-lane arrays: always)."""
+        return self.ior > 1.0 + 1e-4 if isinstance(self.ior, (int, float)) else True
 
     def eval(self, wi, wo):
         """The coat's reflection in 1/sr (no cosine)."""
@@ -121,7 +123,8 @@ class Coat:
         """Share of samples given to the coat at incidence w (``neural.coat.coat_probability``)."""
         if not self.present:
             return mi.Float(0.0)
-        return dr.clip(dr.sqrt(fresnel_dielectric(dr.clip(w.z, 0.0, 1.0), self.ior)), 0.05, 0.95)
+        p = dr.clip(dr.sqrt(fresnel_dielectric(dr.clip(w.z, 0.0, 1.0), self.ior)), 0.05, 0.95)
+        return p if isinstance(self.ior, (int, float)) else dr.select(self.ior > 1.0 + 1e-4, p, 0.0)
 
 
 # --- the body's proxy pdf (neural.sampling) ----------------------------------------------
@@ -247,17 +250,22 @@ class DecoderKernel:
             out = (decoder.out.weight.numpy(), decoder.out.bias.numpy())
         return DecoderKernel(spec.encoding, spec.activation, w_dir, shares, hidden, out)
 
-    def body(self, wi, wo) -> list:
-        """Decoded body values [f_r, f_g, f_b] (1/sr), zero below the horizon."""
+    def body(self, wi, wo, shares: list | None = None) -> list:
+        """Decoded body values [f_r, f_g, f_b] (1/sr), zero below the horizon;
+        ``shares``: per-lane latent shares [3][width] (a latent texture's)
+        instead of the material's own."""
         nn = self._nn
         x = nn.CoopVec(*ENCODERS[self.encoding](wi, wo))
         up = (wi.z > 0) & (wo.z > 0)
         out = []
-        for share in self.shares:
-            h = dr.maximum(nn.matvec(self.w_dir, x, share), 0.0)
-            for k, (w, b) in enumerate(self.layers):
+        for share in self.shares if shares is None else shares:
+            if shares is None:
+                h = dr.maximum(nn.matvec(self.w_dir, x, share), 0.0)
+            else:
+                h = dr.maximum(nn.matvec(self.w_dir, x) + nn.CoopVec(*share), 0.0)
+            for j, (w, b) in enumerate(self.layers):
                 h = nn.matvec(w, h, b)
-                if k < len(self.layers) - 1:
+                if j < len(self.layers) - 1:
                     h = dr.maximum(h, 0.0)
             y = list(h)[0]
             out.append(dr.select(up, dr.exp(dr.minimum(y, 80.0)), 0.0))
@@ -265,23 +273,54 @@ class DecoderKernel:
 
 
 class CodeKernel:
-    """A whole material code: decoded body plus closed-form coat, and its sampler."""
+    """A whole material code: decoded body plus closed-form coat, and its
+    sampler. ``si`` (the hit) is what a textured material looks up; a
+    uniform one ignores it."""
 
     def __init__(self, decoder: DecoderKernel, coat: Coat, proxy: Proxy):
         self.decoder, self.coat, self.proxy = decoder, coat, proxy
 
-    def eval(self, wi, wo):
+    def at(self, si) -> tuple[list | None, Coat]:
+        """(per-lane latent shares or None, the coat) at the hit ``si``."""
+        return None, self.coat
+
+    def eval(self, wi, wo, si=None):
         """RGB f(wi, wo) as a ``mi.Color3f`` (no cosine)."""
-        r, g, b = self.decoder.body(wi, wo)
-        if self.coat.present:
-            c = self.coat.eval(wi, wo)
+        shares, coat = self.at(si)
+        r, g, b = self.decoder.body(wi, wo, shares)
+        if coat.present:
+            c = coat.eval(wi, wo)
             r, g, b = r + c, g + c, b + c
         return mi.Color3f(r, g, b)
 
-    def pdf(self, w, w_other):
-        return coated_pdf(self.coat, self.proxy, w, w_other)
+    def pdf(self, w, w_other, si=None):
+        return coated_pdf(self.at(si)[1], self.proxy, w, w_other)
 
-    def sample(self, w, u0, u1, u2):
+    def sample(self, w, u0, u1, u2, si=None):
         """(other direction, its pdf); pdf 0 where the draw fell below the horizon."""
-        wo = coated_sample(self.coat, self.proxy, w, u0, u1, u2)
-        return wo, coated_pdf(self.coat, self.proxy, w, wo)
+        coat = self.at(si)[1]
+        wo = coated_sample(coat, self.proxy, w, u0, u1, u2)
+        return wo, coated_pdf(coat, self.proxy, w, wo)
+
+
+class TexturedCodeKernel(CodeKernel):
+    """A latent texture's material: the shares and coat of the hit's texel
+    (``textures.LatentTextureKernel``, trilinear by the hit's footprint when
+    ``pixel_angle`` > 0); one proxy for all texels (the texture's mean code),
+    which keeps sample and pdf consistent wherever it is looked up."""
+
+    def __init__(self, decoder: DecoderKernel, texture, proxy: Proxy, pixel_angle: float = 0.0):
+        from nbrdf.neural.coat import IOR_RANGE, ROUGHNESS_RANGE
+
+        super().__init__(decoder, Coat(0.0, 1.0), proxy)
+        self.texture, self.pixel_angle = texture, float(pixel_angle)
+        self._ranges = (ROUGHNESS_RANGE, IOR_RANGE)
+
+    def at(self, si):
+        from nbrdf.mitsuba.textures import level_of_detail
+
+        if si is None:
+            raise ValueError("a textured nbrdf material is evaluated at a hit (si)")
+        shares, r, ior = self.texture.lookup(si.uv, level_of_detail(si, self.pixel_angle, self.texture.size))
+        (r0, r1), (i0, i1) = self._ranges
+        return shares, Coat(dr.clip(r, r0, r1), dr.clip(ior, i0, i1))

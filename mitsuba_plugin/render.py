@@ -1,7 +1,11 @@
 """Path tracing a scene (``scenes.Scene``) in Mitsuba 3, in chunks of samples
 per pixel so that a progress bar can follow it and a caller can stop at a
 time budget. Each chunk is an independent render with its own seed; the image
-is their average (equal weights: every chunk has the same spp)."""
+is their average (equal weights: every chunk has the same spp).
+
+Scenes with nbrdf materials render in Dr.Jit's wavefront mode on the LLVM
+backend (``bsdf.wants_wavefront``): the reference needs it, and the neural
+decoder runs about ten times faster there than inside a symbolic call."""
 from __future__ import annotations
 
 import time
@@ -10,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from nbrdf.mitsuba.scenes import Scene, mitsuba_dict, uses_reference
+from nbrdf.mitsuba.scenes import Scene, mitsuba_dict, uses_neural, uses_reference
 
 #: Samples per pixel per ``mi.render`` call unless asked otherwise.
 CHUNK_SPP = 4
@@ -25,9 +29,13 @@ class RenderResult:
     spp: int
     """samples per pixel in the image"""
     seconds: float
-    """wall time of the sampling (scene loading excluded)"""
+    """wall time of the sampling (scene loading excluded), less ``compile_seconds``"""
     chunks: list[np.ndarray]
     """the per-chunk images (kept when asked, for noise estimates), else empty"""
+    compile_seconds: float = 0.0
+    """LLVM compilation of kernels missing from Dr.Jit's cache during the
+    sampling (a one-off cost per kernel, not per sample): excluded from
+    ``seconds`` when the render was asked to (``exclude_compile``), else 0"""
 
 
 def load(scene: Scene, size: tuple[int, int], chunk_spp: int = CHUNK_SPP):
@@ -41,14 +49,19 @@ def load(scene: Scene, size: tuple[int, int], chunk_spp: int = CHUNK_SPP):
 
 def render(scene: Scene, size: tuple[int, int], spp: int, seed: int = 0, chunk_spp: int = CHUNK_SPP,
            progress: Callable[[int], None] | None = None, keep_chunks: bool = False, loaded=None,
-           max_seconds: float | None = None) -> RenderResult:
+           max_seconds: float | None = None, exclude_compile: bool = False) -> RenderResult:
     """Renders ``spp`` samples per pixel (rounded up to whole chunks) in chunks
     of ``chunk_spp``, seeds ``seed * 100003 + k``; ``progress(spp_done)`` after
-    each chunk. With ``max_seconds`` it stops after the chunk that crosses it."""
+    each chunk. With ``max_seconds`` it stops after the chunk that crosses it.
+    ``exclude_compile``: the time spent compiling kernels that Dr.Jit had not
+    cached (its kernel history) is taken out of the time, so that a timing
+    measures sampling: in wavefront mode a wavefront that happens to hold one
+    lane gets kernels of its own, compiled the first time they occur."""
     import drjit as dr
     import mitsuba as mi
 
     from nbrdf.mitsuba import wavefront_mode
+    from nbrdf.mitsuba.bsdf import wants_wavefront
 
     chunk_spp = max(1, min(chunk_spp, spp))
     n_chunks = -(-spp // chunk_spp)
@@ -57,22 +70,31 @@ def render(scene: Scene, size: tuple[int, int], spp: int, seed: int = 0, chunk_s
     chunks: list[np.ndarray] = []
     done = 0
     t0 = time.perf_counter()
-    ref = uses_reference(scene)
+    compile_s = 0.0
+    wavefront = uses_reference(scene) or (uses_neural(scene) and wants_wavefront())
+    history = dr.flag(dr.JitFlag.KernelHistory)
+    if exclude_compile:
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        dr.kernel_history()  # drop what came before
     for k in range(n_chunks):
-        if ref:
+        if wavefront:
             with wavefront_mode():
                 img = mi.render(mscene, seed=seed * 100003 + k, spp=chunk_spp)
         else:
             img = mi.render(mscene, seed=seed * 100003 + k, spp=chunk_spp)
         dr.eval(img)
         arr = np.array(img, np.float32).reshape(size[1], size[0], 3)
+        if exclude_compile:
+            compile_s += sum(e.get("backend_time", 0.0) for e in dr.kernel_history()
+                             if e.get("type") == dr.KernelType.JIT and not e.get("cache_hit", True)) / 1000.0
         acc += arr
         if keep_chunks:
             chunks.append(arr)
         done += 1
         if progress is not None:
             progress(done * chunk_spp)
-        if max_seconds is not None and time.perf_counter() - t0 >= max_seconds:
+        if max_seconds is not None and time.perf_counter() - t0 - compile_s >= max_seconds:
             break
-    seconds = time.perf_counter() - t0
-    return RenderResult((acc / done).astype(np.float32), done * chunk_spp, seconds, chunks)
+    seconds = time.perf_counter() - t0 - compile_s
+    dr.set_flag(dr.JitFlag.KernelHistory, history)
+    return RenderResult((acc / done).astype(np.float32), done * chunk_spp, seconds, chunks, compile_s)

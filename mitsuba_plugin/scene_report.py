@@ -3,10 +3,14 @@
 Per scene: the neural material (``nbrdf``) and its Monte Carlo ground truth
 (``nbrdf_reference``, a fresh unbiased estimate of f per query, as Guo et al.
 2018) rendered at EQUAL TIME, each scored against a converged reference (the
-Monte Carlo at high spp, cached) by MSE and HDR-FLIP. The time: the neural
-render runs chunks of spp until the budget is spent (after one untimed chunk
-that compiles its kernels); a short timing run of the reference gives its
-seconds per spp, from which its spp for the same wall time follows.
+Monte Carlo at high spp, cached) by MSE and HDR-FLIP. The time: after one
+untimed chunk each (kernel compilation), the two renders take turns, a chunk
+of spp at a time, the one with less time spent going next, until each has
+spent the budget: on a machine whose load drifts both meet the same
+conditions. Both render in Dr.Jit's wavefront mode with the same path tracer,
+and the LLVM compilation of any kernel met later for the first time (a
+wavefront of one lane gets kernels of its own) is taken out of both times
+and stated.
 
 The converged reference is two independent halves (even and odd chunks): the
 MSE between them estimates its own noise (the full average's noise variance is
@@ -20,7 +24,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,8 +34,8 @@ from nbrdf.mitsuba.scenes import Scene, load_scene, with_method
 from nbrdf.neural.errors import NbrdfError
 
 #: The paper's Table 3: equal-time MSE, (neural, Guo et al. Monte Carlo), at 1024 x 1024.
-#: Equal time within this fraction, else the Monte Carlo render is redone once at its measured pace.
-TIME_TOLERANCE = 0.2
+#: Samples per pixel per pass of the converged reference (its cache does not depend on ``--chunk``).
+REF_CHUNK = 16
 PAPER_TABLE3 = {"still_life": (1.0e-3, 2.0e-3), "globe": (9.3e-4, 2.3e-3), "teapot": (6.0e-4, 5.4e-3)}
 
 
@@ -50,10 +53,9 @@ class SceneReportConfig:
     """seconds of the neural render (the equal time)"""
     ref_spp: int = 512
     """samples per pixel of the converged Monte Carlo reference"""
-    chunk: int = 4
-    """samples per pixel per Mitsuba pass"""
-    timing_chunks: int = 2
-    """chunks of the reference's timing run (after one untimed warm-up chunk)"""
+    chunk: int = 16
+    """samples per pixel per Mitsuba pass (the neural render's per-pass cost in wavefront mode, tracing and
+    launches per bounce, is amortised over it; the Monte Carlo's per-spp cost does not depend on it)"""
     cache: Path | None = None
     """converged references are cached here (default: OUT/cache)"""
     seed: int = 0
@@ -65,14 +67,6 @@ class SceneReportConfig:
 def mse(a: np.ndarray, b: np.ndarray) -> float:
     """Mean squared error over pixels and channels."""
     return float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
-
-
-def equal_time_spp(seconds: float, seconds_per_spp: float, chunk: int) -> int:
-    """The spp (a whole number of chunks, at least one) that a render of
-    ``seconds_per_spp`` spends in ``seconds``."""
-    if not (seconds > 0 and seconds_per_spp > 0 and chunk >= 1):
-        raise NbrdfError(f"equal time: bad timing ({seconds} s, {seconds_per_spp} s/spp, chunk {chunk})")
-    return int(max(1, round(seconds / seconds_per_spp / chunk))) * chunk
 
 
 def crossover_seconds(mse_mc: float, seconds_mc: float, mse_target: float) -> float:
@@ -97,7 +91,7 @@ def converged_reference(scene: Scene, cfg: SceneReportConfig, progress=None) -> 
     cache = cfg.cache or cfg.out / "cache"
     ref_scene = with_method(scene, "reference")
     seed = cfg.seed + 1000
-    chunk = max(1, min(cfg.chunk * 4, cfg.ref_spp // 2))
+    chunk = max(1, min(REF_CHUNK, cfg.ref_spp // 2))
     path = cache / f"{scene.name}-{cfg.size[0]}x{cfg.size[1]}-{_cache_key(ref_scene, cfg.size, cfg.ref_spp, chunk, seed)}.npz"
     if path.is_file():
         z = np.load(path)
@@ -121,17 +115,33 @@ def converged_reference(scene: Scene, cfg: SceneReportConfig, progress=None) -> 
     return res
 
 
-def _timed(scene: Scene, cfg: SceneReportConfig, spp: int | None, seed: int,
-           max_seconds: float | None = None, keep_chunks: bool = False) -> tuple[RenderResult, float]:
-    """One untimed warm-up chunk (kernel compilation), then the timed render;
-    returns it and the warm-up's seconds."""
-    mscene = load(scene, cfg.size, cfg.chunk)
-    t0 = time.perf_counter()
-    render(scene, cfg.size, cfg.chunk, seed=seed + 777, chunk_spp=cfg.chunk, loaded=mscene)
-    warm = time.perf_counter() - t0
-    big = spp if spp is not None else 1 << 20
-    return render(scene, cfg.size, big, seed=seed, chunk_spp=cfg.chunk, loaded=mscene, max_seconds=max_seconds,
-                  keep_chunks=keep_chunks), warm
+def equal_time(scenes: dict[str, Scene], cfg: SceneReportConfig, seeds: dict[str, int],
+               log=print) -> dict[str, RenderResult]:
+    """Renders of ``scenes`` (by key) at equal time: one untimed chunk each
+    (kernel compilation), then chunks in turn, always of the render with the
+    least time spent, until each has spent ``cfg.time_budget`` and has two
+    chunks (so the times differ by at most a chunk, and both renders share the
+    machine's load)."""
+    loaded = {k: load(sc, cfg.size, cfg.chunk) for k, sc in scenes.items()}
+    for k, sc in scenes.items():
+        render(sc, cfg.size, cfg.chunk, seed=seeds[k] + 777, chunk_spp=cfg.chunk, loaded=loaded[k])
+    chunks: dict[str, list[np.ndarray]] = {k: [] for k in scenes}
+    spent = {k: 0.0 for k in scenes}
+    compiled = {k: 0.0 for k in scenes}
+    while True:
+        # at least two chunks each: their halves give the render's own noise
+        pending = [k for k in scenes if spent[k] < cfg.time_budget or len(chunks[k]) < 2]
+        if not pending:
+            break
+        k = min(pending, key=spent.__getitem__)
+        r = render(scenes[k], cfg.size, cfg.chunk, seed=seeds[k] * 10007 + len(chunks[k]), chunk_spp=cfg.chunk,
+                   loaded=loaded[k], exclude_compile=True)
+        chunks[k].append(r.image)
+        spent[k] += r.seconds
+        compiled[k] += r.compile_seconds
+    log("  " + ", ".join(f"{k}: {len(c) * cfg.chunk} spp in {spent[k]:.1f} s" for k, c in chunks.items()))
+    return {k: RenderResult(np.mean(c, 0).astype(np.float32), len(c) * cfg.chunk, spent[k], c, compiled[k])
+            for k, c in chunks.items()}
 
 
 def own_noise_mse(chunks: list[np.ndarray]) -> float:
@@ -150,19 +160,10 @@ def score_scene(name: str, cfg: SceneReportConfig, log=print) -> tuple[dict, dic
     scene = load_scene(name)
     log(f"[{scene.name}] converged reference ({cfg.ref_spp} spp)")
     ref = converged_reference(scene, cfg)
-    log(f"[{scene.name}] neural at {cfg.time_budget:g} s")
-    neural, _ = _timed(with_method(scene, "neural"), cfg, None, cfg.seed, max_seconds=cfg.time_budget, keep_chunks=True)
-    log(f"[{scene.name}] reference timing run")
-    mc_scene = with_method(scene, "reference")
-    timing, _ = _timed(mc_scene, cfg, cfg.chunk * cfg.timing_chunks, cfg.seed + 1)
-    spp_mc = equal_time_spp(neural.seconds, timing.seconds / timing.spp, cfg.chunk)
-    log(f"[{scene.name}] reference at {spp_mc} spp (equal time)")
-    mc, _ = _timed(mc_scene, cfg, spp_mc, cfg.seed + 2, keep_chunks=True)
-    if abs(mc.seconds / neural.seconds - 1) > TIME_TOLERANCE:
-        # the short timing run misjudged the pace (a loaded machine): rescale by the measured one, render again
-        spp_mc = equal_time_spp(neural.seconds, mc.seconds / mc.spp, cfg.chunk)
-        log(f"[{scene.name}] reference took {mc.seconds:.1f} s, not {neural.seconds:.1f} s: again at {spp_mc} spp")
-        mc, _ = _timed(mc_scene, cfg, spp_mc, cfg.seed + 3, keep_chunks=True)
+    log(f"[{scene.name}] neural and Monte Carlo at {cfg.time_budget:g} s each, interleaved")
+    res = equal_time({"neural": with_method(scene, "neural"), "mc": with_method(scene, "reference")}, cfg,
+                     {"neural": cfg.seed, "mc": cfg.seed + 2}, log)
+    neural, mc = res["neural"], res["mc"]
     row: dict = {"scene": scene.name, "size": list(cfg.size),
                  "reference": {"spp": ref["spp"], "seconds": round(ref["seconds"], 2), "cached": ref["cached"],
                                "noise_mse": ref["noise_mse"],
@@ -172,13 +173,13 @@ def score_scene(name: str, cfg: SceneReportConfig, log=print) -> tuple[dict, dic
         fl, fmap = flip(ref["image"], r.image)
         m = mse(ref["image"], r.image)
         row[key] = {"spp": r.spp, "seconds": round(r.seconds, 2), "seconds_per_spp": r.seconds / r.spp,
+                    "compile_seconds_excluded": round(r.compile_seconds, 2),
                     "mse": m, "mse_minus_ref_noise": max(m - ref["noise_mse"], 0.0), "flip": fl,
                     "noise_mse": own_noise_mse(r.chunks)}
         # what is left of the error once both renders' noise is taken out: the bias (0 for the unbiased MC,
         # up to its own noise estimate's error)
         row[key]["bias_mse"] = max(m - ref["noise_mse"] - row[key]["noise_mse"], 0.0)
         images[key], images[f"err_{key}"], images[f"flip_{key}"] = r.image, np.mean((r.image - ref["image"]) ** 2, 2), fmap
-    row["mc_timing"] = {"spp": timing.spp, "seconds": round(timing.seconds, 2)}
     row["mse_ratio_mc_over_neural"] = row["mc"]["mse"] / max(row["neural"]["mse"], 1e-30)
     # the equal time is only as equal as a loaded machine allows: the MC's MSE moved to the neural's time by
     # MSE ~ 1/t (its noise part; the reference's noise stays)
@@ -215,7 +216,10 @@ def markdown(result: dict) -> str:
             f"{r['reference']['spp']} ({r['reference']['noise_mse']:.1e}) | "
             f"{'never' if math.isinf(cross) else f'{cross:.0f}'} | {paper} |")
     lines += ["", "MSE ~ 1/time for the unbiased Monte Carlo: the crossover is the time at which it would reach the "
-              "neural material's error (both corrected for the reference's own noise). An extrapolation. Noise: each "
+              "neural material's error (both corrected for the reference's own noise). An extrapolation. Times: "
+              "sampling only, both methods in Dr.Jit's wavefront mode with the same path tracer; the LLVM compilation "
+              "of kernels not yet in Dr.Jit's cache is excluded from both (scenes.json: compile_seconds_excluded). "
+              "Noise: each "
               "render's own, from its even and odd chunks; bias: the MSE left after both renders' noise (the neural "
               "material's representation error; about 0 for the Monte Carlo)."]
     return "\n".join(lines) + "\n"

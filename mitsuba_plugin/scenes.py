@@ -9,9 +9,16 @@ A scene JSON::
      "max_depth": 8,                                            # optional
      "shapes": [{"type": "sphere", "center": [x, y, z], "radius": r, "material": M},
                 {"type": "rectangle", "center": [x, y, z], "size": [w, h], "material": M},
-                {"type": "teapot", "center": [x, y, z], "scale": s, "rotate_z": deg, "material": M}]}
+                {"type": "teapot", "center": [x, y, z], "scale": s, "rotate_z": deg, "material": M},
+                {"type": "torus", "center": [x, y, z], "radius": R, "tube": r, "rotate_z": deg, "material": M}]}
 
-where a material ``M`` is a path (the ``nbrdf`` neural material), ``{"reference": PATH}``
+Any shape may carry ``"normal_map": {"name": "hammered"|"knurled", "tiles": [nu, nv],
+"strength": s}`` (a generated tangent-space normal map, ``generated.normal_map``),
+applied through Mitsuba's ``normalmap`` BSDF to the neural and the reference
+material alike; spheres also take ``rotate_z``.
+
+where a material ``M`` is a path (the ``nbrdf`` neural material; ``generated:globe`` is the
+generated globe material, ``generated.globe_material``), ``{"reference": PATH}``
 (its Monte Carlo ground truth, ``nbrdf_reference``) or ``{"diffuse": [r, g, b]}``.
 Relative paths are relative to the scene file; preset scenes use the bundled
 materials. World z is up; the environment is one of the project's generated
@@ -45,6 +52,29 @@ PRESETS: dict[str, dict[str, Any]] = {
             {"type": "sphere", "center": [-1.25, 0.2, 0.6], "radius": 0.6, "material": "@coated_copper.json"},
             {"type": "sphere", "center": [0.0, 0.6, 0.6], "radius": 0.6, "material": "@car_paint.json"},
             {"type": "sphere", "center": [1.25, 0.2, 0.6], "radius": 0.6, "material": "@rough_gold.json"},
+            {"type": "rectangle", "center": [0.0, 0.5, 0.0], "size": [8.0, 6.0], "material": {"diffuse": [0.35, 0.35, 0.33]}},
+        ],
+    },
+    # the paper's globe: a texture-mapped layered material (varnish over a medium and a base whose albedos follow
+    # generated continents) on a sphere
+    "globe": {
+        "camera": {"origin": [0.0, -6.0, 2.0], "target": [0.0, 0.0, 0.85], "up": [0, 0, 1], "fov": 26},
+        "environment": {"preset": "studio", "scale": 1.0},
+        "point_light": {"position": [-2.5, -3.0, 4.0], "intensity": 12.0},
+        "shapes": [
+            {"type": "sphere", "center": [0.0, 0.0, 0.9], "radius": 0.9, "rotate_z": -100.0,
+             "material": "generated:globe"},
+            {"type": "rectangle", "center": [0.0, 0.5, 0.0], "size": [8.0, 6.0], "material": {"diffuse": [0.35, 0.35, 0.33]}},
+        ],
+    },
+    # a generated shape with a generated normal map: a hammered copper torus
+    "torus": {
+        "camera": {"origin": [0.0, -6.0, 3.2], "target": [0.0, 0.0, 0.4], "up": [0, 0, 1], "fov": 26},
+        "environment": {"preset": "studio", "scale": 1.0},
+        "point_light": {"position": [2.0, -3.0, 4.5], "intensity": 12.0},
+        "shapes": [
+            {"type": "torus", "center": [0.0, 0.0, 0.42], "radius": 1.0, "tube": 0.4, "rotate_z": 20.0,
+             "material": "@coated_copper.json", "normal_map": {"name": "hammered", "tiles": [6, 2], "strength": 1.0}},
             {"type": "rectangle", "center": [0.0, 0.5, 0.0], "size": [8.0, 6.0], "material": {"diffuse": [0.35, 0.35, 0.33]}},
         ],
     },
@@ -91,6 +121,12 @@ def _material(m: Any, base: Path, what: str) -> dict[str, Any]:
     def path(p: Any) -> str:
         if not isinstance(p, str) or not p:
             raise NbrdfError(f"{what}: expected a material path, got {p!r}")
+        if p.startswith("generated:"):
+            if p != "generated:globe":
+                raise NbrdfError(f"{what}: unknown generated material {p!r} (expected generated:globe)")
+            from nbrdf.mitsuba.generated import globe_material
+
+            return str(globe_material())
         q = ASSETS / p[1:] if p.startswith("@") else (base / p)
         if not q.is_file():
             raise NbrdfError(f"{what}: material file {p} not found")
@@ -108,6 +144,22 @@ def _material(m: Any, base: Path, what: str) -> dict[str, Any]:
                 raise NbrdfError(f"{what}.diffuse: albedo must lie in [0, 1], got {rgb}")
             return {"diffuse": rgb}
     raise NbrdfError(f"{what}: expected a material path, {{\"reference\": path}} or {{\"diffuse\": rgb}}, got {m!r}")
+
+
+SHAPES = ("sphere", "rectangle", "teapot", "torus")
+
+
+def _normal_map(nm: Any, what: str) -> dict[str, Any]:
+    """A shape's generated normal map entry -> {"name", "tiles", "strength"}."""
+    from nbrdf.mitsuba.generated import NORMAL_MAPS
+
+    if not isinstance(nm, dict) or nm.get("name") not in NORMAL_MAPS or set(nm) - {"name", "tiles", "strength"}:
+        raise NbrdfError(f"{what}: expected {{\"name\": {' | '.join(NORMAL_MAPS)}, \"tiles\": [nu, nv], "
+                         f"\"strength\": s}}, got {nm!r}")
+    tiles = _vec(nm.get("tiles", [1, 1]), 2, f"{what}.tiles")
+    if min(tiles) <= 0:
+        raise NbrdfError(f"{what}.tiles: expected positive repeats, got {tiles}")
+    return {"name": nm["name"], "tiles": tiles, "strength": _num(nm.get("strength", 1.0), f"{what}.strength")}
 
 
 def parse_scene(spec: Any, base: Path, name: str) -> Scene:
@@ -156,20 +208,27 @@ def parse_scene(spec: Any, base: Path, name: str) -> Scene:
     out["shapes"] = []
     for i, s in enumerate(shapes):
         what = f"shapes[{i}]"
-        if not isinstance(s, dict) or s.get("type") not in ("sphere", "rectangle", "teapot"):
-            raise NbrdfError(f"{what}: expected an object with type sphere, rectangle or teapot, got {s!r}")
+        if not isinstance(s, dict) or s.get("type") not in SHAPES:
+            raise NbrdfError(f"{what}: expected an object with type {', '.join(SHAPES)}, got {s!r}")
         t = s["type"]
         d: dict[str, Any] = {"type": t, "center": _vec(s.get("center", [0, 0, 0]), 3, f"{what}.center"),
                              "material": _material(s.get("material"), base, f"{what}.material")}
-        if t == "sphere":
+        if t in ("sphere", "torus"):
             d["radius"] = _num(s.get("radius", 1.0), f"{what}.radius")
+            d["rotate_z"] = float(_vec([s.get("rotate_z", 0.0)], 1, f"{what}.rotate_z")[0])
+        if t == "torus":
+            d["tube"] = _num(s.get("tube", 0.3), f"{what}.tube")
+            if d["tube"] >= d["radius"]:
+                raise NbrdfError(f"{what}.tube: expected below the radius {d['radius']}, got {d['tube']}")
         elif t == "rectangle":
             d["size"] = _vec(s.get("size", [1, 1]), 2, f"{what}.size")
             if min(d["size"]) <= 0:
                 raise NbrdfError(f"{what}.size: expected positive sizes, got {d['size']}")
-        else:
+        elif t == "teapot":
             d["scale"] = _num(s.get("scale", 1.0), f"{what}.scale")
             d["rotate_z"] = float(_vec([s.get("rotate_z", 0.0)], 1, f"{what}.rotate_z")[0])
+        if "normal_map" in s:
+            d["normal_map"] = _normal_map(s["normal_map"], f"{what}.normal_map")
         out["shapes"].append(d)
     return Scene(out, name)
 
@@ -201,6 +260,11 @@ def with_method(scene: Scene, method: str) -> Scene:
     return Scene({**scene.spec, "shapes": shapes}, scene.name)
 
 
+def uses_neural(scene: Scene) -> bool:
+    """Whether any shape uses the neural ``nbrdf`` plugin."""
+    return any("neural" in s["material"] for s in scene.spec["shapes"])
+
+
 def uses_reference(scene: Scene) -> bool:
     """Whether any shape uses ``nbrdf_reference`` (rendered in Dr.Jit's wavefront mode)."""
     return any("reference" in s["material"] for s in scene.spec["shapes"])
@@ -222,11 +286,27 @@ def environment_bitmap(preset: str, scale: float = 1.0, size: tuple[int, int] = 
     return mi.Bitmap(np.ascontiguousarray(img, np.float32), mi.Bitmap.PixelFormat.RGB)
 
 
-def _bsdf(m: dict[str, Any]) -> dict[str, Any]:
+def _bsdf(m: dict[str, Any], pixel_angle: float) -> dict[str, Any]:
     if "diffuse" in m:
         return {"type": "diffuse", "reflectance": {"type": "rgb", "value": m["diffuse"]}}
-    kind = "nbrdf" if "neural" in m else "nbrdf_reference"
-    return {"type": kind, "material": next(iter(m.values()))}
+    if "neural" in m:
+        # the camera's angle per pixel: a latent texture's mip level per hit follows from it
+        return {"type": "nbrdf", "material": m["neural"], "pixel_angle": pixel_angle}
+    return {"type": "nbrdf_reference", "material": m["reference"]}
+
+
+def _with_normal_map(bsdf: dict[str, Any], nm: dict[str, Any]) -> dict[str, Any]:
+    """``bsdf`` under Mitsuba's ``normalmap`` with a generated map tiled ``tiles`` times."""
+    import mitsuba as mi
+
+    from nbrdf.mitsuba.generated import normal_map
+
+    tex = normal_map(nm["name"], strength=nm["strength"])
+    su, sv = nm["tiles"]
+    return {"type": "normalmap", "bsdf": bsdf,
+            "normalmap": {"type": "bitmap", "raw": True, "filter_type": "bilinear",
+                          "bitmap": mi.Bitmap(np.ascontiguousarray(tex), mi.Bitmap.PixelFormat.RGB),
+                          "to_uv": mi.ScalarTransform4f().scale([su, sv, 1.0])}}
 
 
 def mitsuba_dict(scene: Scene, size: tuple[int, int], spp: int) -> dict[str, Any]:
@@ -234,6 +314,7 @@ def mitsuba_dict(scene: Scene, size: tuple[int, int], spp: int) -> dict[str, Any
     ``spp`` samples per pixel per ``mi.render`` call."""
     import mitsuba as mi
 
+    from nbrdf.mitsuba.generated import torus_ply
     from nbrdf.mitsuba.teapot import teapot_ply
 
     s = scene.spec
@@ -257,12 +338,20 @@ def mitsuba_dict(scene: Scene, size: tuple[int, int], spp: int) -> dict[str, Any
         p = s["point_light"]
         d["point_light"] = {"type": "point", "position": p["position"],
                             "intensity": {"type": "rgb", "value": p["intensity"]}}
+    pixel_angle = math.radians(cam["fov"]) / h
     for i, sh in enumerate(s["shapes"]):
+        inner = _bsdf(sh["material"], pixel_angle)
+        if "normal_map" in sh:
+            inner = _with_normal_map(inner, sh["normal_map"])
         # two-sided: a one-sided BSDF would render back faces black (the teapot's inside, a plane seen from below)
-        bsdf = {"type": "twosided", "material": _bsdf(sh["material"])}
+        bsdf = {"type": "twosided", "material": inner}
         c = sh["center"]
         if sh["type"] == "sphere":
-            shape = {"type": "sphere", "center": c, "radius": sh["radius"], "bsdf": bsdf}
+            shape = {"type": "sphere", "bsdf": bsdf,
+                     "to_world": T().translate(c).rotate([0, 0, 1], sh["rotate_z"]).scale(sh["radius"])}
+        elif sh["type"] == "torus":
+            shape = {"type": "ply", "filename": str(torus_ply(sh["radius"], sh["tube"])), "bsdf": bsdf,
+                     "to_world": T().translate(c).rotate([0, 0, 1], sh["rotate_z"])}
         elif sh["type"] == "rectangle":
             sx, sy = sh["size"]
             shape = {"type": "rectangle", "to_world": T().translate(c).scale([sx / 2, sy / 2, 1.0]), "bsdf": bsdf}

@@ -15,11 +15,14 @@ leaves more live GL objects behind, in the same state, is a leak. Prints a summa
 from __future__ import annotations
 
 import argparse
+import ctypes
+import functools
 import json
 import os
 import random
 import sys
 import time
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +52,32 @@ def rss_mb() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
+class _MallInfo2(ctypes.Structure):
+    _fields_ = [(n, ctypes.c_size_t) for n in
+                ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
+                 "keepcost")]
+
+
+@functools.lru_cache(maxsize=1)
+def _libc():
+    libc = ctypes.CDLL("libc.so.6")
+    libc.mallinfo2.restype = _MallInfo2
+    return libc
+
+
+def malloc_mb() -> dict[str, float]:
+    """glibc's heap over all arenas (MB): ``system`` taken from the OS (sbrk/mmap heaps plus
+    large mmapped blocks), ``used`` handed out to the program, ``free`` held in the arenas'
+    free lists (fragmentation and not-yet-returned memory). Empty where glibc is not the allocator."""
+    try:
+        m = _libc().mallinfo2()
+    except (OSError, AttributeError):
+        return {}
+    mb = 2.0 ** -20
+    return {"system": (m.arena + m.hblkhd) * mb, "used": (m.uordblks + m.hblkhd) * mb, "free": m.fordblks * mb,
+            "mmapped": m.hblkhd * mb}
+
+
 def slope_per_100(x: list[int], y: list[float]) -> float:
     """Least-squares slope of y over x, per 100 units of x."""
     if len(x) < 2:
@@ -56,14 +85,26 @@ def slope_per_100(x: list[int], y: list[float]) -> float:
     return float(np.polyfit(np.asarray(x, float), np.asarray(y, float), 1)[0] * 100)
 
 
-def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=(96, 64)) -> dict:
+def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=(96, 64),
+        gl_per_edit: bool = False, trace_python: bool = False, in_state: bool = False) -> dict:
+    """``gl_per_edit``: count the live GL objects around every edit (slow: 7 x 4096 glIs calls each);
+    ``trace_python``: tracemalloc from the end of the warm-up edits, its largest survivors at the end
+    (Python objects and numpy arrays; torch's and the GL driver's memory are not traced);
+    ``in_state``: at each sample, also go to one state (default preset, sphere, no compare, object
+    view; the edits after it start from there) and sample again: memory that a state holds
+    (a large mesh's, a compare view's) is then told apart from memory that grows."""
     from nbrdf.viewer.app import App
     from nbrdf.viewer.lookdev import presets
     from nbrdf.viewer.options import ViewOptions
 
     rng = random.Random(seed)
     app = App(ViewOptions(size=size), size=size)
-    app.BUDGET_STILL_MS = app.BUDGET_DRAG_MS = 1e9  # a fixed render size: the measurement is of leaks, not speed
+    # Render sizes that do not depend on the machine's speed (the interactive scale steps up frame by frame
+    # as on a fast machine, never down): the same edits make the same targets, the measurement is of leaks.
+    app.refine.settings.budget_ms = 1e9
+    # The compare labels' textures are a cache of 16 texts (viewer/labels.py) whose texts follow the Monte
+    # Carlo worker's timing ("reference (MC, 24 spp)"): off, so the same edits leave the same GL objects.
+    app.lookdev.compare_part.show_labels = False
     ld = app.lookdev
     names = [n for n in presets() if n != "worn_tiles"]  # textured presets build a latent texture each
     meshes = ["sphere", "testmesh", str(ROOT / "viewer/assets/meshes/pebble_on_plinth.glb"), "sphere"]
@@ -71,6 +112,8 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
     counts: dict[str, int] = {}
     failures: list[str] = []
     jumps: list[tuple[float, int, str]] = []  # (resident memory added by an edit and its frame, edit, kind)
+    states: list[dict] = []  # in_state: the samples taken in one state (``canonical``)
+    trace: list[dict] = []  # per edit: what it was, and the memory (and GL objects) its edit and frame added
 
     def edit(k: int) -> str:
         r = rng.random()
@@ -80,18 +123,21 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
             key = rng.choice([k for k in ("roughness", "ior", "sigma_t") if hasattr(layer, k)] or ["roughness"])
             lo, hi = {"roughness": (0.02, 0.9), "ior": (1.1, 2.0), "sigma_t": (0.0, 3.0)}[key]
             ok = ld.set_param(i, key, round(rng.uniform(lo, hi), 3)) if hasattr(layer, key) else True
-            return "param" if ok else f"param failed: {ld.error}"
+            return f"param {key}" if ok else f"param failed: {ld.error}"
         if r < 0.65:
             ld.orbit(rng.uniform(-30, 30), rng.uniform(-10, 10))
             ld.zoom(rng.uniform(0.9, 1.1))
-            ld.set_view(rng.choice(["object", "object", "lobe", "slice"]))
-            return "view"
+            view = rng.choice(["object", "object", "lobe", "slice"])
+            ld.set_view(view)
+            return f"view {view}"
         if r < 0.8:
-            return "preset" if ld.load_preset(rng.choice(names)) else f"preset failed: {ld.error}"
+            name = rng.choice(names)
+            return f"preset {name}" if ld.load_preset(name) else f"preset failed: {ld.error}"
         if r < 0.92:
-            return "compare" if ld.set_compare(rng.choice(["off", "side", "wipe", "error", "off"])) \
-                else f"compare failed: {ld.error}"
-        return "mesh" if ld.set_mesh(rng.choice(meshes)) else f"mesh failed: {ld.error}"
+            mode = rng.choice(["off", "side", "wipe", "error", "off"])
+            return f"compare {mode}" if ld.set_compare(mode) else f"compare failed: {ld.error}"
+        mesh = rng.choice(meshes)
+        return f"mesh {Path(mesh).name}" if ld.set_mesh(mesh) else f"mesh failed: {ld.error}"
 
     def canonical() -> dict:
         """The same state every time (default preset, sphere, no compare, object view): GL objects
@@ -102,7 +148,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         ld.set_view("object")
         for _ in range(2):
             app.step()
-        return {"rss_mb": rss_mb(), "gl": gl_objects()}
+        return {"rss_mb": rss_mb(), "gl": gl_objects(), "malloc_mb": malloc_mb()}
 
     try:
         # Warm-up: every view and compare mode for each kind of BRDF the presets give (analytic, neural),
@@ -128,18 +174,37 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
             rng.seed(seed)
             for k in range(edits + 1):
                 if k % every == 0 and (p == 0 or k > 0):
-                    samples.append({"edit": p * edits + k, "rss_mb": rss_mb(), "gl": gl_objects()})
+                    samples.append({"edit": p * edits + k, "rss_mb": rss_mb(), "gl": gl_objects(),
+                                    "malloc_mb": malloc_mb()})
+                    if in_state:  # the same measurement in one state: what the state holds is left out
+                        states.append({"edit": p * edits + k, **canonical()})
                 if k == edits:
                     break
-                before = rss_mb()
+                if trace_python and p == 0 and k == int(warmup * edits):
+                    tracemalloc.start(6)
+                before, heap0, t_edit = rss_mb(), malloc_mb(), time.perf_counter()
+                gl0 = sum(gl_objects().values()) if gl_per_edit else 0
                 what = edit(k)
                 app.step()
-                jumps.append((rss_mb() - before, p * edits + k, what.split()[0]))
+                heap1 = malloc_mb()
+                rec = {"edit": p * edits + k, "what": what, "rss_mb": rss_mb() - before,
+                       "seconds": time.perf_counter() - t_edit, "trim_ms": getattr(app, "trim_ms", 0.0),
+                       **{f"malloc_{key}_mb": heap1[key] - heap0[key] for key in heap1}}
+                if gl_per_edit:
+                    rec["gl"] = sum(gl_objects().values()) - gl0
+                trace.append(rec)
+                jumps.append((rec["rss_mb"], p * edits + k, what.split()[0]))
                 if "failed" in what:
                     failures.append(what)
                 counts[what.split()[0]] = counts.get(what.split()[0], 0) + 1
             passes.append(canonical())
         seconds = time.perf_counter() - t0
+        survivors = []
+        if trace_python and tracemalloc.is_tracing():
+            stats = tracemalloc.take_snapshot().statistics("traceback")
+            tracemalloc.stop()
+            survivors = [{"mb": st.size / 2**20, "blocks": st.count, "where": [str(f) for f in st.traceback][-6:]}
+                         for st in stats[:12]]
     finally:
         app.close()
     start = next(i for i, s in enumerate(samples) if s["edit"] >= warmup * edits * repeat)
@@ -156,8 +221,46 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         "rss_after_warmup_mb": after[0]["rss_mb"], "rss_end_mb": after[-1]["rss_mb"],
         "passes": passes,
         "largest_memory_steps": sorted(jumps, reverse=True)[:8],
+        "attribution": attribution(trace, after[0]["edit"]),
+        **in_state_slopes(states, after[0]["edit"]),
+        "trace": trace,
+        "python_survivors": survivors,
         "samples": samples,
     }
+
+
+def attribution(trace: list[dict], start: int) -> list[dict]:
+    """Per action (kind and argument) after ``start`` edits: how many, and the resident
+    memory, the heap in use and the GL objects they added in all (each edit with its frame)."""
+    rows: dict[str, dict] = {}
+    for t in trace:
+        if t["edit"] < start:
+            continue
+        key = t["what"] if "failed" not in t["what"] else t["what"].split(":")[0]
+        r = rows.setdefault(key, {"action": key, "n": 0, "rss_mb": 0.0, "malloc_used_mb": 0.0,
+                                  "malloc_system_mb": 0.0, "steps_over_5mb": 0, "gl": 0})
+        r["n"] += 1
+        r["rss_mb"] += t["rss_mb"]
+        r["malloc_used_mb"] += t.get("malloc_used_mb", 0.0)
+        r["malloc_system_mb"] += t.get("malloc_system_mb", 0.0)
+        r["steps_over_5mb"] += t["rss_mb"] > 5.0
+        r["gl"] += t.get("gl", 0)
+    return sorted(rows.values(), key=lambda r: -r["rss_mb"])
+
+
+def in_state_slopes(states: list[dict], start: int) -> dict:
+    """The slopes of the samples taken in one state, after ``start`` edits."""
+    after = [s for s in states if s["edit"] >= start]
+    if len(after) < 2:
+        return {}
+    x = [s["edit"] for s in after]
+    gl = [sum(s["gl"].values()) for s in after]
+    return {"in_state": after,
+            "in_state_rss_slope_mb_per_100": slope_per_100(x, [s["rss_mb"] for s in after]),
+            "in_state_heap_used_slope_mb_per_100": slope_per_100(x, [s["malloc_mb"].get("used", 0.0) for s in after]),
+            "in_state_gl_slope_per_100": slope_per_100(x, gl),
+            "in_state_rss_mb": [after[0]["rss_mb"], after[-1]["rss_mb"], max(s["rss_mb"] for s in after)],
+            "in_state_gl": [gl[0], gl[-1], max(gl)]}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -168,8 +271,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--warmup", type=float, default=0.2, help="the fraction of edits left out of the fit")
     ap.add_argument("--repeat", type=int, default=1, help="passes of the same edit sequence")
     ap.add_argument("--out", type=Path, help="JSON with every sample")
+    ap.add_argument("--gl-per-edit", action="store_true", help="count GL objects around every edit (slow)")
+    ap.add_argument("--in-state", action="store_true",
+                    help="also sample in one state (default preset, sphere, object view) every --every edits")
+    ap.add_argument("--tracemalloc", action="store_true",
+                    help="trace Python allocations after the warm-up; print the largest survivors")
     a = ap.parse_args(argv)
-    res = run(a.edits, a.seed, a.every, a.warmup, a.repeat)
+    res = run(a.edits, a.seed, a.every, a.warmup, a.repeat, gl_per_edit=a.gl_per_edit, trace_python=a.tracemalloc, in_state=a.in_state)
     if a.out:
         a.out.write_text(json.dumps(res, indent=1))
     print(f"soak: {res['edits']} edits (seed {res['seed']}) in {res['seconds']:.0f} s {res['kinds']}; after "
@@ -181,8 +289,24 @@ def main(argv: list[str] | None = None) -> int:
     print("soak: in one state (default preset, sphere, object view) after warm-up and after each pass: "
           + "; ".join(f"GL objects {sum(c['gl'].values())}, memory {c['rss_mb']:.0f} MB" for c in res["passes"]),
           flush=True)
+    if "in_state" in res:
+        r0, r1, rmax = res["in_state_rss_mb"]
+        g0, g1, gmax = res["in_state_gl"]
+        print(f"soak: in one state every {a.every} edits after the warm-up: memory {r0:.0f} -> {r1:.0f} MB "
+              f"(max {rmax:.0f}), slope {res['in_state_rss_slope_mb_per_100']:+.2f} MB per 100 edits (heap in use "
+              f"{res['in_state_heap_used_slope_mb_per_100']:+.2f}); GL objects {g0} -> {g1} (max {gmax}), slope "
+              f"{res['in_state_gl_slope_per_100']:+.2f} per 100 edits", flush=True)
     print("soak: largest memory steps (MB, edit, kind): "
           + ", ".join(f"{mb:+.1f} at {k} ({kind})" for mb, k, kind in res["largest_memory_steps"][:5]), flush=True)
+    print("soak: per action after warm-up (n, resident MB, heap in use MB, heap from the OS MB, steps > 5 MB"
+          + (", GL objects" if a.gl_per_edit else "") + "):", flush=True)
+    for r in res["attribution"]:
+        print(f"  {r['action']:<32} {r['n']:4d} {r['rss_mb']:+8.1f} {r['malloc_used_mb']:+8.1f} "
+              f"{r['malloc_system_mb']:+8.1f} {r['steps_over_5mb']:3d}" + (f" {r['gl']:+4d}" if a.gl_per_edit else ""),
+              flush=True)
+    for st in res["python_survivors"]:
+        print(f"soak: python survivor {st['mb']:.2f} MB in {st['blocks']} blocks from " + " <- ".join(
+            reversed(st["where"][-3:])), flush=True)
     if res["failures"]:
         print("soak: failed edits: " + "; ".join(res["failures"]), flush=True)
     return 0

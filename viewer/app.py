@@ -39,8 +39,10 @@ import glfw
 import moderngl
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer import allocator
 from nbrdf.viewer.autosave import WindowAutosave
 from nbrdf.viewer.gl import check_version
+from nbrdf.viewer.gl_faults import FrameGuard, GlContextLost, fault_types
 from nbrdf.viewer.lookdev import MAX_PASSES, LookDev
 from nbrdf.viewer.refinement import Refinement
 
@@ -86,6 +88,10 @@ class WindowUnavailable(RuntimeError):
     """No window could be opened (no display, no GL 3.3 visual)."""
 
 
+#: Seconds between two trims of the heaps (after edits only).
+TRIM_INTERVAL_S = 2.0
+
+
 class App:
     """The previewer window. ``lookdev`` is the session (its methods are the
     app's API: the panels and the tests call them); ``step`` runs one frame."""
@@ -93,6 +99,7 @@ class App:
     def __init__(self, opts, size: tuple[int, int] | None = None, visible: bool = True):
         if imgui is None:
             raise WindowUnavailable(f"imgui-bundle is not usable ({_IMGUI_ERROR})")
+        allocator.tune()  # large blocks in their own mappings: a session's memory follows what it holds
         self.opts = opts
         if not glfw.init():
             raise WindowUnavailable("glfw could not initialise")
@@ -146,6 +153,11 @@ class App:
         self._events: deque = deque()  # the view's mouse events since the last frame, in order
         self._cursor = glfw.get_cursor_pos(self.window)
         self.clock = FrameClock()
+        self._trim_due, self._trimmed_at = False, 0.0
+        self.trim_ms = 0.0
+        """The last ``malloc_trim``'s milliseconds (viewer/allocator.py)."""
+        self.gl_guard = FrameGuard(self.lookdev, self._recover_gl)
+        """A frame whose GL work fails is one line in the panel (viewer/gl_faults.py)."""
         imgui.get_io().config_input_trickle_event_queue = True  # one click per imgui pass: none is lost
         body_notice = self.lookdev.bodies.calibrate(self.lookdev.brdf) if self.lookdev.brdf is not None else ""
         self.lookdev.renderer.table_sampling = self.lookdev.bodies.sampling(self.lookdev.renderer.sampling)
@@ -297,6 +309,25 @@ class App:
         if self.lookdev.side_by_side != self._side:  # entering or leaving side by side: fit the halves
             self.frame()
         self._mouse()
+        ld = self.lookdev
+        self._trim_due |= ld.passes == 0  # an edit or a view change: its CPU work freed memory
+        drew = self.gl_guard.run(lambda: self._draw_view(w, h, passes_per_frame))
+        self.screen.viewport = (0, 0, w, h)  # the panels' pass covers the window (after a failed view too)
+        imgui.render()
+        _ = self.ctx.error  # PyOpenGL (the panels' backend) raises on any error flag left behind
+        drew = self.gl_guard.run(lambda: self.gui.render(imgui.get_draw_data())) and drew
+        glfw.swap_buffers(self.window)
+        self.ctx.finish()
+        if drew:
+            self.gl_guard.frame_done()
+        ld.frame_done()
+        self._trim()
+        self.clock.presented()
+        ld.timings.fps, ld.timings.frame_ms = self.clock.fps, self.clock.frame_ms
+        self._measure((time.perf_counter() - t0) * 1000.0)
+
+    def _draw_view(self, w: int, h: int, passes_per_frame: int) -> None:
+        """The 3D view (or the screenshot being rendered) into the window, all its GL work."""
         self.screen.use()
         self.screen.viewport = (0, 0, w, h)
         self.screen.clear(0.0, 0.0, 0.0, 1.0)
@@ -313,16 +344,20 @@ class App:
             ld.render(self.screen, (vw, vh), passes, scale=scale, interactive=self.interactive, quick=self.quick)
         self.screen.viewport = (0, 0, w, h)
         self.screen.use()
-        self.screen.viewport = (0, 0, w, h)
-        imgui.render()
-        _ = self.ctx.error  # PyOpenGL (the panels' backend) raises on any error flag left behind
-        self.gui.render(imgui.get_draw_data())
-        glfw.swap_buffers(self.window)
-        self.ctx.finish()
-        ld.frame_done()
-        self.clock.presented()
-        ld.timings.fps, ld.timings.frame_ms = self.clock.fps, self.clock.frame_ms
-        self._measure((time.perf_counter() - t0) * 1000.0)
+
+    def _trim(self) -> None:
+        """After edits, at most every ``TRIM_INTERVAL_S``: the heaps' free pages back to the system."""
+        now = time.monotonic()
+        if self._trim_due and now - self._trimmed_at >= TRIM_INTERVAL_S:
+            allocator.trim()
+            self._trim_due, self._trimmed_at = False, time.monotonic()
+            self.trim_ms = (self._trimmed_at - now) * 1000.0
+
+    def _recover_gl(self) -> None:
+        """After a failed frame: fresh render targets, the accumulation restarted, error flags cleared."""
+        _ = self.ctx.error
+        self.lookdev.renderer.release_targets()
+        self.lookdev.invalidate()
 
     def _show_screenshot(self) -> None:
         """The screenshot being rendered, fitted into the view (imgui's background layer)."""
@@ -362,20 +397,33 @@ class App:
         return np.frombuffer(data, dtype=np.uint8).reshape(h, w, 3)[::-1].copy()
 
     def run(self) -> None:
-        while not glfw.window_should_close(self.window):
-            self.step()
-            if self.lookdev.passes >= MAX_PASSES and not self.dragging:
-                time.sleep(0.01)
+        try:
+            while not glfw.window_should_close(self.window):
+                self.step()
+                if self.lookdev.passes >= MAX_PASSES and not self.dragging:
+                    time.sleep(0.01)
+        except GlContextLost:
+            self.close(abnormal=True)
+            raise
         self.close()
 
-    def close(self) -> None:
+    def close(self, abnormal: bool = False) -> None:
+        """Closes the window; ``abnormal`` (the GL gave up): the session is written but kept
+        for recovery, as after a crash, and GL failures while releasing are ignored."""
         if self.window:
             self.prefs.size = self._window_size()
             self.prefs.save()
-            self.autosave.close()  # the final state written, the lock released: a clean exit
-            self.lookdev.close()
-            _ = self.ctx.error
-            self.gui.shutdown()
+            if abnormal:
+                self.autosave.keep_for_recovery()
+            else:
+                self.autosave.close()  # the final state written, the lock released: a clean exit
+            try:
+                self.lookdev.close()
+                _ = self.ctx.error
+                self.gui.shutdown()
+            except fault_types():
+                if not abnormal:
+                    raise
             glfw.destroy_window(self.window)
             self.window = None
         glfw.terminate()

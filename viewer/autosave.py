@@ -277,3 +277,9 @@ class WindowAutosave:
     def close(self) -> None:
         """At exit: the final state written, the lock released."""
         self.saver.close(self.lookdev.session())
+
+    def keep_for_recovery(self) -> None:
+        """At an abnormal exit the window itself notices (the GL gave up): the final state
+        written and the lock left, so the next start offers to restore it as after a crash."""
+        self.saver.flush(self.lookdev.session())
+        self.saver.active = False

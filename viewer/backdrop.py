@@ -27,6 +27,7 @@ import numpy as np
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer import shaders
 from nbrdf.viewer.modes import Background, View
+from nbrdf.viewer.size_cache import SizeCache, release_all
 
 #: Half-width of the ground's shadow map, world units (objects fit the unit sphere).
 SHADOW_EXTENT = 1.8
@@ -141,7 +142,7 @@ class Backdrop:
         except moderngl.Error as e:
             raise NbrdfError(f"backdrop shader build failed: {str(e).splitlines()[0]}") from None
         self.vao = ctx.vertex_array(self.prog, [])
-        self._targets: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, moderngl.Texture]] = {}
+        self._targets: SizeCache[tuple[moderngl.Framebuffer, moderngl.Texture]] = SizeCache(release_all)
         self._blur: tuple[int, moderngl.Texture] | None = None
         self._shadow: tuple[int, moderngl.Texture, float] | None = None
 
@@ -171,11 +172,10 @@ class Backdrop:
         return self._shadow[1], self._shadow[2]
 
     def _target(self, w: int, h: int, slot: str):
-        key = (slot, w, h)
-        if key not in self._targets:
+        def make():
             tex = self.ctx.texture((w, h), 4, dtype="f4")
-            self._targets[key] = (self.ctx.framebuffer([tex]), tex)
-        return self._targets[key]
+            return self.ctx.framebuffer([tex]), tex
+        return self._targets.get((slot, w, h), make)
 
     # --- the pass ------------------------------------------------------------------------------
     def apply(self, accum: moderngl.Texture, passes: float, state, settings: BackdropSettings,
@@ -221,9 +221,6 @@ class Backdrop:
         return np.ascontiguousarray(img[::-1])
 
     def release(self) -> None:
-        for fbo, tex in self._targets.values():
-            fbo.release()
-            tex.release()
         self._targets.clear()
         for res in (self._blur, self._shadow):
             if res is not None:

@@ -22,6 +22,7 @@ from nbrdf.viewer.modes import View
 from nbrdf.viewer.neural_gpu import SHARE_UNIT
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf
 from nbrdf.viewer.programs import GLSL_430, ProgramKey
+from nbrdf.viewer.size_cache import SizeCache, release_all
 from nbrdf.viewer.view_settings import ViewState, bind_uniforms
 
 if TYPE_CHECKING:
@@ -43,7 +44,8 @@ class LitPasses:
 
     def __init__(self, renderer: "Renderer"):
         self.r = renderer
-        self._gbuf: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = {}
+        self.gbuffers: SizeCache[tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = SizeCache(release_all)
+        """The G-buffer of each (slot, w, h), a few sizes per slot (viewer/size_cache.py)."""
 
     def view_compute(self, view: View, state: ViewState, w: int, h: int, brdf: GpuBrdf,
                       tex: moderngl.Texture) -> None:
@@ -60,14 +62,13 @@ class LitPasses:
     def gbuffer_target(self, w: int, h: int, slot: str) -> tuple[moderngl.Framebuffer, list[moderngl.Texture]]:
         """The G-buffer of ``slot`` at (w, h): three RGBA32F targets sharing the
         accumulation target's depth buffer (the background pass then fills the rest)."""
-        key = (slot, w, h)
-        if key not in self._gbuf:
+        def make():
             depth = self.r.target(w, h, slot)[0].depth_attachment
             texs = [self.r.ctx.texture((w, h), 4, dtype="f4") for _ in GBUFFER_UNITS]
             for t in texs:
                 t.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            self._gbuf[key] = (self.r.ctx.framebuffer(texs, depth), texs)
-        return self._gbuf[key]
+            return self.r.ctx.framebuffer(texs, depth), texs
+        return self.gbuffers.get((slot, w, h), make)
 
     def deferred(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
                          slot: str) -> np.ndarray:

@@ -46,7 +46,7 @@ from nbrdf.viewer.env_presets import resolve_environment
 from nbrdf.viewer.material_parts import MaterialParts, PartMaterial
 from nbrdf.viewer.mesh import GLTF_SUFFIXES, named_mesh
 from nbrdf.viewer.modes import BrdfMode, CompareMode, View
-from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, gpu_brdf
+from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, gpu_brdf, material_key
 from nbrdf.viewer.plane_curves import PlaneCurves
 from nbrdf.viewer.refine_job import IdleRefiner
 from nbrdf.viewer.renderer import Renderer
@@ -289,7 +289,8 @@ class LookDev(SessionEdits):
         """Picks up finished background work (latent textures) and renders the
         next frame of a turntable capture."""
         if self.textures.finished:
-            self.guarded(self._apply_material)
+            if not self.guarded(self._apply_material):
+                self._keep_shown_material()
             self.notice = ""
         refined = self.idle_refine.poll()
         if refined is not None:  # a code that beats the network's on the material's own simulation
@@ -297,6 +298,18 @@ class LookDev(SessionEdits):
             self.invalidate()
         if self.turntables.capture is not None and self.brdf is not None:
             self.guarded(self.turntables.step)
+
+    def _keep_shown_material(self) -> None:
+        """After a material whose latent texture could not be made (``error`` says why):
+        the editor goes back to the material still shown, and the failed edit leaves no undo step."""
+        if self.brdf is None or material_key(self.brdf.material) == material_key(self.material):
+            return
+        self.editor = StackEditor.from_material(self.brdf.material)
+        snap, h = self.snapshot(), self.history
+        if h.undo_stack and h.undo_stack[-1] == snap:
+            h.current = h.undo_stack.pop()
+        else:
+            h.commit(snap)
 
     def wait_svbrdf(self, timeout: float = 60.0) -> None:
         """Waits for the latent texture being built (tests, scripts)."""

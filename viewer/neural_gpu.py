@@ -21,6 +21,7 @@ from nbrdf.neural.gpu_pack import STORE_CONST, STORE_SSBO, STORE_TEXTURE, STORE_
 from nbrdf.neural.latent_texture import LatentTexture
 from nbrdf.viewer import shaders
 from nbrdf.viewer.gl import check_version
+from nbrdf.viewer.gpu_memory import check_texture, raise_if_gl_out_of_memory
 
 WEIGHT_UNIT = 7  # texture unit of the weight texture
 SHARE_UNIT = 8   # texture unit of a latent texture's per-texel share
@@ -157,14 +158,31 @@ class GpuLatentTexture:
     def __init__(self, ctx: moderngl.Context, gdec: GpuDecoder, tex: LatentTexture):
         h, w = tex.size
         width = gdec.dec.spec.width
-        with torch.no_grad():
-            share = gdec.dec.latent_share(tex.levels[0].float())          # (H, W, 3, width)
-        layers = share.reshape(h, w, 3, width // 4, 4).permute(2, 3, 0, 1, 4).reshape(-1, h, w, 4)
-        coat = torch.zeros(1, h, w, 4)  # the last layer: the texel's coat (roughness, ior)
-        coat[0, ..., :2] = _texel_coats(gdec.dec, tex.levels[0])
-        layers = torch.cat([layers, coat])
-        self.texture = ctx.texture_array((w, h, layers.shape[0]), 4, layers.contiguous().numpy().astype("f4").tobytes(),
-                                         dtype="f4")
+        n_layers = 3 * width // 4 + 1
+        what = "the latent texture"
+        # On the CPU before the upload, float32: the share, its layered copy, and that with the coat layer.
+        check_texture(ctx, what, (h, w), n_layers, staging_bytes=3 * h * w * n_layers * 16)
+        try:
+            with torch.no_grad():
+                share = gdec.dec.latent_share(tex.levels[0].float())          # (H, W, 3, width)
+            layers = share.reshape(h, w, 3, width // 4, 4).permute(2, 3, 0, 1, 4).reshape(-1, h, w, 4)
+            coat = torch.zeros(1, h, w, 4)  # the last layer: the texel's coat (roughness, ior)
+            coat[0, ..., :2] = _texel_coats(gdec.dec, tex.levels[0])
+            data = torch.cat([layers, coat]).contiguous().numpy()
+            del share, layers, coat
+            _ = ctx.error  # a flag left by earlier work is not this upload's
+            self.texture = ctx.texture_array((w, h, n_layers), 4, data, dtype="f4")
+        except MemoryError:
+            raise NbrdfError(f"{what} {w}x{h}: out of memory while building it; use smaller maps") from None
+        except RuntimeError as e:  # torch's allocator: "can't allocate memory"
+            if "alloc" not in str(e):
+                raise
+            raise NbrdfError(f"{what} {w}x{h}: out of memory while building it; use smaller maps") from None
+        try:
+            raise_if_gl_out_of_memory(ctx, f"{what} {w}x{h}")
+        except NbrdfError:
+            self.texture.release()
+            raise
         self.texture.repeat_x = self.texture.repeat_y = True
         self.texture.build_mipmaps()
         self.texture.anisotropy = 1.0

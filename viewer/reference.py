@@ -37,6 +37,7 @@ import torch
 
 from nbrdf.neural.geometry import incidence, lobe_grid
 from nbrdf.neural.material import Material, material_to_dict
+from nbrdf.viewer.reference_cache import ReferenceCache
 from nbrdf.viewer.reference_lit import LitRun, LitSpec, f32
 
 
@@ -278,7 +279,7 @@ class ReferenceWorker:
         per round; ``threads``: torch threads of the process (default: half the cores)."""
         self.start_spp, self.round_spp = start_spp, round_spp
         self.threads = threads or max(1, (os.cpu_count() or 2) // 2)
-        self._cache: dict[str, ReferenceImage] = {}
+        self._cache = ReferenceCache()
         self._current: str | None = None
         self._spec: JobSpec | None = None  # what was sent for ``_current``: sent again after a restart
         self._proc = None
@@ -362,8 +363,8 @@ class ReferenceWorker:
             n = self._job_deaths[key] = self._job_deaths.get(key, 0) + 1
             if n >= self.MAX_DEATHS_PER_JOB:
                 why = f"{msg} {n} times on this job; not retried"
-                self._cache[key] = (ReferenceImage(np.zeros((*spec.mask.shape, 3), np.float32), 0, True, why)
-                                    if isinstance(spec, (JobSpec, LitSpec)) else spec.failed(why))
+                self._cache.put(key, ReferenceImage(np.zeros((*spec.mask.shape, 3), np.float32), 0, True, why)
+                                if isinstance(spec, (JobSpec, LitSpec)) else spec.failed(why))
                 self._current = self._spec = None
                 self._last_death = (time.monotonic(), f"{msg} {n} times on this job; not retried")
                 return
@@ -381,7 +382,8 @@ class ReferenceWorker:
                 key, img, spp, done, err, se = self._results.get_nowait()
             except (queue.Empty, OSError, ValueError):
                 return
-            self._cache[key] = ReferenceImage(img, spp, done, err, se) if isinstance(img, np.ndarray) else img
+            self._cache.put(key, ReferenceImage(img, spp, done, err, se) if isinstance(img, np.ndarray) else img,
+                            keep=self._current)
             if key == self._current and (done or err):
                 self._current = self._spec = None
 

@@ -49,6 +49,7 @@ from nbrdf.viewer.mesh import Mesh, named_mesh
 from nbrdf.viewer.modes import ToneMap, View
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf, MaterialPipeline, NormalMaps, gpu_brdf
 from nbrdf.viewer.programs import ProgramCache, ProgramKey
+from nbrdf.viewer.size_cache import SizeCache, release_all
 from nbrdf.viewer.view_settings import ViewState
 
 if TYPE_CHECKING:
@@ -96,7 +97,8 @@ class Renderer:
         self.lit = LitPasses(self)
         """The lit passes of the object view (deferred compute or fragment) and the compute lobe / slice."""
         self._mesh_vaos: dict[tuple, moderngl.VertexArray] = {}
-        self._fbo: dict[tuple[str, int, int], tuple[moderngl.Framebuffer, moderngl.Texture]] = {}
+        self._fbo: SizeCache[tuple[moderngl.Framebuffer, moderngl.Texture]] = SizeCache(
+            lambda t: release_all(t[0], t[0].depth_attachment, t[1]), on_evict=self.lit.gbuffers.evict)
         self.tone = self.programs.get(ProgramKey("tonemap.frag"))
         self.background_prog = self.programs.get(ProgramKey("background.frag"))
         self.empty_tone = ctx.vertex_array(self.tone, [])
@@ -256,12 +258,15 @@ class Renderer:
 
     # --- frames -------------------------------------------------------------------
     def target(self, w: int, h: int, slot: str = MAIN):
-        key = (slot, w, h)
-        if key not in self._fbo:
+        def make():
             tex = self.ctx.texture((w, h), 4, dtype="f4")
-            depth = self.ctx.depth_renderbuffer((w, h))
-            self._fbo[key] = (self.ctx.framebuffer([tex], depth), tex)
-        return self._fbo[key]
+            return self.ctx.framebuffer([tex], self.ctx.depth_renderbuffer((w, h))), tex
+        return self._fbo.get((slot, w, h), make)
+
+    def release_targets(self) -> None:
+        """Releases every accumulation target and G-buffer (made again on next use)."""
+        self._fbo.clear()
+        self.lit.gbuffers.clear()
 
     def frame_texture(self, view: View | str, w: int, h: int, slot: str = MAIN) -> moderngl.Texture:
         """The accumulation target of ``view`` at (w, h) in ``slot`` as the last ``accumulate`` left it."""

@@ -74,6 +74,9 @@ class TextureJobs:
                 job.result = latent_texture(model, m, progress=lambda d, n: setattr(job, "progress", d / n))
             except NbrdfError as e:
                 job.error = str(e)
+            except (MemoryError, RuntimeError) as e:  # torch's allocator raises RuntimeError
+                job.error = f"the latent texture: out of memory while building it ({type(e).__name__}); " \
+                    "use smaller maps"
         threading.Thread(target=build, name="nbrdf-svbrdf", daemon=True).start()
         return job
 

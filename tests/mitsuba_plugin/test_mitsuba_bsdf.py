@@ -94,15 +94,17 @@ def test_a_code_file_renders_as_its_material(mi, materials, tmp_path):
 @pytest.mark.parametrize("props,message", [
     ({}, 'property "material"'),
     ({"material": "/nonexistent/m.json"}, "m.json"),
-    ({"material": "MAPPED"}, "texture-mapped"),
+    ({"material": "MAPPED"}, "nope.png"),
     ({"material": "GOLD", "weights": "BROKEN"}, "safetensors"),
 ])
 def test_bad_input_is_one_clear_line(mi, materials, tmp_path, props, message):
-    from pathlib import Path
+    if props.get("material") == "MAPPED":  # a texture-mapped material whose map is missing
+        import json
 
-    assets = Path(materials["car_paint"]).parent
-    if props.get("material") == "MAPPED":
-        props["material"] = str(assets / "worn_tiles.json")
+        (tmp_path / "mapped.json").write_text(json.dumps({"format": "nbrdf-material/1", "name": "m", "layers": [
+            {"type": "dielectric", "roughness": {"texture": "nope.png", "channel": "r", "range": [0.1, 0.3]},
+             "ior": 1.5}, {"type": "diffuse", "albedo": 0.5}]}))
+        props["material"] = str(tmp_path / "mapped.json")
     if props.get("material") == "GOLD":
         props["material"] = materials["uncoated"]
         (tmp_path / "w.safetensors").write_bytes(b"not a weight file")

@@ -104,3 +104,24 @@ def test_white_furnace_of_an_energy_conserving_stack(mi, materials):
     assert abs(got.mean() - want.mean()) < 5e-3, (got.mean(), want.mean())
     assert np.all(np.abs(img[inside] - img[inside].mean(1, keepdims=True)) < 1e-5)  # grey stays grey
     assert abs(np.mean(albedo) - 1) < 0.12
+
+
+@pytest.mark.slow
+def test_symbolic_render_of_the_neural_plugin_warns_once(mi, materials, capfd, monkeypatch):
+    """On LLVM the decoder inside a symbolic call loads every weight with a
+    gather (record 071): a plain ``mi.render`` still works, and Mitsuba's log
+    says once to render in wavefront mode."""
+    from nbrdf.mitsuba import bsdf
+
+    monkeypatch.setattr(bsdf, "_warned_symbolic", False)
+    scene = mi.load_dict({"type": "scene", "integrator": {"type": "path", "max_depth": 2},
+                          "light": {"type": "constant", "radiance": 1.0},
+                          "sphere": {"type": "sphere", "bsdf": {"type": "nbrdf", "material": materials["white_coat"]}},
+                          "camera": {"type": "perspective", "fov": 25, "to_world": mi.ScalarTransform4f().look_at(
+                              origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0]),
+                              "film": {"type": "hdrfilm", "width": 6, "height": 6},
+                              "sampler": {"type": "independent", "sample_count": 4}}})
+    capfd.readouterr()
+    assert np.array(mi.render(scene))[3, 3].mean() > 0.5
+    mi.render(scene, seed=1)
+    assert "".join(capfd.readouterr()).count("nbrdf: traced symbolically on the LLVM backend") == 1

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from nbrdf.cli.main import nbrdf_main
+from nbrdf.neural.errors import NbrdfError
 
 pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
 
@@ -108,15 +109,9 @@ def test_teapot_ply_is_cached_and_readable(tmp_path, monkeypatch):
 
 
 # --- nbrdf report scenes: the equal-time logic ------------------------------------------------
-def test_equal_time_spp_and_crossover():
-    from nbrdf.mitsuba.scene_report import crossover_seconds, equal_time_spp
-    from nbrdf.neural.errors import NbrdfError
+def test_crossover():
+    from nbrdf.mitsuba.scene_report import crossover_seconds
 
-    assert equal_time_spp(10.0, 0.5, 4) == 20  # 20 spp fill 10 s at 0.5 s/spp
-    assert equal_time_spp(10.0, 0.3, 4) == 32  # 33.3 spp -> whole chunks of 4
-    assert equal_time_spp(0.1, 5.0, 4) == 4  # never fewer than one chunk
-    with pytest.raises(NbrdfError):
-        equal_time_spp(10.0, 0.0, 4)
     # MSE ~ 1/t: 4e-3 after 10 s reaches 1e-3 after 40 s
     assert crossover_seconds(4e-3, 10.0, 1e-3) == pytest.approx(40.0)
     assert crossover_seconds(4e-3, 10.0, 0.0) == float("inf")
@@ -124,7 +119,7 @@ def test_equal_time_spp_and_crossover():
 
 @pytest.mark.slow
 def test_scene_report_on_a_tiny_scene(tmp_path):
-    """Both methods render; the MC's spp comes from its timing (whole chunks);
+    """Both methods render at equal time (each until it has spent the budget);
     the MSEs are those of the saved images against the cached converged
     reference, which a second run reads back instead of rendering."""
     from nbrdf.mitsuba.scene_report import SceneReportConfig, converged_reference, mse, run_scene_report
@@ -138,6 +133,8 @@ def test_scene_report_on_a_tiny_scene(tmp_path):
     (row,) = result["scenes"]
     assert row["scene"] == "tiny" and row["reference"]["spp"] == 8 and not row["reference"]["cached"]
     assert row["mc"]["spp"] % 2 == 0 and row["mc"]["spp"] >= 2 and row["neural"]["spp"] >= 2
+    for k in ("neural", "mc"):  # each rendered until it had spent the budget
+        assert row[k]["seconds"] >= cfg.time_budget - 0.01
     ref = converged_reference(load_scene(scene), cfg)
     assert ref["cached"] and ref["image"].shape == (9, 12, 3)
     for k in ("neural", "mc"):
@@ -153,3 +150,85 @@ def test_scene_report_on_a_tiny_scene(tmp_path):
     assert row["reference"]["noise_mse"] == pytest.approx(mse(ref["half_a"], ref["half_b"]) / 4)
     assert (tmp_path / "rep" / "scenes.png").is_file() and "tiny" in (tmp_path / "rep" / "scenes.md").read_text()
     json.loads((tmp_path / "rep" / "scenes.json").read_text())
+
+
+def test_neural_scenes_render_in_wavefront_mode_on_llvm(tmp_path, monkeypatch):
+    """Inside a symbolic call Dr.Jit's LLVM back end loads every decoder weight
+    with a per-lane gather (10x slower, record 071): ``render`` must render a
+    neural scene in wavefront mode, as it does the reference."""
+    import contextlib
+
+    pytest.importorskip("mitsuba")
+    import nbrdf.mitsuba
+    from nbrdf.mitsuba import render as render_mod
+    from nbrdf.mitsuba.scenes import load_scene
+
+    entered = []
+
+    @contextlib.contextmanager
+    def recording():
+        entered.append(True)
+        with nbrdf.mitsuba.bsdf.wavefront_mode():
+            yield
+
+    monkeypatch.setattr(nbrdf.mitsuba, "wavefront_mode", recording)
+    scene = load_scene(_tiny_scene(tmp_path / "s.json", GOLD))
+    res = render_mod.render(scene, (8, 6), 2, chunk_spp=1)
+    assert res.spp == 2 and np.isfinite(res.image).all()
+    assert len(entered) == 2  # one per chunk
+
+
+def test_generated_globe_maps_and_material(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    from nbrdf.mitsuba.generated import continents, globe_material
+    from nbrdf.neural.material import load_material
+
+    land = continents((64, 32))
+    assert land.shape == (32, 64) and 0.2 < land.mean() < 0.5  # about 35 % land
+    np.testing.assert_array_equal(land, continents((64, 32)))  # deterministic
+    # seamless in longitude: the first and last columns are neighbours on the sphere
+    assert np.abs(land[:, 0] - land[:, -1]).mean() < 3 * np.abs(np.diff(land, axis=1)).mean()
+    m = load_material(globe_material())
+    assert m.is_textured and len(m.interfaces) == 1
+    assert {p.split(".")[0] for p, _ in m.textures()} == {"layers[1]", "layers[2]"}
+
+
+@pytest.mark.parametrize("name", ["hammered", "knurled"])
+def test_generated_normal_maps_are_unit_tileable_and_tilted(name):
+    from nbrdf.mitsuba.generated import normal_map
+
+    rgb = normal_map(name, size=64)
+    n = rgb * 2 - 1
+    np.testing.assert_allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-5)
+    assert (n[..., 2] > 0).all() and (n[..., 2] < 0.99).mean() > 0.2  # tilted somewhere, never flipped
+    # tileable: the wrap-around step is no larger than the steps inside
+    assert np.abs(n[:, 0] - n[:, -1]).max() <= np.abs(np.diff(n, axis=1)).max() + 1e-6
+
+
+def test_torus_mesh_uv_and_normals():
+    from nbrdf.mitsuba.generated import torus_mesh
+
+    pos, nrm, uv, tris = torus_mesh(1.0, 0.3, 16, 8)
+    np.testing.assert_allclose(np.linalg.norm(nrm, axis=1), 1.0, atol=1e-6)
+    ring = np.linalg.norm(pos[:, :2], axis=1)
+    np.testing.assert_allclose(np.hypot(ring - 1.0, pos[:, 2]), 0.3, atol=1e-6)
+    assert uv.min() == 0.0 and uv.max() == 1.0 and tris.max() < len(pos)
+    # outward faces: the geometric normal agrees with the vertex normals
+    a, b, c = pos[tris[:, 0]], pos[tris[:, 1]], pos[tris[:, 2]]
+    g = np.cross(b - a, c - a)
+    keep = np.linalg.norm(g, axis=1) > 1e-9
+    assert (np.sum(g[keep] * nrm[tris[keep, 0]], 1) > 0).all()
+
+
+@pytest.mark.parametrize("shape, words", [
+    ({"type": "torus", "radius": 0.5, "tube": 0.6}, "tube"),
+    ({"type": "sphere", "normal_map": {"name": "bumpy"}}, "normal_map"),
+    ({"type": "sphere", "normal_map": {"name": "hammered", "tiles": [0, 1]}}, "tiles"),
+])
+def test_bad_torus_or_normal_map_is_one_line(shape, words):
+    from nbrdf.mitsuba.scenes import parse_scene
+
+    spec = {"camera": {"origin": [0, -3, 0], "target": [0, 0, 0]}, "environment": "studio",
+            "shapes": [{**shape, "material": {"diffuse": 0.5}}]}
+    with pytest.raises(NbrdfError, match=words):
+        parse_scene(spec, Path("."), "bad")

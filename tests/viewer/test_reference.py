@@ -181,3 +181,31 @@ def test_an_interrupted_job_resumes_with_its_paths():
     assert r.done and r.spp == got + 16
     rounds = [reference_eval(m, a.wi, a.wo, spp=8, seed=7919 * k)[0] for k in range(r.spp // 8)]
     np.testing.assert_allclose(r.image[a.mask], (sum(rounds) / len(rounds) * a.weight).numpy(), rtol=1e-5, atol=1e-7)
+
+
+def test_the_references_kept_in_the_window_are_bounded():
+    """Every orbit or edit of a compared view is a new job key: the window keeps the
+    latest references within the cache's bounds, never the current job's dropped."""
+    import queue
+
+    class Alive:
+        def is_alive(self) -> bool:
+            return True
+
+    w = ReferenceWorker()
+    w._proc, w._results = Alive(), queue.Queue()  # a process that has sent 40 images (no process started)
+    w._current = "job-0"  # still being computed: kept however old
+    for k in range(40):
+        w._results.put((f"job-{k}", np.zeros((8, 8, 3), np.float32), 8, k > 0, None, None))  # job-0 goes on
+    assert w.result("job-39") is not None and w.result("job-0") is not None
+    assert len(w._cache) == 16 and w.result("job-1") is None
+
+    from nbrdf.viewer.reference import ReferenceImage
+    from nbrdf.viewer.reference_cache import ReferenceCache
+
+    c = ReferenceCache(max_items=100, max_bytes=3 * 8 * 8 * 3 * 4)  # room for three 8 x 8 images
+    for k in range(5):
+        c.put(str(k), ReferenceImage(np.zeros((8, 8, 3), np.float32), 8, True))
+    assert [c.get(str(k)) is not None for k in range(5)] == [False, False, True, True, True]
+    c.put("big", ReferenceImage(np.zeros((64, 64, 3), np.float32), 8, True))  # over the bound alone: kept
+    assert len(c) == 1 and c.get("big") is not None

@@ -1,0 +1,181 @@
+"""Texture-mapped nbrdf materials in Mitsuba: per-hit lookups by the hit's uv.
+
+``LatentTextureKernel``: the neural side. A latent texture (``neural.svbrdf``)
+is kept as its decoder share (the latent's affine part of layer 1, per
+channel) and its clear coat per texel, on every mip level, in one flat
+buffer; a lookup is bilinear on the two mip levels around the hit's level of
+detail and blends them (trilinear), as ``LatentTexture.trilinear`` and the
+previewer's share texture do. The share is affine in the latent, so
+filtering shares is filtering latents.
+
+``ParamMaps``: the Monte Carlo side. The material's parameter maps sampled
+bilinearly at the hits' uvs (finest level: the ground truth is not filtered),
+as the ``ParamValues`` that ``neural.stack.material_stack`` turns into one
+layer stack per hit.
+
+uv follows Mitsuba (its bitmap texture): v = 0 is the image's top row, so a
+map painted upright appears upright (an equirectangular map on a sphere has
+its north at the top). Wrapping repeats.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import torch
+
+from nbrdf.neural.material import Material, TextureRef
+from nbrdf.neural.svbrdf import read_map
+
+
+def texture_rows_uv(u, v):
+    """Mitsuba's (u, v) -> the latent texture's (u, v) (row 0 at the image's bottom)."""
+    return u, 1.0 - v
+
+
+def level_of_detail(si, pixel_angle: float, size: tuple[int, int]):
+    """The mip level of a hit: its footprint, the ray cone of ``pixel_angle``
+    radians at the hit distance ``si.t``, in uv units (the larger of the u
+    and v extents, from ``si.dp_du``/``si.dp_dv``) times the texture's larger
+    side, in log2. None (the finest level only) with ``pixel_angle`` 0."""
+    if pixel_angle <= 0:
+        return None
+    world = dr.select(dr.isfinite(si.t), si.t, 0.0) * pixel_angle
+    fu = world / dr.maximum(dr.norm(si.dp_du), 1e-12)
+    fv = world / dr.maximum(dr.norm(si.dp_dv), 1e-12)
+    return dr.log2(dr.maximum(dr.maximum(fu, fv) * max(size), 1e-8))
+
+
+class LatentTextureKernel:
+    """Per-texel decoder shares (3 x width) and coats (roughness, ior) of a
+    latent texture's mip chain, looked up per lane."""
+
+    def __init__(self, decoder, texture, coat_split: bool, no_coat: tuple[float, float]):
+        """``decoder``: the torch ``Decoder``; ``texture``: a ``LatentTexture``
+        of codes (H, W, 3, 34); ``coat_split``: whether its codes carry a
+        coat (else ``no_coat`` everywhere)."""
+        spec = decoder.spec
+        self.width = spec.width
+        self.stride = 3 * self.width + 2
+        chunks, self.levels = [], []
+        offset = 0
+        with torch.no_grad():
+            for lv in texture.levels:
+                h, w = lv.shape[:2]
+                share = decoder.latent_share(lv.float()).reshape(h, w, 3 * self.width)
+                if coat_split:
+                    coat = lv[:, :, 0, spec.latent:spec.latent + 2].float()
+                else:
+                    coat = torch.tensor(no_coat, dtype=torch.float32).expand(h, w, 2)
+                chunks.append(torch.cat([share, coat], -1).reshape(-1).numpy())
+                self.levels.append((offset, h, w))
+                offset += h * w * self.stride
+        self.buffer = mi.Float(np.concatenate(chunks).astype(np.float32))
+        #: per level: offset, height, width (gathered per lane by level index)
+        self._tables = tuple(mi.UInt32([lv[k] for lv in self.levels]) for k in range(3))
+        self.size = tuple(texture.size)
+
+    def _bilinear(self, level, u, v, weight, out: list) -> None:
+        """Adds ``weight`` x the bilinear lookup on ``level`` (an int, or a
+        per-lane ``mi.UInt32``) to ``out`` (stride floats per lane)."""
+        if isinstance(level, int):
+            off, h, w = (mi.UInt32(x) for x in self.levels[level])
+        else:
+            off, h, w = (dr.gather(mi.UInt32, t, level) for t in self._tables)
+        # sizes as floats, at least 1: lanes a call masks off gather 0, and an integer modulo by 0 traps
+        hf, wf = dr.maximum(mi.Float(h), 1.0), dr.maximum(mi.Float(w), 1.0)
+        x = u * wf - 0.5
+        y = v * hf - 0.5
+        x0, y0 = dr.floor(x), dr.floor(y)
+        fx, fy = x - x0, y - y0
+
+        def wrap(i, n):
+            """i mod n for whole-number floats (repeat wrapping) as an index."""
+            return mi.UInt32(dr.clip(i - n * dr.floor(i / n), 0.0, n - 1.0))
+
+        taps = []
+        for dy, wy in ((0, 1.0 - fy), (1, fy)):
+            for dx, wx in ((0, 1.0 - fx), (1, fx)):
+                idx = off + (wrap(y0 + dy, hf) * w + wrap(x0 + dx, wf)) * self.stride
+                taps.append((idx, weight * wy * wx))
+        for c in range(self.stride):
+            acc = out[c]
+            for idx, wt in taps:
+                acc = dr.fma(dr.gather(mi.Float, self.buffer, idx + c), wt, acc)
+            out[c] = acc
+
+    def lookup(self, uv, lod=None):
+        """(shares [3][width] per lane, coat roughness, coat ior (unclamped))
+        at Mitsuba uv: trilinear between the two mip levels around ``lod``
+        (their offsets and sizes gathered per lane), the finest level alone
+        when ``lod`` is None."""
+        u, v = texture_rows_uv(uv.x, uv.y)
+        # lanes a call masks off may hold anything: a NaN index must not reach a gather
+        u = dr.select(dr.isfinite(u), u - dr.floor(u), 0.0)
+        v = dr.select(dr.isfinite(v), v - dr.floor(v), 0.0)
+        out = [mi.Float(0.0) for _ in range(self.stride)]
+        n = len(self.levels)
+        if lod is None or n == 1:
+            self._bilinear(0, u, v, mi.Float(1.0), out)
+        else:
+            lod = dr.clip(dr.select(dr.isfinite(lod), lod, 0.0), 0.0, float(n - 1))
+            lo = dr.floor(lod)
+            t = lod - lo
+            lo_i = mi.UInt32(lo)
+            self._bilinear(lo_i, u, v, 1.0 - t, out)
+            self._bilinear(dr.minimum(lo_i + 1, n - 1), u, v, t, out)
+        shares = [out[ch * self.width:(ch + 1) * self.width] for ch in range(3)]
+        return shares, out[3 * self.width], out[3 * self.width + 1]
+
+
+class ParamMaps:
+    """A texture-mapped material's parameter maps, sampled at query uvs: call
+    ``at(uv)`` (N, 2 Mitsuba uv) to get the ``ParamValues`` of those N hits."""
+
+    def __init__(self, material: Material):
+        self._maps: dict[tuple[str, str], np.ndarray] = {}
+        for _, ref in material.textures():
+            key = (str(ref.resolved), ref.channel)
+            if key not in self._maps:
+                self._maps[key] = read_map(ref.resolved, ref.channel)  # row 0 = the image's bottom
+
+    def _sample(self, ref: TextureRef, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        m = self._maps[(str(ref.resolved), ref.channel)]
+        h, w = m.shape
+        x = u * w - 0.5
+        y = v * h - 0.5
+        x0, y0 = np.floor(x), np.floor(y)
+        fx, fy = x - x0, y - y0
+        x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+        at = lambda yy, xx: m[yy % h, xx % w]
+        val = ((1 - fy) * ((1 - fx) * at(y0, x0) + fx * at(y0, x0 + 1))
+               + fy * ((1 - fx) * at(y0 + 1, x0) + fx * at(y0 + 1, x0 + 1)))
+        lo, hi = ref.range
+        return lo + val * (hi - lo)
+
+    def at(self, uv: np.ndarray):
+        """The ``ParamValues`` (value, place) -> (N, 3) of the hits at ``uv`` (N, 2)."""
+        u, v = texture_rows_uv(uv[:, 0].astype(np.float64), uv[:, 1].astype(np.float64))
+        u, v = u - np.floor(u), v - np.floor(v)
+        n = uv.shape[0]
+
+        def values(val, place: str) -> torch.Tensor:
+            if isinstance(val, TextureRef):
+                return torch.from_numpy(np.repeat(self._sample(val, u, v)[:, None], 3, 1))
+            if isinstance(val, tuple) and any(isinstance(x, TextureRef) for x in val):
+                cols = [self._sample(x, u, v) if isinstance(x, TextureRef) else np.full(n, float(x)) for x in val]
+                return torch.from_numpy(np.stack(cols, -1))
+            return torch.tensor([Material.rgb(val)], dtype=torch.float64)
+
+        return values
+
+
+def sharpest_top_roughness(material: Material) -> float:
+    """The top interface's roughness, or the low end of its map's range when
+    texture-mapped (the sampler's lobe must be at least as sharp as any texel's)."""
+    r = getattr(material.layers[0], "roughness", None)
+    if isinstance(r, TextureRef):
+        return float(min(r.range))
+    return float(r) if isinstance(r, (int, float)) else 1.0
+
+
