@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test test-slow lint clean fuzz soak goldens
+.PHONY: setup run test test-slow test-ci-slow lint clean fuzz soak goldens mutation
 
 setup: $(STAMP)
 
@@ -28,12 +28,19 @@ test: setup lint
 test-slow: setup
 	@$(BIN)/python -m pytest -m slow
 
+# The slow tests CI runs after `make test` (.ci/run): those also marked ci_slow, chosen by measured duration to
+# fit CI's 20 minutes (the list and the ones left to `make test-slow`: docs/decisions/076-ci-slow-subset.md).
+test-ci-slow: setup
+	@$(BIN)/python -m pytest -m "slow and ci_slow"
+
 # Rewrites every stored render or array the tests compare against (golden images, the
-# session render: tests/viewer/goldens.py; the look-development reference lobes the
-# shipped networks are held to: tests/training/shipped_lobes.py); nothing else writes them.
+# session render: tests/viewer/goldens.py; the look-development reference lobes and sphere
+# renders the shipped networks are held to: tests/training/shipped_lobes.py, shipped_renders.py);
+# nothing else writes them.
 goldens: setup
 	@$(BIN)/python tests/viewer/goldens.py
 	@$(BIN)/python tests/training/shipped_lobes.py
+	@$(BIN)/python tests/training/shipped_renders.py
 
 # The packages mypy checks; it sees the repository's folders under their installed names through links.
 MYPY_PACKAGES := nbrdf.neural nbrdf.cli
@@ -57,6 +64,14 @@ fuzz: setup
 # and in one state every 25 edits (tools/soak.py).
 soak: setup
 	@xvfb-run -a -s "-screen 0 640x480x24" nice $(BIN)/python tools/soak.py --edits 1000 --seed 1 --in-state --out soak.json
+
+# Mutation testing of the pure-Python core (material schema, stack translator, coat, microfacet, closed-form
+# BxDFs, tone mappers) with mutmut against their fast unit tests ([tool.mutmut] in pyproject.toml); prints the
+# kill rate per module. The staging tree build/mutation is kept, so a rerun tests only changed functions;
+# MUTATION_ARGS=--fresh starts over.
+MUTATION_ARGS ?=
+mutation: setup
+	@nice $(BIN)/python tools/mutation.py $(MUTATION_ARGS)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis

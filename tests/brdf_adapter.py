@@ -46,3 +46,39 @@ def check_sampler(name: str, brdf, theta_deg: float, alpha: float = 1e-3, n_samp
         f = brdf.eval(wi, wk)
         torch.testing.assert_close(s.f[:k][ok].double(), f[ok].double(), rtol=1e-4, atol=1e-6)
     return res
+
+
+def sphere_quadrature(n: int, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
+    """Midpoint quadrature over the whole sphere in (cos theta, phi): directions (4 n^2, 3), solid-angle weights."""
+    c = (torch.arange(2 * n, dtype=dtype) + 0.5) / n - 1.0
+    p = (torch.arange(2 * n, dtype=dtype) + 0.5) / (2 * n) * 2 * math.pi
+    cz, ph = torch.meshgrid(c, p, indexing="ij")
+    s = torch.sqrt(1 - cz * cz)
+    d = torch.stack([s * torch.cos(ph), s * torch.sin(ph), cz], -1).reshape(-1, 3)
+    return d, torch.full((d.shape[0],), 4 * math.pi / d.shape[0], dtype=dtype)
+
+
+def check_sampler_moments(name: str, brdf, theta_deg: float, n_samples: int = 1 << 14, grid: int = 200,
+                          tol: float = 4e-3) -> None:
+    """A deterministic, fast companion of ``check_sampler``: ``n_samples`` scrambled Sobol points (fixed seed)
+    drive the sampler; the share of valid samples and their mean x, y, z and z^2 (over all samples, 0 where
+    invalid) must equal the pdf's mass and moments by quadrature to ``tol``, and each sample must report eval's
+    value and pdf's density for its direction. For lobes a ``grid`` x ``4 grid`` quadrature resolves (roughness
+    >= about 0.2): a sampler or pdf off by a few percent of its mass or mean direction fails."""
+    from scipy.stats import qmc
+
+    w = incidence(theta_deg)
+    u = torch.from_numpy(qmc.Sobol(3, scramble=True, seed=7).random(n_samples))
+    s = brdf.sample(w.expand(n_samples, 3), u)
+    ok = s.pdf > 0
+    d, wt = sphere_quadrature(grid)
+    p = brdf.pdf(w.expand(d.shape[0], 3), d) * wt
+    share = float(ok.double().mean())
+    assert abs(share - float(p.sum())) < tol, f"{name}: valid share {share} vs the pdf's mass {float(p.sum())}"
+    for k, g in enumerate((lambda v: v[:, 0], lambda v: v[:, 1], lambda v: v[:, 2], lambda v: v[:, 2] ** 2)):
+        got = float(torch.where(ok, g(s.w), torch.zeros_like(s.pdf)).mean())
+        assert abs(got - float((g(d) * p).sum())) < tol, f"{name}: moment {k} of the samples {got}"
+    wk = w.expand(int(ok.sum()), 3)
+    torch.testing.assert_close(s.pdf[ok], brdf.pdf(wk, s.w[ok]), rtol=1e-6, atol=1e-10)
+    torch.testing.assert_close(s.f[ok], brdf.eval(wk, s.w[ok]), rtol=1e-6, atol=1e-10)
+

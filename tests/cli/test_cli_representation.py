@@ -24,6 +24,7 @@ def decoder_file(tmp_path_factory):
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_data_then_train_tiny(tmp_path, capsys):
     code, out, err = run(["data", "--preset", "tiny", "--out", tmp_path / "ds", "--spp", 4], capsys)
     assert code == 0, err
@@ -121,6 +122,7 @@ def test_eval_projected_with_the_shipped_weights(tmp_path, capsys):
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_view_offscreen_with_the_neural_shader(tmp_path, capsys):
     from nbrdf.cli.view import main
 

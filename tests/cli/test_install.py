@@ -37,6 +37,7 @@ def wheel(tmp_path_factory) -> Path:
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_wheel_holds_only_the_nbrdf_package(wheel):
     names = zipfile.ZipFile(wheel).namelist()
     tops = {n.split("/")[0] for n in names}
@@ -52,6 +53,7 @@ def test_wheel_holds_only_the_nbrdf_package(wheel):
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_wheel_console_scripts_point_at_the_cli(wheel):
     z = zipfile.ZipFile(wheel)
     (ep,) = [n for n in z.namelist() if n.endswith(".dist-info/entry_points.txt")]

@@ -42,6 +42,7 @@ def _adapter(mi, bsdf, theta_deg: float):
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 @pytest.mark.parametrize("role,theta", CASES)
 def test_sampler_passes_mitsubas_chi2(mi, materials, role, theta):
     from mitsuba.chi2 import ChiSquareTest, SphericalDomain

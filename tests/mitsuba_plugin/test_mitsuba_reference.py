@@ -20,6 +20,7 @@ def _dirs(rng, n) -> np.ndarray:
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_reference_plugin_agrees_with_nbrdf_eval_reference(mi, materials, tmp_path):
     """z = (plugin mean - eval) / sqrt(se_plugin^2 + se_eval^2) over 48 pairs x 3
     channels: |mean z| < 4 / sqrt(144) and mean z^2 < 1.6 (its 99.9 % point
@@ -48,6 +49,7 @@ def test_reference_plugin_agrees_with_nbrdf_eval_reference(mi, materials, tmp_pa
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_reference_plugin_renders_in_wavefront_mode_only(mi, materials, capfd):
     from nbrdf.mitsuba import wavefront_mode
 

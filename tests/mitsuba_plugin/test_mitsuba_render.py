@@ -46,6 +46,7 @@ def _pixel_hits(mi, scene):
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 @pytest.mark.parametrize("role", ["car_paint", "uncoated"])
 def test_directional_light_pixels_equal_neural_f_cos(mi, materials, role, tmp_path):
     direction = np.array([-0.4, 0.5, -0.8])
@@ -71,6 +72,7 @@ def test_directional_light_pixels_equal_neural_f_cos(mi, materials, role, tmp_pa
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_white_furnace_of_an_energy_conserving_stack(mi, materials):
     """A smooth clear coat over a white Lambertian base reflects all light
     (the walk's albedo is 1; ``test_mitsuba_reference`` renders it). The

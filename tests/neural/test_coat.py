@@ -6,9 +6,20 @@ import math
 
 import pytest
 import torch
-from brdf_adapter import check_sampler
+from brdf_adapter import check_sampler, check_sampler_moments
 
-from nbrdf.neural.coat import NO_COAT, coat_eval, coat_of, coat_pdf, coat_probability, coat_sample, with_coat
+from nbrdf.neural.coat import (
+    NO_COAT,
+    coat_eval,
+    coat_features,
+    coat_of,
+    coat_pdf,
+    coat_probability,
+    coat_sample,
+    code_coat,
+    code_size,
+    with_coat,
+)
 from nbrdf.neural.decoder import Decoder, DecoderSpec
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
@@ -67,25 +78,59 @@ def test_decoder_adds_the_coat_to_a_code_only():
     torch.testing.assert_close(one, full[:, 1], rtol=1e-5, atol=1e-6)
 
 
+class CoatLobe:
+    """The coat's lobe as a BRDF for the sampler checks (u[:, 0] unused: one lobe)."""
+
+    def __init__(self, roughness: float = 0.08, ior: float = 1.5):
+        self.c = torch.tensor([roughness, ior], dtype=torch.float64)
+
+    def sample(self, w, u):
+        from nbrdf.neural.brdf import Sample
+
+        wo = coat_sample(self.c, w, u[:, 1], u[:, 2])
+        return Sample(wo, coat_eval(self.c, w, wo), self.pdf(w, wo))
+
+    def pdf(self, w, w_other):
+        return coat_pdf(self.c, w, w_other)
+
+    def eval(self, wi, wo):
+        return coat_eval(self.c, wi, wo)
+
+
 @pytest.mark.parametrize("theta", [10.0, 55.0])
 def test_coat_sampler_follows_its_pdf(theta):
-    class Coat:
-        c = torch.tensor([0.08, 1.5], dtype=torch.float64)
+    check_sampler("coat lobe", CoatLobe(), theta, alpha=ALPHA, n_samples=200_000)
 
-        def sample(self, w, u):
-            from nbrdf.neural.brdf import Sample
 
-            wo = coat_sample(self.c, w, u[:, 1], u[:, 2])
-            p = self.pdf(w, wo)
-            return Sample(wo, coat_eval(self.c, w, wo), p)
+@pytest.mark.parametrize("theta", [0.0, 35.0, 70.0])
+def test_coat_sampler_moments_match_its_pdf(theta):
+    """Fast and deterministic beside the chi-square test, on a lobe a quadrature resolves."""
+    check_sampler_moments("coat lobe a=0.4", CoatLobe(0.4, 1.7), theta)
 
-        def pdf(self, w, w_other):
-            return coat_pdf(self.c, w, w_other)
 
-        def eval(self, wi, wo):
-            return coat_eval(self.c, wi, wo)
+def test_coat_features_and_probability_values():
+    f = coat_features(torch.tensor([[0.125, 1.5], [0.0, 0.5], [8.0, 9.0]], dtype=torch.float64))
+    # cube-root roughness, ior - 1, normal-incidence reflectance; out-of-range coats clamped first
+    torch.testing.assert_close(f[0], torch.tensor([0.5, 0.5, 0.04], dtype=torch.float64))
+    torch.testing.assert_close(f[1], torch.tensor([0.005 ** (1 / 3), 0.0, 0.0], dtype=torch.float64))
+    torch.testing.assert_close(f[2], torch.tensor([1.0, 2.0, 0.25], dtype=torch.float64))
+    torch.testing.assert_close(coat_features(torch.tensor([0.125, 1.5], dtype=torch.float64)), f[0])  # one coat
+    assert code_size(32, coat=True) == 34 and code_size(32, coat=False) == 32
+    # the coat lobe's share: sqrt of the normal-incidence Fresnel term, held to [0.05, 0.95]
+    up = torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64)
+    assert coat_probability(torch.tensor([0.1, 1.5], dtype=torch.float64), up).item() == pytest.approx(0.2)
+    assert coat_probability(torch.tensor([0.1, 1.02], dtype=torch.float64), up).item() == pytest.approx(0.05)
+    graze = torch.tensor([[math.sqrt(1 - 1e-6), 0.0, 1e-3]], dtype=torch.float64)
+    assert coat_probability(torch.tensor([0.1, 1.5], dtype=torch.float64), graze).item() == pytest.approx(0.95)
 
-    check_sampler("coat lobe", Coat(), theta, alpha=ALPHA, n_samples=200_000)
+
+def test_code_coat_reads_a_coat_split_code_only():
+    spec = DecoderSpec(coat=True)
+    z = with_coat(torch.zeros(3, spec.latent), (0.3, 1.8))
+    assert code_coat(spec, z) == pytest.approx((0.3, 1.8))
+    assert code_coat(spec, torch.zeros(3, spec.latent)) == NO_COAT  # a bare latent
+    assert code_coat(DecoderSpec(coat=False), z) == NO_COAT
+    assert code_coat(spec, with_coat(torch.zeros(3, spec.latent), (5.0, 0.2))) == pytest.approx((1.0, 1.0))
 
 
 @pytest.mark.parametrize("theta", [5.0, 45.0, 75.0])
@@ -99,6 +144,7 @@ def test_coated_material_sampler_follows_its_pdf(theta):
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_projection_fits_the_body_under_a_known_coat():
     """Samples of coat + a decoded body: the projection returns the coat in
     the code and a body that decodes to the samples' body."""

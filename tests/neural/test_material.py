@@ -185,3 +185,94 @@ def test_mutations_fail_cleanly(data, where, what, tmp_path):
     except NbrdfError as e:
         msg = str(e)
         assert "\n" not in msg and msg.startswith(f"layers[{i}]"), msg
+
+
+def test_texture_reference_errors_name_the_place_and_the_fault(tmp_path):
+    (tmp_path / "r.png").write_bytes(b"")
+    place = r"^layers\[2\]\.roughness"
+
+    def rough(ref):
+        return parse_material(doc(D, M, {**C, "roughness": ref}), tmp_path).base.roughness
+
+    cases = [
+        ({"texture": "r.png", "gain": 2}, place + r"\.gain: unknown key$"),
+        ({"texture": ""}, place + r"\.texture: expected a file path, got "),
+        ({"texture": 3}, place + r"\.texture: expected a file path, got int$"),
+        ({"texture": "r\0.png"}, place + r"\.texture: expected a file path"),
+        ({"range": [0.1, 0.2]}, place + r"\.texture: expected a file path"),
+        ({"texture": "r.png", "channel": "x"}, place + r'\.channel: expected one of r, g, b, a, l, got the string "x"$'),
+        ({"texture": "r.png", "range": 0.5}, place + r"\.range: expected \[lo, hi\]$"),
+        ({"texture": "r.png", "range": [0.1]}, place + r"\.range: expected \[lo, hi\]$"),
+        ({"texture": "r.png", "range": [-1, 0.5]}, place + r"\.range\[0\]: -1 is outside"),
+        ({"texture": "r.png", "range": [0.5, 0.2]}, place + r"\.range: lo 0\.5 is above hi 0\.2$"),
+        ({"texture": "gone.png"}, place + r"\.texture: .*gone\.png not found$"),
+    ]
+    for ref, match in cases:
+        with pytest.raises(NbrdfError, match=match):
+            rough(ref)
+    flat = rough({"texture": "r.png", "channel": "g", "range": [0.3, 0.3]})  # a constant map is legal
+    assert flat.channel == "g" and flat.range == (0.3, 0.3)
+    assert rough({"texture": "r.png"}).channel == "r"
+
+
+EXACT_ERRORS = [
+    ([1, 2], "material: expected a JSON object at the top level, got a list"),
+    ("x", 'material: expected a JSON object at the top level, got the string "x"'),
+    ({**doc(C), "format": 1}, 'format: expected "nbrdf-material/1", got int'),
+    ({**doc(C), "format": "v2"}, 'format: expected "nbrdf-material/1", got "v2"'),
+    ({**doc(C), "name": 3}, "name: expected a string, got int"),
+    ({"format": "nbrdf-material/1", "name": "t"}, 'material: missing key "layers"'),
+    ({**doc(C), "layers": {}}, "layers: expected a non-empty list of layers"),
+    (doc(7), "layers[0]: expected an object, got int"),
+    (doc({"type": 5}), "layers[0].type: unknown layer type int (expected one of "
+                       "dielectric, medium, conductor, diffuse, measured, latent)"),
+    (doc({"type": "measured", "path": ""}), "layers[0].path: expected a file path, got the string \"\""),
+    (doc({"type": "measured", "path": 4}), "layers[0].path: expected a file path, got int"),
+    (doc({"type": "latent", "path": "a\0b"}), 'layers[0].path: expected a file path, got the string "a\\u0000b"'),
+    (doc(C, D), "layers[0]: a conductor can only be the base (the last layer); above the base come dielectric interfaces "
+                "and media"),
+    ({**doc(C), "normal_map": ""}, 'normal_map: expected a file path, got the string ""'),
+    ({**doc(C), "normal_map": 2}, "normal_map: expected a file path, got int"),
+]
+
+
+@pytest.mark.parametrize("data,message", EXACT_ERRORS, ids=[e[1][:40] for e in EXACT_ERRORS])
+def test_error_lines_are_exact(data, message, tmp_path):
+    """The whole line: the place, the fault, what was found (a type's name for a wrong type)."""
+    with pytest.raises(NbrdfError) as e:
+        parse_material(data, tmp_path)
+    assert str(e.value) == message
+
+
+def test_names_paths_and_saved_form(tmp_path):
+    (tmp_path / "n.png").write_bytes(b"")
+    (tmp_path / "t.binary").write_bytes(b"")
+    m = parse_material({"format": "nbrdf-material/1", "layers": [{"type": "measured", "path": "t.binary"}],
+                        "normal_map": "n.png"}, tmp_path)
+    assert m.name == "" and m.normal_map == "n.png" and m.base.resolved == (tmp_path / "t.binary").resolve()
+    with pytest.raises(NbrdfError) as e:
+        parse_material({**doc(C), "normal_map": "gone.png"}, tmp_path)
+    assert str(e.value) == f"normal_map: {(tmp_path / 'gone.png').resolve()} not found"
+    # paths are kept as written, or rewritten relative to a new folder (the base's and the normal map's)
+    assert material_to_dict(m)["layers"][0]["path"] == "t.binary"
+    (tmp_path / "sub").mkdir()
+    moved = material_to_dict(m, tmp_path / "sub")
+    assert moved["layers"][0] == {"type": "measured", "path": "../t.binary"} and moved["normal_map"] == "../n.png"
+    save_material(m, tmp_path / "sub" / "m.json")
+    text = (tmp_path / "sub" / "m.json").read_text(encoding="utf-8")
+    assert text.startswith('{\n  "format": "nbrdf-material/1",\n  "name": "",\n  "layers": [\n    {\n      "type"')
+    assert load_material(tmp_path / "sub" / "m.json").base.resolved == m.base.resolved
+    with pytest.raises(NbrdfError) as e:
+        save_material(m, tmp_path / "nowhere" / "m.json")
+    assert str(e.value) == f"{tmp_path / 'nowhere' / 'm.json'}: the folder {tmp_path / 'nowhere'} does not exist"
+    (tmp_path / "bad.json").write_text('{"format": "nbrdf-material/1", "layers": [7]}', encoding="utf-8")
+    with pytest.raises(NbrdfError) as e:
+        load_material(tmp_path / "bad.json")
+    assert str(e.value) == "layers[0]: expected an object, got int"
+    (tmp_path / "top.json").write_text("[]", encoding="utf-8")
+    with pytest.raises(NbrdfError) as e:
+        load_material(tmp_path / "top.json")
+    assert str(e.value) == f"{tmp_path / 'top.json'}: expected a JSON object at the top level, got a list"
+    (tmp_path / "u.json").write_bytes('{"format": "nbrdf-material/1", "name": "é", "layers": [{"type": "diffuse", '
+                                      '"albedo": 0.5}]}'.encode())
+    assert load_material(tmp_path / "u.json").name == "é"  # read as UTF-8 whatever the locale

@@ -18,6 +18,7 @@ def dec():
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_projection_recovers_a_brdf_the_decoder_can_represent(dec):
     """Values made by the decoder at some latents are fitted back to within a few percent."""
     torch.manual_seed(1)
@@ -77,6 +78,7 @@ def test_latent_files_remember_their_decoder(tmp_path, dec):
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 @pytest.mark.parametrize("share, lo, hi", [(0.5, 0.93, 1.07), (0.0, 0.0, 0.8)])
 def test_projection_fits_the_mean_of_skewed_noise(dec, share, lo, hi):
     """Monte Carlo values are right-skewed: with f x E, E ~ Exp(1) (mean 1,

@@ -60,6 +60,32 @@ def neural_lobe(stack: str, theta: float, model=None) -> np.ndarray:
     return lobe(brdf_for(material(stack), "neural", model=model), theta)[0]
 
 
+#: The ways ``worse_bundle`` makes the shipped bundle worse.
+WORSE = ("body+10%", "body-10%", "layering")
+
+
+def worse_bundle(kind: str):
+    """The shipped bundle made worse as a retrain could: the decoded body 10 % high or
+    low (the output bias shifted by log 1.1 / log 0.9), or the layering network's
+    output weights 10 % larger (latents of every layered stack shifted)."""
+    import copy
+    import math
+
+    import torch
+
+    from nbrdf.neural.model import default_model
+
+    m = copy.deepcopy(default_model())
+    with torch.no_grad():
+        if kind == "layering":
+            m.layering.mlp.net[-1].weight.mul_(1.1)
+        elif kind in ("body+10%", "body-10%"):
+            m.decoder.out.bias += math.log(1.1 if kind == "body+10%" else 0.9)
+        else:
+            raise ValueError(f"unknown perturbation {kind!r}: one of {WORSE}")
+    return m
+
+
 def psnr(img: np.ndarray, ref: np.ndarray) -> float:
     """The lobe PSNR (SPEC section 9: tone-compressed, over the disk)."""
     from nbrdf.neural.metrics import compressed_psnr, disk_mask

@@ -6,7 +6,7 @@ import math
 
 import pytest
 import torch
-from brdf_adapter import check_sampler
+from brdf_adapter import check_sampler, check_sampler_moments
 
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
 
@@ -157,3 +157,19 @@ SAMPLERS = [
 @pytest.mark.parametrize("name,bsdf,theta_deg", SAMPLERS, ids=[s[0] for s in SAMPLERS])
 def test_sampler_chi2(name, bsdf, theta_deg):
     check_sampler(name, bsdf, theta_deg, alpha=ALPHA)
+
+
+MOMENT_SAMPLERS = [
+    ("conductor a=0.3", GGXConductor(0.3, 0.9), 30),
+    ("conductor a=0.8", GGXConductor(0.8, 0.3), 70),
+    ("dielectric a=0.3 from above", GGXDielectric(0.3, 1.5), 40),
+    ("dielectric a=0.5 from below", GGXDielectric(0.5, 1.5), 160),
+    ("dielectric a=0.4 from below, past the critical angle", GGXDielectric(0.4, 1.5), 125),
+    ("lambertian", Lambertian(0.7), 20),
+]
+
+
+@pytest.mark.parametrize("name,bsdf,theta_deg", MOMENT_SAMPLERS, ids=[s[0] for s in MOMENT_SAMPLERS])
+def test_sampler_moments_match_the_pdf(name, bsdf, theta_deg):
+    """Fast and deterministic beside the chi-square tests: the samples' mass and mean direction are the pdf's."""
+    check_sampler_moments(name, bsdf, theta_deg)

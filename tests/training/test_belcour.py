@@ -156,6 +156,7 @@ STACKS = {
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 @pytest.mark.parametrize("name", STACKS)
 def test_lobes_agree_with_the_monte_carlo_reference(name):
     m = material(*STACKS[name])

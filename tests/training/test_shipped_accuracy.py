@@ -4,13 +4,9 @@ rewrites the references, which do not depend on the networks). A worse bundle,
 saved as a retrain would save it, fails here whatever the golden images say."""
 from __future__ import annotations
 
-import copy
-import math
-
 import numpy as np
 import pytest
 import shipped_lobes as sl
-import torch
 
 #: Lobe PSNR floors (dB): the shipped bundle's measured PSNR less 2 dB, rounded
 #: down to 0.5 dB (measured 47.95, 51.54, 45.83, 43.87, 60.88, 59.24, 50.25,
@@ -40,26 +36,11 @@ def test_shipped_lobe_psnr_floor(references, stack, theta):
     assert got >= FLOORS[sl.key(stack, theta)], f"{sl.key(stack, theta)}: lobe PSNR {got:.2f} dB"
 
 
-def _worse(kind: str):
-    """The shipped bundle made worse as a retrain could: the decoded body 10 % high or
-    low (the output bias shifted by log 1.1 / log 0.9), or the layering network's
-    output weights 10 % larger (latents of every layered stack shifted)."""
-    from nbrdf.neural.model import default_model
-
-    m = copy.deepcopy(default_model())
-    with torch.no_grad():
-        if kind == "layering":
-            m.layering.mlp.net[-1].weight.mul_(1.1)
-        else:
-            m.decoder.out.bias += math.log(1.1 if kind == "body+10%" else 0.9)
-    return m
-
-
 @pytest.mark.parametrize("kind", ["body+10%", "body-10%", "layering"])
 def test_a_10_percent_worse_bundle_fails_the_floors(references, kind):
     """The floors' power: each perturbation falls below the floor on at least 6
     of the 8 lobes (measured 8, 7 and 8; one lobe failing fails the suite)."""
-    model = _worse(kind)
+    model = sl.worse_bundle(kind)
     below = [k for s, t in LOBES
              if sl.psnr(sl.neural_lobe(s, t, model), references[(k := sl.key(s, t))]) < FLOORS[k]]
     assert len(below) >= 6, below

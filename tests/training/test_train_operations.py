@@ -121,6 +121,7 @@ def test_layering_shape_and_loss_scale_are_chosen(bundles):
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_moving_average_of_weights_is_shipped_and_survives_a_resume(bundles, monkeypatch):
     """``--ema``: the bundle holds the average of the weights, not the last
     step's; a run stopped at a checkpoint and resumed ends with the same

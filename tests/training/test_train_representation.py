@@ -38,6 +38,7 @@ def test_training_lowers_the_loss_and_writes_its_outputs(data, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_interrupted_run_resumes_to_the_same_weights(data, tmp_path):
     cfg = TrainConfig(data=str(data), out=str(tmp_path / "a"), spec=SPEC, epochs=3, batch=512, val_every=3)
     whole = load_decoder(train(cfg, progress=False)).weights_id()

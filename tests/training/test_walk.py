@@ -230,6 +230,7 @@ def _calibrated(z: np.ndarray) -> bool:
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_64_path_error_bars_hold_over_8_seeds_on_the_standard_stack():
     """1,280 z-scores (160 directions x 8 seeds): sd 1.024, mean -0.036 measured."""
     z = _pooled_z(_runs("standard", 160))
@@ -237,6 +238,7 @@ def test_64_path_error_bars_hold_over_8_seeds_on_the_standard_stack():
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 @pytest.mark.parametrize("value,error", [(1.1, 1.0), (0.9, 1.0), (1.0, 0.9)])
 def test_the_8_seed_check_rejects_10_percent_errors(value, error):
     """The check's power: on the stack where it holds, estimates 10 % high or

@@ -85,6 +85,7 @@ def _lookdev(gl_ctx, doc: dict):
 
 @pytest.mark.gl
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_reference_of_the_lit_object_is_lit_like_the_neural_image(gl_ctx):
     """A clear coat over a black base: the body is zero, so the neural image
     (the coat exact on the GPU) is exact, and the reference must agree under
@@ -112,6 +113,7 @@ def test_reference_of_the_lit_object_is_lit_like_the_neural_image(gl_ctx):
 
 @pytest.mark.gl
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_switching_compare_modes_keeps_the_reference(gl_ctx):
     """wipe -> relative error -> HDR-FLIP -> wipe, and a lower render scale, all
     show the same Monte Carlo job: its samples only grow (it used to restart)."""

@@ -64,6 +64,7 @@ def _dirs(rng) -> np.ndarray:
 
 @pytest.mark.gl
 @pytest.mark.slow
+@pytest.mark.ci_slow
 @pytest.mark.parametrize("name", ["car_paint.json", "rough_gold.json"])
 def test_exported_glsl_equals_torch(name):
     import moderngl

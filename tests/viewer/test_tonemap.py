@@ -132,6 +132,85 @@ def test_every_mode_has_an_operator_and_bad_input_is_one_line():
         tonemap(np.ones((2, 2)), "aces")
 
 
+def test_operators_map_each_pixel_on_its_own():
+    """An image is mapped pixel by pixel: a dark, a mid and a bright saturated pixel side by side come out as
+    each does alone (nothing is reduced over the image)."""
+    img = np.array([[[0.01, 0.02, 0.005], [0.4, 0.3, 0.2]], [[5.0, 0.2, 0.1], [0.9, 1.5, 3.0]]])
+    for mode in ToneMap:
+        whole = tonemap(img, mode)
+        for i, j in np.ndindex(2, 2):
+            np.testing.assert_array_equal(whole[i, j], tonemap(img[i, j], mode), err_msg=str(mode))
+
+
+def test_every_operator_stays_in_the_unit_range_at_the_extremes():
+    """Black, negative and very bright saturated radiance stay in [0, 1]; black maps to black (AgX: to its
+    floor, the sigmoid at the bottom of its range) and every operator saturates toward white."""
+    extremes = np.array([[0.0, 0.0, 0.0], [-1.0, 0.5, 2.0], [1e4, 0.0, 0.0], [0.0, 1e4, 0.0], [1e4, 1e4, 1e4],
+                         [1e-9, 1e-9, 1e-9]])
+    for mode in ToneMap:
+        out = tonemap(extremes, mode)
+        assert out.min() >= 0.0 and out.max() <= 1.0, mode
+        assert out[4].min() > 0.97, mode  # white saturates
+    assert (tonemap(extremes, "linear")[1] == [0.0, 0.5, 1.0]).all()  # clamped on both sides
+    # AgX clips its log2 encoding to [MIN_EV, MAX_EV]: anything darker reads as its floor, anything brighter
+    # as its ceiling, and inside the range it is strictly increasing.
+    floor = agx(grey(0.0))
+    np.testing.assert_allclose(agx(grey(1e-9)), floor, atol=1e-12)
+    np.testing.assert_allclose(agx(grey(2.0 ** (AGX_MIN_EV - 1.0))), floor, atol=1e-12)
+    np.testing.assert_allclose(agx(grey(2.0 ** (AGX_MAX_EV + 0.01))), agx(grey(1e6)), atol=1e-12)
+    assert agx(grey(1e6)).min() > agx(grey(2.0 ** (AGX_MAX_EV - 1.0))).max()
+    assert agx(grey(2.0 ** (AGX_MIN_EV + 1.0))).min() > floor.max()
+    # A bright saturated red leaves the outset matrix above 1 (1.10 at radiance 20): the last clamp holds it.
+    assert agx(np.array([20.0, 0.0, 0.0]))[0] == 1.0
+    # PBR Neutral: a bright saturated colour keeps its hue order and is clamped to 1 at its peak.
+    n = pbr_neutral(np.array([50.0, 5.0, 0.5]))
+    assert n[0] == pytest.approx(1.0, abs=2e-3) and n[0] > n[1] > n[2] >= 0.0
+
+
+def test_neutral_compression_and_desaturation_reference_values():
+    """The Khronos reference at a grey above the start of compression and at a saturated colour, evaluated
+    by hand from its formulas (start 0.76, desaturation 0.15)."""
+    def reference(c):
+        c = np.asarray(c, np.float64)
+        lo = c.min()
+        c = c - (lo - 6.25 * lo * lo if lo < 0.08 else 0.04)
+        peak = c.max()
+        if peak < 0.76:
+            return c
+        d = 1 - 0.76
+        new_peak = 1 - d * d / (peak + d - 0.76)
+        g = 1 - 1 / (0.15 * (peak - new_peak) + 1)
+        return c * (new_peak / peak) * (1 - g) + new_peak * g
+
+    for c in ([2.0, 2.0, 2.0], [3.0, 1.0, 0.2], [0.9, 0.05, 0.01], [0.08, 0.5, 0.9]):
+        np.testing.assert_allclose(pbr_neutral(np.array(c)), np.clip(reference(c), 0, 1), rtol=1e-12)
+
+
+def test_srgb_encoding_reference_values():
+    """IEC 61966-2-1: the linear toe (12.92 c up to 0.0031308), the power segment, clamping to [0, 1]."""
+    np.testing.assert_allclose(srgb_encode(np.array([0.0, 0.002, 0.0031308])), [0.0, 0.02584, 0.04045],
+                               rtol=1e-4)
+    np.testing.assert_allclose(srgb_encode(np.array([0.0031309, 0.18, 0.5, 1.0])),
+                               [0.040451, 0.461356, 0.735357, 1.0], rtol=1e-5)
+    np.testing.assert_allclose(srgb_encode(np.array([-0.5, 1.5, 40.0])), [0.0, 1.0, 1.0], atol=1e-12)
+    # 8 bits: white is 255, mid grey's display value rounds, the exposure is applied
+    px = to_display8(np.array([[1.0, 1.0, 1.0], [0.18, 0.18, 0.18], [0.09, 0.09, 0.09]]), "linear")
+    assert px.tolist() == [[255] * 3, [118] * 3, [85] * 3]
+    assert to_display8(np.array([0.09, 0.09, 0.09]), "linear", ev=1.0).tolist() == [118] * 3
+
+
+def test_tonemap_errors_name_the_function():
+    img = np.ones((3, 2))
+    with pytest.raises(NbrdfError, match=r"^tonemap: expected"):
+        tonemap(img, "aces")
+    with pytest.raises(NbrdfError, match=r"^tonemap: the image holds NaN or infinite values$"):
+        tonemap(np.array([np.inf, 0.0, 0.0]), "agx")
+    with pytest.raises(NbrdfError, match=r"^tonemap: 'filmic' is not one of"):
+        tonemap(np.ones(3), "filmic")
+    assert tonemap(np.array([0.5, 0.25, 1.0], np.float32), "linear").dtype == np.float32
+    np.testing.assert_array_equal(tonemap(np.array([1, 0, 2]), "linear"), [1.0, 0.0, 1.0])  # integers accepted
+
+
 # ---------------------------------------------------------------- GLSL twin
 
 PROBE = """
