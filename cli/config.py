@@ -14,7 +14,10 @@ flag's default, and its type decides the parsing:
   in the field's ``metadata["parse"]``, run after argparse so that its error is
   the command's own one-line message.
 
-A field without a default is a required flag. ``metadata`` may also set
+A field whose ``metadata["nested"]`` is true holds another such dataclass: its
+fields marked ``metadata["cli"]`` become flags of their own (the previewer's
+view settings, declared once in viewer/view_settings.py). A field without a
+default is a required flag. ``metadata`` may also set
 ``positional`` (an optional positional argument), ``flag`` (another flag name),
 ``metavar``, ``choices`` and ``shown`` (how the default reads in ``--help``).
 Each flag's action carries ``field_type``, the field's type with ``None``
@@ -162,6 +165,10 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, *, only: Iterable[
         if not f.init or f.name in skip or (keep is not None and f.name not in keep):
             continue
         meta = f.metadata
+        if meta.get("nested"):
+            inner = hints[f.name]
+            added += add_arguments(parser, inner, only=_cli_fields(inner))
+            continue
         tp, optional = _unwrap_optional(hints[f.name])
         default = defaults.get(f.name, _default(f))
         text = help.get(f.name, docs.get(f.name, "")).replace("%", "%%")  # argparse %-formats help
@@ -211,6 +218,11 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, *, only: Iterable[
     return added
 
 
+def _cli_fields(cls: type) -> list[str]:
+    """The fields of a nested dataclass that are flags (``metadata["cli"]``)."""
+    return [f.name for f in dataclasses.fields(cls) if f.metadata.get("cli")]
+
+
 def values(cls: type, ns: argparse.Namespace, names: Iterable[str] | None = None) -> dict[str, Any]:
     """The parsed values of ``cls``'s fields (those in ``names``, default:
     every field present in ``ns``), converted to the field types: enums from
@@ -220,6 +232,10 @@ def values(cls: type, ns: argparse.Namespace, names: Iterable[str] | None = None
     keep = set(names) if names is not None else None
     out: dict[str, Any] = {}
     for f in dataclasses.fields(cls):
+        if f.init and f.metadata.get("nested"):
+            inner = hints[f.name]
+            out[f.name] = inner(**values(inner, ns, _cli_fields(inner)))
+            continue
         if not f.init or not hasattr(ns, f.name) or (keep is not None and f.name not in keep):
             continue
         v = getattr(ns, f.name)

@@ -45,7 +45,6 @@ from nbrdf.viewer.gl import check_version
 from nbrdf.viewer.gl_faults import FrameGuard, GlContextLost, fault_types
 from nbrdf.viewer.lookdev import MAX_PASSES, LookDev
 from nbrdf.viewer.refinement import Refinement
-from nbrdf.viewer.renderer import ViewState
 
 
 def _screen_size() -> tuple[int, int] | None:
@@ -122,15 +121,12 @@ class App:
         self.ctx = moderngl.create_context()
         check_version(self.ctx)
         self.screen = self.ctx.detect_framebuffer()  # the window's default framebuffer, bound now
-        state = ViewState(view=opts.view, theta_i=opts.theta_i, exposure=opts.exposure, tonemap=opts.tonemap,
-                          env_rotation=opts.env_rotation, env_intensity=opts.env_intensity,
-                          background=opts.background != "none", point_light=opts.point_light,
-                          point_intensity=opts.point_intensity)
-        material, notes = opts.load_material()
-        self.lookdev = LookDev(self.ctx, material, opts.mesh, opts.env, state, opts.backdrop(),
-                               parts=opts.file_materials())
-        if notes:
-            self.lookdev.notice = "; ".join(notes)
+        try:
+            self.lookdev = LookDev.from_options(self.ctx, opts)  # the offscreen path opens the same session
+        except NbrdfError:
+            glfw.destroy_window(self.window)
+            glfw.terminate()
+            raise
         from imgui_bundle.python_backends.glfw_backend import GlfwRenderer
 
         from nbrdf.viewer.ui.panels import Panels
@@ -141,9 +137,6 @@ class App:
         self.gui = GlfwRenderer(self.window)
         self.panels = Panels(self.lookdev)
         self.panels.frame_view = self.frame
-        if getattr(opts, "session", None) and not self.lookdev.open_session(opts.session):
-            self.close()
-            raise NbrdfError(self.lookdev.error or f"{opts.session}: cannot open the session")
         self._drag: tuple[int, float, float] | None = None
         self._click: tuple[float, float, int, int] | None = None  # a left press not yet moved (view coordinates)
         self._side = self.lookdev.side_by_side  # framed for two halves (compare side by side)
@@ -340,9 +333,9 @@ class App:
         self.screen.clear(0.0, 0.0, 0.0, 1.0)
         vx, vy, vw, vh = self.viewport()
         ld = self.lookdev
-        if ld.screenshot_progress() is not None:
+        if ld.shots.progress is not None:
             # The view shows the screenshot as it is rendered, a step per frame.
-            ld.step_screenshot()
+            ld.shots.step()
             self._show_screenshot()
         else:
             self.screen.viewport = (vx, h - vy - vh, vw, vh)  # GL's origin is the bottom left
@@ -368,7 +361,7 @@ class App:
 
     def _show_screenshot(self) -> None:
         """The screenshot being rendered, fitted into the view (imgui's background layer)."""
-        tex = self.lookdev.shot_texture
+        tex = self.lookdev.shots.texture
         if tex is None:
             return
         vx, vy, vw, vh = self.panels.viewport(self._window_size())

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -99,22 +100,16 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
     run; and (``frames``) the lit sphere filling the frame per lit path
     (deferred compute with its default storage, fragment fallback): ms per frame with one directional light and ms per
     environment pass (the default resampled estimator; the balance heuristic
-    over three environment strategies and over two, ``Renderer.strategies``
+    over three environment strategies and over two, ``LitSampling.strategies``
     3), the first frame's seconds (shader
     compilation included), and the same per 1080p frame (scaled by pixel
     count when ``size`` is another). Also which half-precision arithmetic
     extensions the context offers. The decoder paths and torch are timed in
     interleaved rounds (fair ratios on a shared machine). Never needs a display; the GPU's name picks
     its peak (``GPU_PEAK_GFMA``), software OpenGL the CPU's."""
-    import moderngl
-
     from nbrdf.neural.errors import NbrdfError
-    from nbrdf.neural.material import load_material
-    from nbrdf.viewer import shaders
     from nbrdf.viewer.gl import COMPUTE_VERSION, describe, half_float_extensions, offscreen_context
-    from nbrdf.viewer.neural_gpu import ComputeDecoderPass, GpuDecoder, WeightStorage
-    from nbrdf.viewer.options import DEFAULT_MATERIAL
-    from nbrdf.viewer.renderer import Renderer, ViewState
+    from nbrdf.viewer.neural_gpu import GpuDecoder, WeightStorage
 
     try:
         chosen = [WeightStorage(x) for x in storages]
@@ -127,97 +122,15 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
     n = w * h
     ctx = offscreen_context()
     gdec = GpuDecoder(ctx, dec)
-
-    # Decoder only: one evaluation (RGB) per pixel at random pairs.
-    g = np.random.default_rng(0)
-    v = g.normal(size=(2, n, 3)).astype(np.float32)
-    v /= np.linalg.norm(v, axis=-1, keepdims=True)
-    v[..., 2] = np.abs(v[..., 2])
-    prog = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
-                       fragment_shader=gdec.source("decoder_probe.frag"))
-    tw = 2048
-    pairs = np.zeros((2 * n, 4), np.float32)
-    pairs[0::2, :3], pairs[1::2, :3] = v[0], v[1]
-    rows = -(-2 * n // tw)
-    buf = np.zeros((rows * tw, 4), np.float32)
-    buf[: 2 * n] = pairs
-    ptex = ctx.texture((tw, rows), 4, buf.tobytes(), dtype="f4")
-    target = ctx.texture((w, h), 4, dtype="f4")
-    fbo = ctx.framebuffer([target])
-    vao = ctx.vertex_array(prog, [])
-
-    def decode_frame():
-        fbo.use()
-        gdec.bind(prog)
-        gdec.set_latent(prog, z)
-        ptex.use(0)
-        prog["u_pairs"].value = 0
-        prog["u_pairs_w"].value = tw
-        prog["u_target_w"].value = w
-        vao.render(moderngl.TRIANGLES, vertices=3)
-        ctx.finish()
-
-    runs = {"fragment_texture": decode_frame}
-    # The same evaluations in a compute shader, per weight storage (OpenGL 4.3),
-    # one pair per invocation and (the loop forms) two.
     compute = ctx.version_code >= COMPUTE_VERSION
-    cpasses = []
-    for st in chosen if compute else ():
-        for pairs in (1,) if st.unrolled else (1, 2):
-            cpasses.append(ComputeDecoderPass(ctx, gdec, z, v[0], v[1], st, pairs))
-            runs[f"compute_{st.value}" + ("_x2" if pairs == 2 else "")] = cpasses[-1].run
-    # The torch decoder on this CPU, same work per evaluation (RGB at one pair), timed in the same rounds.
-    wi = torch.from_numpy(v[0, :torch_pairs].copy())
-    wo = torch.from_numpy(v[1, :torch_pairs].copy())
-
-    def torch_run():
-        with torch.no_grad():
-            dec.eval_rgb(z, wi, wo)
-
-    runs["torch_cpu"] = torch_run
-    times = _time_interleaved(runs, repeats)
-    t_torch = times.pop("torch_cpu")
-    for cpass in cpasses:
-        cpass.release()
-
-    # Full shading: the lit sphere filling the frame; one directional light, then
-    # one pass of the light and the environment (no background: the object alone).
-    frame_ms: dict[str, dict] = {}
-    if frames:
-        mat = load_material(DEFAULT_MATERIAL)
-        for name, comp in (("compute", True), ("fragment", False)) if compute else (("fragment", False),):
-            r = Renderer(ctx, mat, neural=gdec, latent=z, compute=comp)
-            out: dict[str, object] = {}
-            for key, state in (("one_light_ms", ViewState(env_on=False)),
-                               ("env_pass_ms", ViewState(env_on=True, background=False))):
-                state.camera.distance = 2.2
-
-                def shade_frame(state=state):
-                    r.accumulate(state, w, h, 0, 1)
-                    ctx.finish()
-
-                if key == "one_light_ms":  # the first frame builds the programs
-                    t0 = time.perf_counter()
-                    shade_frame()
-                    out["first_frame_s"] = round(time.perf_counter() - t0, 2)
-                out[key] = round(1000 * _time(shade_frame, repeats), 2)
-                if key == "env_pass_ms":  # the balance heuristic instead of resampling: three and two strategies
-                    ris, r.sampling.ris_samples = r.sampling.ris_samples, 0
-                    out["env_pass_balance_ms"] = round(1000 * _time(shade_frame, repeats), 2)
-                    r.strategies = 3
-                    out["env_pass_two_strategies_ms"] = round(1000 * _time(shade_frame, repeats), 2)
-                    r.strategies, r.sampling.ris_samples = 4, ris
-            out["storage"] = gdec.compute_storage.value if comp else "texture"
-            scale = FRAME_1080P / n
-            out["per_1080p_frame"] = {k: round(val * scale, 1) for k, val in out.items()
-                                      if k.endswith("_ms")}
-            frame_ms[name] = out
-
-    torch_rate = wi.shape[0] / t_torch
+    times, t_torch, torch_n = _decoder_paths(ctx, gdec, dec, z, size, chosen if compute else [], repeats,
+                                             torch_pairs)
+    frame_ms = _lit_frames(ctx, gdec, z, size, repeats, compute) if frames else {}
+    torch_rate = torch_n / t_torch
     macs_rgb = 3 * dec.spec.macs()  # one RGB evaluation, latent share cached
     info = describe(ctx)
     peak = machine_peak(info)
-    gfma = lambda rate: round(rate * macs_rgb / 1e9, 3)
+    gfma = lambda rate: round(rate * macs_rgb / 1e9, 3)  # noqa: E731
     paths = {k: {"decoder_ms": round(1000 * t, 2), "rgb_evals_per_s": round(n / t), "gfma_per_s": gfma(n / t)}
              for k, t in times.items()}
     paths["torch_cpu"] = {"rgb_evals_per_s": round(torch_rate), "gfma_per_s": gfma(torch_rate)}
@@ -249,6 +162,110 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
     }
 
 
+def _decoder_paths(ctx, gdec, dec, z, size: tuple[int, int], storages: list, repeats: int,
+                   torch_pairs: int) -> tuple[dict[str, float], float, int]:
+    """Seconds of one RGB decoder evaluation per pixel at random pairs per decoder
+    path (the fragment shader, the compute shader per weight ``storages``, one
+    and two pairs per invocation), and of the torch CPU decoder on its share of
+    the pairs, timed in interleaved rounds: (path times, torch time, torch pairs)."""
+    import moderngl
+
+    from nbrdf.viewer import shaders
+    from nbrdf.viewer.neural_gpu import ComputeDecoderPass
+
+    w, h = size
+    n = w * h
+    g = np.random.default_rng(0)
+    v = g.normal(size=(2, n, 3)).astype(np.float32)
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    v[..., 2] = np.abs(v[..., 2])
+    prog = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
+                       fragment_shader=gdec.source("decoder_probe.frag"))
+    tw = 2048
+    pairs = np.zeros((2 * n, 4), np.float32)
+    pairs[0::2, :3], pairs[1::2, :3] = v[0], v[1]
+    rows = -(-2 * n // tw)
+    buf = np.zeros((rows * tw, 4), np.float32)
+    buf[: 2 * n] = pairs
+    ptex = ctx.texture((tw, rows), 4, buf.tobytes(), dtype="f4")
+    target = ctx.texture((w, h), 4, dtype="f4")
+    fbo = ctx.framebuffer([target])
+    vao = ctx.vertex_array(prog, [])
+
+    def decode_frame():
+        fbo.use()
+        gdec.bind(prog)
+        gdec.set_latent(prog, z)
+        ptex.use(0)
+        prog["u_pairs"].value = 0
+        prog["u_pairs_w"].value = tw
+        prog["u_target_w"].value = w
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        ctx.finish()
+
+    runs = {"fragment_texture": decode_frame}
+    cpasses = []
+    for st in storages:
+        for k in (1,) if st.unrolled else (1, 2):
+            cpasses.append(ComputeDecoderPass(ctx, gdec, z, v[0], v[1], st, k))
+            runs[f"compute_{st.value}" + ("_x2" if k == 2 else "")] = cpasses[-1].run
+    wi = torch.from_numpy(v[0, :torch_pairs].copy())
+    wo = torch.from_numpy(v[1, :torch_pairs].copy())
+
+    def torch_run():
+        with torch.no_grad():
+            dec.eval_rgb(z, wi, wo)
+
+    runs["torch_cpu"] = torch_run
+    times = _time_interleaved(runs, repeats)
+    for cpass in cpasses:
+        cpass.release()
+    return times, times.pop("torch_cpu"), wi.shape[0]
+
+
+def _lit_frames(ctx, gdec, z, size: tuple[int, int], repeats: int, compute: bool) -> dict[str, dict]:
+    """The lit sphere filling the frame per lit path (deferred compute, fragment):
+    ms per frame with one directional light and per environment pass (the default
+    resampled estimator, the balance heuristic over three strategies and over
+    two), the first frame's seconds, and the same per 1080p frame."""
+    from nbrdf.neural.material import load_material
+    from nbrdf.viewer.options import DEFAULT_MATERIAL
+    from nbrdf.viewer.renderer import Renderer
+    from nbrdf.viewer.view_settings import ViewState
+
+    w, h = size
+    mat = load_material(DEFAULT_MATERIAL)
+    frame_ms: dict[str, dict] = {}
+    for name, comp in (("compute", True), ("fragment", False)) if compute else (("fragment", False),):
+        r = Renderer(ctx, mat, neural=gdec, latent=z, compute=comp)
+        out: dict[str, object] = {}
+        for key, state in (("one_light_ms", ViewState(env_on=False)),
+                           ("env_pass_ms", ViewState(env_on=True, background=False))):
+            state.camera.distance = 2.2
+
+            def shade_frame(state=state):
+                r.accumulate(state, w, h, 0, 1)
+                ctx.finish()
+
+            if key == "one_light_ms":  # the first frame builds the programs
+                t0 = time.perf_counter()
+                shade_frame()
+                out["first_frame_s"] = round(time.perf_counter() - t0, 2)
+            out[key] = round(1000 * _time(shade_frame, repeats), 2)
+            if key == "env_pass_ms":  # the balance heuristic instead of resampling: three and two strategies
+                default = r.sampling
+                r.sampling = replace(default, ris_samples=0)
+                out["env_pass_balance_ms"] = round(1000 * _time(shade_frame, repeats), 2)
+                r.sampling = replace(default, ris_samples=0, strategies=3)
+                out["env_pass_two_strategies_ms"] = round(1000 * _time(shade_frame, repeats), 2)
+                r.sampling = default
+        out["storage"] = gdec.compute_storage.value if comp else "texture"
+        scale = FRAME_1080P / (w * h)
+        out["per_1080p_frame"] = {k: round(val * scale, 1) for k, val in out.items() if k.endswith("_ms")}
+        frame_ms[name] = out
+    return frame_ms
+
+
 def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int = 3,
               noise_target: float = 0.01, noise_renders: int = 4, noise_spp: int = 4) -> dict:
     """The look-development window (needs a display; Xvfb will do) as a user gets
@@ -275,7 +292,6 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
       threads (llvmpipe's included): what a pass needs of the machine, whatever else runs on it;
     - the machine's load average (1 minute) before and after: other work on the machine slows every figure."""
     import statistics
-    from dataclasses import replace
 
     from nbrdf.viewer.app import App
     from nbrdf.viewer.noise import per_pixel_noise
@@ -302,22 +318,9 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
             scales.append(app.scale)
             latent.append(ld.timings.latent_ms)
             bake.append(ld.bodies.tables.bake_ms)
-        # Still: refine until a full-resolution frame is shown.
-        steps = 0
-        while True:
-            app.step()
-            steps += 1
-            if app.scale >= 1.0 and not app.interactive:
-                break
-            if steps > 16:
-                raise RuntimeError("bench app: the still view did not reach full resolution in 16 frames")
+        _until_full_resolution(app)
         full_res_s = time.perf_counter() - t_edit
-        passes, cpu = [], []
-        for _ in range(3):  # passes at full resolution
-            t, c = time.perf_counter(), time.process_time()
-            app.step()
-            passes.append((time.perf_counter() - t) * 1000.0)
-            cpu.append((time.process_time() - c) * 1000.0)
+        passes, cpu = _frame_ms(app, 3)  # passes at full resolution
         # The noise of the still view's estimator, per pass.
         _, _, vw, vh = app.viewport()
         r = ld.renderer
@@ -355,6 +358,26 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
         }
     finally:
         app.close()
+
+
+def _until_full_resolution(app, frames: int = 16) -> None:
+    """Steps a still window until it shows a full-resolution frame (the refinement's preview)."""
+    for _ in range(frames):
+        app.step()
+        if app.scale >= 1.0 and not app.interactive:
+            return
+    raise RuntimeError(f"bench app: the still view did not reach full resolution in {frames} frames")
+
+
+def _frame_ms(app, frames: int) -> tuple[list[float], list[float]]:
+    """Wall and CPU milliseconds of each of ``frames`` window frames."""
+    wall, cpu = [], []
+    for _ in range(frames):
+        t, c = time.perf_counter(), time.process_time()
+        app.step()
+        wall.append((time.perf_counter() - t) * 1000.0)
+        cpu.append((time.process_time() - c) * 1000.0)
+    return wall, cpu
 
 
 def passes_to_target(noise, spp0: int, target: float, rounds: int = 4) -> tuple[int, float]:
@@ -417,7 +440,8 @@ def bench_body_table(sizes: tuple[str, ...] = ("32x16x8", "48x24x12"), size: int
     from nbrdf.viewer.body_table_gpu import BodyTables
     from nbrdf.viewer.gl import offscreen_context
     from nbrdf.viewer.pipeline import MaterialPipeline
-    from nbrdf.viewer.renderer import Renderer, ViewState
+    from nbrdf.viewer.renderer import Renderer
+    from nbrdf.viewer.view_settings import ViewState
 
     root = Path(materials) if materials else Path(__file__).resolve().parents[1] / "training" / "sets" / "lookdev"
     tables = [TableSize(*(int(x) for x in s.split("x"))) for s in sizes]

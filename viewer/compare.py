@@ -38,16 +38,10 @@ from nbrdf.viewer.labels import Label, Labels
 from nbrdf.viewer.lit_sampling import Term
 from nbrdf.viewer.modes import CompareMode, ToneMap, View
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf, analytic_capable
-from nbrdf.viewer.reference import (
-    LitJob,
-    ReferenceJob,
-    ReferenceWorker,
-    frames_from_normals,
-    lobe_job,
-    slice_job,
-    to_local,
-)
-from nbrdf.viewer.renderer import Renderer, ViewState
+from nbrdf.viewer.reference import ReferenceJob, ReferenceWorker, lobe_job, slice_job
+from nbrdf.viewer.reference_lit import LitJob, frames_from_normals, to_local
+from nbrdf.viewer.renderer import Renderer
+from nbrdf.viewer.view_settings import ViewState
 
 OBJECT_REF_SIZE = 160  # the Monte Carlo object reference's longest side, pixels
 SLICE_REF_SIZE = 96    # the Monte Carlo slice reference's longest side, pixels
@@ -167,7 +161,7 @@ class Compare:
             self.ctx.disable(moderngl.BLEND)
             self.ctx.depth_func = "<"
             a = aspect if aspect is not None else w / h
-            r._surface_uniforms(p, state, a * h, h, brdf.normal_map if brdf is not None else None)
+            r.surface_uniforms(p, state, a * h, h, brdf.normal_map if brdf is not None else None)
             vao.render(moderngl.TRIANGLES)
             n, x = (np.frombuffer(t.read(), np.float32).reshape(h, w, 4)[::-1] for t in targets)
             return np.ascontiguousarray(n[..., :3]), np.ascontiguousarray(x[..., :3]), n[..., 3] > 0.5

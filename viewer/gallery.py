@@ -57,14 +57,15 @@ class TileRenderer:
         from nbrdf.viewer.gl import offscreen_context
         from nbrdf.viewer.options import ViewOptions
         from nbrdf.viewer.pipeline import MaterialPipeline
-        from nbrdf.viewer.renderer import Renderer, ViewState
+        from nbrdf.viewer.renderer import Renderer
+        from nbrdf.viewer.view_settings import ViewState
 
         self.opts = ViewOptions()
         self.ctx = ctx or offscreen_context()
         self.pipeline = MaterialPipeline(self.ctx)
         self.renderer = Renderer(self.ctx, mesh="sphere", environment=resolve_environment(self.opts.env))
         self.backdrop = Backdrop(self.ctx, self.renderer)
-        self.state = ViewState(exposure=self.opts.exposure, tonemap=self.opts.tonemap)
+        self.state = ViewState(exposure=self.opts.state.exposure, tonemap=self.opts.state.tonemap)
 
     def render(self, material, size: int, spp: int) -> np.ndarray:
         """The tone-mapped tile, uint8 (size, size, 3), row 0 on top."""
@@ -73,7 +74,7 @@ class TileRenderer:
 
         brdf = self.pipeline.build(material, BrdfMode.AUTO)
         img = self.backdrop.render_linear(self.state, (size, size), spp, brdf, self.opts.backdrop())
-        return tonemap(img, self.opts.exposure, self.opts.tonemap.value)
+        return tonemap(img, self.opts.state.exposure, self.opts.state.tonemap.value)
 
     def release(self) -> None:
         self.backdrop.release()

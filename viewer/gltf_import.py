@@ -378,22 +378,8 @@ def _convert_material(gltf: _Gltf, index: int | None, out_dir: Path,
     for e in ext:
         if e not in SUPPORTED_EXTENSIONS:
             notes.append(f"{e}: no equivalent in a layer stack (ignored)")
-
-    # metallic: nearest of metal / dielectric
-    metallic = float(pbr.get("metallicFactor", 1.0))
-    mr_info = pbr.get("metallicRoughnessTexture")
-    mr_img = w.texture(mr_info, "metallicRoughnessTexture")
-    if mr_img is not None and mr_img.shape[2] >= 3:
-        metal_map = metallic * mr_img[..., 2]
-        share = float((metal_map >= 0.5).mean())
-        if 0 < share < 1:
-            notes.append(f"metallic varies over the texture ({share:.0%} metal): one base kind for the whole "
-                         f"material, the majority ({'metal' if share >= 0.5 else 'dielectric'})")
-        metallic = 1.0 if share >= 0.5 else 0.0
-    elif 0 < metallic < 1:
-        notes.append(f"metallicFactor {_g(metallic)}: a layer stack has no metal/dielectric blend; "
-                     f"taken as {'metal' if metallic >= 0.5 else 'dielectric'} (nearest)")
-    is_metal = metallic >= 0.5
+    mr_img = w.texture(pbr.get("metallicRoughnessTexture"), "metallicRoughnessTexture")
+    is_metal = _is_metal(float(pbr.get("metallicFactor", 1.0)), mr_img, notes)
     roughness = w.roughness(float(pbr.get("roughnessFactor", 1.0)), mr_img, "roughness")
     base_factor = pbr.get("baseColorFactor", [1, 1, 1, 1])
     colour = w.colour(base_factor, pbr.get("baseColorTexture"))
@@ -401,8 +387,42 @@ def _convert_material(gltf: _Gltf, index: int | None, out_dir: Path,
         notes.append(f"alpha (alphaMode {m.get('alphaMode', 'OPAQUE')}, "
                      f"baseColorFactor alpha {_g(base_factor[3] if len(base_factor) > 3 else 1)}): "
                      "no equivalent, rendered opaque")
+    ior = _interface_ior(ext, is_metal, notes)
+    trans = ext.get("KHR_materials_transmission", {})
+    transmission = float(trans.get("transmissionFactor", 0.0))
+    if "transmissionTexture" in trans:
+        notes.append("KHR_materials_transmission.transmissionTexture: no equivalent (ignored)")
+    layers = _layers(w, ext.get("KHR_materials_clearcoat"), is_metal, transmission, roughness, colour, ior, notes)
+    _unsupported(m, notes)
+    data: dict[str, Any] = {"format": FORMAT, "name": raw_name, "layers": layers}
+    normal = m.get("normalTexture")
+    if isinstance(normal, dict):
+        img = w.texture(normal, "normalTexture")
+        if float(normal.get("scale", 1.0)) != 1.0:
+            notes.append(f"normalTexture.scale {_g(float(normal['scale']))}: no equivalent (taken as 1)")
+        if img is not None and img.shape[2] >= 3:
+            data["normal_map"] = w.write(img[..., :3], "normal", bits=8)
+    json_path = out_dir / f"{name}.json"
+    json_path.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    return load_material(json_path), notes
 
-    # the interface's ior: KHR_materials_ior, then KHR_materials_specular
+
+def _is_metal(metallic: float, mr_img, notes: list[str]) -> bool:
+    """Metal or dielectric base, the nearest of the factor (times the texture's blue channel)."""
+    if mr_img is not None and mr_img.shape[2] >= 3:
+        share = float((metallic * mr_img[..., 2] >= 0.5).mean())
+        if 0 < share < 1:
+            notes.append(f"metallic varies over the texture ({share:.0%} metal): one base kind for the whole "
+                         f"material, the majority ({'metal' if share >= 0.5 else 'dielectric'})")
+        return share >= 0.5
+    if 0 < metallic < 1:
+        notes.append(f"metallicFactor {_g(metallic)}: a layer stack has no metal/dielectric blend; "
+                     f"taken as {'metal' if metallic >= 0.5 else 'dielectric'} (nearest)")
+    return metallic >= 0.5
+
+
+def _interface_ior(ext: dict, is_metal: bool, notes: list[str]) -> float:
+    """The interface's ior: KHR_materials_ior, then KHR_materials_specular, clamped into [1.05, 2]."""
     ior = float(ext.get("KHR_materials_ior", {}).get("ior", 1.5))
     spec = ext.get("KHR_materials_specular")
     if spec is not None and not is_metal:
@@ -421,12 +441,14 @@ def _convert_material(gltf: _Gltf, index: int | None, out_dir: Path,
         clamped = min(max(ior if ior > 0 else 2.0, 1.05), 2.0)
         notes.append(f"ior {_g(ior)} clamped into [1.05, 2] -> {_g(clamped)}")
         ior = clamped
+    return ior
 
-    transmission = float(ext.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0))
-    if "transmissionTexture" in ext.get("KHR_materials_transmission", {}):
-        notes.append("KHR_materials_transmission.transmissionTexture: no equivalent (ignored)")
+
+def _layers(w: "_MaterialWriter", coat: dict | None, is_metal: bool, transmission: float, roughness,
+            colour, ior: float, notes: list[str]) -> list[dict]:
+    """The layer stack: an optional clear coat over a conductor, a dielectric, or a
+    dielectric interface over a diffuse base."""
     layers: list[dict] = []
-    coat = ext.get("KHR_materials_clearcoat")
     coat_factor = float(coat.get("clearcoatFactor", 0.0)) if coat else 0.0
     if coat is not None:
         if 0 < coat_factor < 1:
@@ -462,25 +484,17 @@ def _convert_material(gltf: _Gltf, index: int | None, out_dir: Path,
             notes.append(f"base interface under the clear coat: relative ior {_g(rel_ior)} < 1.05 "
                          "reflects nothing and is left out")
         layers.append({"type": DIFFUSE, "albedo": colour})
+    return layers
 
-    # properties without an equivalent
+
+def _unsupported(m: dict, notes: list[str]) -> None:
+    """Notes on the material's properties without an equivalent."""
     emissive = m.get("emissiveFactor", [0, 0, 0])
     if any(float(c) > 0 for c in emissive) or "emissiveTexture" in m:
         notes.append(f"emission (emissiveFactor {[_g(float(c)) for c in emissive]}"
                      f"{', emissiveTexture' if 'emissiveTexture' in m else ''}): no equivalent (ignored)")
     if "occlusionTexture" in m:
         notes.append("occlusionTexture: no equivalent, the previewer computes its own lighting (ignored)")
-    data: dict[str, Any] = {"format": FORMAT, "name": raw_name, "layers": layers}
-    normal = m.get("normalTexture")
-    if isinstance(normal, dict):
-        img = w.texture(normal, "normalTexture")
-        if float(normal.get("scale", 1.0)) != 1.0:
-            notes.append(f"normalTexture.scale {_g(float(normal['scale']))}: no equivalent (taken as 1)")
-        if img is not None and img.shape[2] >= 3:
-            data["normal_map"] = w.write(img[..., :3], "normal", bits=8)
-    json_path = out_dir / f"{name}.json"
-    json_path.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-    return load_material(json_path), notes
 
 
 # ---------------------------------------------------------------- meshes

@@ -5,12 +5,17 @@ less what is not an edit, see ``LookDev.snapshot``). ``History`` keeps the
 current snapshot and two stacks beside it; ``commit`` after an edit pushes the
 previous snapshot when the new one differs. Edits made under one open
 ``group`` (a slider being dragged: one value per frame) coalesce into a single
-step, so one drag is one undo.
+step, so one drag is one undo. ``GuardedEdits`` runs a session's edits
+against it (a bad input changes nothing and is one line).
 """
 from __future__ import annotations
 
 import copy
+from contextlib import contextmanager
 from dataclasses import dataclass, field
+from typing import Callable, Iterator
+
+from nbrdf.neural.errors import NbrdfError
 
 #: Undo steps kept by default (the oldest are dropped beyond it).
 DEFAULT_LIMIT = 200
@@ -89,3 +94,43 @@ class History:
         self.current = self.redo_stack.pop()
         self.group = None
         return copy.deepcopy(self.current)
+
+
+class GuardedEdits:
+    """Runs a session's edits: a bad input becomes a one-line error and changes
+    nothing; each outermost edit that succeeds is one undo step of ``history``
+    (edits inside ``coalescing(group)`` join the open step of that group)."""
+
+    def __init__(self, history: History, snapshot: Callable[[], dict]):
+        self.history = history
+        self.snapshot = snapshot
+        """The session's undo snapshot, taken after each step."""
+        self.group: str | None = None
+        """The coalescing group of the edits being made (a slider drag)."""
+        self.restoring = False
+        """True while undo / redo restores a snapshot (no new step)."""
+        self._depth = 0  # nested edits: one undo step for the outermost
+
+    def run(self, fn: Callable[..., object], *args) -> str | None:
+        """Runs ``fn``; returns None, or the one-line error of a bad input."""
+        self._depth += 1
+        try:
+            fn(*args)
+        except NbrdfError as e:
+            return str(e)
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            return f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
+        finally:
+            self._depth -= 1
+        if not self.restoring and self._depth == 0:
+            self.history.commit(self.snapshot(), self.group)
+        return None
+
+    @contextmanager
+    def coalescing(self, group: str | None) -> Iterator[None]:
+        """Edits made inside join the open step of ``group``."""
+        old, self.group = self.group, group
+        try:
+            yield
+        finally:
+            self.group = old

@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -71,13 +71,12 @@ def default_setup(ctx, material: Path | None = None):
     """The default offscreen preview's renderer and state (``nbrdf-view --offscreen``:
     ``material``, default the default material, studio environment, the framed
     three-quarter camera), object only."""
-    from nbrdf.viewer.offscreen import make_renderer
     from nbrdf.viewer.options import ViewOptions
-    from nbrdf.viewer.renderer import ViewState
+    from nbrdf.viewer.renderer import make_renderer
 
     opts = ViewOptions() if material is None else ViewOptions(material=material)
     r = make_renderer(ctx, opts.load_material()[0], opts)
-    state = ViewState(env_intensity=opts.env_intensity, env_rotation=opts.env_rotation, background=False)
+    state = replace(opts.state, background=False)
     return r, state
 
 
@@ -193,12 +192,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.clamp is not None:
         r.sampling.clamp = args.clamp
     if args.strategies is not None:
-        r.strategies = args.strategies
+        r.sampling.strategies = args.strategies
     cfg = NoiseConfig(size=(args.size, args.size), spp=args.spp, renders=args.renders, terms=args.terms)
     out = measure_noise(r, state, cfg, progress=True).as_dict()
     out.update(size=f"{args.size}x{args.size}", spp=args.spp, renders=args.renders,
                ris=r.sampling.ris_samples, candidates=r.sampling.ris_candidates,
-               coat_samples=r.sampling.coat_samples, clamp=r.sampling.clamp, strategies=r.strategies)
+               coat_samples=r.sampling.coat_samples, clamp=r.sampling.clamp, strategies=r.sampling.strategies)
     if args.bias:
         out["clamp_bias"] = clamp_bias(r, state, r.sampling.clamp, (args.size, args.size), args.spp, progress=True)
     print(json.dumps(out))

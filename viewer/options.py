@@ -3,13 +3,13 @@ offscreen renderer's settings): one documented dataclass, read by the viewer
 and turned into flags by ``nbrdf.cli.view``."""
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.viewer.modes import Background, BrdfMode, ToneMap, View
+from nbrdf.viewer.modes import Background, BrdfMode, View
+from nbrdf.viewer.view_settings import ViewState, check_flags
 
 #: The material shown when none is given (varnished copper).
 DEFAULT_MATERIAL = Path(__file__).parent / "assets" / "materials" / "default.json"
@@ -30,16 +30,6 @@ def parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def parse_point(text: str) -> tuple[float, float, float]:
-    """``X,Y,Z`` -> a finite world position; one-line error otherwise."""
-    try:
-        point = tuple(float(x) for x in text.split(","))
-    except ValueError:
-        point = ()
-    if len(point) != 3 or not all(math.isfinite(x) for x in point):
-        raise NbrdfError(f"--point-light: expected X,Y,Z such as 2,-2,3, got {text!r}")
-    return point  # type: ignore[return-value]
-
 if TYPE_CHECKING:
     from nbrdf.neural.material import Material
     from nbrdf.viewer.gltf_import import MaterialGroup
@@ -56,10 +46,8 @@ class ViewOptions:
     MATERIAL is given)"""
     env: str | None = "studio"
     """environment: a generated preset (studio, sky, softbox) or an equirectangular .hdr/.exr file"""
-    view: View = View.OBJECT
-    """what the viewport shows"""
-    theta_i: float = 30.0
-    """incidence angle of the lobe view, degrees"""
+    state: ViewState = field(default_factory=ViewState, metadata={"nested": True})
+    """the view settings (viewer/view_settings.py: each one marked ``cli`` is a flag of its own)"""
     offscreen: bool = False
     """render through EGL to --out instead of opening a window"""
     restore: bool | None = field(default=None, metadata={
@@ -73,19 +61,10 @@ class ViewOptions:
     """image or window size in pixels"""
     spp: int = 32
     """passes accumulated per pixel (32: the default preview's relative noise under 1 %)"""
-    exposure: float = 0.0
-    """exposure in EV (stops: +1 doubles the brightness)"""
-    tonemap: ToneMap = ToneMap.NEUTRAL
-    """display transform of a .png or the window (Khronos PBR Neutral keeps base colours: presets read as
-    their names)"""
     brdf: BrdfMode = BrdfMode.AUTO
     """analytic: closed form in GLSL (single layers); neural: the shipped decoder in GLSL at the latents of leaf
     encoders and layering; projected: at latents fitted to the material's reference; auto: analytic for a single
     layer, else neural"""
-    env_rotation: float = 0.0
-    """environment rotation about the up axis, degrees"""
-    env_intensity: float = 0.6
-    """environment radiance scale"""
     background: Background = Background.BLUR
     """what is seen behind the object, independent of what lights it: the environment, the environment
     blurred, a flat colour, or none (black)"""
@@ -93,11 +72,6 @@ class ViewOptions:
     """a soft contact shadow on the ground under the object (--no-ground: none)"""
     session: str | None = None
     """a look-development session file (material, camera, lights, environment, view) to open"""
-    point_light: tuple[float, float, float] | None = field(default=None, metadata={"parse": parse_point,
-                                                                                    "metavar": "X,Y,Z"})
-    """a point light at this world position (z up)"""
-    point_intensity: float = 20.0
-    """the point light's radiant intensity"""
     turntable: int = 0
     """offscreen: N frames of one turn of the camera around the object, written to --out as .mp4, .gif or
     a frame pattern such as frame_%03d.png (0: a single image)"""
@@ -108,10 +82,10 @@ class ViewOptions:
         if self.size is None:
             self.size = DEFAULT_IMAGE_SIZE
         self.material = Path(self.material)
-        self.view = View.parse(self.view, "--view")
-        self.tonemap = ToneMap.parse(self.tonemap, "--tonemap")
         self.brdf = BrdfMode.parse(self.brdf, "--brdf")
         self.background = Background.parse(self.background, "--background")
+        # What lights the object is the environment whatever is seen behind it; "none" hides it.
+        self.state = replace(self.state, background=self.background != Background.NONE)
 
     def backdrop(self):
         """The backdrop settings of these options (viewer/backdrop.py)."""
@@ -146,17 +120,12 @@ class ViewOptions:
         """Raises ``NbrdfError`` (one line naming the flag) for values out of range."""
         if self.spp < 1:
             raise NbrdfError(f"--spp: {self.spp} must be at least 1")
-        if not (0.0 <= self.theta_i < 90.0):
-            raise NbrdfError(f"--theta-i: {self.theta_i} is outside [0, 90)")
-        if not (math.isfinite(self.env_intensity) and self.env_intensity >= 0) or not math.isfinite(self.env_rotation):
-            raise NbrdfError("--env-intensity must be finite and >= 0, --env-rotation finite")
-        if not (math.isfinite(self.point_intensity) and self.point_intensity >= 0):
-            raise NbrdfError("--point-intensity must be finite and >= 0")
+        check_flags(self.state)
         if self.offscreen and not self.out:
             raise NbrdfError("--offscreen needs --out IMG")
         if self.turntable < 0 or self.turntable > 3600:
             raise NbrdfError(f"--turntable: {self.turntable} is outside 0..3600 frames")
-        if self.turntable and self.view != View.OBJECT:
+        if self.turntable and self.state.view != View.OBJECT:
             raise NbrdfError("--turntable: turns the camera around the object (--view object)")
         if self.turntable and not self.offscreen:
             raise NbrdfError("--turntable needs --offscreen and --out (in the window, T toggles the turntable)")

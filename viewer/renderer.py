@@ -6,15 +6,14 @@ Everything renders linear radiance into a float framebuffer; the object view
 accumulates ``spp`` passes with different random numbers (progressive).
 
 The object view is deferred where OpenGL 4.3 exists: a raster pass writes a
-G-buffer (gbuffer_lit.frag: shading normal, position, uv, coverage, latent mip
-level) and a compute pass (lit.comp) shades every pixel with the BRDF into the
+G-buffer and a compute pass (lit.comp) shades every pixel with the BRDF into the
 float accumulation image, so the decoder runs in compute shaders (all of a
 data-centre GPU; weights in a uniform buffer by default: a broadcast read). On OpenGL
 3.3-4.2 (macOS) the fragment path object.frag shades instead, with a one-line
-notice; both call lit_shade.glsl with the same random numbers.
+notice; both call lit_shade.glsl with the same random numbers (viewer/lit_passes.py).
 
-One ``Renderer`` owns the scene's GPU resources -- programs (built once per
-BRDF kind), the mesh buffers, the environment's sampling tables and the
+One ``Renderer`` owns the scene's GPU resources -- programs (viewer/programs.py:
+built once per ``ProgramKey``), the mesh buffers, the environment's sampling tables and the
 accumulation targets -- and draws with the BRDF it is handed per draw (a
 ``GpuBrdf`` from viewer/pipeline.py), so the neural image, its reference and
 a second material share them. A renderer made with a material keeps that
@@ -27,12 +26,12 @@ edited). The deferred path rasterises every range into one depth-tested
 G-buffer with the range's index in the uv target's z, then runs lit.comp once
 per range over the pixels of that index; the fragment path writes the depth
 of all ranges first, then shades each range with its own program. One range
-(every mesh but a multi-material glTF) is one draw and one dispatch, as before.
+(every mesh but a multi-material glTF) is one draw and one dispatch. GL state
+is set through the scopes of viewer/gl_state.py.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Sequence
 
 import moderngl
@@ -40,70 +39,31 @@ import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
-from nbrdf.viewer import shaders
-from nbrdf.viewer.camera import OrbitCamera
+from nbrdf.viewer.env_presets import resolve_environment
 from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
 from nbrdf.viewer.gl import use_compute
+from nbrdf.viewer.gl_state import accumulating, depth_tested, flat, masked
+from nbrdf.viewer.lit_passes import LitPasses, incidence
 from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.mesh import Mesh, named_mesh
 from nbrdf.viewer.modes import ToneMap, View
-from nbrdf.viewer.neural_gpu import SHARE_UNIT
-from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf, NormalMaps, gpu_brdf
+from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf, MaterialPipeline, NormalMaps, gpu_brdf
+from nbrdf.viewer.programs import ProgramCache, ProgramKey
 from nbrdf.viewer.size_cache import SizeCache, release_all
+from nbrdf.viewer.view_settings import ViewState
 
 if TYPE_CHECKING:
     import torch
 
     from nbrdf.neural.latent_texture import LatentTexture
     from nbrdf.viewer.neural_gpu import GpuDecoder, GpuLatentTexture
+    from nbrdf.viewer.options import ViewOptions
 
 VIEWS = View.words()
 LOBE_SIZE = 64
 NORMAL_UNIT = 9  # texture unit of a material's normal map
-GBUFFER_UNITS = (10, 11, 12)  # texture units of the G-buffer in the compute lit pass
 TABLE_UNIT = 13  # texture unit of a material's baked body table
-LIT_GROUP = 8     # lit.comp's work group is LIT_GROUP x LIT_GROUP pixels
-LIT_CHUNK = 8     # passes per compute dispatch (bounds one dispatch's duration)
 MAIN = "main"    # the default accumulation slot
-
-
-@dataclass
-class ViewState:
-    """Everything that decides a frame besides the material and the mesh."""
-
-    view: View = View.OBJECT
-    """object, lobe or slice."""
-    theta_i: float = 30.0
-    """The lobe view's incidence, degrees."""
-    camera: OrbitCamera = field(default_factory=OrbitCamera)
-    """The orbit camera of the object view."""
-    light_dir: tuple[float, float, float] = (0.4, -0.6, 0.7)
-    """Toward the directional light, world space."""
-    light_radiance: float = 3.0
-    """The directional light's radiance."""
-    point_light: tuple[float, float, float] | None = None
-    """A point light's world position (None: off)."""
-    point_intensity: float = 20.0
-    """The point light's radiant intensity."""
-    env_intensity: float = 0.6
-    """The environment's radiance scale."""
-    env_rotation: float = 0.0
-    """The environment's rotation about world z, degrees."""
-    env_on: bool = True
-    """False: the directional (and point) light alone."""
-    background: bool = True
-    """The environment behind the object."""
-    exposure: float = 0.0
-    """Stops."""
-    tonemap: ToneMap = ToneMap.NEUTRAL
-    """The display transform (Khronos PBR Neutral keeps base colours)."""
-
-    def __post_init__(self) -> None:
-        try:
-            self.view = View.parse(self.view, "--view")
-            self.tonemap = ToneMap.parse(self.tonemap, "--tonemap")
-        except ValueError as e:
-            raise NbrdfError(str(e)) from None
 
 
 class Renderer:
@@ -124,29 +84,23 @@ class Renderer:
         path (None: wherever OpenGL 4.3 exists, see gl.use_compute)."""
         self.ctx = ctx
         self.deferred = use_compute(ctx, compute)
-        self.strategies = 4
-        """With ``sampling.ris_samples`` 0 only (the default resamples, lit_sampling.py):
-        the environment strategies of the balance heuristic, 4 = environment CDF, the
-        BRDF's lobe and the cosine lobe, 3 = without the cosine lobe (issue 12 measured
-        0.68x the time to equal noise)."""
-        self.one_sample_mis = False
-        """With ``sampling.ris_samples`` 0 only: one environment sample per pass from the
-        strategies' mixture (fewer BRDF evaluations, more noise, issue 12)."""
         self.sampling = LitSampling()
-        """The lit pass's sampling: coat samples per pass, firefly clamp, seed (viewer/lit_sampling.py)."""
+        """The lit pass's sampling: resampling, strategies, coat samples per pass, firefly
+        clamp, seed (viewer/lit_sampling.py)."""
         self.quick = False
         """True: passes use ``sampling.quick()`` (the window's interactive frames, viewer/refinement.py)."""
         self.table_sampling: LitSampling | None = None
         """The sampling of draws whose body is a baked table (None: ``sampling``; the window's
         choice, viewer/body_source.py ``BodySource.sampling``)."""
-        self._gbuf: SizeCache[tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = SizeCache(release_all)
         self.neural = neural
-        self._programs: dict[tuple, moderngl.Program] = {}
+        self.programs = ProgramCache(ctx)
+        self.lit = LitPasses(self)
+        """The lit passes of the object view (deferred compute or fragment) and the compute lobe / slice."""
         self._mesh_vaos: dict[tuple, moderngl.VertexArray] = {}
         self._fbo: SizeCache[tuple[moderngl.Framebuffer, moderngl.Texture]] = SizeCache(
-            lambda t: release_all(t[0], t[0].depth_attachment, t[1]), on_evict=self._gbuf.evict)
-        self.tone = self._build("fullscreen.vert", "tonemap.frag", None)
-        self.background_prog = self._build("fullscreen.vert", "background.frag", None)
+            lambda t: release_all(t[0], t[0].depth_attachment, t[1]), on_evict=self.lit.gbuffers.evict)
+        self.tone = self.programs.get(ProgramKey("tonemap.frag"))
+        self.background_prog = self.programs.get(ProgramKey("background.frag"))
         self.empty_tone = ctx.vertex_array(self.tone, [])
         self.empty_background = ctx.vertex_array(self.background_prog, [])
         self._empty: dict[tuple, moderngl.VertexArray] = {}
@@ -164,49 +118,15 @@ class Renderer:
             self.set_material(material, latent, proxy, latent_texture)
 
     # --- programs -------------------------------------------------------------------------
-    def _build(self, vert: str, frag: str, brdf: GpuBrdf | None) -> moderngl.Program:
-        """A program whose ``//@INCLUDE brdf`` is ``brdf``'s kind (closed form,
-        the decoder at a uniform latent, or at a latent texture); None: no BRDF."""
-        if brdf is None:
-            fs = shaders.source(frag)
-        elif brdf.kind == BrdfKind.ANALYTIC:
-            fs = shaders.source(frag, {"brdf": shaders.read("analytic_brdf.glsl")})
-        else:
-            snippets, defines = _neural_snippets(brdf)
-            fs = brdf.decoder.source(frag, snippets, defines=defines)
-        try:
-            return self.ctx.program(vertex_shader=shaders.source(vert), fragment_shader=fs)
-        except moderngl.Error as e:
-            raise NbrdfError(f"shader build failed on {self.ctx.info.get('GL_RENDERER', '?')}: "
-                             f"{str(e).splitlines()[0]}") from None
-
     def compute_program(self, brdf: GpuBrdf, name: str = "lit.comp",
                         defines: dict | None = None) -> moderngl.ComputeShader:
         """Compute shader ``name`` (lit.comp; view.comp: lobe and slice) for ``brdf``'s
         kind (neural: weights in the decoder's ``compute_storage``), kept."""
-        storage = brdf.decoder.compute_storage if brdf.neural else None
-        key = (name, brdf.kind, id(brdf.decoder) if brdf.neural else 0, storage, tuple(sorted((defines or {}).items())))
-        if key not in self._programs:
-            version = "#version 430 core"
-            if brdf.kind == BrdfKind.ANALYTIC:
-                src = shaders.source(name, {"brdf": shaders.read("analytic_brdf.glsl")}, version=version,
-                                     defines=defines)
-            else:
-                snippets, extra = _neural_snippets(brdf)
-                src = brdf.decoder.source(name, snippets, storage=storage, defines={**extra, **(defines or {})})
-            try:
-                self._programs[key] = self.ctx.compute_shader(src)
-            except moderngl.Error as e:
-                raise NbrdfError(f"compute shader build failed on {self.ctx.info.get('GL_RENDERER', '?')}: "
-                                 f"{str(e).splitlines()[0]}") from None
-        return self._programs[key]
+        return self.programs.get(ProgramKey.of(name, brdf, vertex=None, defines=defines), brdf)
 
     def program(self, frag: str, brdf: GpuBrdf, vert: str = "fullscreen.vert") -> moderngl.Program:
         """The program of ``frag`` for ``brdf``'s kind, built on first use and kept."""
-        key = (vert, frag, brdf.kind, id(brdf.decoder) if brdf.neural else 0)
-        if key not in self._programs:
-            self._programs[key] = self._build(vert, frag, brdf)
-        return self._programs[key]
+        return self.programs.get(ProgramKey.of(frag, brdf, vertex=vert), brdf)
 
     def _fullscreen(self, prog: moderngl.Program) -> moderngl.VertexArray:
         key = (id(prog),)
@@ -214,7 +134,7 @@ class Renderer:
             self._empty[key] = self.ctx.vertex_array(prog, [])
         return self._empty[key]
 
-    def _mesh_vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
+    def mesh_vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
         """The mesh as drawn by ``prog`` (rebuilt after a mesh change)."""
         key = (id(prog),)
         if key not in self._mesh_vaos:
@@ -224,7 +144,7 @@ class Renderer:
                 skip_errors=True)
         return self._mesh_vaos[key]
 
-    def _bind_brdf(self, prog: moderngl.Program, brdf: GpuBrdf, compute: bool = False) -> None:
+    def bind_brdf(self, prog: moderngl.Program, brdf: GpuBrdf, compute: bool = False) -> None:
         """Makes ``brdf`` the program's BRDF: weights, latent share (or latent texture), uniforms."""
         if brdf.kind == BrdfKind.TABLE:
             brdf.body_table.use(TABLE_UNIT)
@@ -269,7 +189,7 @@ class Renderer:
             raise NbrdfError(f"the mesh has {len(self.mesh.draw_ranges)} material parts, got {len(brdfs)} BRDFs")
         self.part_brdfs = list(brdfs)
 
-    def _draws(self, brdf: GpuBrdf) -> list[tuple[int, int, GpuBrdf]]:
+    def draws(self, brdf: GpuBrdf) -> list[tuple[int, int, GpuBrdf]]:
         """(first index, index count, BRDF) of each draw: consecutive ranges with the
         same BRDF merged, so a mesh of one material is one draw of everything (count -1)."""
         out: list[tuple[int, int, GpuBrdf]] = []
@@ -317,7 +237,7 @@ class Renderer:
         if self.latent_tex is not None:
             self.latent_tex.set_mipmapped(on)
 
-    def _surface_uniforms(self, p: moderngl.Program, state: ViewState, w: int, h: int,
+    def surface_uniforms(self, p: moderngl.Program, state: ViewState, w: int, h: int,
                           normal_map: moderngl.Texture | None) -> np.ndarray:
         """Camera, light direction and normal map of a program over the mesh
         (shading_frame.glsl); returns the view-projection matrix."""
@@ -337,7 +257,7 @@ class Renderer:
         return vp
 
     # --- frames -------------------------------------------------------------------
-    def _target(self, w: int, h: int, slot: str = MAIN):
+    def target(self, w: int, h: int, slot: str = MAIN):
         def make():
             tex = self.ctx.texture((w, h), 4, dtype="f4")
             return self.ctx.framebuffer([tex], self.ctx.depth_renderbuffer((w, h))), tex
@@ -346,12 +266,12 @@ class Renderer:
     def release_targets(self) -> None:
         """Releases every accumulation target and G-buffer (made again on next use)."""
         self._fbo.clear()
-        self._gbuf.clear()
+        self.lit.gbuffers.clear()
 
     def frame_texture(self, view: View | str, w: int, h: int, slot: str = MAIN) -> moderngl.Texture:
         """The accumulation target of ``view`` at (w, h) in ``slot`` as the last ``accumulate`` left it."""
         lobe = View.parse(view) == View.LOBE
-        return self._target(*((LOBE_SIZE, LOBE_SIZE) if lobe else (w, h)), slot)[1]
+        return self.target(*((LOBE_SIZE, LOBE_SIZE) if lobe else (w, h)), slot)[1]
 
     def accumulate(self, state: ViewState, w: int, h: int, first_pass: int, passes: int,
                    brdf: GpuBrdf | None = None, slot: str = MAIN) -> moderngl.Texture:
@@ -359,182 +279,40 @@ class Renderer:
         (w, h) float target of ``slot`` (one per image shown at once); returns it."""
         brdf = self._brdf(brdf)
         view = View.parse(state.view, "--view")
-        fbo, tex = self._target(w, h, slot)
+        fbo, tex = self.target(w, h, slot)
         fbo.use()
         if first_pass == 0:
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         if view == View.OBJECT:
             self._object_passes(state, w, h, first_pass, passes, brdf, slot)
         elif first_pass == 0 and self.deferred:
-            self._view_compute(view, state, w, h, brdf, tex)
+            self.lit.view_compute(view, state, w, h, brdf, tex)
         elif first_pass == 0:
             p = self.program("lobe.frag" if view == View.LOBE else "slice.frag", brdf)
-            self._bind_brdf(p, brdf)
+            self.bind_brdf(p, brdf)
             if view == View.LOBE:
-                p["u_wi"].value = _incidence(state.theta_i)
+                p["u_wi"].value = incidence(state.theta_i)
             p["u_size"].value = (float(w), float(h))
-            self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
-            self._fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
+            with flat(self.ctx):
+                self._fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
         return tex
-
-    def _view_compute(self, view: View, state: ViewState, w: int, h: int, brdf: GpuBrdf,
-                      tex: moderngl.Texture) -> None:
-        """The lobe or slice view in view.comp (the compute decoder, one pixel per invocation) into ``tex``."""
-        c = self.compute_program(brdf, "view.comp", {"VIEW_IS_LOBE": 1} if view == View.LOBE else None)
-        self._bind_brdf(c, brdf, compute=True)
-        if view == View.LOBE:
-            c["u_wi"].value = _incidence(state.theta_i)
-        c["u_size"].value = (float(w), float(h))
-        tex.bind_to_image(0, read=False, write=True)
-        c.run(-(-w // LIT_GROUP), -(-h // LIT_GROUP))
-        self.ctx.memory_barrier()
-
-    def _gbuffer_target(self, w: int, h: int, slot: str) -> tuple[moderngl.Framebuffer, list[moderngl.Texture]]:
-        """The G-buffer of ``slot`` at (w, h): three RGBA32F targets sharing the
-        accumulation target's depth buffer (the background pass then fills the rest)."""
-        def make():
-            depth = self._target(w, h, slot)[0].depth_attachment
-            texs = [self.ctx.texture((w, h), 4, dtype="f4") for _ in GBUFFER_UNITS]
-            for t in texs:
-                t.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            return self.ctx.framebuffer(texs, depth), texs
-        return self._gbuf.get((slot, w, h), make)
-
-    def _deferred_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
-                         slot: str) -> np.ndarray:
-        """The deferred lit path: on a slot's first pass, rasterise its G-buffer
-        (gbuffer_lit.frag); then ``passes`` passes of lit.comp over it into the
-        slot's accumulation image. Returns the view-projection matrix."""
-        gfbo, gtex = self._gbuffer_target(w, h, slot)
-        key = ("object.vert", "gbuffer_lit.frag", None, 0)
-        if key not in self._programs:
-            self._programs[key] = self.ctx.program(vertex_shader=shaders.source("object.vert"),
-                                                   fragment_shader=shaders.source("gbuffer_lit.frag",
-                                                                                  version="#version 430 core"))
-        g = self._programs[key]
-        draws = self._draws(brdf)
-        vp = self._surface_uniforms(g, state, w, h, draws[0][2].normal_map)
-        if first == 0:
-            gfbo.use()
-            gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self.ctx.enable(moderngl.DEPTH_TEST)
-            self.ctx.disable(moderngl.BLEND)
-            self.ctx.depth_func = "<"
-            # A sampler array on unit 0 beside the normal map's 2D sampler would void the draw.
-            g["u_nb_share_tex"].value = SHARE_UNIT
-            for part, (start, count, b) in enumerate(draws):
-                if part:
-                    self._surface_uniforms(g, state, w, h, b.normal_map)
-                textured = b.latent_texture is not None
-                if textured:
-                    b.latent_texture.bind(g)
-                g["u_textured"].value = int(textured)
-                if "u_material_id" in g:
-                    g["u_material_id"].value = part
-                self._mesh_vao(g).render(moderngl.TRIANGLES, vertices=count, first=start)
-        tex = self._target(w, h, slot)[1]
-        for part, (_, _, b) in enumerate(draws):
-            c = self.compute_program(b)
-            self._bind_brdf(c, b, compute=True)
-            self._lit_uniforms(c, state, b)
-            c["u_eye"].value = tuple(state.camera.eye())
-            if "u_material_id" in c:  # -1: every covered pixel (one material)
-                c["u_material_id"].value = part if len(draws) > 1 else -1
-            for t, unit, name in zip(gtex, GBUFFER_UNITS, ("u_gb_normal", "u_gb_world", "u_gb_uv")):
-                t.use(unit)
-                if name in c:
-                    c[name].value = unit
-            tex.bind_to_image(0, read=True, write=True)
-            self.ctx.memory_barrier()
-            for k in range(first, first + passes, LIT_CHUNK):
-                c["u_first_pass"].value = k
-                c["u_passes"].value = min(LIT_CHUNK, first + passes - k)
-                c.run(-(-w // LIT_GROUP), -(-h // LIT_GROUP))
-                self.ctx.memory_barrier()
-        self.unbind_textures(*GBUFFER_UNITS)
-        return vp
-
-    def _fragment_passes(self, state: ViewState, w: int, h: int, first: int, passes: int,
-                         brdf: GpuBrdf) -> tuple[np.ndarray, moderngl.Framebuffer]:
-        """The fallback lit path: ``passes`` passes of object.frag blended into the
-        bound target (per draw range its BRDF's program); returns the
-        view-projection matrix and that target."""
-        draws = [(self.program("object.frag", b, "object.vert"), start, count, b)
-                 for start, count, b in self._draws(brdf)]
-        fbo = self.ctx.fbo
-        vp = None
-        for p, _, _, b in draws:
-            self._bind_brdf(p, b)
-            vp = self._surface_uniforms(p, state, w, h, b.normal_map)
-        self.ctx.enable(moderngl.DEPTH_TEST)
-        self.ctx.disable(moderngl.BLEND)
-        if first == 0:
-            # Depth pre-pass of every range: the shading passes then add exactly the visible surface.
-            # (moderngl applies a framebuffer's masks when it is bound, hence use().)
-            fbo.color_mask = (False, False, False, False)
-            fbo.use()
-            self.ctx.depth_func = "<"
-            for p, start, count, _ in draws:
-                self._mesh_vao(p).render(moderngl.TRIANGLES, vertices=count, first=start)
-        fbo.color_mask = (True, True, True, True)
-        fbo.depth_mask = False
-        fbo.use()
-        self.ctx.depth_func = "<="
-        self.ctx.enable(moderngl.BLEND)
-        self.ctx.blend_func = moderngl.ONE, moderngl.ONE
-        for p, start, count, b in draws:
-            if len(draws) > 1:  # programs may be shared by two ranges: this range's BRDF
-                self._bind_brdf(p, b)
-                self._surface_uniforms(p, state, w, h, b.normal_map)
-            self._lit_uniforms(p, state, b)
-            vao = self._mesh_vao(p)
-            for k in range(first, first + passes):
-                p["u_pass"].value = k
-                vao.render(moderngl.TRIANGLES, vertices=count, first=start)
-        return vp, fbo
-
-    def _lit_uniforms(self, p: moderngl.Program | moderngl.ComputeShader, state: ViewState,
-                      brdf: GpuBrdf | None = None) -> None:
-        """The lights and the environment of lit_shade.glsl, and the sampling of ``brdf``'s draw."""
-        ld = np.asarray(state.light_dir, dtype=np.float64)
-        p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
-        p["u_light_radiance"].value = (state.light_radiance,) * 3
-        p["u_point_on"].value = int(state.point_light is not None)
-        p["u_point_pos"].value = tuple(state.point_light or (0.0, 0.0, 0.0))
-        p["u_point_intensity"].value = (state.point_intensity,) * 3
-        p["u_env_intensity"].value = state.env_intensity
-        p["u_env_on"].value = int(state.env_on)
-        p["u_strategies"].value = self.strategies
-        p["u_one_sample"].value = int(self.one_sample_mis)
-        table = brdf is not None and brdf.kind == BrdfKind.TABLE and self.table_sampling is not None
-        sampling = self.table_sampling if table else self.sampling
-        (sampling.quick() if self.quick else sampling).bind(p)
-        self.env.bind(p, math.radians(state.env_rotation))
 
     def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
                        slot: str = MAIN) -> None:
-        cam = state.camera
+        fbo = self.target(w, h, slot)[0]
         if self.deferred:
-            vp = self._deferred_passes(state, w, h, first, passes, brdf, slot)
-            fbo = self._target(w, h, slot)[0]
-            fbo.depth_mask = False
-            fbo.use()
-            self.ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
-            self.ctx.depth_func = "<="
-            self.ctx.blend_func = moderngl.ONE, moderngl.ONE
+            vp = self.lit.deferred(state, w, h, first, passes, brdf, slot)
         else:
-            vp, fbo = self._fragment_passes(state, w, h, first, passes, brdf)
+            vp = self.lit.fragment(state, w, h, first, passes, brdf, fbo)
         if state.background and state.env_on:
             bg = self.background_prog
             self.env.bind(bg, math.radians(state.env_rotation))
             bg["u_inv_view_proj"].write(np.linalg.inv(vp).T.astype("f4").tobytes())
-            bg["u_eye"].value = tuple(cam.eye())
+            bg["u_eye"].value = tuple(state.camera.eye())
             bg["u_env_intensity"].value = state.env_intensity * passes  # as many passes as the object
-            self.empty_background.render(moderngl.TRIANGLES, vertices=3)
-        self.ctx.disable(moderngl.BLEND)
-        fbo.depth_mask = True
-        fbo.use()
-        self.ctx.depth_func = "<"
+            with accumulating(self.ctx, fbo):
+                self.empty_background.render(moderngl.TRIANGLES, vertices=3)
+        fbo.use()  # the target stays bound (a first deferred pass bound the G-buffer)
 
     def render_linear(self, state: ViewState, size: tuple[int, int] = (256, 256), spp: int = 1,
                       brdf: GpuBrdf | None = None) -> np.ndarray:
@@ -558,22 +336,17 @@ class Renderer:
         w, h = size
         own = brdf if brdf is not None else self.brdf
         normal_map = own.normal_map if own is not None else None
-        key = ("object.vert", "gbuffer.frag", None, 0)
-        if key not in self._programs:
-            self._programs[key] = self._build("object.vert", "gbuffer.frag", None)
-        p = self._programs[key]
-        vao = self._mesh_vao(p)
+        p = self.programs.get(ProgramKey("gbuffer.frag", "object.vert"))
+        vao = self.mesh_vao(p)
         targets = [self.ctx.texture((w, h), 4, dtype="f4") for _ in range(2)]
         depth = self.ctx.depth_renderbuffer((w, h))
         fbo = self.ctx.framebuffer(targets, depth)
         try:
             fbo.use()
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self.ctx.enable(moderngl.DEPTH_TEST)
-            self.ctx.disable(moderngl.BLEND)
-            self.ctx.depth_func = "<"
-            self._surface_uniforms(p, state, w, h, normal_map)
-            vao.render(moderngl.TRIANGLES)
+            self.surface_uniforms(p, state, w, h, normal_map)
+            with depth_tested(self.ctx):
+                vao.render(moderngl.TRIANGLES)
             wi, wo = (np.frombuffer(t.read(), np.float32).reshape(h, w, 4)[::-1] for t in targets)
             return np.ascontiguousarray(wi[..., :3]), np.ascontiguousarray(wo[..., :3]), wi[..., 3] > 0.5
         finally:
@@ -585,11 +358,8 @@ class Renderer:
         of the visible draw range (material; ``Mesh.draw_ranges``), -1 off the object
         (picking a material by clicking, tests). Works on OpenGL 3.3."""
         w, h = size
-        key = ("object.vert", "gbuffer.frag", None, 0)
-        if key not in self._programs:
-            self._programs[key] = self._build("object.vert", "gbuffer.frag", None)
-        p = self._programs[key]
-        vao = self._mesh_vao(p)
+        p = self.programs.get(ProgramKey("gbuffer.frag", "object.vert"))
+        vao = self.mesh_vao(p)
         target = self.ctx.texture((w, h), 4, dtype="f4")
         spare = self.ctx.texture((w, h), 4, dtype="f4")
         depth = self.ctx.depth_renderbuffer((w, h))
@@ -598,36 +368,31 @@ class Renderer:
         try:
             fbo.use()
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self.ctx.enable(moderngl.DEPTH_TEST)
-            self.ctx.disable(moderngl.BLEND)
-            self.ctx.depth_func = "<"
-            self._surface_uniforms(p, state, w, h, None)
-            vao.render(moderngl.TRIANGLES)  # the depth of the nearest surface
-            fbo.depth_mask = False
-            self.ctx.depth_func = "<="
-            for part, (start, count) in enumerate(self.mesh.draw_ranges):
-                fbo.use()
-                fbo.clear(0.0, 0.0, 0.0, 0.0)
-                vao.render(moderngl.TRIANGLES, vertices=count, first=start)
-                hit = np.frombuffer(target.read(), np.float32).reshape(h, w, 4)[::-1, :, 3] > 0.5
-                ids[hit] = part
+            self.surface_uniforms(p, state, w, h, None)
+            with depth_tested(self.ctx):
+                vao.render(moderngl.TRIANGLES)  # the depth of the nearest surface
+                with masked(fbo, depth=False):
+                    self.ctx.depth_func = "<="
+                    for part, (start, count) in enumerate(self.mesh.draw_ranges):
+                        fbo.clear(0.0, 0.0, 0.0, 0.0)
+                        vao.render(moderngl.TRIANGLES, vertices=count, first=start)
+                        hit = np.frombuffer(target.read(), np.float32).reshape(h, w, 4)[::-1, :, 3] > 0.5
+                        ids[hit] = part
             return ids
         finally:
-            fbo.depth_mask = True
-            self.ctx.depth_func = "<"
             for r in (fbo, depth, target, spare):
                 r.release()
 
     def tonemap_to(self, target: moderngl.Framebuffer, tex: moderngl.Texture, passes: int, state: ViewState) -> None:
         """Draws the accumulation ``tex`` (sum of ``passes``) to ``target`` as sRGB."""
         target.use()
-        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
         tex.use(0)
         self.tone["u_hdr"].value = 0
         self.tone["u_passes"].value = float(passes)
         self.tone["u_exposure"].value = state.exposure
         self.tone["u_tonemap"].value = ToneMap.parse(state.tonemap).code
-        self.empty_tone.render(moderngl.TRIANGLES, vertices=3)
+        with flat(self.ctx):
+            self.empty_tone.render(moderngl.TRIANGLES, vertices=3)
         # Unbind the accumulation texture: rendering into a texture that is still
         # bound for sampling is a feedback loop (llvmpipe then drops the blending).
         self.unbind_textures(0)
@@ -638,18 +403,14 @@ class Renderer:
             self._dummy.use(u)
 
 
-def _neural_snippets(brdf: GpuBrdf) -> tuple[dict[str, str], dict[str, object]]:
-    """The ``brdf`` snippet of a neural kind and its defines: the decoder (at a
-    uniform latent or a latent texture), or the baked body table (NB_BODY_TABLE,
-    no decoder compiled in)."""
-    code = shaders.read("neural_brdf.glsl")
-    if brdf.kind == BrdfKind.TEXTURED:
-        code = shaders.read("latent_texture.glsl") + "\n" + code
-    if brdf.kind == BrdfKind.TABLE:
-        return {"brdf": code, "neural_decoder.glsl": ""}, {"NB_BODY_TABLE": 1}
-    return {"brdf": code, "body_table.glsl": ""}, {}
-
-
-def _incidence(theta_deg: float) -> tuple[float, float, float]:
-    t = math.radians(theta_deg)
-    return (math.sin(t), 0.0, math.cos(t))
+def make_renderer(ctx: moderngl.Context, material: Material, opts: "ViewOptions", others=()) -> "Renderer":
+    """A renderer of ``material`` alone in ``opts.brdf``, on ``opts``' mesh and
+    environment (noise measurements, benchmarks and tests that draw one material
+    without a session). ``others``: the materials of the mesh's further draw
+    ranges (a glTF file's second, third, ...)."""
+    env = resolve_environment(str(opts.env)) if opts.env is not None else None
+    pipeline = MaterialPipeline(ctx)
+    r = Renderer(ctx, mesh=opts.mesh, environment=env, brdf=pipeline.build(material, opts.brdf))
+    if others:
+        r.set_part_brdfs([None] + [pipeline.build(m, opts.brdf) for m in others])
+    return r

@@ -1,19 +1,29 @@
-"""A screenshot rendered in steps: the window renders a few passes of it per
-frame (``LookDev.step_screenshot``), shows its progress, and stays responsive.
+"""Screenshots of the session's view: at once (``Screenshots.write``, the
+command line and scripts) or in steps, a few passes per window frame
+(``Screenshots.start`` / ``step``), showing their progress while the window
+stays responsive.
 
 ``ScreenshotJob`` is what is being rendered and how far it is; the passes are
-drawn by ``LookDev`` into accumulation slots of their own (``SHOT_SLOTS``), so
-the result is the image a one-shot render of the same passes gives.
+drawn by the session's ``ViewFrames`` into accumulation slots of their own
+(``SHOT_SLOTS``), so the result is the image a one-shot render of the same
+passes gives.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import time
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+import moderngl
 import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.camera import OrbitCamera
+from nbrdf.viewer.modes import ToneMap, View
+
+if TYPE_CHECKING:
+    from nbrdf.viewer.lookdev import LookDev
 
 #: Screenshot files: .png is the displayed composite, .exr / .npy the linear neural image.
 SHOT_SUFFIXES = (".png", ".exr", ".npy")
@@ -21,6 +31,8 @@ SHOT_SUFFIXES = (".png", ".exr", ".npy")
 SHOT_SLOTS = ("shot", "shot-other")
 #: The slot of a linear (.exr / .npy) screenshot's accumulation.
 SHOT_LINEAR_SLOT = "shot-linear"
+#: The time one step of a screenshot may take (ms): the window stays responsive.
+SHOT_STEP_MS = 150.0
 #: The side of a screenshot's tile (pixels): a few passes of one fit a frame on software OpenGL.
 TILE = 64
 
@@ -126,3 +138,188 @@ def write_display_png(path: Path, rgb8: np.ndarray) -> None:
 
     path.parent.mkdir(parents=True, exist_ok=True)
     write_png8(path, rgb8)
+
+
+def _write_linear(path: Path, img: np.ndarray, state) -> None:
+    from nbrdf.viewer.image_io import write_image
+
+    write_image(path, img, state.exposure, ToneMap.parse(state.tonemap).value)
+
+
+class Screenshots:
+    """The screenshots of a session: one-shot, or one being rendered in steps
+    (``job``; its image so far in ``texture`` for the window to show)."""
+
+    def __init__(self, session: "LookDev"):
+        self.session = session
+        self.job: ScreenshotJob | None = None
+        self.texture: moderngl.Texture | None = None
+        """The screenshot being rendered as far as it is (RGBA8, row 0 at the bottom)."""
+        self._fbos: dict[tuple[int, int], moderngl.Framebuffer] = {}
+
+    def write(self, path: str | Path, size: tuple[int, int], passes: int = 16) -> bool:
+        """Renders and writes a screenshot at once (a guarded edit of the session:
+        False with its ``error`` on bad input). .png: the displayed composite
+        (tone-mapped, compare included); .exr/.npy: the linear neural image of the view."""
+        ld = self.session
+        return ld.guarded(lambda: setattr(ld, "notice", self._write(path, size, passes)))
+
+    def start(self, path: str | Path, size: tuple[int, int], passes: int = 16,
+              budget_ms: float = SHOT_STEP_MS) -> bool:
+        """Starts a screenshot that ``step`` renders a step per frame (a guarded edit)."""
+        ld = self.session
+        return ld.guarded(lambda: setattr(ld, "notice", self._start(path, size, passes, budget_ms)))
+
+    def cancel(self) -> None:
+        self.job = None
+        self.session.notice = "screenshot cancelled"
+
+    def step(self, budget_ms: float = SHOT_STEP_MS) -> None:
+        """Renders the next step of the screenshot being rendered and writes the file
+        after the last; an error ends it and becomes the session's ``error``."""
+        ld = self.session
+        if self.job is None:
+            return
+        ld.poll()
+        if ld.brdf is None or self.job is None:
+            return
+        try:
+            notice = self._step_file(budget_ms)
+        except (NbrdfError, OSError, ValueError, moderngl.Error) as e:
+            ld.error = f"screenshot: {str(e).splitlines()[0] if str(e) else type(e).__name__}"
+            return
+        if notice:
+            ld.notice = notice
+
+    def _write(self, path: str | Path, size: tuple[int, int], passes: int) -> str:
+        ld = self.session
+        p = Path(path)
+        suffix = p.suffix.lower()
+        if suffix not in SHOT_SUFFIXES:
+            raise NbrdfError(f"{p}: a screenshot is .png, .exr or .npy")
+        if ld.brdf is None:
+            raise NbrdfError("the latent texture is still building")
+        if suffix == ".png":
+            fbo = ld.ctx.simple_framebuffer(size, components=4)
+            try:
+                ld.invalidate()
+                ld.render(fbo, size, passes)
+                data = np.frombuffer(fbo.read(components=3), np.uint8).reshape(size[1], size[0], 3)[::-1]
+                write_display_png(p, data)
+            finally:
+                fbo.release()
+                ld.invalidate()
+        else:
+            _write_linear(p, ld.render_linear(size, passes), ld.state)
+            ld.invalidate()
+        return f"wrote {p}"
+
+    def _start(self, path: str | Path, size: tuple[int, int], passes: int, budget_ms: float) -> str:
+        """A screenshot that ``step`` renders a step per frame: the same file
+        ``write`` writes at once. Where a whole pass would not fit ``budget_ms``
+        (software OpenGL), the object view is rendered tile by tile."""
+        from nbrdf.viewer.image_io import check_output
+
+        ld = self.session
+        if ld.brdf is None:
+            raise NbrdfError("the latent texture is still building")
+        job = ScreenshotJob(Path(path), size, passes)
+        check_output(job.path)
+        rate = ld.frames.ms_per_pixel_pass
+        whole_ms = None if rate is None else rate * job.size[0] * job.size[1]
+        if (View.parse(ld.state.view) == View.OBJECT and not ld.compare_active()
+                and (whole_ms is None or whole_ms > budget_ms)):
+            job = ScreenshotJob(job.path, job.size, job.passes, tiled=True)
+        job.ms_per_pixel_pass = rate
+        if self.texture is not None:
+            self.texture.release()
+        self.texture = ld.ctx.texture(job.size, 4)
+        self.job = job
+        return f"rendering {job.path.name}..."
+
+    @property
+    def progress(self) -> float | None:
+        """The share of the screenshot being rendered that is done (None: none running)."""
+        return None if self.job is None else self.job.progress
+
+    def restart(self) -> None:
+        """The session changed: the screenshot being rendered starts over."""
+        if self.job is not None:
+            self.job.restart()
+
+    def _step_file(self, budget_ms: float) -> str | None:
+        """Renders the next step of the screenshot (passes of one tile within
+        ``budget_ms``, or one whole pass) and writes the file after the last;
+        returns the notice then. An error ends the screenshot and is raised."""
+        job = self.job
+        try:
+            self._step(job, budget_ms)
+        except Exception:
+            self.job = None
+            raise
+        if not job.finished:
+            return None
+        self.job = None
+        if job.linear:
+            _write_linear(job.path, job.image, self.session.state)
+        else:
+            write_display_png(job.path, job.image)
+        self.session.invalidate()  # the view's reference and accumulation slots may have been used
+        return f"wrote {job.path}"
+
+    def _step(self, job: ScreenshotJob, budget_ms: float) -> None:
+        from nbrdf.viewer.image_io import tonemap
+
+        ld = self.session
+        k, (x, y, w, h), have = job.current()
+        view = View.parse(ld.state.view)
+        n = 1
+        if job.tiled and job.ms_per_pixel_pass:
+            n = int(np.clip(budget_ms / (job.ms_per_pixel_pass * w * h), 1, job.passes - have))
+        cam = TileCamera.of(ld.state.camera, job.size, (x, y, w, h)) if job.tiled else None
+        body = ld.bodies.for_frame(ld.brdf, False) if view == View.OBJECT else ld.brdf
+        ld.renderer.quick = False  # a still image: the full estimator
+        t0 = time.perf_counter()
+        if job.linear:
+            img, n = self._linear_step(job, view, cam, body, (x, y, w, h), have, n)
+            rgb8 = tonemap(img, ld.state.exposure, ToneMap.parse(ld.state.tonemap).value)
+        else:
+            if (w, h) not in self._fbos:
+                self._fbos[(w, h)] = ld.ctx.simple_framebuffer((w, h), components=4)
+            fbo = self._fbos[(w, h)]
+            fbo.use()
+            fbo.viewport = (0, 0, w, h)
+            got = ld.frames.draw(fbo, w, h, have, n, SHOT_SLOTS, camera=cam, body=body)
+            n = job.passes - have if view != View.OBJECT else got - have  # the lobe and slice: drawn once
+            rgb8 = np.frombuffer(fbo.read(components=3), np.uint8).reshape(h, w, 3)[::-1]
+            job.image[y:y + h, x:x + w] = rgb8
+        ld.ctx.finish()
+        if job.tiled and n:
+            job.ms_per_pixel_pass = (time.perf_counter() - t0) * 1000.0 / (w * h * n)
+        job.done += max(n, 1)
+        rgba = np.concatenate([rgb8, np.full(rgb8.shape[:2] + (1,), 255, np.uint8)], -1)[::-1]
+        self.texture.write(np.ascontiguousarray(rgba).tobytes(), viewport=(x, job.size[1] - y - h, w, h))
+
+    def _linear_step(self, job: ScreenshotJob, view: View, cam, body, rect, have: int, n: int):
+        """One step of a linear (.exr / .npy) screenshot into ``job.image``: (the tile's image, passes added)."""
+        ld = self.session
+        x, y, w, h = rect
+        state = ld.main_state()
+        if view != View.OBJECT:  # one pass: the lobe and slice views are not accumulated
+            img, n = ld.renderer.render_linear(state, job.size, 1, ld.brdf), job.passes - have
+        else:
+            if cam is not None:
+                state = replace(state, camera=cam)
+            acc = ld.renderer.accumulate(replace(state, background=False), w, h, have, n, body, SHOT_LINEAR_SLOT)
+            tex = ld.backdrop_part.apply(acc, have + n, state, ld.backdrop, SHOT_LINEAR_SLOT)
+            img = np.frombuffer(tex.read(), dtype="f4").reshape(h, w, 4)[::-1, :, :3]
+        job.image[y:y + h, x:x + w] = img
+        return img, n
+
+    def release(self) -> None:
+        for fbo in self._fbos.values():
+            fbo.release()
+        self._fbos.clear()
+        if self.texture is not None:
+            self.texture.release()
+            self.texture = None

@@ -18,9 +18,8 @@ from pathlib import Path
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material, material_to_dict, parse_material
 from nbrdf.viewer.backdrop import BackdropSettings
-from nbrdf.viewer.camera import OrbitCamera
-from nbrdf.viewer.modes import CompareMode, ToneMap, View
-from nbrdf.viewer.renderer import ViewState
+from nbrdf.viewer.modes import CompareMode
+from nbrdf.viewer.view_settings import ViewState, from_session, to_session
 
 SESSION_FORMAT = "nbrdf-session/1"
 
@@ -127,22 +126,17 @@ class SessionDoc:
 
     def to_dict(self) -> dict:
         """The ``nbrdf-session/1`` document."""
-        s = self.state
+        settings = to_session(self.state)
+        view = settings.pop("view")
         return {
             "format": SESSION_FORMAT,
             "material": material_to_dict(self.material),
             "material_dir": str(self.material.base_dir),
             "mesh": self.mesh,
             "environment": self.environment,
-            "camera": asdict(s.camera),
-            "light": {"direction": list(s.light_dir), "radiance": s.light_radiance,
-                      "point": list(s.point_light) if s.point_light else None, "point_intensity": s.point_intensity},
-            "lighting": {"env_intensity": s.env_intensity, "env_rotation": s.env_rotation, "env_on": s.env_on,
-                         "background": s.background},
-            "view": {"view": View.parse(s.view).value, "theta_i": s.theta_i, "exposure": s.exposure,
-                     "tonemap": ToneMap.parse(s.tonemap).value, "compare": self.compare.mode.value,
-                     "wipe": self.compare.wipe, "error_scale": self.compare.error_scale,
-                     "mipmapping": self.mipmapping},
+            **settings,
+            "view": {**view, "compare": self.compare.mode.value, "wipe": self.compare.wipe,
+                     "error_scale": self.compare.error_scale, "mipmapping": self.mipmapping},
             "interpolation": asdict(self.interpolation),
             "backdrop": {"mode": self.backdrop.mode.value, "flat_colour": list(self.backdrop.flat_colour),
                          "ground": self.backdrop.ground},
@@ -162,21 +156,8 @@ class SessionDoc:
         require_finite(data, source)
         try:
             mat = parse_material(data["material"], data.get("material_dir", "."), source=f"{source}: material")
-            cam = OrbitCamera(**data["camera"])
-            v, lt, li = data["view"], data["lighting"], data["light"]
-            try:
-                view = View.parse(v["view"], "view")
-                tonemap = ToneMap.parse(v["tonemap"], "tone mapping")
-            except ValueError as e:
-                raise NbrdfError(f"{source}: {e}") from None
-            state = ViewState(view=view, theta_i=float(v["theta_i"]), camera=cam,
-                              light_dir=tuple(float(x) for x in li["direction"]),
-                              light_radiance=float(li["radiance"]),
-                              point_light=tuple(float(x) for x in li["point"]) if li.get("point") else None,
-                              point_intensity=float(li.get("point_intensity", 20.0)),
-                              env_intensity=float(lt["env_intensity"]), env_rotation=float(lt["env_rotation"]),
-                              env_on=bool(lt["env_on"]), background=bool(lt["background"]),
-                              exposure=float(v["exposure"]), tonemap=tonemap)
+            v = data["view"]
+            state = from_session(data)
             require_finite(state, source)
             interp = Interpolation(**data.get("interpolation", {}))
             bd = data.get("backdrop") or {}  # older sessions: the defaults

@@ -22,8 +22,8 @@ def test_flags_default_to_the_view_options():
     assert parse_args([]) == ViewOptions()
     opts = parse_args(["m.json", "--view", "lobe", "--tonemap", "linear", "--brdf", "neural", "--size", "64x32",
                        "--point-light", "1,2,3", "--background", "none", "--theta-i", "-0"])
-    assert opts.view is View.LOBE and opts.tonemap is ToneMap.LINEAR and opts.brdf is BrdfMode.NEURAL
-    assert opts.size == (64, 32) and opts.point_light == (1.0, 2.0, 3.0) and opts.background == "none"
+    assert opts.state.view is View.LOBE and opts.state.tonemap is ToneMap.LINEAR and opts.brdf is BrdfMode.NEURAL
+    assert opts.size == (64, 32) and opts.state.point_light == (1.0, 2.0, 3.0) and opts.background == "none"
     assert opts.material == Path("m.json")
 
 
@@ -99,7 +99,7 @@ def test_cli_renders_a_session_file(gl_ctx, tmp_path, capsys):
         ld.state.view = "slice"
         ld.set_param(2, "roughness", 0.6)
         assert ld.save_session(tmp_path / "s.json")
-        assert ld.screenshot(tmp_path / "direct.png", (24, 16), 1)
+        assert ld.shots.write(tmp_path / "direct.png", (24, 16), 1)
     finally:
         ld.close()
     assert main(["--offscreen", "--session", str(tmp_path / "s.json"), "--size", "24x16", "--spp", "1",

@@ -89,9 +89,8 @@ def material_doc(case: Case) -> tuple[dict, Path]:
 def render_case(ctx, case: Case, doc: dict | None = None) -> np.ndarray:
     """The case's linear render; ``doc`` replaces its material document (an edited preset)."""
     from nbrdf.neural.material import parse_material
-    from nbrdf.viewer.offscreen import make_renderer
     from nbrdf.viewer.options import ViewOptions
-    from nbrdf.viewer.renderer import ViewState
+    from nbrdf.viewer.renderer import ViewState, make_renderer
 
     own, base = material_doc(case)
     material = parse_material(doc if doc is not None else own, base)

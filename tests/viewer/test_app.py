@@ -65,8 +65,8 @@ SCRIPT = textwrap.dedent("""
         out["doc_after_bad"] = ld.editor.doc
         app.step()
         # Screenshots.
-        out["shots"] = [ld.screenshot(tmp / "shot.png", (64, 48), 2), ld.screenshot(tmp / "shot.exr", (32, 24), 2),
-                        ld.screenshot(tmp / "shot.bmp", (8, 8), 1), ld.error]
+        out["shots"] = [ld.shots.write(tmp / "shot.png", (64, 48), 2), ld.shots.write(tmp / "shot.exr", (32, 24), 2),
+                        ld.shots.write(tmp / "shot.bmp", (8, 8), 1), ld.error]
         # Every panel and mode draws: compare modes, views, interpolation, a textured preset.
         app.panels.visible = app.panels.expand_all = True
         for view, mode in (("lobe", "side"), ("slice", "error"), ("object", "wipe"), ("lobe", "flip")):
@@ -124,7 +124,7 @@ def test_slider_changes_latents_and_pixels_as_offscreen(session_run, gl_ctx):
     r = Renderer(gl_ctx, m, neural=GpuDecoder(gl_ctx, model.decoder), latent=z, proxy=model.proxy(z),
                  environment=resolve_environment(opts.env))
     img = Backdrop(gl_ctx, r).render_linear(ViewState(), (64, 48), 2, r.brdf, opts.backdrop())
-    expected = tonemap(img, opts.exposure, opts.tonemap.value).astype(int)
+    expected = tonemap(img, opts.state.exposure, opts.state.tonemap.value).astype(int)
     assert np.abs(f["b"].astype(int) - expected).max() <= 2
     assert 0 < out["latent_ms"] <= out["edit_to_frame_ms"]  # the frame follows the latent (timings: nbrdf bench app)
 

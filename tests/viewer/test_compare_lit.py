@@ -41,7 +41,7 @@ def test_lit_samples_are_unbiased_under_an_environment(tmp_path):
     share (1/3) or a wrong rotation of the map would be off by tens of sigma."""
     from nbrdf.training.reference import reference_eval
     from nbrdf.viewer.environment import EnvironmentMap
-    from nbrdf.viewer.reference import LitJob, env_bilinear, frames_from_normals, lit_samples, to_local
+    from nbrdf.viewer.reference_lit import LitJob, env_bilinear, frames_from_normals, lit_samples, to_local
 
     material = parse_material({"format": "nbrdf-material/1", "name": "s", "layers": [
         {"type": "dielectric", "roughness": 0.05, "ior": 1.5}, {"type": "medium", "albedo": 0.8, "sigma_t": 0.3},

@@ -102,8 +102,8 @@ def test_paired_decoder_with_literal_weights_is_a_clear_error(gl_ctx):
 def test_the_lobe_view_is_a_round_disk_in_a_view_of_any_shape(gl_ctx, size):
     """A window's view is rarely square: the lobe's disk keeps its shape (radius half the
     shorter side), nothing is drawn outside it, everything inside is lit (rough gold)."""
-    from nbrdf.viewer.offscreen import make_renderer
     from nbrdf.viewer.options import ViewOptions
+    from nbrdf.viewer.renderer import make_renderer
 
     opts = ViewOptions(material=MATERIALS / "rough_gold.json", brdf="analytic")
     r = make_renderer(gl_ctx, load_material(opts.material), opts)

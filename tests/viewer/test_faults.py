@@ -118,12 +118,12 @@ WINDOW = textwrap.dedent("""
     try:
         app.step()
         out["saved"] = [ld.save_material(good / "m.json"), ld.save_session(good / "s.json"),
-                        ld.screenshot(good / "shot.png", (16, 16), 1)]
+                        ld.shots.write(good / "shot.png", (16, 16), 1)]
         ld.set_param(len(ld.material.layers) - 1, "roughness", 0.61)
         out["bad"] = []
         for call in (lambda: ld.save_material(bad / "m.json"), lambda: ld.save_session(bad / "s.json"),
-                     lambda: ld.screenshot(bad / "shot.png", (16, 16), 1),
-                     lambda: ld.screenshot(bad / "shot.exr", (16, 16), 1)):
+                     lambda: ld.shots.write(bad / "shot.png", (16, 16), 1),
+                     lambda: ld.shots.write(bad / "shot.exr", (16, 16), 1)):
             out["bad"].append([call(), ld.error])
         out["roughness_after"] = ld.material.layers[-1].roughness
         # the Monte Carlo worker killed while the window runs a compare view of a stack

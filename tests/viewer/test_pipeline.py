@@ -89,8 +89,8 @@ def test_one_renderer_draws_any_material(gl_ctx):
 
 
 def test_the_offscreen_renderer_is_the_pipeline(gl_ctx):
-    from nbrdf.viewer.offscreen import make_renderer
     from nbrdf.viewer.options import ViewOptions
+    from nbrdf.viewer.renderer import make_renderer
 
     m = load_material(DEFAULT_MATERIAL)
     r = make_renderer(gl_ctx, m, ViewOptions(material=DEFAULT_MATERIAL, brdf="neural"))

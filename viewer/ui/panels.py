@@ -14,19 +14,19 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from imgui_bundle import imgui, implot
+from imgui_bundle import imgui
 
 from nbrdf.viewer.camera import FOV_RANGE
 from nbrdf.viewer.env_presets import ENV_PRESETS
 from nbrdf.viewer.lookdev import LookDev, presets
-from nbrdf.viewer.modes import Background, CompareMode, ToneMap, View
+from nbrdf.viewer.modes import Background, CompareMode, View
+from nbrdf.viewer.ui.plots import error_bar, flip_bar, polar_plot
 from nbrdf.viewer.ui.preset_browser import preset_browser
 from nbrdf.viewer.ui.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
+from nbrdf.viewer.view_settings import Row, rows
 
 COMPARE_LABELS = {CompareMode.OFF: "off", CompareMode.SIDE: "side by side", CompareMode.WIPE: "A/B wipe",
                   CompareMode.ERROR: "relative error", CompareMode.FLIP: "HDR-FLIP"}
-TONEMAP_LABELS = {ToneMap.ACES: "ACES filmic", ToneMap.AGX: "AgX", ToneMap.NEUTRAL: "Khronos PBR Neutral",
-                  ToneMap.LINEAR: "linear"}
 MESHES = ("sphere", "testmesh")
 BACKGROUND_LABELS = {Background.ENV: "environment", Background.BLUR: "blurred environment",
                      Background.FLAT: "flat colour", Background.NONE: "none (black)"}
@@ -144,7 +144,7 @@ class Panels:
                     ld.load_preset(n)
             imgui.end_combo()
         preset_browser(ld)
-        progress = ld.svbrdf_progress()
+        progress = ld.textures.progress
         if progress is not None:
             imgui.progress_bar(progress, None, "latent texture")
         imgui.text_wrapped(ld.material.name)
@@ -185,7 +185,7 @@ class Panels:
         if hit == "add clear coat":
             ld.edit("add_coat")
         elif hit == "save curve":
-            ld.save_curve()
+            ld.curves.save()
         changed, self.material_path = imgui.input_text("material file", self.material_path)
         hit = self._wrap_buttons(["open material", "save material"], small=False)
         if hit == "open material":
@@ -251,16 +251,7 @@ class Panels:
         ld, s = self.ld, self.ld.state
         if not self._header("View", True):
             return
-        for v in View:
-            if imgui.radio_button(v.value, s.view == v) and s.view != v:
-                ld.set_view(v)
-            imgui.same_line()
-        imgui.new_line()
-        changed, theta = imgui.slider_float("incidence (deg)", s.theta_i, 0.0, 89.0)
-        group = self._held("theta_i")
-        if changed:
-            with ld.coalescing(group):
-                ld.update_state(theta_i=theta)
+        self._settings("view")
         modes = list(CompareMode)
         changed, k = imgui.combo("compare", modes.index(ld.compare), [COMPARE_LABELS[m] for m in modes])
         if changed:
@@ -282,50 +273,16 @@ class Panels:
                 if changed:
                     with ld.coalescing(group):
                         ld.set_error_scale(x)
-                self._error_bar()
+                error_bar(ld.err_scale)
             if ld.compare == CompareMode.FLIP:
-                self._flip_bar()
+                flip_bar(ld.flip_mean)
         if ld.material.is_textured:
             changed, on = imgui.checkbox("latent mip-mapping", ld.mipmapping)
             if changed:
                 ld.set_mipmapping(on)
         self._interpolation()
         if s.view == View.LOBE:
-            self._polar_plot()
-
-    def _error_bar(self) -> None:
-        """The false-colour scale: relative error 0 ... error scale."""
-        dl = imgui.get_window_draw_list()
-        p = imgui.get_cursor_screen_pos()
-        w, h = imgui.get_content_region_avail().x, 12.0
-        stops = [(0.0, (0, 0.35, 1)), (0.3, (0, 0.8, 1)), (0.5, (0.2, 1, 0.3)), (0.7, (1, 1, 0)), (1.0, (1, 0, 0))]
-        for (t0, c0), (t1, c1) in zip(stops, stops[1:]):
-            a, b = imgui.ImVec2(p.x + w * t0, p.y), imgui.ImVec2(p.x + w * t1, p.y + h)
-            col0 = imgui.get_color_u32(imgui.ImVec4(*c0, 1.0))
-            col1 = imgui.get_color_u32(imgui.ImVec4(*c1, 1.0))
-            dl.add_rect_filled_multi_color(a, b, col0, col1, col1, col0)
-        imgui.dummy(imgui.ImVec2(w, h))
-        imgui.text("0 %")
-        right = f"{self.ld.err_scale * 100:.0f} % relative error"
-        imgui.same_line(max(0.0, imgui.get_content_region_avail().x + imgui.get_cursor_pos_x()
-                            - imgui.calc_text_size(right).x))
-        imgui.text(right)
-
-    def _flip_bar(self) -> None:
-        """The magma scale of the FLIP map and the mean FLIP."""
-        dl = imgui.get_window_draw_list()
-        p = imgui.get_cursor_screen_pos()
-        w, h = imgui.get_content_region_avail().x, 12.0
-        stops = [(0.0, (0.0, 0.0, 0.02)), (0.25, (0.32, 0.07, 0.5)), (0.5, (0.72, 0.21, 0.47)),
-                 (0.75, (0.99, 0.53, 0.38)), (1.0, (0.99, 0.99, 0.75))]
-        for (t0, c0), (t1, c1) in zip(stops, stops[1:]):
-            a, b = imgui.ImVec2(p.x + w * t0, p.y), imgui.ImVec2(p.x + w * t1, p.y + h)
-            col0 = imgui.get_color_u32(imgui.ImVec4(*c0, 1.0))
-            col1 = imgui.get_color_u32(imgui.ImVec4(*c1, 1.0))
-            dl.add_rect_filled_multi_color(a, b, col0, col1, col1, col0)
-        imgui.dummy(imgui.ImVec2(w, h))
-        mean = self.ld.flip_mean
-        imgui.text_wrapped(f"FLIP 0 ... 1, mean {'(waiting for the reference)' if mean is None else f'{mean:.4f}'}")
+            polar_plot(ld.curves.curves())
 
     def _interpolation(self) -> None:
         ld = self.ld
@@ -352,20 +309,6 @@ class Panels:
             if imgui.button("stop blending"):
                 ld.clear_interpolation()
 
-    def _polar_plot(self) -> None:
-        curves = self.ld.plane_curves()
-        if not curves:
-            return
-        imgui.text_wrapped("plane of incidence: f cos / (1 + f cos)")  # the title above: the plot is narrow
-        if implot.begin_plot("##plane", imgui.ImVec2(-1, 220), implot.Flags_.equal):
-            implot.setup_axes("", "", 0, 0)
-            for name, (th, val) in curves.items():
-                t = np.radians(th)
-                r = np.maximum(val, 0.0)
-                r = r / (1.0 + r)  # the lobe metric's compression: peaks and tails both visible
-                implot.plot_line(name, np.ascontiguousarray(r * np.sin(t)), np.ascontiguousarray(r * np.cos(t)))
-            implot.end_plot()
-
     # --- scene -------------------------------------------------------------------------------
     def _scene(self) -> None:
         ld, s = self.ld, self.ld.state
@@ -389,53 +332,19 @@ class Panels:
         elif hit is not None:
             self.env_path = hit
             ld.set_environment(hit)
-        changes: dict = {}
-        held: list[str] = []
-
-        def take(name: str, result) -> None:
-            changed, value = result
-            if self._held(name):
-                held.append(name)
-            if changed:
-                changes[name] = value
-
-        take("env_on", imgui.checkbox("environment light", s.env_on))
         bd = ld.backdrop
         kinds = list(Background)
-        c12, k = imgui.combo("background", kinds.index(bd.mode), [BACKGROUND_LABELS[m] for m in kinds])
-        if c12:
+        changed, k = imgui.combo("background", kinds.index(bd.mode), [BACKGROUND_LABELS[m] for m in kinds])
+        if changed:
             ld.set_backdrop(kinds[k])
         if bd.mode == Background.FLAT:
-            c13, colour = imgui.color_edit3("background colour", list(bd.flat_colour))
-            if c13:
+            changed, colour = imgui.color_edit3("background colour", list(bd.flat_colour))
+            if changed:
                 ld.set_backdrop(flat_colour=[float(x) for x in colour])
-        c14, on = imgui.checkbox("ground shadow", bd.ground)
-        if c14:
+        changed, on = imgui.checkbox("ground shadow", bd.ground)
+        if changed:
             ld.set_backdrop(ground=on)
-        take("env_rotation", imgui.slider_float("env rotation", s.env_rotation, -180.0, 180.0))
-        take("env_intensity", imgui.slider_float("env intensity", s.env_intensity, 0.0, 4.0))
-        az, el = _angles(s.light_dir)
-        c4, az = imgui.slider_float("light azimuth", az, -180.0, 180.0)
-        held += ["light_dir"] if self._held("light_dir") else []
-        c5, el = imgui.slider_float("light elevation", el, -10.0, 90.0)
-        held += ["light_dir"] if self._held("light_dir") else []
-        if c4 or c5:
-            changes["light_dir"] = _direction(az, el)
-        take("light_radiance", imgui.slider_float("light intensity", s.light_radiance, 0.0, 20.0))
-        c9, on = imgui.checkbox("point light", s.point_light is not None)
-        if c9:
-            changes["point_light"] = (2.0, -2.0, 2.5) if on else None
-        if s.point_light is not None:
-            c10, pos = imgui.drag_float3("point position", list(s.point_light), 0.05, -20.0, 20.0)
-            held += ["point_light"] if self._held("point_light") else []
-            if c10:
-                changes["point_light"] = tuple(float(x) for x in pos)
-            take("point_intensity", imgui.slider_float("point intensity", s.point_intensity, 0.0, 200.0))
-        take("exposure", imgui.slider_float("exposure (EV)", s.exposure, -6.0, 6.0, "%+.1f EV"))
-        tonemaps = list(ToneMap)
-        c8, k = imgui.combo("tone mapping", tonemaps.index(s.tonemap), [TONEMAP_LABELS[t] for t in tonemaps])
-        if c8:
-            changes["tonemap"] = tonemaps[k]
+        self._settings("scene")
         c11, fov = imgui.slider_float("field of view", s.camera.fov, *FOV_RANGE, "%.0f deg")
         group = self._held("fov")
         if c11:
@@ -445,6 +354,25 @@ class Panels:
         imgui.same_line()
         if imgui.button("frame (F)"):
             self.frame_view()
+
+    def _settings(self, panel: str) -> None:
+        """The rows of the view settings shown in ``panel`` (viewer/view_settings.py),
+        in their declaration order; a row's change is one ``update_state``."""
+        ld, s = self.ld, self.ld.state
+        changes: dict = {}
+        held: list[str] = []
+        for name, row, tp in rows(panel):
+            if row.when is not None and getattr(s, row.when) is None:
+                continue
+            value = getattr(s, name)
+            if row.widget in ("choice", "radio"):
+                value = tp.parse(value)  # a mode's word (scripts may set one) as its enum
+            changed, value, active = setting_row(row, value)
+            if active:  # a slider being dragged: its values are one undo step
+                self._grouped = True
+                held.append(name)
+            if changed:
+                changes[name] = value
         if changes:
             with ld.coalescing(held[0] if held else None):
                 ld.update_state(**changes)
@@ -460,19 +388,19 @@ class Panels:
         if imgui.button("save session"):
             ld.save_session(self.session_path)
         _, self.shot_path = imgui.input_text("screenshot", self.shot_path)
-        shot = ld.screenshot_progress()
+        shot = ld.shots.progress
         if shot is None:
             if imgui.button("screenshot (.png/.exr)"):
                 w, h = self.view_size
-                ld.start_screenshot(self.shot_path, (max(w, 1), max(h, 1)), 16)
+                ld.shots.start(self.shot_path, (max(w, 1), max(h, 1)), 16)
         else:
             imgui.progress_bar(shot, imgui.ImVec2(-1, 0), f"screenshot {shot * 100:.0f} %")
             if imgui.small_button("cancel screenshot"):
-                ld.cancel_screenshot()
+                ld.shots.cancel()
         imgui.separator()
         _, self.turntable_path = imgui.input_text("turntable file", self.turntable_path)
         _, self.turntable_frames = imgui.slider_int("frames", self.turntable_frames, 4, 240)
-        progress = ld.turntable_progress()
+        progress = ld.turntables.progress
         if progress is None:
             imgui.push_style_color(imgui.Col_.text, DIM)
             imgui.text_wrapped("turntable file: .mp4, .gif or name_%03d.png")
@@ -480,7 +408,7 @@ class Panels:
             if imgui.button("capture turntable"):
                 w, h = self.view_size
                 k = min(1.0, TURNTABLE_MAX_SIDE / max(w, h, 1))  # the view's shape, at most 480 pixels a side
-                ld.start_turntable(self.turntable_path, self.turntable_frames,
+                ld.turntables.start(self.turntable_path, self.turntable_frames,
                                    (max(2, round(w * k)), max(2, round(h * k))))
         else:
             imgui.progress_bar(progress, imgui.ImVec2(-1, 0), "turntable")
@@ -508,6 +436,43 @@ def sidebar_width(window_w: int) -> int:
     """The width of each side bar: ``SIDEBAR_SHARE`` of the window within
     [SIDEBAR_MIN, SIDEBAR_MAX], and never more than a quarter of it (the view keeps half)."""
     return int(min(max(window_w * SIDEBAR_SHARE, SIDEBAR_MIN), SIDEBAR_MAX, window_w / 4))
+
+
+def setting_row(row: Row, value) -> tuple[bool, object, bool]:
+    """Draws one view setting's widget: (changed, new value, held). A direction row
+    is two sliders (azimuth, elevation), a point row a switch and a position."""
+    def out(result) -> tuple[bool, object, bool]:
+        return result[0], result[1], imgui.is_item_active()
+
+    if row.widget == "check":
+        return out(imgui.checkbox(row.label, value))
+    if row.widget == "radio":
+        pick = None
+        for w in type(value):
+            if imgui.radio_button(w.value, value == w) and value != w:
+                pick = w
+            imgui.same_line()
+        imgui.new_line()
+        return pick is not None, pick, False
+    if row.widget == "choice":
+        words, names = list(type(value)), dict(row.labels)
+        changed, k = imgui.combo(row.label, words.index(value), [names.get(w.value, w.value) for w in words])
+        return changed, words[k], imgui.is_item_active()
+    if row.widget == "direction":
+        az, el = _angles(value)
+        c1, az = imgui.slider_float(f"{row.label} azimuth", az, -180.0, 180.0)
+        held = imgui.is_item_active()
+        c2, el = imgui.slider_float(f"{row.label} elevation", el, -10.0, 90.0)
+        return c1 or c2, _direction(az, el), held or imgui.is_item_active()
+    if row.widget == "point":
+        changed, on = imgui.checkbox(row.label, value is not None)
+        if changed:
+            return True, (2.0, -2.0, 2.5) if on else None, False
+        if value is None:
+            return False, None, False
+        changed, pos = imgui.drag_float3(f"{row.label.split()[0]} position", list(value), 0.05, row.lo, row.hi)
+        return changed, tuple(float(x) for x in pos), imgui.is_item_active()
+    return out(imgui.slider_float(row.label, float(value), row.lo, row.hi, row.fmt))
 
 
 def _angles(d) -> tuple[float, float]:
