@@ -146,12 +146,13 @@ def test_reference_walks_in_the_bent_frame(mi, maps):
     assert (f.sum(0) > 0).mean() > 0.5
     s1 = mi.Float(rng.random(n).astype(np.float32))
     s2 = mi.Point2f(rng.random((2, n)).astype(np.float32))
-    (bs, weight), (bs_p, _) = ours.sample(ctx, si, s1, s2), plain.sample(ctx, bent_si, s1, s2)
+    (bs, weight), (bs_p, weight_p) = ours.sample(ctx, si, s1, s2), plain.sample(ctx, bent_si, s1, s2)
     expect = np.array(frame.to_world(bs_p.wo))
     live = np.array(bs.pdf) > 0
     assert live.mean() > 0.5
     np.testing.assert_allclose(np.array(bs.wo)[:, live], expect[:, live], atol=2e-5)
     np.testing.assert_allclose(np.array(bs.pdf)[live], np.array(bs_p.pdf)[live], rtol=1e-5)
+    np.testing.assert_allclose(np.array(weight)[:, live], np.array(weight_p)[:, live], rtol=1e-5, atol=1e-6)
     assert (np.array(bs.wo)[2][live] > 0).all()
 
 
@@ -193,27 +194,33 @@ def test_sampler_with_a_tilted_normal_passes_mitsubas_chi2(mi, maps, theta):
 def test_render_equals_mitsubas_normalmap_wrapper(mi, maps):
     """A sphere under the studio environment and a key light (direct lighting,
     32 x 32, 64 spp, the same seed): the plugin's own map and Mitsuba's
-    wrapper give the same image, up to float rounding and the pixels where
-    a bent normal faces away (the pull-back; the wrapper's flip is off):
-    mean within 0.1 %, 99 % of the pixels within 1 %."""
+    wrapper give the same image, up to float rounding, wherever the sphere
+    faces the camera within 55 degrees (no bent normal faces away there: the
+    map tilts at most 27 degrees). Nearer the silhouette the previewer's
+    pull-back lights what the wrapper (its flip off) leaves black."""
+    import drjit as dr
+
     from nbrdf.mitsuba import wavefront_mode
     from nbrdf.mitsuba.scenes import ENV_TO_WORLD, environment_bitmap
 
     T = mi.ScalarTransform4f
+    res = 32
 
-    def render(bsdf):
-        scene = mi.load_dict({
+    def scene(bsdf):
+        return mi.load_dict({
             "type": "scene", "integrator": {"type": "direct"},
             "env": {"type": "envmap", "bitmap": environment_bitmap("studio", 1.0, (64, 32)), "to_world": T(ENV_TO_WORLD)},
             "key": {"type": "directional", "direction": [-0.4, 0.3, -0.8], "irradiance": 2.0},
             "sphere": {"type": "sphere", "bsdf": bsdf},
             "camera": {"type": "perspective", "fov": 30, "to_world": T().look_at(origin=[0, -5, 1.5], target=[0, 0, 0],
                                                                                    up=[0, 0, 1]),
-                       "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"},
+                       "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"},
                                 "pixel_format": "rgb"},
                        "sampler": {"type": "independent", "sample_count": 64}}})
+
+    def render(bsdf):
         with wavefront_mode():
-            return np.array(mi.render(scene, seed=7))
+            return np.array(mi.render(scene(bsdf), seed=7))
 
     ours = render({"type": "nbrdf", "material": maps["wavy"]})
     theirs = render({"type": "normalmap", "flip_invalid_normals": False, "use_shadowing_function": False,
@@ -221,12 +228,21 @@ def test_render_equals_mitsubas_normalmap_wrapper(mi, maps):
                                    "filter_type": "bilinear", "wrap_mode": "repeat"},
                      "bsdf": {"type": "nbrdf", "material": maps["plain"]}})
     plain = render({"type": "nbrdf", "material": maps["plain"]})
-    lit = theirs.sum(-1) > 1e-3
-    assert lit.mean() > 0.3
-    assert abs(ours[lit].mean() / theirs[lit].mean() - 1) < 1e-3
-    rel = np.abs(ours[lit] - theirs[lit]).max(-1) / theirs[lit].max(-1)
-    assert np.quantile(rel, 0.99) < 0.01
-    assert np.quantile(np.abs(plain[lit] - theirs[lit]).max(-1) / theirs[lit].max(-1), 0.5) > 0.02  # the map shows
+    # the pixels whose whole square sees the sphere within 55 degrees of its normal (corners checked)
+    sc = scene({"type": "nbrdf", "material": maps["plain"]})
+    facing = np.ones((res, res), bool)
+    for dx in (0.0, 1.0):
+        for dy in (0.0, 1.0):
+            y, x = np.meshgrid(np.arange(res) + dy, np.arange(res) + dx, indexing="ij")
+            pos = mi.Point2f(np.ascontiguousarray(np.stack([x.ravel(), y.ravel()]) / res, np.float32))
+            ray, _ = sc.sensors()[0].sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
+            si = sc.ray_intersect(ray)
+            cos = np.where(np.array(si.is_valid()), np.array(dr.dot(si.n, -ray.d)), 0.0)
+            facing &= (cos > np.cos(np.radians(55))).reshape(res, res)
+    assert facing.sum() > 100
+    np.testing.assert_allclose(ours[facing], theirs[facing], rtol=1e-3, atol=1e-4 * theirs[facing].max())
+    rel = np.abs(plain[facing] - theirs[facing]).max(-1) / theirs[facing].max(-1)
+    assert np.median(rel) > 0.02  # the map shows
 
 
 @pytest.mark.parametrize("plugin", ["nbrdf", "nbrdf_reference"])
