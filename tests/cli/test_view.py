@@ -33,7 +33,7 @@ def test_help_lists_every_option_and_the_mode_words():
                  "--session", "--background", "--no-ground", "--view", "--theta-i", "--offscreen", "--out", "--size", "--spp",
                  "--exposure", "--tonemap", "--brdf"):
         assert flag in text, flag
-    assert "{object,lobe,slice}" in text and "{auto,analytic,neural,projected}" in text
+    assert "{object,lobe,slice}" in text and "{auto,analytic,neural,projected,belcour}" in text
 
 
 @pytest.mark.gl
