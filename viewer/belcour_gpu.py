@@ -65,6 +65,14 @@ def belcour_uniforms(material: Material, tables: BelcourTables | None = None) ->
     slab = [0] * MAX_ATOMS
     r_above, r_below = [(0.0, 0.0, 0.0)] * MAX_ATOMS, [(0.0, 0.0, 0.0)] * MAX_ATOMS
     eta = [1.0] * MAX_ATOMS
+    # the lit pass's lobe strategy: a mixture of the lobes' GGX at their normal-incidence roughness,
+    # weighted by their energy there (no lobe: one of roughness 1)
+    sample_w, sample_alpha = [0.0] * MAX_ATOMS, [1.0] * MAX_ATOMS
+    for lobe in dec.lobes:
+        k = next(i for i, a in enumerate(atoms) if a is lobe.atom)
+        sample_w[k], sample_alpha[k] = float(lobe.energy.mean()), float(lobe.roughness[0])
+    total = sum(sample_w)
+    sample_w = [w / total for w in sample_w] if total > 0 else [1.0] + [0.0] * (MAX_ATOMS - 1)
     for s in dec.slabs:
         k = next(i for i, a in enumerate(atoms) if a is s.atom)
         slab[k], eta[k] = 1, float(s.eta)
@@ -81,6 +89,8 @@ def belcour_uniforms(material: Material, tables: BelcourTables | None = None) ->
         "u_bc_r_above": r_above,
         "u_bc_r_below": r_below,
         "u_bc_eta": eta,
+        "u_bc_sample_w": sample_w,
+        "u_bc_sample_alpha": sample_alpha,
     }
 
 

@@ -163,3 +163,28 @@ def test_a_material_the_model_does_not_hold_is_shown_neural_with_one_line():
         assert "\n" not in note and needle in note and note.endswith("shown with the neural BRDF instead")
     assert fallback_note(STACKS["car_paint_three_layer"](), "belcour") == ""
     assert fallback_note(textured, "neural") == ""
+
+
+@pytest.mark.parametrize("name", ["car_paint_three_layer", "coated_metal", "two_layer"])
+def test_the_lit_pass_lobe_strategy_is_a_density(gpu, name):
+    """The lit pass's lobe strategy (a mixture of the lobes' GGX) draws from the
+    pdf it reports: sum(cos l / pdf(l)) / N over its draws estimates the projected
+    solid angle pi (only draws with pdf > 0 land above the horizon). 65536 draws at
+    two views; |estimate - pi| within 4.5 standard errors (two-sided p ~ 7e-6) and
+    the standard error under 2 % of pi. A pick that disagrees with the mixture's
+    weights (e.g. the coat drawn as often as the base) is off by tens of errors."""
+    from nbrdf.viewer.brdf_probe import probe_lobe_sampling
+
+    pipe, r = gpu
+    brdf = pipe.build(STACKS[name](), BrdfMode.BELCOUR)
+    rng = np.random.default_rng(5)
+    for theta in (20.0, 65.0):
+        n = 65536
+        t = np.radians(theta)
+        wo = np.tile([np.sin(t), 0.0, np.cos(t)], (n, 1))
+        out = probe_lobe_sampling(r, brdf, wo, rng.random((n, 3)))
+        up = (out[:, 2] > 0) & (out[:, 3] > 0)
+        x = np.where(up, out[:, 2] / np.where(up, out[:, 3], 1.0), 0.0).astype(np.float64)
+        se = x.std() / np.sqrt(n)
+        assert se < 0.02 * np.pi, (name, theta, se)
+        assert abs(x.mean() - np.pi) < 4.5 * se, (name, theta, x.mean(), se)

@@ -27,6 +27,8 @@ uniform int u_bc_slab[BC_MAX_ATOMS];       // 1: the atom is a diffuse slab (a s
 uniform vec3 u_bc_r_above[BC_MAX_ATOMS];   // a slab's hemispherical reflectance of the stack above it
 uniform vec3 u_bc_r_below[BC_MAX_ATOMS];   // ... of it and the stack below it
 uniform float u_bc_eta[BC_MAX_ATOMS];      // a slab's absolute ior
+uniform float u_bc_sample_w[BC_MAX_ATOMS];      // the lobe strategy's mixture weights (see sample_lobe)
+uniform float u_bc_sample_alpha[BC_MAX_ATOMS];  // ... and roughnesses
 uniform sampler3D u_bc_dielectric;
 uniform sampler2D u_bc_schlick;
 
@@ -240,13 +242,26 @@ vec3 brdf(vec3 wi, vec3 wo) {
     return f;
 }
 
-// The lit view's lobe strategy: GGX visible normals at the top reflecting atom's roughness
-// (what the environment and cosine strategies miss of the lobes below is theirs by MIS).
-float lobe_roughness() {
-    int kind = u_bc_kind[0];
-    return kind == BC_DIFFUSE || kind == BC_MEDIUM ? 1.0 : clamp(u_bc_roughness[0], BC_ALPHA_MIN, 1.0);
+// The lit view's lobe strategy: a mixture of GGX visible-normal reflections,
+// one per lobe at its roughness at normal incidence, weighted by its energy
+// there (u_bc_sample_w sums to 1); the environment and cosine strategies take
+// the diffuse slabs by MIS.
+//@INCLUDE sampling.glsl
+vec3 sample_lobe(vec3 wo, vec3 u) {
+    int pick = 0;
+    float acc = 0.0;
+    for (int k = 0; k < u_bc_n; ++k) {
+        if (u_bc_sample_w[k] <= 0.0) continue;
+        pick = k;
+        acc += u_bc_sample_w[k];
+        if (u.z < acc) break;
+    }
+    return reflect(-wo, sample_vndf(wo, u_bc_sample_alpha[pick], u.xy));
 }
 
-//@INCLUDE sampling.glsl
-vec3 sample_lobe(vec3 wo, vec3 u) { return reflect(-wo, sample_vndf(wo, lobe_roughness(), u.xy)); }
-float pdf_lobe(vec3 wo, vec3 wi) { return pdf_ggx_reflection(wo, wi, lobe_roughness()); }
+float pdf_lobe(vec3 wo, vec3 wi) {
+    float p = 0.0;
+    for (int k = 0; k < u_bc_n; ++k)
+        if (u_bc_sample_w[k] > 0.0) p += u_bc_sample_w[k] * pdf_ggx_reflection(wo, wi, u_bc_sample_alpha[k]);
+    return p;
+}
