@@ -20,7 +20,7 @@ from nbrdf.viewer.brdf_probe import probe_brdf
 from nbrdf.viewer.modes import BrdfMode
 from nbrdf.viewer.options import DEFAULT_MATERIAL
 from nbrdf.viewer.pipeline import BrdfKind, MaterialPipeline, fallback_note
-from nbrdf.viewer.renderer import Renderer, ViewState
+from nbrdf.viewer.renderer import Renderer
 
 pytestmark = pytest.mark.gl
 
