@@ -70,6 +70,12 @@ def test_unknown_preset_and_bad_size_exit_2(tmp_path, capsys):
     assert len(err) == 2 and "moon_landing" in err[0] and "WxH" in err[1]
 
 
+def test_report_scenes_max_chunk_below_chunk_exits_2(tmp_path, capsys):
+    assert nbrdf_main(["report", "scenes", "--chunk", "32", "--max-chunk", "16", "--out", str(tmp_path / "r")]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "--max-chunk" in line and not (tmp_path / "r").exists()
+
+
 @pytest.mark.parametrize("n", [4, 8])
 def test_teapot_mesh_from_the_bezier_patches(n):
     """32 patches; the classic bounding box (spout tip 3.43, handle -3,
