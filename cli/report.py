@@ -248,7 +248,9 @@ class ScenesReport:
     ref_spp: int = 512
     """samples per pixel of the converged Monte Carlo reference (cached)"""
     chunk: int = 16
-    """samples per pixel per Mitsuba pass (larger passes amortise the wavefront mode's per-pass cost)"""
+    """samples per pixel of the first and smallest Mitsuba pass (larger passes amortise the wavefront mode's per-pass cost)"""
+    max_chunk: int = 256
+    """largest pass: a method's passes double from --chunk while one takes at most 1/8 of the budget"""
     cache: str | None = None
     """cache folder of the converged references (default: OUT/cache)"""
     figure: str | None = None
@@ -259,9 +261,10 @@ class ScenesReport:
 
 def cmd_report_scenes(ns: argparse.Namespace) -> int:
     c: ScenesReport = build(ScenesReport, ns)
-    if c.time_budget <= 0 or c.ref_spp < 2 or c.chunk < 1:
+    if c.time_budget <= 0 or c.ref_spp < 2 or c.chunk < 1 or c.max_chunk < c.chunk:
         raise NbrdfError(f"report scenes: --time-budget must be positive, --ref-spp at least 2, --chunk at least 1 "
-                         f"(got {c.time_budget}, {c.ref_spp}, {c.chunk})")
+                         f"and --max-chunk at least --chunk (got {c.time_budget}, {c.ref_spp}, {c.chunk}, "
+                         f"{c.max_chunk})")
     try:
         import nbrdf.mitsuba  # noqa: F401
     except ImportError as e:
@@ -275,7 +278,7 @@ def cmd_report_scenes(ns: argparse.Namespace) -> int:
     for n in names:
         load_scene(n)  # bad scenes fail before minutes of rendering
     cfg = SceneReportConfig(out=Path(c.out), scenes=names, size=c.size, time_budget=c.time_budget,
-                            ref_spp=c.ref_spp, chunk=c.chunk, cache=Path(c.cache) if c.cache else None,
+                            ref_spp=c.ref_spp, chunk=c.chunk, max_chunk=c.max_chunk, cache=Path(c.cache) if c.cache else None,
                             seed=c.seed, figure=Path(c.figure) if c.figure else None)
     print(markdown(run_scene_report(cfg, log=lambda s: print(s, file=sys.stderr))))
     return 0
