@@ -222,9 +222,12 @@ class WorkCosts:
     score: float = 0.0
     """Seconds to score one code on the held-out set."""
     pairs_done: int = 0
+    """Pairs simulated so far."""
     pair_seconds: float = 0.0
+    """Seconds their simulation took."""
 
     def add_chunk(self, n: int, seconds: float) -> None:
+        """Records a walk call of n pairs that took ``seconds``."""
         self.pairs_done += n
         self.pair_seconds += seconds
         self.pair = max(seconds / n, self.pair_seconds / self.pairs_done)
