@@ -260,6 +260,7 @@ class Refiner:
         self._held: list[tuple[Tensor, Tensor, Tensor]] = []  # held-out chunks simulated so far
         self._heldout: HeldOut | None = None
         self._chunks = 0  # walk calls so far (each its own seed)
+        self._largest = 0  # pairs of the largest walk call so far
         self._spent = (0.0, 0.0)  # (wall, processor) seconds inside start and step: a set-aside run is not charged
         self._call = (0.0, 0.0)  # (clock, process_time) at the start of the current call
         self._stale = 0
@@ -288,12 +289,16 @@ class Refiner:
         wi, wo = placed_pairs(n, self.g, self.roughness)
         f = body_values(self.material, wi, wo, self.cfg.spp, self.cfg.seed * 7919 + 1 + self._chunks)
         self._chunks += 1
+        self._largest = max(self._largest, n)
         self.costs.add_chunk(n, self.clock() - t)
         return wi, wo, f
 
     def _next_chunk(self, want: int) -> int:
-        """Pairs in the next chunk: the first one is a small probe."""
-        return min(want, self.cfg.probe_pairs if self.costs.pair is None else self.cfg.chunk_pairs)
+        """Pairs in the next chunk: the first one is a small probe, and a chunk is at most twice the largest so far
+        (a cost measured on few pairs is checked on a few more before it is trusted with ``chunk_pairs``)."""
+        if self.costs.pair is None:
+            return min(want, self.cfg.probe_pairs)
+        return min(want, self.cfg.chunk_pairs, 2 * self._largest)
 
     def _score(self, code: Tensor) -> float:
         t = self.clock()

@@ -223,6 +223,6 @@ def test_a_cancel_during_the_simulation_is_taken_between_chunks(model, work_cloc
     r = R.Refiner(model.decoder, m, model.material_latent(m), cfg, clock=work_clock)
     calls = []
     st = r.start(stop=lambda: calls.append(1) or len(calls) > 3)
-    assert len(r._held) == 3 and r._heldout is None and st.error == float("inf") and not st.done
+    assert [h[0].shape[0] for h in r._held] == [8, 16, 32] and r._heldout is None and st.error == float("inf") and not st.done
     st = r.start()
     assert r._heldout.wi.shape[0] == cfg.heldout_pairs and st.error < float("inf")
