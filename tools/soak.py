@@ -35,15 +35,48 @@ GL_KINDS = ("Texture", "Buffer", "Program", "Framebuffer", "Renderbuffer", "Vert
 NAME_RANGE = 4096
 
 
-def gl_objects() -> dict[str, int]:
-    """Live GL objects of the current context, per kind."""
+def gl_names() -> dict[str, set[int]]:
+    """The names of the live GL objects of the current context, per kind."""
     from OpenGL import GL
 
     out = {}
     for kind in GL_KINDS:
         test = getattr(GL, f"glIs{kind}")
-        out[kind] = sum(1 for name in range(1, NAME_RANGE) if test(name))
+        out[kind] = {name for name in range(1, NAME_RANGE) if test(name)}
     return out
+
+
+def gl_objects(names: dict[str, set[int]] | None = None) -> dict[str, int]:
+    """Live GL objects of the current context, per kind (of ``names``: ``gl_names()``)."""
+    return {kind: len(v) for kind, v in (names or gl_names()).items()}
+
+
+def gl_describe(kind: str, name: int) -> str:
+    """What a live GL object is (a texture's size and format, a buffer's bytes), for a dump of objects created."""
+    from OpenGL import GL
+
+    try:
+        if kind == "Texture":
+            for target, binding in ((GL.GL_TEXTURE_2D, GL.GL_TEXTURE_BINDING_2D),
+                                    (GL.GL_TEXTURE_2D_ARRAY, GL.GL_TEXTURE_BINDING_2D_ARRAY)):
+                prev = GL.glGetIntegerv(binding)
+                GL.glBindTexture(target, name)
+                if GL.glGetError() != GL.GL_NO_ERROR:
+                    continue
+                w = GL.glGetTexLevelParameteriv(target, 0, GL.GL_TEXTURE_WIDTH)
+                h = GL.glGetTexLevelParameteriv(target, 0, GL.GL_TEXTURE_HEIGHT)
+                d = GL.glGetTexLevelParameteriv(target, 0, GL.GL_TEXTURE_DEPTH)
+                fmt = GL.glGetTexLevelParameteriv(target, 0, GL.GL_TEXTURE_INTERNAL_FORMAT)
+                GL.glBindTexture(target, int(prev))
+                return f"{'2d' if target == GL.GL_TEXTURE_2D else '2d-array'} {w}x{h}x{d} format {fmt:#x}"
+        if kind == "Buffer":
+            from OpenGL.GL.ARB.direct_state_access import glGetNamedBufferParameteriv
+            return f"{int(glGetNamedBufferParameteriv(name, GL.GL_BUFFER_SIZE))} bytes"
+        if kind == "Renderbuffer":
+            return "renderbuffer"
+    except Exception as e:  # a description is best effort: the name and kind are the finding
+        return f"? ({type(e).__name__})"
+    return ""
 
 
 def rss_mb() -> float:
@@ -96,6 +129,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
     from nbrdf.viewer.app import App
     from nbrdf.viewer.lookdev import presets
     from nbrdf.viewer.options import ViewOptions
+    from nbrdf.viewer.programs import ProgramCache
 
     rng = random.Random(seed)
     app = App(ViewOptions(size=size), size=size)
@@ -142,6 +176,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
     def canonical() -> dict:
         """The same state every time (default preset, sphere, no compare, object view): GL objects
         and memory comparable between the start and the end."""
+        at["what"] = "the one state"
         ld.load_preset("default")
         ld.set_mesh("sphere")
         ld.set_compare("off")
@@ -150,8 +185,29 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
             app.step()
         return {"rss_mb": rss_mb(), "gl": gl_objects(), "malloc_mb": malloc_mb()}
 
+    builds: list[dict] = []  # every shader program built, with the edit (-1: start-up and warm-up) that built it
+    at = {"edit": -1, "what": "start-up"}
+    build = ProgramCache._build
+
+    def traced_build(cache, key, brdf):
+        t0, rss0 = time.perf_counter(), rss_mb()
+        prog = build(cache, key, brdf)
+        builds.append({"edit": at["edit"], "after": at["what"], "shader": key.shader,
+                       "kind": None if key.kind is None else str(key.kind.value),
+                       "defines": [list(d) for d in key.defines], "compute": key.compute,
+                       "seconds": time.perf_counter() - t0, "rss_mb": rss_mb() - rss0})
+        return prog
+
+    ProgramCache._build = traced_build
     try:
-        # Warm-up: every view and compare mode for each kind of BRDF the presets give (analytic, neural),
+        # Warm-up, 1: the window's own idle warm-up (viewer/program_warmup.py) compiles every shader
+        # variant its views can reach, frames without edits until it has none left.
+        t_idle = time.perf_counter()
+        while not app.warmup.done and time.perf_counter() - t_idle < 600:
+            app.step()
+        idle_warmup = {"seconds": time.perf_counter() - t_idle, "built": len(app.warmup.built),
+                       "failed": list(app.warmup.failed.values()), "left": len(app.warmup.pending())}
+        # 2: every view and compare mode for each kind of BRDF the presets give (analytic, neural),
         # every mesh: the shader variants and per-mode targets the edits will use exist before measuring.
         kinds = set()
         for name in names:
@@ -169,13 +225,18 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
             ld.set_mesh(mesh)
             app.step()
         passes = [canonical()]
+        last_names = gl_names()
         t0 = time.perf_counter()
         for p in range(repeat):  # the same edits again: a pass after the first may create nothing new
             rng.seed(seed)
             for k in range(edits + 1):
                 if k % every == 0 and (p == 0 or k > 0):
-                    samples.append({"edit": p * edits + k, "rss_mb": rss_mb(), "gl": gl_objects(),
-                                    "malloc_mb": malloc_mb()})
+                    live = gl_names()
+                    created = [[kind, n] for kind in GL_KINDS for n in sorted(live[kind] - last_names[kind])]
+                    samples.append({"edit": p * edits + k, "rss_mb": rss_mb(), "gl": gl_objects(live),
+                                    "malloc_mb": malloc_mb(), "gl_created": created,
+                                    "gl_deleted": sum(len(last_names[kind] - live[kind]) for kind in GL_KINDS)})
+                    last_names = live
                     if in_state:  # the same measurement in one state: what the state holds is left out
                         states.append({"edit": p * edits + k, **canonical()})
                 if k == edits:
@@ -184,7 +245,9 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
                     tracemalloc.start(6)
                 before, heap0, t_edit = rss_mb(), malloc_mb(), time.perf_counter()
                 gl0 = sum(gl_objects().values()) if gl_per_edit else 0
+                at["edit"], at["what"] = p * edits + k, "edit"
                 what = edit(k)
+                at["what"] = what
                 app.step()
                 heap1 = malloc_mb()
                 rec = {"edit": p * edits + k, "what": what, "rss_mb": rss_mb() - before,
@@ -205,7 +268,13 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
             tracemalloc.stop()
             survivors = [{"mb": st.size / 2**20, "blocks": st.count, "where": [str(f) for f in st.traceback][-6:]}
                          for st in stats[:12]]
+        # What was created after the warm-up and is alive at the end (named while the context is current).
+        start_edit = warmup * edits * repeat
+        final = gl_names()
+        survivors_gl = [{"kind": kind, "name": n, "sample": s["edit"], "what": gl_describe(kind, n)}
+                        for s in samples if s["edit"] > start_edit for kind, n in s["gl_created"] if n in final[kind]]
     finally:
+        ProgramCache._build = build
         app.close()
     start = next(i for i, s in enumerate(samples) if s["edit"] >= warmup * edits * repeat)
     after = samples[start:]
@@ -223,6 +292,10 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         "largest_memory_steps": sorted(jumps, reverse=True)[:8],
         "attribution": attribution(trace, after[0]["edit"]),
         **in_state_slopes(states, after[0]["edit"]),
+        "idle_warmup": idle_warmup,
+        "programs_built": builds,
+        "programs_built_after_warmup": [b for b in builds if b["edit"] >= after[0]["edit"]],
+        "gl_created_after_warmup_alive": survivors_gl,
         "trace": trace,
         "python_survivors": survivors,
         "samples": samples,
@@ -304,6 +377,21 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {r['action']:<32} {r['n']:4d} {r['rss_mb']:+8.1f} {r['malloc_used_mb']:+8.1f} "
               f"{r['malloc_system_mb']:+8.1f} {r['steps_over_5mb']:3d}" + (f" {r['gl']:+4d}" if a.gl_per_edit else ""),
               flush=True)
+    iw = res["idle_warmup"]
+    print(f"soak: the window's idle warm-up compiled {iw['built']} shader variants in {iw['seconds']:.1f} s"
+          + (f", {iw['left']} left" if iw["left"] else "") + (f"; failed: {iw['failed']}" if iw["failed"] else ""),
+          flush=True)
+    print("soak: shader builds (s, MB resident): " + ", ".join(
+        f"{b['shader']}/{b['kind']}{'/lobe' if b['defines'] else ''} {b['seconds']:.2f} {b['rss_mb']:+.0f}"
+        for b in res["programs_built"]), flush=True)
+    late = res["programs_built_after_warmup"]
+    print(f"soak: shader programs built: {len(res['programs_built'])}, {len(late)} of them after the warm-up"
+          + "".join(f"\n  edit {b['edit']} ({b['after']}): {b['shader']} kind {b['kind']} defines {b['defines']}"
+                    for b in late), flush=True)
+    alive = res["gl_created_after_warmup_alive"]
+    print(f"soak: GL objects created after the warm-up and alive at the end: {len(alive)}"
+          + "".join(f"\n  {o['kind']} {o['name']} (by sample {o['sample']}) {o['what']}" for o in alive[:30]),
+          flush=True)
     for st in res["python_survivors"]:
         print(f"soak: python survivor {st['mb']:.2f} MB in {st['blocks']} blocks from " + " <- ".join(
             reversed(st["where"][-3:])), flush=True)

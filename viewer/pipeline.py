@@ -173,6 +173,11 @@ class MaterialPipeline:
             self._decoder = GpuDecoder(self.ctx, self.model.decoder)
         return self._decoder
 
+    @property
+    def loaded_decoder(self) -> "GpuDecoder | None":
+        """The decoder if it is on the GPU already (None: no neural material drawn yet)."""
+        return self._decoder
+
     @staticmethod
     def resolve(material: Material, mode: BrdfMode | str) -> BrdfMode:
         """``auto`` -> analytic for single layers, neural otherwise; checks the mode fits."""
