@@ -119,13 +119,16 @@ def slope_per_100(x: list[int], y: list[float]) -> float:
 
 
 def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=(96, 64),
-        gl_per_edit: bool = False, trace_python: bool = False, in_state: bool = False) -> dict:
+        gl_per_edit: bool = False, trace_python: bool = False, in_state: bool = False, leak_kb: int = 0,
+        leak_gl: bool = False) -> dict:
     """``gl_per_edit``: count the live GL objects around every edit (slow: 7 x 4096 glIs calls each);
     ``trace_python``: tracemalloc from the end of the warm-up edits, its largest survivors at the end
     (Python objects and numpy arrays; torch's and the GL driver's memory are not traced);
     ``in_state``: at each sample, also go to one state (default preset, sphere, no compare, object
     view; the edits after it start from there) and sample again: memory that a state holds
-    (a large mesh's, a compare view's) is then told apart from memory that grows."""
+    (a large mesh's, a compare view's) is then told apart from memory that grows.
+    ``leak_kb``, ``leak_gl``: a leak put in on purpose (that many KB of heap, one small GL
+    texture kept per edit), to check that the soak's criteria see one."""
     from nbrdf.viewer.app import App
     from nbrdf.viewer.lookdev import presets
     from nbrdf.viewer.options import ViewOptions
@@ -185,6 +188,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
             app.step()
         return {"rss_mb": rss_mb(), "gl": gl_objects(), "malloc_mb": malloc_mb()}
 
+    leaked: list = []  # leak_kb, leak_gl
     builds: list[dict] = []  # every shader program built, with the edit (-1: start-up and warm-up) that built it
     at = {"edit": -1, "what": "start-up"}
     build = ProgramCache._build
@@ -207,23 +211,32 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
             app.step()
         idle_warmup = {"seconds": time.perf_counter() - t_idle, "built": len(app.warmup.built),
                        "failed": list(app.warmup.failed.values()), "left": len(app.warmup.pending())}
-        # 2: every view and compare mode for each kind of BRDF the presets give (analytic, neural),
-        # every mesh: the shader variants and per-mode targets the edits will use exist before measuring.
-        kinds = set()
-        for name in names:
-            ld.load_preset(name)
-            app.step()
-            if ld.brdf is None or ld.brdf.kind in kinds:
-                continue
-            kinds.add(ld.brdf.kind)
+        # 2: every view and compare mode in each kind of state the edits reach: a preset of each BRDF kind
+        # with and without a closed-form reference (compare draws it on the GPU, else the Monte Carlo
+        # worker's), then every mesh with its materials built (a glTF part's latent texture is built in a
+        # thread). The driver compiles (llvmpipe: JITs) a program's code at its first draw in each state,
+        # and the size caches get their targets: none of that is in the measurement.
+        def every_view() -> None:
             for view in ("object", "lobe", "slice"):
                 for mode in ("off", "side", "wipe", "error"):
                     ld.set_view(view)
                     ld.set_compare(mode)
                     app.step()
+
+        seen = set()
+        for name in names:
+            ld.load_preset(name)
+            app.step()
+            key = None if ld.brdf is None else (ld.brdf.kind, ld.ref_brdf is not None)
+            if key is not None and key not in seen:
+                seen.add(key)
+                every_view()
         for mesh in meshes:
             ld.set_mesh(mesh)
-            app.step()
+            t_mesh = time.perf_counter()
+            while ld.brdf is None and time.perf_counter() - t_mesh < 300:
+                app.step()
+            every_view()
         passes = [canonical()]
         last_names = gl_names()
         t0 = time.perf_counter()
@@ -248,6 +261,10 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
                 at["edit"], at["what"] = p * edits + k, "edit"
                 what = edit(k)
                 at["what"] = what
+                if leak_kb:
+                    leaked.append(np.ones(leak_kb * 128))  # written: resident, from the heap (under 1 MB)
+                if leak_gl:
+                    leaked.append(app.ctx.texture((4, 4), 4))
                 app.step()
                 heap1 = malloc_mb()
                 rec = {"edit": p * edits + k, "what": what, "rss_mb": rss_mb() - before,
@@ -262,9 +279,10 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
                 counts[what.split()[0]] = counts.get(what.split()[0], 0) + 1
             passes.append(canonical())
         seconds = time.perf_counter() - t0
-        survivors = []
+        survivors, survivors_mb = [], 0.0
         if trace_python and tracemalloc.is_tracing():
             stats = tracemalloc.take_snapshot().statistics("traceback")
+            survivors_mb = sum(st.size for st in stats) / 2**20
             tracemalloc.stop()
             survivors = [{"mb": st.size / 2**20, "blocks": st.count, "where": [str(f) for f in st.traceback][-6:]}
                          for st in stats[:12]]
@@ -298,6 +316,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         "gl_created_after_warmup_alive": survivors_gl,
         "trace": trace,
         "python_survivors": survivors,
+        "python_survivors_mb": survivors_mb,
         "samples": samples,
     }
 
@@ -349,8 +368,11 @@ def main(argv: list[str] | None = None) -> int:
                     help="also sample in one state (default preset, sphere, object view) every --every edits")
     ap.add_argument("--tracemalloc", action="store_true",
                     help="trace Python allocations after the warm-up; print the largest survivors")
+    ap.add_argument("--leak-kb", type=int, default=0, help="keep this many KB of heap per edit (checks the soak)")
+    ap.add_argument("--leak-gl", action="store_true", help="keep a small GL texture per edit (checks the soak)")
     a = ap.parse_args(argv)
-    res = run(a.edits, a.seed, a.every, a.warmup, a.repeat, gl_per_edit=a.gl_per_edit, trace_python=a.tracemalloc, in_state=a.in_state)
+    res = run(a.edits, a.seed, a.every, a.warmup, a.repeat, gl_per_edit=a.gl_per_edit, trace_python=a.tracemalloc,
+              in_state=a.in_state, leak_kb=a.leak_kb, leak_gl=a.leak_gl)
     if a.out:
         a.out.write_text(json.dumps(res, indent=1))
     print(f"soak: {res['edits']} edits (seed {res['seed']}) in {res['seconds']:.0f} s {res['kinds']}; after "
@@ -392,6 +414,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"soak: GL objects created after the warm-up and alive at the end: {len(alive)}"
           + "".join(f"\n  {o['kind']} {o['name']} (by sample {o['sample']}) {o['what']}" for o in alive[:30]),
           flush=True)
+    if a.tracemalloc:
+        print(f"soak: Python allocations made after the warm-up and alive at the end: {res['python_survivors_mb']:.2f} MB",
+              flush=True)
     for st in res["python_survivors"]:
         print(f"soak: python survivor {st['mb']:.2f} MB in {st['blocks']} blocks from " + " <- ".join(
             reversed(st["where"][-3:])), flush=True)
