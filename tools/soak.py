@@ -51,29 +51,53 @@ def gl_objects(names: dict[str, set[int]] | None = None) -> dict[str, int]:
     return {kind: len(v) for kind, v in (names or gl_names()).items()}
 
 
+def _texture_levels(name: int) -> list[tuple[int, int, int, int]]:
+    """(width, height, depth, bits per texel) of each level of a live texture (DSA: nothing is bound)."""
+    from OpenGL import GL
+
+    out = []
+    for level in range(16):
+        w, h, d = (int(GL.glGetTextureLevelParameteriv(name, level, q))
+                   for q in (GL.GL_TEXTURE_WIDTH, GL.GL_TEXTURE_HEIGHT, GL.GL_TEXTURE_DEPTH))
+        if w == 0:
+            break
+        bits = sum(int(GL.glGetTextureLevelParameteriv(name, level, q)) for q in (
+            GL.GL_TEXTURE_RED_SIZE, GL.GL_TEXTURE_GREEN_SIZE, GL.GL_TEXTURE_BLUE_SIZE, GL.GL_TEXTURE_ALPHA_SIZE,
+            GL.GL_TEXTURE_DEPTH_SIZE, GL.GL_TEXTURE_STENCIL_SIZE))
+        out.append((w, h, d, bits))
+    return out
+
+
+def gl_bytes(names: dict[str, set[int]]) -> dict[str, float]:
+    """The data the live textures, buffers and renderbuffers hold (MB per kind): what the
+    driver keeps for the program's objects, told apart from its own allocations."""
+    from OpenGL import GL
+
+    mb = 2.0 ** -20
+    tex = sum(w * h * d * bits // 8 for n in names["Texture"] for w, h, d, bits in _texture_levels(n))
+    buf = sum(int(GL.glGetNamedBufferParameteriv(n, GL.GL_BUFFER_SIZE)) for n in names["Buffer"])
+    rb = 0
+    for n in names["Renderbuffer"]:
+        w, h = (int(GL.glGetNamedRenderbufferParameteriv(n, q)) for q in (GL.GL_RENDERBUFFER_WIDTH,
+                                                                          GL.GL_RENDERBUFFER_HEIGHT))
+        bits = sum(int(GL.glGetNamedRenderbufferParameteriv(n, q)) for q in (
+            GL.GL_RENDERBUFFER_RED_SIZE, GL.GL_RENDERBUFFER_GREEN_SIZE, GL.GL_RENDERBUFFER_BLUE_SIZE,
+            GL.GL_RENDERBUFFER_ALPHA_SIZE, GL.GL_RENDERBUFFER_DEPTH_SIZE, GL.GL_RENDERBUFFER_STENCIL_SIZE))
+        rb += w * h * bits // 8
+    return {"Texture": tex * mb, "Buffer": buf * mb, "Renderbuffer": rb * mb}
+
+
 def gl_describe(kind: str, name: int) -> str:
-    """What a live GL object is (a texture's size and format, a buffer's bytes), for a dump of objects created."""
+    """What a live GL object is (a texture's levels and bits per texel, a buffer's bytes), for a dump."""
     from OpenGL import GL
 
     try:
         if kind == "Texture":
-            for target, binding in ((GL.GL_TEXTURE_2D, GL.GL_TEXTURE_BINDING_2D),
-                                    (GL.GL_TEXTURE_2D_ARRAY, GL.GL_TEXTURE_BINDING_2D_ARRAY)):
-                prev = GL.glGetIntegerv(binding)
-                GL.glBindTexture(target, name)
-                if GL.glGetError() != GL.GL_NO_ERROR:
-                    continue
-                w = GL.glGetTexLevelParameteriv(target, 0, GL.GL_TEXTURE_WIDTH)
-                h = GL.glGetTexLevelParameteriv(target, 0, GL.GL_TEXTURE_HEIGHT)
-                d = GL.glGetTexLevelParameteriv(target, 0, GL.GL_TEXTURE_DEPTH)
-                fmt = GL.glGetTexLevelParameteriv(target, 0, GL.GL_TEXTURE_INTERNAL_FORMAT)
-                GL.glBindTexture(target, int(prev))
-                return f"{'2d' if target == GL.GL_TEXTURE_2D else '2d-array'} {w}x{h}x{d} format {fmt:#x}"
+            levels = _texture_levels(name)
+            return (f"{levels[0][0]}x{levels[0][1]}x{levels[0][2]}, {levels[0][3]} bits, {len(levels)} levels"
+                    if levels else "no storage")
         if kind == "Buffer":
-            from OpenGL.GL.ARB.direct_state_access import glGetNamedBufferParameteriv
-            return f"{int(glGetNamedBufferParameteriv(name, GL.GL_BUFFER_SIZE))} bytes"
-        if kind == "Renderbuffer":
-            return "renderbuffer"
+            return f"{int(GL.glGetNamedBufferParameteriv(name, GL.GL_BUFFER_SIZE))} bytes"
     except Exception as e:  # a description is best effort: the name and kind are the finding
         return f"? ({type(e).__name__})"
     return ""
@@ -83,6 +107,37 @@ def rss_mb() -> float:
     """Resident memory of this process (MB)."""
     with open("/proc/self/statm") as f:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def rss_parts_mb() -> dict[str, float]:
+    """Resident memory by kind (MB, /proc/self/status): ``anon`` (what the process allocated:
+    heaps, mappings, stacks), ``file`` (pages of mapped files: libraries' code, read in as used),
+    ``shmem``."""
+    out = {}
+    with open("/proc/self/status") as f:
+        for line in f:
+            for key, name in (("RssAnon:", "anon"), ("RssFile:", "file"), ("RssShmem:", "shmem")):
+                if line.startswith(key):
+                    out[name] = int(line.split()[1]) / 1024.0
+    return out
+
+
+def smaps_mb() -> dict[str, float]:
+    """Resident memory per mapping kind (MB, /proc/self/smaps): ``[heap]``, ``[anon]`` (mappings
+    without a file: large blocks, arenas, the driver's own, thread stacks) and each mapped file."""
+    out: dict[str, float] = {}
+    where = "[anon]"
+    with open("/proc/self/smaps") as f:
+        for line in f:
+            head = line.split()
+            if not head:
+                continue
+            if "-" in head[0] and len(head) >= 5 and not head[0].endswith(":"):
+                where = Path(head[5]).name if len(head) > 5 and not head[5].startswith("[") else (
+                    head[5] if len(head) > 5 else "[anon]")
+            elif head[0] == "Rss:":
+                out[where] = out.get(where, 0.0) + int(head[1]) / 1024.0
+    return {k: round(v, 2) for k, v in out.items() if v >= 0.1}
 
 
 class _MallInfo2(ctypes.Structure):
@@ -186,7 +241,9 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         ld.set_view("object")
         for _ in range(2):
             app.step()
-        return {"rss_mb": rss_mb(), "gl": gl_objects(), "malloc_mb": malloc_mb()}
+        live = gl_names()
+        return {"rss_mb": rss_mb(), "rss_parts_mb": rss_parts_mb(), "smaps_mb": smaps_mb(), "gl": gl_objects(live),
+                "gl_mb": gl_bytes(live), "malloc_mb": malloc_mb()}
 
     leaked: list = []  # leak_kb, leak_gl
     builds: list[dict] = []  # every shader program built, with the edit (-1: start-up and warm-up) that built it
@@ -350,6 +407,10 @@ def in_state_slopes(states: list[dict], start: int) -> dict:
     return {"in_state": after,
             "in_state_rss_slope_mb_per_100": slope_per_100(x, [s["rss_mb"] for s in after]),
             "in_state_heap_used_slope_mb_per_100": slope_per_100(x, [s["malloc_mb"].get("used", 0.0) for s in after]),
+            "in_state_anon_slope_mb_per_100": slope_per_100(x, [s["rss_parts_mb"].get("anon", 0.0) for s in after]),
+            "in_state_file_slope_mb_per_100": slope_per_100(x, [s["rss_parts_mb"].get("file", 0.0) for s in after]),
+            "in_state_gl_data_slope_mb_per_100": slope_per_100(x, [sum(s["gl_mb"].values()) for s in after]),
+            "in_state_gl_data_mb": [sum(after[0]["gl_mb"].values()), sum(after[-1]["gl_mb"].values())],
             "in_state_gl_slope_per_100": slope_per_100(x, gl),
             "in_state_rss_mb": [after[0]["rss_mb"], after[-1]["rss_mb"], max(s["rss_mb"] for s in after)],
             "in_state_gl": [gl[0], gl[-1], max(gl)]}
@@ -389,8 +450,38 @@ def main(argv: list[str] | None = None) -> int:
         g0, g1, gmax = res["in_state_gl"]
         print(f"soak: in one state every {a.every} edits after the warm-up: memory {r0:.0f} -> {r1:.0f} MB "
               f"(max {rmax:.0f}), slope {res['in_state_rss_slope_mb_per_100']:+.2f} MB per 100 edits (heap in use "
-              f"{res['in_state_heap_used_slope_mb_per_100']:+.2f}); GL objects {g0} -> {g1} (max {gmax}), slope "
+              f"{res['in_state_heap_used_slope_mb_per_100']:+.2f}, anonymous {res['in_state_anon_slope_mb_per_100']:+.2f}, "
+              f"mapped files {res['in_state_file_slope_mb_per_100']:+.2f}, data of the live GL objects "
+              f"{res['in_state_gl_data_mb'][0]:.1f} -> {res['in_state_gl_data_mb'][1]:.1f} MB, "
+              f"{res['in_state_gl_data_slope_mb_per_100']:+.2f}); GL objects {g0} -> {g1} (max {gmax}), slope "
               f"{res['in_state_gl_slope_per_100']:+.2f} per 100 edits", flush=True)
+    marks = [max(1, round(res["edits"] * f)) for f in (0.1, 0.5, 1.0)]
+
+    def at(series: list[dict], k: int) -> str:
+        s = min(series, key=lambda s: abs(s["edit"] - k))
+        return str(sum(s["gl"].values()))
+
+    states = res.get("in_state", [])
+    all_states = [{"edit": c["edit"], "gl": c["gl"]} for c in res["passes"][:1]] + states
+    print(f"soak: summary: slope {res['rss_slope_mb_per_100']:+.2f} MB per 100 edits as the states come"
+          + (f", {res['in_state_rss_slope_mb_per_100']:+.2f} in one state (heap in use "
+             f"{res['in_state_heap_used_slope_mb_per_100']:+.2f})" if states else "")
+          + f" after {res['warmup_edits']} edits; GL objects at edits {'/'.join(map(str, marks))}: "
+          + "/".join(at(res["samples"], k) for k in marks)
+          + (" as the states come, " + "/".join(at(all_states, k) for k in marks) + " in one state" if states else "")
+          + f"; shader programs built after the warm-up: {len(res['programs_built_after_warmup'])}", flush=True)
+    if states:
+        def smaps_diff(a: dict, b: dict) -> str:
+            keys = set(a["smaps_mb"]) | set(b["smaps_mb"])
+            d = sorted(((b["smaps_mb"].get(k, 0.0) - a["smaps_mb"].get(k, 0.0), k) for k in keys),
+                       key=lambda t: -abs(t[0]))
+            return ", ".join(f"{k} {v:+.1f}" for v, k in d[:5] if abs(v) >= 0.05)
+
+        lo = min(states, key=lambda c: c["rss_mb"])
+        hi = max(states, key=lambda c: c["rss_mb"])
+        print(f"soak: in one state, resident MB by mapping: edit {states[-1]['edit']} less edit {states[0]['edit']}: "
+              f"{smaps_diff(states[0], states[-1])}; the highest sample (edit {hi['edit']}) less the lowest "
+              f"(edit {lo['edit']}): {smaps_diff(lo, hi)}", flush=True)
     print("soak: largest memory steps (MB, edit, kind): "
           + ", ".join(f"{mb:+.1f} at {k} ({kind})" for mb, k, kind in res["largest_memory_steps"][:5]), flush=True)
     print("soak: per action after warm-up (n, resident MB, heap in use MB, heap from the OS MB, steps > 5 MB"
