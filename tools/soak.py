@@ -51,17 +51,24 @@ def gl_objects(names: dict[str, set[int]] | None = None) -> dict[str, int]:
     return {kind: len(v) for kind, v in (names or gl_names()).items()}
 
 
+def _iv(fn, *args) -> int:
+    """One integer from a glGet*iv call."""
+    out = (ctypes.c_int * 1)()
+    fn(*args, out)
+    return int(out[0])
+
+
 def _texture_levels(name: int) -> list[tuple[int, int, int, int]]:
     """(width, height, depth, bits per texel) of each level of a live texture (DSA: nothing is bound)."""
     from OpenGL import GL
 
     out = []
     for level in range(16):
-        w, h, d = (int(GL.glGetTextureLevelParameteriv(name, level, q))
+        w, h, d = (_iv(GL.glGetTextureLevelParameteriv, name, level, q)
                    for q in (GL.GL_TEXTURE_WIDTH, GL.GL_TEXTURE_HEIGHT, GL.GL_TEXTURE_DEPTH))
         if w == 0:
             break
-        bits = sum(int(GL.glGetTextureLevelParameteriv(name, level, q)) for q in (
+        bits = sum(_iv(GL.glGetTextureLevelParameteriv, name, level, q) for q in (
             GL.GL_TEXTURE_RED_SIZE, GL.GL_TEXTURE_GREEN_SIZE, GL.GL_TEXTURE_BLUE_SIZE, GL.GL_TEXTURE_ALPHA_SIZE,
             GL.GL_TEXTURE_DEPTH_SIZE, GL.GL_TEXTURE_STENCIL_SIZE))
         out.append((w, h, d, bits))
@@ -75,12 +82,12 @@ def gl_bytes(names: dict[str, set[int]]) -> dict[str, float]:
 
     mb = 2.0 ** -20
     tex = sum(w * h * d * bits // 8 for n in names["Texture"] for w, h, d, bits in _texture_levels(n))
-    buf = sum(int(GL.glGetNamedBufferParameteriv(n, GL.GL_BUFFER_SIZE)) for n in names["Buffer"])
+    buf = sum(_iv(GL.glGetNamedBufferParameteriv, n, GL.GL_BUFFER_SIZE) for n in names["Buffer"])
     rb = 0
     for n in names["Renderbuffer"]:
-        w, h = (int(GL.glGetNamedRenderbufferParameteriv(n, q)) for q in (GL.GL_RENDERBUFFER_WIDTH,
+        w, h = (_iv(GL.glGetNamedRenderbufferParameteriv, n, q) for q in (GL.GL_RENDERBUFFER_WIDTH,
                                                                           GL.GL_RENDERBUFFER_HEIGHT))
-        bits = sum(int(GL.glGetNamedRenderbufferParameteriv(n, q)) for q in (
+        bits = sum(_iv(GL.glGetNamedRenderbufferParameteriv, n, q) for q in (
             GL.GL_RENDERBUFFER_RED_SIZE, GL.GL_RENDERBUFFER_GREEN_SIZE, GL.GL_RENDERBUFFER_BLUE_SIZE,
             GL.GL_RENDERBUFFER_ALPHA_SIZE, GL.GL_RENDERBUFFER_DEPTH_SIZE, GL.GL_RENDERBUFFER_STENCIL_SIZE))
         rb += w * h * bits // 8
@@ -97,7 +104,7 @@ def gl_describe(kind: str, name: int) -> str:
             return (f"{levels[0][0]}x{levels[0][1]}x{levels[0][2]}, {levels[0][3]} bits, {len(levels)} levels"
                     if levels else "no storage")
         if kind == "Buffer":
-            return f"{int(GL.glGetNamedBufferParameteriv(name, GL.GL_BUFFER_SIZE))} bytes"
+            return f"{_iv(GL.glGetNamedBufferParameteriv, name, GL.GL_BUFFER_SIZE)} bytes"
     except Exception as e:  # a description is best effort: the name and kind are the finding
         return f"? ({type(e).__name__})"
     return ""
