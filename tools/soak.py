@@ -374,6 +374,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         "largest_memory_steps": sorted(jumps, reverse=True)[:8],
         "attribution": attribution(trace, after[0]["edit"]),
         **in_state_slopes(states, after[0]["edit"]),
+        "in_state_all": [{"edit": s["edit"], "gl": s["gl"]} for s in states],
         "idle_warmup": idle_warmup,
         "programs_built": builds,
         "programs_built_after_warmup": [b for b in builds if b["edit"] >= after[0]["edit"]],
@@ -438,11 +439,16 @@ def main(argv: list[str] | None = None) -> int:
                     help="trace Python allocations after the warm-up; print the largest survivors")
     ap.add_argument("--leak-kb", type=int, default=0, help="keep this many KB of heap per edit (checks the soak)")
     ap.add_argument("--leak-gl", action="store_true", help="keep a small GL texture per edit (checks the soak)")
+    ap.add_argument("--report", type=Path, help="print the summary of an earlier run's --out JSON (runs nothing)")
     a = ap.parse_args(argv)
-    res = run(a.edits, a.seed, a.every, a.warmup, a.repeat, gl_per_edit=a.gl_per_edit, trace_python=a.tracemalloc,
-              in_state=a.in_state, leak_kb=a.leak_kb, leak_gl=a.leak_gl)
+    if a.report:
+        res = json.loads(a.report.read_text())
+    else:
+        res = run(a.edits, a.seed, a.every, a.warmup, a.repeat, gl_per_edit=a.gl_per_edit,
+                  trace_python=a.tracemalloc, in_state=a.in_state, leak_kb=a.leak_kb, leak_gl=a.leak_gl)
     if a.out:
         a.out.write_text(json.dumps(res, indent=1))
+    gl_per_edit = any("gl" in t for t in res["trace"])
     print(f"soak: {res['edits']} edits (seed {res['seed']}) in {res['seconds']:.0f} s {res['kinds']}; after "
           f"{res['warmup_edits']} edits of warm-up: memory {res['rss_after_warmup_mb']:.0f} -> "
           f"{res['rss_end_mb']:.0f} MB, slope {res['rss_slope_mb_per_100']:+.2f} MB per 100 edits (second half "
@@ -455,7 +461,7 @@ def main(argv: list[str] | None = None) -> int:
     if "in_state" in res:
         r0, r1, rmax = res["in_state_rss_mb"]
         g0, g1, gmax = res["in_state_gl"]
-        print(f"soak: in one state every {a.every} edits after the warm-up: memory {r0:.0f} -> {r1:.0f} MB "
+        print(f"soak: in one state every {res['every']} edits after the warm-up: memory {r0:.0f} -> {r1:.0f} MB "
               f"(max {rmax:.0f}), slope {res['in_state_rss_slope_mb_per_100']:+.2f} MB per 100 edits (heap in use "
               f"{res['in_state_heap_used_slope_mb_per_100']:+.2f}, anonymous {res['in_state_anon_slope_mb_per_100']:+.2f}, "
               f"mapped files {res['in_state_file_slope_mb_per_100']:+.2f}, data of the live GL objects "
@@ -465,11 +471,13 @@ def main(argv: list[str] | None = None) -> int:
     marks = [max(1, round(res["edits"] * f)) for f in (0.1, 0.5, 1.0)]
 
     def at(series: list[dict], k: int) -> str:
+        if not series:
+            return "-"
         s = min(series, key=lambda s: abs(s["edit"] - k))
         return str(sum(s["gl"].values()))
 
     states = res.get("in_state", [])
-    all_states = [{"edit": c["edit"], "gl": c["gl"]} for c in res["passes"][:1]] + states
+    all_states = res.get("in_state_all") or states
     print(f"soak: summary: slope {res['rss_slope_mb_per_100']:+.2f} MB per 100 edits as the states come"
           + (f", {res['in_state_rss_slope_mb_per_100']:+.2f} in one state (heap in use "
              f"{res['in_state_heap_used_slope_mb_per_100']:+.2f})" if states else "")
@@ -492,10 +500,10 @@ def main(argv: list[str] | None = None) -> int:
     print("soak: largest memory steps (MB, edit, kind): "
           + ", ".join(f"{mb:+.1f} at {k} ({kind})" for mb, k, kind in res["largest_memory_steps"][:5]), flush=True)
     print("soak: per action after warm-up (n, resident MB, heap in use MB, heap from the OS MB, steps > 5 MB"
-          + (", GL objects" if a.gl_per_edit else "") + "):", flush=True)
+          + (", GL objects" if gl_per_edit else "") + "):", flush=True)
     for r in res["attribution"]:
         print(f"  {r['action']:<32} {r['n']:4d} {r['rss_mb']:+8.1f} {r['malloc_used_mb']:+8.1f} "
-              f"{r['malloc_system_mb']:+8.1f} {r['steps_over_5mb']:3d}" + (f" {r['gl']:+4d}" if a.gl_per_edit else ""),
+              f"{r['malloc_system_mb']:+8.1f} {r['steps_over_5mb']:3d}" + (f" {r['gl']:+4d}" if gl_per_edit else ""),
               flush=True)
     iw = res["idle_warmup"]
     print(f"soak: the window's idle warm-up compiled {iw['built']} shader variants in {iw['seconds']:.1f} s"
@@ -512,7 +520,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"soak: GL objects created after the warm-up and alive at the end: {len(alive)}"
           + "".join(f"\n  {o['kind']} {o['name']} (by sample {o['sample']}) {o['what']}" for o in alive[:30]),
           flush=True)
-    if a.tracemalloc:
+    if res.get("python_survivors"):
         print(f"soak: Python allocations made after the warm-up and alive at the end: {res['python_survivors_mb']:.2f} MB",
               flush=True)
     for st in res["python_survivors"]:
