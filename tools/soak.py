@@ -301,6 +301,16 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
             while ld.brdf is None and time.perf_counter() - t_mesh < 300:
                 app.step()
             every_view()
+            # A texture-mapped material edited once: its latent texture is built on the worker thread,
+            # whose malloc arena then holds its working size (freed blocks stay with the arena).
+            layers = ld.material.layers if ld.material.is_textured else ()
+            i = next((i for i, layer in enumerate(layers) if isinstance(getattr(layer, "roughness", None), float)),
+                     None)
+            if i is not None and ld.set_param(i, "roughness", round(0.5 * layers[i].roughness + 0.1, 3)):
+                t_mesh = time.perf_counter()
+                while ld.textures.job is not None and time.perf_counter() - t_mesh < 300:
+                    app.step()
+                every_view()
         passes = [canonical()]
         last_names = gl_names()
         t0 = time.perf_counter()
