@@ -194,6 +194,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
     from nbrdf.viewer.app import App
     from nbrdf.viewer.lookdev import presets
     from nbrdf.viewer.options import ViewOptions
+    from nbrdf.viewer.pipeline import TEXTURES_KEPT
     from nbrdf.viewer.programs import ProgramCache
 
     rng = random.Random(seed)
@@ -301,15 +302,19 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
             while ld.brdf is None and time.perf_counter() - t_mesh < 300:
                 app.step()
             every_view()
-            # A texture-mapped material edited once: its latent texture is built on the worker thread,
-            # whose malloc arena then holds its working size (freed blocks stay with the arena).
+            # A texture-mapped material edited until the pipeline keeps as many latent textures of earlier
+            # edits as it may (TEXTURES_KEPT, the rest released): each is built on the worker thread, whose
+            # malloc arena then holds its working size (freed blocks stay with the arena).
             layers = ld.material.layers if ld.material.is_textured else ()
             i = next((i for i, layer in enumerate(layers) if isinstance(getattr(layer, "roughness", None), float)),
                      None)
-            if i is not None and ld.set_param(i, "roughness", round(0.5 * layers[i].roughness + 0.1, 3)):
+            for n in range(TEXTURES_KEPT + 1 if i is not None else 0):
+                if not ld.set_param(i, "roughness", round(0.2 + 0.1 * n, 3)):
+                    break
                 t_mesh = time.perf_counter()
                 while ld.textures.job is not None and time.perf_counter() - t_mesh < 300:
                     app.step()
+            if i is not None:
                 every_view()
         passes = [canonical()]
         last_names = gl_names()
