@@ -8,6 +8,16 @@ squares line through the samples gives the slope per 100 edits.
 
     python tools/soak.py --edits 1000 --seed 1 --out soak.json   # needs a display (Xvfb: make soak)
 
+Warm-up, left out of the measurement: frames without edits until the window's
+own idle warm-up has built every shader variant (viewer/program_warmup.py);
+every view and compare mode in each kind of state (a preset of each BRDF kind
+with and without a closed-form reference, every mesh with its materials built,
+the texture-mapped material edited until the pipeline's latent textures of
+earlier edits are at their bound); then the first ``--warmup`` fraction of the
+random edits (the undo history, the reference and size caches fill to their
+bounds). What is created after it is named: every program built with its edit,
+the GL objects created and still alive at the end (with their size).
+
 ``--repeat R`` replays the same edit sequence R times: caches (shader
 variants, per-mode targets) fill in the first pass, so a later pass that
 leaves more live GL objects behind, in the same state, is a leak. Prints a summary; ``--out`` writes every sample and the slopes as JSON.
