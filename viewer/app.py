@@ -175,7 +175,8 @@ class App:
         self.autosave = WindowAutosave(self.lookdev, getattr(opts, "restore", None))  # may restore a crashed session
         ld = self.lookdev
         self.warmup = ProgramWarmup(ld.renderer, lambda: reachable(
-            ld.renderer, ld.pipeline.loaded_decoder, bool(ld.bodies.use_tables), ld.material))
+            ld.renderer, ld.pipeline.loaded_decoder, bool(ld.bodies.use_tables), ld.material,
+            ld.pipeline.belcour_loaded))
         """The shader variants the views can reach, compiled on idle frames (viewer/program_warmup.py)."""
 
     # --- input -----------------------------------------------------------------------

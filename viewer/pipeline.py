@@ -184,6 +184,11 @@ class MaterialPipeline:
         return self._decoder
 
     @property
+    def belcour_loaded(self) -> bool:
+        """Whether Belcour's tables are on the GPU (a material was shaded with ``--brdf belcour``)."""
+        return self._belcour is not None
+
+    @property
     def loaded_decoder(self) -> "GpuDecoder | None":
         """The decoder if it is on the GPU already (None: no neural material drawn yet)."""
         return self._decoder

@@ -4,7 +4,8 @@ The renderer builds a program per (shader, BRDF kind) on first use
 (viewer/programs.py). Each of the window's views reaches a few: the lit pass
 of the object view for every kind a frame can shade with (closed form,
 decoder at a latent, decoder at a latent texture, baked body table), the
-lobe and slice views for every kind but the table. Built on first use, a
+lobe and slice views for every kind but the table (and Belcour's model once
+the session has used it). Built on first use, a
 variant costs the frame that first needs it a compile (hundreds of
 milliseconds on llvmpipe): the first compare of a single-layer material, the
 first glTF file with a texture-mapped part. ``ProgramWarmup`` builds them one
@@ -29,7 +30,9 @@ if TYPE_CHECKING:
     from nbrdf.viewer.renderer import Renderer
 
 #: The kinds the lobe and slice views draw (a baked table shades the object view only).
-VIEW_KINDS = (BrdfKind.ANALYTIC, BrdfKind.NEURAL, BrdfKind.TEXTURED)
+VIEW_KINDS = (BrdfKind.ANALYTIC, BrdfKind.BELCOUR, BrdfKind.NEURAL, BrdfKind.TEXTURED)
+#: The kinds whose programs compile the decoder in.
+NEURAL_KINDS = (BrdfKind.NEURAL, BrdfKind.TEXTURED, BrdfKind.TABLE)
 
 
 @dataclass
@@ -44,16 +47,16 @@ class WarmupSettings:
 
 
 def reachable(renderer: "Renderer", decoder: "GpuDecoder | None", tables: bool,
-              material: "Material") -> list[tuple[ProgramKey, GpuBrdf]]:
+              material: "Material", belcour: bool = False) -> list[tuple[ProgramKey, GpuBrdf]]:
     """Every (key, BRDF of its kind) the window's views can draw with on ``renderer``'s
     path (deferred compute or fragment): neural kinds only once the ``decoder`` exists,
-    the table kind only where frames are shaded from baked ``tables``. The BRDFs stand
-    in for their kind (``material`` is any: a program's source depends on the kind
-    and the decoder only)."""
-    kinds = [BrdfKind.ANALYTIC]
+    the table kind only where frames are shaded from baked ``tables``, Belcour's model
+    once the session has shaded with it (``belcour``). The BRDFs stand in for their kind
+    (``material`` is any: a program's source depends on the kind and the decoder only)."""
+    kinds = [BrdfKind.ANALYTIC] + ([BrdfKind.BELCOUR] if belcour else [])
     if decoder is not None:
         kinds += [BrdfKind.NEURAL, BrdfKind.TEXTURED] + ([BrdfKind.TABLE] if tables else [])
-    brdfs = {k: GpuBrdf(material, k, decoder=None if k == BrdfKind.ANALYTIC else decoder) for k in kinds}
+    brdfs = {k: GpuBrdf(material, k, decoder=decoder if k in NEURAL_KINDS else None) for k in kinds}
     out: list[tuple[ProgramKey, GpuBrdf | None]] = []
     if renderer.deferred:
         out.append((ProgramKey("gbuffer_lit.frag", "object.vert", version=GLSL_430), None))

@@ -23,15 +23,17 @@ ROUGH_GOLD = {"format": "nbrdf-material/1", "name": "rough gold",
 @pytest.fixture(scope="module")
 def kinds(gl_ctx):
     """A BRDF of every kind the window draws: closed form, decoder at a latent, decoder
-    at a latent texture, baked body table."""
+    at a latent texture, baked body table, Belcour's model."""
     pipe = MaterialPipeline(gl_ctx)
     neural = pipe.build(load_material(DEFAULT_MATERIAL), "neural")
     z = neural.latent
     flat = LatentTexture(z.expand(4, 4, 3, z.shape[-1]).clone())
     textured = gpu_brdf(gl_ctx, neural.material, pipe.decoder, latent=z, latent_texture=flat)
     table = BodyTables(gl_ctx).brdf(neural, INTERACTIVE)
-    out = [pipe.build(parse_material(ROUGH_GOLD), "analytic"), neural, textured, table]
-    assert [b.kind for b in out] == [BrdfKind.ANALYTIC, BrdfKind.NEURAL, BrdfKind.TEXTURED, BrdfKind.TABLE]
+    out = [pipe.build(parse_material(ROUGH_GOLD), "analytic"), neural, textured, table,
+           pipe.build(neural.material, "belcour")]
+    assert [b.kind for b in out] == [BrdfKind.ANALYTIC, BrdfKind.NEURAL, BrdfKind.TEXTURED, BrdfKind.TABLE,
+                                     BrdfKind.BELCOUR]
     return pipe, out
 
 
@@ -39,8 +41,8 @@ def kinds(gl_ctx):
 def test_after_the_warmup_no_view_builds_a_program(gl_ctx, kinds, compute):
     pipe, brdfs = kinds
     r = Renderer(gl_ctx, mesh="sphere", compute=compute)
-    warm = ProgramWarmup(r, lambda: reachable(r, pipe.loaded_decoder, True, brdfs[0].material),
-                         WarmupSettings(idle_s=0.0))
+    warm = ProgramWarmup(r, lambda: reachable(r, pipe.loaded_decoder, True, brdfs[0].material,
+                                              pipe.belcour_loaded), WarmupSettings(idle_s=0.0))
     while warm.frame(False) is not None:
         pass
     assert warm.done and not warm.failed and warm.built
@@ -67,6 +69,6 @@ def test_nothing_is_built_before_the_window_is_idle(gl_ctx, kinds):
     assert warm.frame(True, now=101.1) is None and warm.frame(False, now=101.5) is None  # input again
     warm.settings.enabled = False
     assert warm.frame(False, now=200.0) is None
-    # without a decoder on the GPU the neural kinds wait for one
+    # without a decoder on the GPU the neural kinds wait for one, Belcour's model for its tables
     assert all(k.kind in (None, BrdfKind.ANALYTIC)
                for k, _ in reachable(r, None, True, brdfs[0].material))
