@@ -201,6 +201,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
     (a large mesh's, a compare view's) is then told apart from memory that grows.
     ``leak_kb``, ``leak_gl``: a leak put in on purpose (that many KB of heap, one small GL
     texture kept per edit), to check that the soak's criteria see one."""
+    from nbrdf.viewer import allocator
     from nbrdf.viewer.app import App
     from nbrdf.viewer.lookdev import presets
     from nbrdf.viewer.options import ViewOptions
@@ -260,8 +261,13 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         for _ in range(2):
             app.step()
         live = gl_names()
-        return {"rss_mb": rss_mb(), "rss_parts_mb": rss_parts_mb(), "smaps_mb": smaps_mb(), "gl": gl_objects(live),
-                "gl_mb": gl_bytes(live), "malloc_mb": malloc_mb()}
+        out = {"rss_mb": rss_mb(), "rss_parts_mb": rss_parts_mb(), "smaps_mb": smaps_mb(), "gl": gl_objects(live),
+               "gl_mb": gl_bytes(live), "malloc_mb": malloc_mb()}
+        # The same after the trim the window makes within 2 s of an edit (viewer/allocator.py): free heap
+        # pages are resident or not by when the last trim ran; after one, what is resident is held.
+        allocator.trim()
+        out["rss_trimmed_mb"] = rss_mb()
+        return out
 
     leaked: list = []  # leak_kb, leak_gl
     builds: list[dict] = []  # every shader program built, with the edit (-1: start-up and warm-up) that built it
@@ -440,6 +446,7 @@ def in_state_slopes(states: list[dict], start: int) -> dict:
     return {"in_state": after,
             "in_state_rss_slope_mb_per_100": slope_per_100(x, [s["rss_mb"] for s in after]),
             "in_state_heap_used_slope_mb_per_100": slope_per_100(x, [s["malloc_mb"].get("used", 0.0) for s in after]),
+            "in_state_rss_trimmed_slope_mb_per_100": slope_per_100(x, [s.get("rss_trimmed_mb", 0.0) for s in after]),
             "in_state_anon_slope_mb_per_100": slope_per_100(x, [s["rss_parts_mb"].get("anon", 0.0) for s in after]),
             "in_state_file_slope_mb_per_100": slope_per_100(x, [s["rss_parts_mb"].get("file", 0.0) for s in after]),
             "in_state_gl_data_slope_mb_per_100": slope_per_100(x, [sum(s["gl_mb"].values()) for s in after]),
@@ -504,7 +511,8 @@ def main(argv: list[str] | None = None) -> int:
     states = res.get("in_state", [])
     all_states = res.get("in_state_all") or states
     print(f"soak: summary: slope {res['rss_slope_mb_per_100']:+.2f} MB per 100 edits as the states come"
-          + (f", {res['in_state_rss_slope_mb_per_100']:+.2f} in one state (heap in use "
+          + (f", {res['in_state_rss_slope_mb_per_100']:+.2f} in one state ("
+             f"{res.get('in_state_rss_trimmed_slope_mb_per_100', float('nan')):+.2f} after a trim, heap in use "
              f"{res['in_state_heap_used_slope_mb_per_100']:+.2f})" if states else "")
           + f" after {res['warmup_edits']} edits; GL objects at edits {'/'.join(map(str, marks))}: "
           + "/".join(at(res["samples"], k) for k in marks)
