@@ -129,7 +129,9 @@ WINDOW = textwrap.dedent("""
         # the Monte Carlo worker killed while the window runs a compare view of a stack
         ld.state.view = "lobe"
         ld.set_compare("side")
-        for _ in range(40):
+        # waits end on an event; the deadlines only turn a hang into a failure (a loaded machine is slow)
+        deadline = time.monotonic() + 180
+        while time.monotonic() < deadline:
             app.step()
             if ld.worker.process is not None and ld.worker.result(ld.compare_part._job) is not None:
                 break
@@ -142,7 +144,8 @@ WINDOW = textwrap.dedent("""
         out["status"] = ld.reference_status()
         out["restarted"] = ld.worker.process is not None and ld.worker.process.pid != first.pid \\
             and ld.worker.process.is_alive()
-        for _ in range(60):
+        deadline = time.monotonic() + 180
+        while time.monotonic() < deadline:
             app.step()
             r = ld.worker.result(ld.compare_part._job)
             if r is not None and r.spp > 0 and ld.worker.process.is_alive():
