@@ -7,74 +7,11 @@ import math
 import pytest
 import torch
 from brdf_adapter import check_sampler, check_sampler_moments
+from scalar_reference import ref_conductor, ref_dielectric
 
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
 
 ALPHA = 1e-3  # significance level of each chi-square test (fixed seeds: deterministic)
-
-
-# --- an independent scalar implementation of SPEC section 5 ---------------------
-def _d(cos_m: float, a: float) -> float:
-    if cos_m <= 0:
-        return 0.0
-    tan2 = (1 - cos_m * cos_m) / (cos_m * cos_m)
-    return 1.0 / (math.pi * a * a * cos_m ** 4 * (1 + tan2 / (a * a)) ** 2)
-
-
-def _g1(w, m, a) -> float:
-    wm = sum(x * y for x, y in zip(w, m))
-    if wm * w[2] <= 0:
-        return 0.0
-    tan2 = (1 - w[2] ** 2) / (w[2] ** 2)
-    return 2.0 / (1.0 + math.sqrt(1.0 + a * a * tan2))
-
-
-def _fresnel(cos_i: float, n1: float, n2: float) -> float:
-    cos_i = abs(cos_i)
-    sin_t = n1 / n2 * math.sqrt(max(0.0, 1 - cos_i * cos_i))
-    if sin_t >= 1:
-        return 1.0
-    cos_t = math.sqrt(1 - sin_t * sin_t)
-    rs = (n1 * cos_i - n2 * cos_t) / (n1 * cos_i + n2 * cos_t)
-    rp = (n2 * cos_i - n1 * cos_t) / (n2 * cos_i + n1 * cos_t)
-    return (rs * rs + rp * rp) / 2
-
-
-def _unit(v):
-    n = math.sqrt(sum(x * x for x in v))
-    return [x / n for x in v]
-
-
-def ref_conductor(wi, wo, a, r0):
-    if wi[2] <= 0 or wo[2] <= 0:
-        return 0.0
-    h = _unit([x + y for x, y in zip(wi, wo)])
-    c = sum(x * y for x, y in zip(wi, h))
-    F = r0 + (1 - r0) * (1 - c) ** 5
-    return F * _d(h[2], a) * _g1(wi, h, a) * _g1(wo, h, a) / (4 * wi[2] * wo[2])
-
-
-def ref_dielectric(wi, wo, a, ior):
-    n_i = 1.0 if wi[2] > 0 else ior
-    if wi[2] * wo[2] > 0:
-        h = _unit([x + y for x, y in zip(wi, wo)])
-        if h[2] < 0:
-            h = [-x for x in h]
-        c = sum(x * y for x, y in zip(wi, h))
-        n_t = ior if wi[2] > 0 else 1.0
-        F = _fresnel(c, n_i, n_t)
-        return F * _d(h[2], a) * _g1(wi, h, a) * _g1(wo, h, a) / abs(4 * wi[2] * wo[2])
-    n_o = ior if wi[2] > 0 else 1.0
-    h = _unit([-(n_i * x + n_o * y) for x, y in zip(wi, wo)])
-    if h[2] < 0:
-        h = [-x for x in h]
-    ih = sum(x * y for x, y in zip(wi, h))
-    oh = sum(x * y for x, y in zip(wo, h))
-    if ih * oh >= 0:
-        return 0.0
-    F = _fresnel(ih, n_i, n_o)
-    g = _g1(wi, h, a) * _g1(wo, h, a)
-    return abs(ih * oh / (wi[2] * wo[2])) * n_o ** 2 * (1 - F) * _d(h[2], a) * g / (n_i * ih + n_o * oh) ** 2
 
 
 def _dirs(n, seed, lower=False):
