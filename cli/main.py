@@ -26,7 +26,8 @@ def run_guarded(prog: str, fn: Callable[[], int]) -> int:
     try:
         return fn()
     except NbrdfError as e:
-        print(f"{prog}: {e}", file=sys.stderr)
+        msg = str(e)  # a usage error already names its program ("nbrdf eval: ...")
+        print(msg if msg.split(":", 1)[0].split(" ")[0] == prog else f"{prog}: {msg}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)

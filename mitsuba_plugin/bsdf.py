@@ -20,6 +20,7 @@ import mitsuba as mi
 import numpy as np
 
 from nbrdf.mitsuba.kernel import Coat, CodeKernel, DecoderKernel, Proxy, TexturedCodeKernel
+from nbrdf.mitsuba.normal_map import BentDirections, material_normal_map
 
 FLAGS_GLOSSY = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
 #: A material without a coat whose proxy gives the cosine lobe more than this share is reported
@@ -99,7 +100,9 @@ def _textured_kernel(material, weights: str | None, pixel_angle: float) -> Textu
 class NbrdfBSDF(mi.BSDF):
     """``{"type": "nbrdf", "material": PATH[, "weights": BUNDLE, "pixel_angle": RADIANS]}``:
     ``pixel_angle`` (texture-mapped materials) is the camera's angle per pixel,
-    whose ray cone picks the latent texture's mip level per hit (0: the finest)."""
+    whose ray cone picks the latent texture's (and the normal map's) mip level
+    per hit (0: the finest). A material JSON's ``normal_map`` bends the shading
+    frame per hit (``normal_map.py``)."""
 
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
@@ -110,7 +113,9 @@ class NbrdfBSDF(mi.BSDF):
         if path is None:
             raise PluginError('nbrdf: the property "material" (a material JSON or a code file) is missing')
         self.path = str(path)
-        self.kernel = code_kernel(self.path, _prop(props, "weights"), float(_prop(props, "pixel_angle", 0.0)))
+        self.pixel_angle = float(_prop(props, "pixel_angle", 0.0))
+        self.kernel = code_kernel(self.path, _prop(props, "weights"), self.pixel_angle)
+        self.normal_map = material_normal_map(self.path, "nbrdf")
         textured = isinstance(self.kernel, TexturedCodeKernel)
         diffuse = not textured and not self.kernel.coat.present and self.kernel.proxy.w > DIFFUSE_W
         self._lobe = mi.BSDFFlags.DiffuseReflection if diffuse else mi.BSDFFlags.GlossyReflection
@@ -121,30 +126,38 @@ class NbrdfBSDF(mi.BSDF):
         """``active`` where the context asks for this BSDF's one component."""
         return active & ctx.is_enabled(self._lobe, 0)
 
+    def _frame(self, si):
+        """The hit's bent shading frame (None: no normal map)."""
+        return None if self.normal_map is None else self.normal_map.frame(si, self.pixel_angle)
+
     def eval(self, ctx, si, wo, active=True):
         _warn_if_slow()
-        f = self.kernel.eval(wo, si.wi, si)
-        ok = self._enabled(ctx, active) & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
-        return dr.select(ok, f * mi.Frame3f.cos_theta(wo), 0.0)
+        d = BentDirections(self._frame(si), si.wi, wo)
+        f = self.kernel.eval(d.wo, d.wi, si)
+        return dr.select(self._enabled(ctx, active) & d.ok, f * mi.Frame3f.cos_theta(d.wo), 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
-        return dr.select(self._enabled(ctx, active), self.kernel.pdf(si.wi, wo, si), 0.0)
+        d = BentDirections(self._frame(si), si.wi, wo)
+        return dr.select(self._enabled(ctx, active) & d.ok, self.kernel.pdf(d.wi, d.wo, si), 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
         return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         _warn_if_slow()
-        wo, pdf = self.kernel.sample(si.wi, sample1, sample2.x, sample2.y, si)
-        ok = (self._enabled(ctx, active) & (pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0)
-              & (mi.Frame3f.cos_theta(wo) > 0))
+        frame = self._frame(si)
+        wi = si.wi if frame is None else frame.to_local(si.wi)
+        wo_bent, pdf = self.kernel.sample(wi, sample1, sample2.x, sample2.y, si)
+        wo = wo_bent if frame is None else frame.to_world(wo_bent)
+        d = BentDirections(frame, si.wi, wo)
+        ok = self._enabled(ctx, active) & (pdf > 0) & d.ok
         bs = dr.zeros(mi.BSDFSample3f)
         bs.wo = wo
         bs.pdf = dr.select(ok, pdf, 0.0)
         bs.eta = 1.0
         bs.sampled_component = mi.UInt32(0)
         bs.sampled_type = mi.UInt32(+self._lobe)
-        f = self.kernel.eval(wo, si.wi, si) * mi.Frame3f.cos_theta(wo)
+        f = self.kernel.eval(wo_bent, wi, si) * mi.Frame3f.cos_theta(wo_bent)
         return bs, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0)
 
     def traverse(self, cb):
@@ -155,8 +168,9 @@ class NbrdfBSDF(mi.BSDF):
         if isinstance(self.kernel, TexturedCodeKernel):
             return (f"NbrdfBSDF[material={self.path!r}, latent texture {self.kernel.texture.size}, "
                     f"pixel_angle {self.kernel.pixel_angle:g}, proxy=(sigma {p.sigma:g}, w {p.w:g})]")
+        nmap = "" if self.normal_map is None else f", normal_map={self.normal_map.path!r}"
         return (f"NbrdfBSDF[material={self.path!r}, coat=(roughness {c.roughness:g}, ior {c.ior:g}), "
-                f"proxy=(sigma {p.sigma:g}, w {p.w:g})]")
+                f"proxy=(sigma {p.sigma:g}, w {p.w:g}){nmap}]")
 
 
 # --- the Monte Carlo reference ------------------------------------------------------------
@@ -218,7 +232,9 @@ class NbrdfReferenceBSDF(mi.BSDF):
     """``{"type": "nbrdf_reference", "material": PATH[, "spp": N, "seed": S]}``:
     every query draws ``spp`` new walk paths per lane (an unbiased, noisy f).
     A texture-mapped material gets its layer stack per hit from its maps at
-    the hit's uv (``textures.ParamMaps``)."""
+    the hit's uv (``textures.ParamMaps``); a ``normal_map`` bends the shading
+    frame per hit as in ``nbrdf`` (its finest level: the ground truth is not
+    filtered)."""
 
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
@@ -241,6 +257,7 @@ class NbrdfReferenceBSDF(mi.BSDF):
                 self.maps, self.sampler = None, ReferenceBRDF(self.material, spp=self.spp).sampler
         except NbrdfError as e:
             raise PluginError(f"nbrdf_reference: {e}") from None
+        self.normal_map = material_normal_map(self.path, "nbrdf_reference")
         self._seeds = itertools.count(int(_prop(props, "seed", 0)) * 1_000_003 + 1)
         self.m_components = [FLAGS_GLOSSY]
         self.m_flags = FLAGS_GLOSSY
@@ -287,21 +304,27 @@ class NbrdfReferenceBSDF(mi.BSDF):
     def _color(f: np.ndarray):
         return mi.Color3f(mi.Float(f[:, 0]), mi.Float(f[:, 1]), mi.Float(f[:, 2]))
 
+    def _frame(self, si):
+        """The hit's bent shading frame (None: no normal map)."""
+        return None if self.normal_map is None else self.normal_map.frame(si)
+
     def eval(self, ctx, si, wo, active=True):
         if _symbolic():
             return dr.zeros(mi.Color3f, dr.width(wo))
-        light, view = _to_np(wo), _to_np(si.wi)
-        f = self._color(self._f(light, view, self._uv(si)))
-        ok = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
-        return dr.select(ok, f * mi.Frame3f.cos_theta(wo), 0.0)
+        d = BentDirections(self._frame(si), si.wi, wo)
+        f = self._color(self._f(_to_np(d.wo), _to_np(d.wi), self._uv(si)))
+        return dr.select(active & d.ok, f * mi.Frame3f.cos_theta(d.wo), 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
         import torch
 
         if _symbolic():
             return dr.zeros(mi.Float, dr.width(wo))
-        p = self.sampler.pdf(torch.from_numpy(_to_np(si.wi)), torch.from_numpy(_to_np(wo))).numpy()
-        return dr.select(active, mi.Float(p.astype(np.float32)), 0.0)
+        frame = self._frame(si)
+        d = BentDirections(frame, si.wi, wo)
+        p = mi.Float(self.sampler.pdf(torch.from_numpy(_to_np(d.wi)), torch.from_numpy(_to_np(d.wo))).numpy()
+                     .astype(np.float32))
+        return dr.select(active & (d.ok if frame is not None else True), p, 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
         return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
@@ -311,7 +334,8 @@ class NbrdfReferenceBSDF(mi.BSDF):
 
         if _symbolic():
             return dr.zeros(mi.BSDFSample3f, dr.width(si.wi)), dr.zeros(mi.Color3f, dr.width(si.wi))
-        view = _to_np(si.wi)
+        frame = self._frame(si)
+        view = _to_np(si.wi if frame is None else frame.to_local(si.wi))
         s1, s2 = np.asarray(sample1, np.float32), np.stack([np.asarray(sample2.x, np.float32),
                                                            np.asarray(sample2.y, np.float32)], 1)
         s1 = np.broadcast_to(s1, (view.shape[0],))
@@ -325,6 +349,9 @@ class NbrdfReferenceBSDF(mi.BSDF):
         bs = dr.zeros(mi.BSDFSample3f)
         bs.wo = mi.Vector3f(mi.Float(light[:, 0]), mi.Float(light[:, 1]), mi.Float(light[:, 2]))
         ok = active & mi.Bool(ok_np)
+        if frame is not None:
+            bs.wo = frame.to_world(bs.wo)
+            ok &= BentDirections(frame, si.wi, bs.wo).ok
         bs.pdf = dr.select(ok, mi.Float(pdf), 0.0)
         bs.eta = 1.0
         bs.sampled_component = mi.UInt32(0)

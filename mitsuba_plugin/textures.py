@@ -46,34 +46,42 @@ def level_of_detail(si, pixel_angle: float, size: tuple[int, int]):
     return dr.log2(dr.maximum(dr.maximum(fu, fv) * max(size), 1e-8))
 
 
-class LatentTextureKernel:
-    """Per-texel decoder shares (3 x width) and coats (roughness, ior) of a
-    latent texture's mip chain, looked up per lane."""
+def mip_chain(image: np.ndarray) -> list[np.ndarray]:
+    """(H, W, C) -> its mip levels down to 1 x 1, each the 2 x 2 mean of the
+    one above (an odd side repeats its last row or column), as
+    ``neural.latent_texture`` builds a latent texture's chain."""
+    levels = [np.ascontiguousarray(image, np.float32)]
+    while max(levels[-1].shape[:2]) > 1:
+        lv = levels[-1]
+        if lv.shape[0] % 2:
+            lv = np.concatenate([lv, lv[-1:]], 0)
+        if lv.shape[1] % 2:
+            lv = np.concatenate([lv, lv[:, -1:]], 1)
+        levels.append(0.25 * (lv[0::2, 0::2] + lv[1::2, 0::2] + lv[0::2, 1::2] + lv[1::2, 1::2]))
+    return levels
 
-    def __init__(self, decoder, texture, coat_split: bool, no_coat: tuple[float, float]):
-        """``decoder``: the torch ``Decoder``; ``texture``: a ``LatentTexture``
-        of codes (H, W, 3, 34); ``coat_split``: whether its codes carry a
-        coat (else ``no_coat`` everywhere)."""
-        spec = decoder.spec
-        self.width = spec.width
-        self.stride = 3 * self.width + 2
+
+class MipBuffer:
+    """A mip chain of (H, W, stride) float texels in one flat ``mi.Float``
+    buffer, looked up per lane at Mitsuba uv (repeat wrapping): bilinear on
+    one level, or trilinear between the two levels around a per-lane level
+    of detail (their offsets and sizes gathered per lane from three small
+    tables, so a lookup touches two levels whatever the chain's length)."""
+
+    def __init__(self, levels: list[np.ndarray]):
+        """``levels``: (H, W, stride) arrays, finest first, row 0 = v 0 (the image's bottom)."""
+        self.stride = int(levels[0].shape[-1])
         chunks, self.levels = [], []
         offset = 0
-        with torch.no_grad():
-            for lv in texture.levels:
-                h, w = lv.shape[:2]
-                share = decoder.latent_share(lv.float()).reshape(h, w, 3 * self.width)
-                if coat_split:
-                    coat = lv[:, :, 0, spec.latent:spec.latent + 2].float()
-                else:
-                    coat = torch.tensor(no_coat, dtype=torch.float32).expand(h, w, 2)
-                chunks.append(torch.cat([share, coat], -1).reshape(-1).numpy())
-                self.levels.append((offset, h, w))
-                offset += h * w * self.stride
-        self.buffer = mi.Float(np.concatenate(chunks).astype(np.float32))
+        for lv in levels:
+            h, w = lv.shape[:2]
+            chunks.append(np.ascontiguousarray(lv, np.float32).reshape(-1))
+            self.levels.append((offset, h, w))
+            offset += h * w * self.stride
+        self.buffer = mi.Float(np.concatenate(chunks))
         #: per level: offset, height, width (gathered per lane by level index)
         self._tables = tuple(mi.UInt32([lv[k] for lv in self.levels]) for k in range(3))
-        self.size = tuple(texture.size)
+        self.size = (self.levels[0][1], self.levels[0][2])
 
     def _bilinear(self, level, u, v, weight, out: list) -> None:
         """Adds ``weight`` x the bilinear lookup on ``level`` (an int, or a
@@ -104,11 +112,9 @@ class LatentTextureKernel:
                 acc = dr.fma(dr.gather(mi.Float, self.buffer, idx + c), wt, acc)
             out[c] = acc
 
-    def lookup(self, uv, lod=None):
-        """(shares [3][width] per lane, coat roughness, coat ior (unclamped))
-        at Mitsuba uv: trilinear between the two mip levels around ``lod``
-        (their offsets and sizes gathered per lane), the finest level alone
-        when ``lod`` is None."""
+    def lookup(self, uv, lod=None) -> list:
+        """``stride`` floats per lane at Mitsuba uv: trilinear between the two
+        mip levels around ``lod``, the finest level alone when ``lod`` is None."""
         u, v = texture_rows_uv(uv.x, uv.y)
         # lanes a call masks off may hold anything: a NaN index must not reach a gather
         u = dr.select(dr.isfinite(u), u - dr.floor(u), 0.0)
@@ -124,6 +130,38 @@ class LatentTextureKernel:
             lo_i = mi.UInt32(lo)
             self._bilinear(lo_i, u, v, 1.0 - t, out)
             self._bilinear(dr.minimum(lo_i + 1, n - 1), u, v, t, out)
+        return out
+
+
+class LatentTextureKernel:
+    """Per-texel decoder shares (3 x width) and coats (roughness, ior) of a
+    latent texture's mip chain, looked up per lane (``MipBuffer``)."""
+
+    def __init__(self, decoder, texture, coat_split: bool, no_coat: tuple[float, float]):
+        """``decoder``: the torch ``Decoder``; ``texture``: a ``LatentTexture``
+        of codes (H, W, 3, 34); ``coat_split``: whether its codes carry a
+        coat (else ``no_coat`` everywhere)."""
+        spec = decoder.spec
+        self.width = spec.width
+        levels = []
+        with torch.no_grad():
+            for lv in texture.levels:
+                h, w = lv.shape[:2]
+                share = decoder.latent_share(lv.float()).reshape(h, w, 3 * self.width)
+                if coat_split:
+                    coat = lv[:, :, 0, spec.latent:spec.latent + 2].float()
+                else:
+                    coat = torch.tensor(no_coat, dtype=torch.float32).expand(h, w, 2)
+                levels.append(torch.cat([share, coat], -1).numpy())
+        self.texels = MipBuffer(levels)
+        self.stride = self.texels.stride
+        self.levels = self.texels.levels
+        self.size = tuple(texture.size)
+
+    def lookup(self, uv, lod=None):
+        """(shares [3][width] per lane, coat roughness, coat ior (unclamped))
+        at Mitsuba uv (``MipBuffer.lookup``)."""
+        out = self.texels.lookup(uv, lod)
         shares = [out[ch * self.width:(ch + 1) * self.width] for ch in range(3)]
         return shares, out[3 * self.width], out[3 * self.width + 1]
 

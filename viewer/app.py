@@ -122,7 +122,8 @@ class App:
         check_version(self.ctx)
         self.screen = self.ctx.detect_framebuffer()  # the window's default framebuffer, bound now
         try:
-            self.lookdev = LookDev.from_options(self.ctx, opts)  # the offscreen path opens the same session
+            # the offscreen path opens the same session
+            self.lookdev = LookDev.from_options(self.ctx, opts, brdf=getattr(opts, "window_brdf", "neural"))
         except NbrdfError:
             glfw.destroy_window(self.window)
             glfw.terminate()

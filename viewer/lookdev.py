@@ -46,7 +46,7 @@ from nbrdf.viewer.env_presets import resolve_environment
 from nbrdf.viewer.material_parts import MaterialParts, PartMaterial
 from nbrdf.viewer.mesh import GLTF_SUFFIXES, named_mesh
 from nbrdf.viewer.modes import BrdfMode, CompareMode, View
-from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, gpu_brdf, material_key
+from nbrdf.viewer.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, fallback_note, gpu_brdf, material_key
 from nbrdf.viewer.plane_curves import PlaneCurves
 from nbrdf.viewer.refine_job import IdleRefiner
 from nbrdf.viewer.renderer import Renderer
@@ -98,6 +98,8 @@ class LookDev(SessionEdits):
         super().__init__(material, mesh, env, state, backdrop)
         self.ctx = ctx
         self.brdf_mode = BrdfMode.parse(brdf, "--brdf")
+        self.brdf_note = ""
+        """One line when the edited material is shown other than ``brdf_mode`` asks (a stated fallback)."""
         self.pipeline = MaterialPipeline(ctx)
         self.notes: list[str] = []
         """One line per property of the opened file without an equivalent (a glTF file's materials)."""
@@ -257,6 +259,10 @@ class LookDev(SessionEdits):
         t0 = time.perf_counter()
         m = self.material
         mode = self.pipeline.resolve(m, self.brdf_mode)
+        note = fallback_note(m, self.brdf_mode)
+        if note or self.notice == self.brdf_note:
+            self.notice = note
+        self.brdf_note = note
         if m.is_textured and mode == BrdfMode.NEURAL:
             if self.interp.active:
                 raise NbrdfError("interpolation takes uniform materials; turn it off for a texture-mapped one")
@@ -284,6 +290,23 @@ class LookDev(SessionEdits):
         self.timings.latent_ms = (time.perf_counter() - t0) * 1000.0
         self._edit_t0 = t0
         self.invalidate()
+
+    def set_brdf_mode(self, mode: BrdfMode | str) -> bool:
+        """How the materials are shaded (the panel's BRDF: neural or belcour on the same
+        material); a view choice, not an undo step. A material the mode cannot shade
+        is shown with the neural BRDF and ``brdf_note`` says so."""
+        def go():
+            try:
+                parsed = BrdfMode.parse(mode, "BRDF")
+            except ValueError as e:
+                raise NbrdfError(str(e)) from None
+            old, self.brdf_mode = self.brdf_mode, parsed
+            try:
+                self._apply_material()
+            except Exception:
+                self.brdf_mode = old
+                raise
+        return self.guarded(go)
 
     def poll(self) -> None:
         """Picks up finished background work (latent textures) and renders the

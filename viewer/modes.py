@@ -52,6 +52,7 @@ class BrdfMode(_Mode):
     ANALYTIC = "analytic"   #: closed form (single interfaces; analytic layering for stacks)
     NEURAL = "neural"       #: leaf encoders -> layering -> decoder
     PROJECTED = "projected" #: a latent fitted to the reference
+    BELCOUR = "belcour"     #: Belcour 2018's analytic layered model (statistical operators)
 
 
 #: The base layers the closed-form shader (shaders/analytic_brdf.glsl) evaluates: conductor (GGX, Schlick

@@ -42,7 +42,7 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     check_target_size(ctx, opts.size)  # before any rendering: one line naming the limit
     ld = LookDev.from_options(ctx, opts, brdf=opts.brdf, threaded=False)
     try:
-        for note in ld.notes:
+        for note in ld.notes + ([ld.brdf_note] if ld.brdf_note else []):
             print(f"{PROG}: {note}", file=sys.stderr)
         if opts.session:
             if not ld.shots.write(out, opts.size, opts.spp):

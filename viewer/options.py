@@ -63,8 +63,10 @@ class ViewOptions:
     """passes accumulated per pixel (32: the default preview's relative noise under 1 %)"""
     brdf: BrdfMode = BrdfMode.AUTO
     """analytic: closed form in GLSL (single layers); neural: the shipped decoder in GLSL at the latents of leaf
-    encoders and layering; projected: at latents fitted to the material's reference; auto: analytic for a single
-    layer, else neural"""
+    encoders and layering; projected: at latents fitted to the material's reference; belcour: Belcour 2018's
+    analytic layered model in GLSL (uniform stacks; others are shown neural, said in one line); auto: analytic
+    for a single layer, else neural. The window shades neural or belcour (its panel switches between them;
+    other modes open neural)"""
     background: Background = Background.BLUR
     """what is seen behind the object, independent of what lights it: the environment, the environment
     blurred, a flat colour, or none (black)"""
@@ -86,6 +88,12 @@ class ViewOptions:
         self.background = Background.parse(self.background, "--background")
         # What lights the object is the environment whatever is seen behind it; "none" hides it.
         self.state = replace(self.state, background=self.background != Background.NONE)
+
+    @property
+    def window_brdf(self) -> BrdfMode:
+        """The window's BRDF: belcour when asked, else neural (the window's own; the closed
+        form of a single layer is its reference)."""
+        return BrdfMode.BELCOUR if self.brdf == BrdfMode.BELCOUR else BrdfMode.NEURAL
 
     def backdrop(self):
         """The backdrop settings of these options (viewer/backdrop.py)."""

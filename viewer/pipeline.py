@@ -30,6 +30,7 @@ from nbrdf.viewer.modes import BrdfMode
 if TYPE_CHECKING:
     from nbrdf.neural.latent_texture import LatentTexture
     from nbrdf.neural.model import NeuralModel
+    from nbrdf.viewer.belcour_gpu import BelcourTextures
     from nbrdf.viewer.neural_gpu import GpuDecoder, GpuLatentTexture
 
 
@@ -39,6 +40,7 @@ class BrdfKind(str, Enum):
     NEURAL = "neural"       #: the decoder at one latent (neural_brdf.glsl)
     TEXTURED = "textured"   #: the decoder at a latent texture (latent_texture.glsl)
     TABLE = "table"         #: a uniform latent's body baked into a table (body_table.glsl), the coat exact
+    BELCOUR = "belcour"     #: Belcour 2018's layered model (belcour_brdf.glsl, tables as textures)
 
 
 def analytic_capable(m: Material) -> bool:
@@ -75,10 +77,12 @@ class GpuBrdf:
     """The material's tangent-space normal map, mip-mapped (None: the mesh normal)."""
     body_table: moderngl.Texture | None = None
     """TABLE: the body's log f over (theta_h, theta_d, phi_d), a float 3D texture (neural/body_table.py)."""
+    textures: tuple[tuple[str, int, moderngl.Texture], ...] = ()
+    """(sampler uniform, texture unit, texture) bound with the program (BELCOUR: its tables)."""
 
     @property
     def neural(self) -> bool:
-        return self.kind != BrdfKind.ANALYTIC
+        return self.kind in (BrdfKind.NEURAL, BrdfKind.TEXTURED, BrdfKind.TABLE)
 
 
 class NormalMaps:
@@ -156,6 +160,7 @@ class MaterialPipeline:
         self._decoder: "GpuDecoder | None" = None
         self.normal_maps = NormalMaps(ctx)
         self._textures: dict[str, "GpuLatentTexture"] = {}
+        self._belcour: "BelcourTextures | None" = None
 
     @property
     def model(self) -> "NeuralModel":
@@ -175,10 +180,13 @@ class MaterialPipeline:
 
     @staticmethod
     def resolve(material: Material, mode: BrdfMode | str) -> BrdfMode:
-        """``auto`` -> analytic for single layers, neural otherwise; checks the mode fits."""
+        """``auto`` -> analytic for single layers, neural otherwise; belcour -> neural for a
+        material Belcour's model does not hold (``fallback_note`` says why); checks the mode fits."""
         mode = BrdfMode.parse(mode, "--brdf")
         if mode == BrdfMode.AUTO:
             return BrdfMode.ANALYTIC if analytic_capable(material) else BrdfMode.NEURAL
+        if mode == BrdfMode.BELCOUR and belcour_unsupported(material) is not None:
+            return BrdfMode.NEURAL
         if mode == BrdfMode.PROJECTED and material.is_textured:
             raise NbrdfError("--brdf projected: a texture-mapped material is shaded through its latent texture "
                              "(use --brdf neural)")
@@ -218,6 +226,15 @@ class MaterialPipeline:
     def cached_texture(self, material: Material) -> "GpuLatentTexture | None":
         return self._textures.get(material_key(material))
 
+    @property
+    def belcour(self) -> "BelcourTextures":
+        """Belcour's tables on the GPU (loaded, or generated and cached, on first use)."""
+        if self._belcour is None:
+            from nbrdf.viewer.belcour_gpu import BelcourTextures
+
+            self._belcour = BelcourTextures(self.ctx)
+        return self._belcour
+
     def build(self, material: Material, mode: BrdfMode | str = BrdfMode.AUTO,
               latent: torch.Tensor | None = None) -> GpuBrdf:
         """The GPU resources of ``material`` under ``mode``; ``latent`` overrides
@@ -225,6 +242,11 @@ class MaterialPipeline:
         mode = self.resolve(material, mode)
         if mode == BrdfMode.ANALYTIC:
             return gpu_brdf(self.ctx, material, normal_maps=self.normal_maps)
+        if mode == BrdfMode.BELCOUR:
+            from nbrdf.viewer.belcour_gpu import belcour_uniforms
+
+            return GpuBrdf(material, BrdfKind.BELCOUR, belcour_uniforms(material),
+                           normal_map=self.normal_maps.get(material), textures=self.belcour.bindings())
         if material.is_textured:
             tex = self.latent_texture(material)
             z = tex.mean_latent
@@ -239,6 +261,24 @@ class MaterialPipeline:
             t.release()
         self._textures.clear()
         self.normal_maps.release()
+        if self._belcour is not None:
+            self._belcour.release()
+            self._belcour = None
+
+
+def belcour_unsupported(material: Material) -> str | None:
+    """Why Belcour's model cannot shade ``material`` (one line), or None."""
+    from nbrdf.viewer.belcour_gpu import unsupported
+
+    return unsupported(material)
+
+
+def fallback_note(material: Material, mode: BrdfMode | str) -> str:
+    """The one line that says a material is shown other than ``mode`` asks, and how ("" when it is not)."""
+    if BrdfMode.parse(mode, "--brdf") != BrdfMode.BELCOUR:
+        return ""
+    why = belcour_unsupported(material)
+    return "" if why is None else f"--brdf belcour: {why}; shown with the neural BRDF instead"
 
 
 def offscreen_brdf(ctx: moderngl.Context, material: Material, mode: BrdfMode | str) -> GpuBrdf:
@@ -246,5 +286,5 @@ def offscreen_brdf(ctx: moderngl.Context, material: Material, mode: BrdfMode | s
     return MaterialPipeline(ctx).build(material, mode)
 
 
-__all__ = ["BrdfKind", "GpuBrdf", "MaterialPipeline", "NormalMaps", "analytic_capable", "gpu_brdf",
-           "material_key", "offscreen_brdf"]
+__all__ = ["BrdfKind", "GpuBrdf", "MaterialPipeline", "NormalMaps", "analytic_capable", "belcour_unsupported",
+           "fallback_note", "gpu_brdf", "material_key", "offscreen_brdf"]

@@ -67,7 +67,7 @@ def neural_snippets(brdf: GpuBrdf) -> tuple[dict[str, str], dict[str, object]]:
 
 def assemble(key: ProgramKey, brdf: GpuBrdf | None) -> str:
     """The source of ``key``'s shader with ``brdf`` (of ``key.kind``) filled in:
-    the closed form, or the decoder (weights where ``key.storage`` says) with
+    the closed form, Belcour's model, or the decoder (weights where ``key.storage`` says) with
     its snippets; None: the shader as it is."""
     defines = dict(key.defines) or None
     version = key.version or (GLSL_430 if key.compute else shaders.VERSION)
@@ -76,6 +76,11 @@ def assemble(key: ProgramKey, brdf: GpuBrdf | None) -> str:
     if brdf.kind == BrdfKind.ANALYTIC:
         return shaders.source(key.shader, {"brdf": shaders.read("analytic_brdf.glsl")}, version=version,
                               defines=defines)
+    if brdf.kind == BrdfKind.BELCOUR:
+        from nbrdf.viewer.belcour_gpu import brdf_snippet, kinds_snippet
+
+        return shaders.source(key.shader, {"brdf": brdf_snippet(), "belcour_kinds": kinds_snippet()},
+                              version=version, defines=defines)
     snippets, extra = neural_snippets(brdf)
     return brdf.decoder.source(key.shader, snippets, storage=key.storage, defines={**extra, **(defines or {})})
 

@@ -156,6 +156,10 @@ class Renderer:
                 prog["u_nb_share"].write(brdf.share)
             if brdf.latent_texture is not None:
                 brdf.latent_texture.bind(prog)
+        for name, unit, tex in brdf.textures:
+            tex.use(unit)
+            if name in prog:
+                prog[name].value = unit
         for k, v in brdf.uniforms.items():
             if k in prog:
                 prog[k].value = v

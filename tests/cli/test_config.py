@@ -110,7 +110,7 @@ def test_run_guarded_prints_one_line_and_exits_2(capsys):
 
     assert run_guarded("demo", bad) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("demo: demo: argument --method: invalid choice"), err
+    assert len(err) == 1 and err[0].startswith("demo: argument --method: invalid choice"), err  # named once
 
 
 def test_only_exclude_and_overrides():

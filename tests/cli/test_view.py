@@ -33,7 +33,7 @@ def test_help_lists_every_option_and_the_mode_words():
                  "--session", "--background", "--no-ground", "--view", "--theta-i", "--offscreen", "--out", "--size", "--spp",
                  "--exposure", "--tonemap", "--brdf"):
         assert flag in text, flag
-    assert "{object,lobe,slice}" in text and "{auto,analytic,neural,projected}" in text
+    assert "{object,lobe,slice}" in text and "{auto,analytic,neural,projected,belcour}" in text
 
 
 @pytest.mark.gl
@@ -57,12 +57,51 @@ def test_cli_offscreen_outputs(tmp_path, capsys):
     (["--offscreen"], "--out"),
     (["--offscreen", "--out", "x.png", "--point-light", "1,2"], "--point-light"),
     (["--offscreen", "--out", "x.png", "--session", "/nonexistent.json"], "no such file"),
+    (["--offscreen", "--out", "x.png", "--brdf", "belcor"], "--brdf"),
 ])
 def test_cli_bad_input_one_line(tmp_path, capsys, monkeypatch, argv, needle):
     monkeypatch.chdir(tmp_path)
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and needle in err[0], err
+
+
+@pytest.mark.gl
+def test_cli_brdf_belcour_lobe_is_the_python_model(tmp_path, capsys):
+    """``--brdf belcour`` shades the car paint with Belcour's GLSL model: its lobe view is
+    ``brdf_for(m, "belcour")``'s (SPEC section 9's lobe image) within the GPU tolerance."""
+    import torch
+
+    from nbrdf.neural.metrics import lobe_image
+    from nbrdf.training.brdfs import brdf_for
+
+    car_paint = DEFAULT_MATERIAL.parent / "car_paint.json"
+    out = tmp_path / "l.npy"
+    assert main([str(car_paint), "--offscreen", "--view", "lobe", "--theta-i", "40", "--brdf", "belcour",
+                 "--out", str(out)]) == 0
+    assert capsys.readouterr().err == ""
+    f = brdf_for(load_material(car_paint), "belcour")
+    ref = lobe_image(lambda wi, wo: f.eval(wi.float().double(), wo.float().double()).to(torch.float64), 40.0)
+    img = np.load(out)
+    assert ref.max() > 1.0
+    np.testing.assert_allclose(img, ref, rtol=1e-4, atol=1e-4)
+    neural = tmp_path / "n.npy"
+    assert main([str(car_paint), "--offscreen", "--view", "lobe", "--theta-i", "40", "--out", str(neural)]) == 0
+    assert np.abs(np.load(neural) - img).mean() > 1e-3  # the flag changes the model shown
+
+
+@pytest.mark.gl
+def test_cli_brdf_belcour_falls_back_to_neural_with_one_line(tmp_path, capsys):
+    from nbrdf.viewer.belcour_gpu import MAX_ATOMS
+
+    layers = [{"type": "dielectric", "roughness": 0.1, "ior": 1.2}] * MAX_ATOMS + [{"type": "diffuse", "albedo": 0.5}]
+    (tmp_path / "deep.json").write_text(json.dumps({"format": "nbrdf-material/1", "name": "d", "layers": layers}))
+    out = tmp_path / "d.npy"
+    assert main([str(tmp_path / "deep.json"), "--offscreen", "--view", "lobe", "--brdf", "belcour",
+                 "--out", str(out)]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"at most {MAX_ATOMS} layers" in err[0] and "neural BRDF instead" in err[0], err
+    assert np.load(out).max() > 0
 
 
 @pytest.mark.gl

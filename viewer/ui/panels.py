@@ -19,7 +19,7 @@ from imgui_bundle import imgui
 from nbrdf.viewer.camera import FOV_RANGE
 from nbrdf.viewer.env_presets import ENV_PRESETS
 from nbrdf.viewer.lookdev import LookDev, presets
-from nbrdf.viewer.modes import Background, CompareMode, View
+from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, View
 from nbrdf.viewer.ui.plots import error_bar, flip_bar, polar_plot
 from nbrdf.viewer.ui.preset_browser import preset_browser
 from nbrdf.viewer.ui.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
@@ -28,6 +28,9 @@ from nbrdf.viewer.view_settings import Row, rows
 COMPARE_LABELS = {CompareMode.OFF: "off", CompareMode.SIDE: "side by side", CompareMode.WIPE: "A/B wipe",
                   CompareMode.ERROR: "relative error", CompareMode.FLIP: "HDR-FLIP"}
 MESHES = ("sphere", "testmesh")
+#: The window's BRDF choices (the panel's combo) and their labels.
+WINDOW_BRDFS = (BrdfMode.NEURAL, BrdfMode.BELCOUR)
+BRDF_LABELS = {BrdfMode.NEURAL: "neural", BrdfMode.BELCOUR: "Belcour 2018 (analytic)"}
 BACKGROUND_LABELS = {Background.ENV: "environment", Background.BLUR: "blurred environment",
                      Background.FLAT: "flat colour", Background.NONE: "none (black)"}
 #: The longest side of a turntable captured from the window, pixels.
@@ -252,6 +255,7 @@ class Panels:
         if not self._header("View", True):
             return
         self._settings("view")
+        self._brdf_choice()
         modes = list(CompareMode)
         changed, k = imgui.combo("compare", modes.index(ld.compare), [COMPARE_LABELS[m] for m in modes])
         if changed:
@@ -412,6 +416,14 @@ class Panels:
                                    (max(2, round(w * k)), max(2, round(h * k))))
         else:
             imgui.progress_bar(progress, imgui.ImVec2(-1, 0), "turntable")
+
+    def _brdf_choice(self) -> None:
+        """The BRDF the material is shaded with: the neural path or Belcour 2018 (same material)."""
+        ld = self.ld
+        cur = WINDOW_BRDFS.index(ld.brdf_mode) if ld.brdf_mode in WINDOW_BRDFS else 0
+        changed, k = imgui.combo("BRDF", cur, [BRDF_LABELS[m] for m in WINDOW_BRDFS])
+        if changed:
+            ld.set_brdf_mode(WINDOW_BRDFS[k])
 
     # --- status (top of the right side bar) -----------------------------------------------------
     def _status(self) -> None:
