@@ -167,8 +167,6 @@ class LitPasses:
         viewer/body_guide.py), or none (the proxy target: latent textures, ``table_target`` off)."""
         from nbrdf.viewer.renderer import TABLE_UNIT
 
-        if "u_body_table" in p:  # never left on unit 0 beside the 2D samplers there
-            p["u_body_table"].value = TABLE_UNIT
         if "u_ris_table" not in p:
             if "u_ris_lobe" in p:
                 p["u_ris_lobe"].value = 0
