@@ -17,7 +17,9 @@ class DataArgs:
     out: str
     """folder for the shards and manifest.json"""
     preset: str = "tiny"
-    """tiny (seconds), cpu (the shipped decoder), layering (stacks for the layering network), coats (look-development stacks to fine-tune it), paper"""
+    """tiny (seconds), cpu (the shipped decoder), layering (stacks for the layering network), layering_open (the
+    same without clear top slabs), coats (look-development stacks to fine-tune it), lacquers (dark thick coatings),
+    paints (car paints and coated metals), paper"""
     seed: int | None = None
     """random seed (default: the preset's)"""
     spp: int | None = None

@@ -48,8 +48,18 @@ class OperationsReport:
     every: int = 7
     """show every N-th stack in the lobe figure"""
     set: str = "heldout"
-    """materials scored: heldout (the paper-distribution held-out set) or lookdev (the look-development set,
-    training/sets/lookdev); keep one --refs folder per set"""
+    """materials scored: heldout (the paper-distribution held-out set), lookdev (the look-development set,
+    training/sets/lookdev) or depth (stacks of 2, 3 and 4 layers: how the error grows with depth); keep one
+    --refs folder per set"""
+    per_depth: int = 8
+    """depth: stacks of each depth"""
+    noise_target: float = 48.0
+    """lobe noise PSNR (dB) new references are refined to (60: the held-out figures of docs/RESULTS.md)"""
+    max_spp: int = 256
+    """paths per pixel at most while refining a new reference (60 dB needs about 16384)"""
+    methods: str = "neural,projected,analytic"
+    """comma-separated methods scored: neural (the full neural path), projected (the decoder at a fitted latent,
+    the decoder's capacity; a fit per material), analytic (the analytic layering baseline)"""
 
 
 @dataclass
@@ -142,18 +152,26 @@ def cmd_report_operations(ns: argparse.Namespace) -> int:
 
     c: OperationsReport = build(OperationsReport, ns)
     model = model_or_default(c.model)
-    if c.set not in ("heldout", "lookdev"):
-        raise NbrdfError(f"--set: {c.set!r} is not heldout or lookdev")
+    if c.set not in ("heldout", "lookdev", "depth"):
+        raise NbrdfError(f"--set: {c.set!r} is not heldout, lookdev or depth")
+    if c.per_depth < 1 or c.max_spp < 1 or not c.noise_target > 0:
+        raise NbrdfError("--per-depth, --max-spp and --noise-target must be positive")
+    makers = {"neural": lambda: ev.neural_method(model), "projected": lambda: ev.projected_method(model.decoder),
+              "analytic": ev.analytic_method}
+    names = tuple(dict.fromkeys(w.strip() for w in c.methods.split(",") if w.strip()))
+    if not names or any(n not in makers for n in names):
+        raise NbrdfError(f"--methods: {c.methods!r} is not a comma-separated list of {', '.join(makers)}")
     items = None
     if c.set == "lookdev":
         from nbrdf.training.render_report import load_set
 
         items = load_set("lookdev")
-    refs = ev.build_references(c.refs, limit=c.limit, items=items)
+    elif c.set == "depth":
+        items = ev.depth_set(c.per_depth)
+    refs = ev.build_references(c.refs, limit=c.limit, items=items, noise_target=c.noise_target, max_spp=c.max_spp)
     out = Path(c.out)
     out.mkdir(parents=True, exist_ok=True)
-    methods = {"neural": ev.neural_method(model), "projected": ev.projected_method(model.decoder),
-               "analytic": ev.analytic_method()}
+    methods = {n: makers[n]() for n in names}
     stacks = [x for x in refs if x[1].interfaces]  # single layers: the analytic model is the reference itself
     results = {name: ev.score(stacks if name == "analytic" else refs, m) for name, m in methods.items()}
     glossy = ev.glossy_stacks(refs)
@@ -165,7 +183,7 @@ def cmd_report_operations(ns: argparse.Namespace) -> int:
               "rows": {k: r["rows"] for k, r in results.items()}}
     (out / "operations.json").write_text(json.dumps(report, indent=1))
     (out / "operations.md").write_text(ev.comparison_table(results) + "\n")
-    shown = [(k, m, r) for k, m, r in refs if k in ("two_layer", "three_layer") or c.set == "lookdev"]
+    shown = [(k, m, r) for k, m, r in refs if k in ("two_layer", "three_layer") or c.set != "heldout"]
     shown = shown[:: max(1, c.every)][:6]
     rows = []
     for _k, m, r in shown:
@@ -230,7 +248,9 @@ class ScenesReport:
     ref_spp: int = 512
     """samples per pixel of the converged Monte Carlo reference (cached)"""
     chunk: int = 16
-    """samples per pixel per Mitsuba pass (larger passes amortise the wavefront mode's per-pass cost)"""
+    """samples per pixel of the first and smallest Mitsuba pass (larger passes amortise the wavefront mode's per-pass cost)"""
+    max_chunk: int = 256
+    """largest pass: a method's passes double from --chunk while one takes at most 1/8 of the budget"""
     cache: str | None = None
     """cache folder of the converged references (default: OUT/cache)"""
     figure: str | None = None
@@ -241,9 +261,10 @@ class ScenesReport:
 
 def cmd_report_scenes(ns: argparse.Namespace) -> int:
     c: ScenesReport = build(ScenesReport, ns)
-    if c.time_budget <= 0 or c.ref_spp < 2 or c.chunk < 1:
+    if c.time_budget <= 0 or c.ref_spp < 2 or c.chunk < 1 or c.max_chunk < c.chunk:
         raise NbrdfError(f"report scenes: --time-budget must be positive, --ref-spp at least 2, --chunk at least 1 "
-                         f"(got {c.time_budget}, {c.ref_spp}, {c.chunk})")
+                         f"and --max-chunk at least --chunk (got {c.time_budget}, {c.ref_spp}, {c.chunk}, "
+                         f"{c.max_chunk})")
     try:
         import nbrdf.mitsuba  # noqa: F401
     except ImportError as e:
@@ -257,7 +278,7 @@ def cmd_report_scenes(ns: argparse.Namespace) -> int:
     for n in names:
         load_scene(n)  # bad scenes fail before minutes of rendering
     cfg = SceneReportConfig(out=Path(c.out), scenes=names, size=c.size, time_budget=c.time_budget,
-                            ref_spp=c.ref_spp, chunk=c.chunk, cache=Path(c.cache) if c.cache else None,
+                            ref_spp=c.ref_spp, chunk=c.chunk, max_chunk=c.max_chunk, cache=Path(c.cache) if c.cache else None,
                             seed=c.seed, figure=Path(c.figure) if c.figure else None)
     print(markdown(run_scene_report(cfg, log=lambda s: print(s, file=sys.stderr))))
     return 0

@@ -214,7 +214,8 @@ ENCODERS = {"rusink5": rusink5, "lobes11": lobes11}
 class DecoderKernel:
     """The shipped decoder at one material: per channel, relu layers over the
     direction features with the latent's share as the first layer's bias,
-    then y = log f; f = exp(min(y, 80)). Weights packed once for ``drjit.nn``."""
+    then y = log f; f = exp(min(y, 80)). Weights packed once for ``drjit.nn``;
+    the shares are literal constants of the traced program (192 floats)."""
 
     def __init__(self, encoding: str, activation: str, w_dir: np.ndarray, shares: np.ndarray,
                  hidden: list[tuple[np.ndarray, np.ndarray]], out: tuple[np.ndarray, np.ndarray]):
@@ -227,14 +228,14 @@ class DecoderKernel:
         self.encoding = encoding
         T = mi.TensorXf
         mats = [T(np.ascontiguousarray(w_dir, np.float32))]
-        mats += [T(np.ascontiguousarray(s, np.float32)) for s in shares]
         for w, b in hidden + [out]:
             mats += [T(np.ascontiguousarray(w, np.float32)), T(np.ascontiguousarray(b, np.float32))]
         packed = nn.pack(*mats, layout="inference")
         self._nn = nn
         self.w_dir = packed[0]
-        self.shares = packed[1:1 + len(shares)]
-        rest = packed[1 + len(shares):]
+        # exact float32 values as Python floats: Dr.Jit literals
+        self.shares = np.asarray(shares, np.float32).astype(np.float64).tolist()
+        rest = packed[1:]
         self.layers = [(rest[2 * k], rest[2 * k + 1]) for k in range(len(rest) // 2)]
 
     @staticmethod
@@ -253,16 +254,17 @@ class DecoderKernel:
     def body(self, wi, wo, shares: list | None = None) -> list:
         """Decoded body values [f_r, f_g, f_b] (1/sr), zero below the horizon;
         ``shares``: per-lane latent shares [3][width] (a latent texture's)
-        instead of the material's own."""
+        instead of the material's own. The first layer's direction part is
+        the same for the three channels and computed once."""
         nn = self._nn
         x = nn.CoopVec(*ENCODERS[self.encoding](wi, wo))
         up = (wi.z > 0) & (wo.z > 0)
+        d = nn.matvec(self.w_dir, x)
         out = []
-        for share in self.shares if shares is None else shares:
-            if shares is None:
-                h = dr.maximum(nn.matvec(self.w_dir, x, share), 0.0)
-            else:
-                h = dr.maximum(nn.matvec(self.w_dir, x) + nn.CoopVec(*share), 0.0)
+        if shares is None:
+            shares = [[mi.Float(v) for v in share] for share in self.shares]
+        for share in shares:
+            h = dr.maximum(d + nn.CoopVec(*share), 0.0)
             for j, (w, b) in enumerate(self.layers):
                 h = nn.matvec(w, h, b)
                 if j < len(self.layers) - 1:

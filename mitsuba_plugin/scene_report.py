@@ -36,6 +36,8 @@ from nbrdf.neural.errors import NbrdfError
 #: The paper's Table 3: equal-time MSE, (neural, Guo et al. Monte Carlo), at 1024 x 1024.
 #: Samples per pixel per pass of the converged reference (its cache does not depend on ``--chunk``).
 REF_CHUNK = 16
+#: A method's passes grow (doubling from ``chunk``) while one takes at most this share of the time budget.
+PASS_SHARE = 1 / 8
 PAPER_TABLE3 = {"still_life": (1.0e-3, 2.0e-3), "globe": (9.3e-4, 2.3e-3), "teapot": (6.0e-4, 5.4e-3)}
 
 
@@ -54,8 +56,11 @@ class SceneReportConfig:
     ref_spp: int = 512
     """samples per pixel of the converged Monte Carlo reference"""
     chunk: int = 16
-    """samples per pixel per Mitsuba pass (the neural render's per-pass cost in wavefront mode, tracing and
-    launches per bounce, is amortised over it; the Monte Carlo's per-spp cost does not depend on it)"""
+    """samples per pixel of the first pass and the smallest (the wavefront mode's per-pass cost, tracing and
+    launches per bounce, is amortised over a pass)"""
+    max_chunk: int = 256
+    """largest pass: each method's passes double from ``chunk`` while one takes at most ``PASS_SHARE`` of
+    the budget at its warm-up pace (the same rule for both; ``chunk``: fixed passes)"""
     cache: Path | None = None
     """converged references are cached here (default: OUT/cache)"""
     seed: int = 0
@@ -78,10 +83,15 @@ def crossover_seconds(mse_mc: float, seconds_mc: float, mse_target: float) -> fl
 
 
 def _cache_key(scene: Scene, size: tuple[int, int], spp: int, chunk: int, seed: int) -> str:
+    """The converged reference's cache key: the scene with its materials' file
+    names (their contents are hashed, so the key does not depend on where the
+    checkout lies), the image size, spp, pass and seed."""
     files = sorted({next(iter(s["material"].values())) for s in scene.spec["shapes"]
                     if "diffuse" not in s["material"]})
-    blob = json.dumps({"spec": scene.spec, "size": size, "spp": spp, "chunk": chunk, "seed": seed, "v": 1,
-                       "materials": [Path(f).read_text() for f in files]}, sort_keys=True)
+    shapes = [{**s, "material": {k: Path(v).name for k, v in s["material"].items()}}
+              if "diffuse" not in s["material"] else s for s in scene.spec["shapes"]]
+    blob = json.dumps({"spec": {**scene.spec, "shapes": shapes}, "size": size, "spp": spp, "chunk": chunk,
+                       "seed": seed, "v": 2, "materials": [Path(f).read_text() for f in files]}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
@@ -115,32 +125,49 @@ def converged_reference(scene: Scene, cfg: SceneReportConfig, progress=None) -> 
     return res
 
 
+def pass_spp(seconds_per_spp: float, cfg: SceneReportConfig) -> int:
+    """Samples per pixel of a method's passes at its measured pace: ``cfg.chunk``
+    doubled while a pass stays within ``cfg.max_chunk`` and ``PASS_SHARE`` of
+    the budget. At 96 x 72 a pass of 16 spp is 110 k paths, and the wavefront
+    mode's per-pass cost (kernel tracing and launches per bounce) is a large
+    part of a fast method's pass; at the paper's 1024 x 1024 one spp is 1 M
+    paths and it is negligible."""
+    spp = cfg.chunk
+    while spp * 2 <= cfg.max_chunk and spp * 2 * seconds_per_spp <= cfg.time_budget * PASS_SHARE:
+        spp *= 2
+    return spp
+
+
 def equal_time(scenes: dict[str, Scene], cfg: SceneReportConfig, seeds: dict[str, int],
                log=print) -> dict[str, RenderResult]:
-    """Renders of ``scenes`` (by key) at equal time: one untimed chunk each
-    (kernel compilation), then chunks in turn, always of the render with the
-    least time spent, until each has spent ``cfg.time_budget`` and has two
-    chunks (so the times differ by at most a chunk, and both renders share the
-    machine's load)."""
+    """Renders of ``scenes`` (by key) at equal time: one untimed pass each
+    (kernel compilation; its pace sizes the method's passes, ``pass_spp``),
+    then passes in turn, always of the render with the least time spent,
+    until each has spent ``cfg.time_budget`` and has two passes (so the times
+    differ by at most a pass, and both renders share the machine's load)."""
     loaded = {k: load(sc, cfg.size, cfg.chunk) for k, sc in scenes.items()}
+    sizes = {}
     for k, sc in scenes.items():
-        render(sc, cfg.size, cfg.chunk, seed=seeds[k] + 777, chunk_spp=cfg.chunk, loaded=loaded[k])
+        w = render(sc, cfg.size, cfg.chunk, seed=seeds[k] + 777, chunk_spp=cfg.chunk, loaded=loaded[k],
+                   exclude_compile=True)
+        sizes[k] = pass_spp(w.seconds / w.spp, cfg) if w.seconds > 0 else cfg.chunk
     chunks: dict[str, list[np.ndarray]] = {k: [] for k in scenes}
     spent = {k: 0.0 for k in scenes}
     compiled = {k: 0.0 for k in scenes}
     while True:
-        # at least two chunks each: their halves give the render's own noise
+        # at least two passes each: their halves give the render's own noise
         pending = [k for k in scenes if spent[k] < cfg.time_budget or len(chunks[k]) < 2]
         if not pending:
             break
         k = min(pending, key=spent.__getitem__)
-        r = render(scenes[k], cfg.size, cfg.chunk, seed=seeds[k] * 10007 + len(chunks[k]), chunk_spp=cfg.chunk,
+        r = render(scenes[k], cfg.size, sizes[k], seed=seeds[k] * 10007 + len(chunks[k]), chunk_spp=sizes[k],
                    loaded=loaded[k], exclude_compile=True)
         chunks[k].append(r.image)
         spent[k] += r.seconds
         compiled[k] += r.compile_seconds
-    log("  " + ", ".join(f"{k}: {len(c) * cfg.chunk} spp in {spent[k]:.1f} s" for k, c in chunks.items()))
-    return {k: RenderResult(np.mean(c, 0).astype(np.float32), len(c) * cfg.chunk, spent[k], c, compiled[k])
+    log("  " + ", ".join(f"{k}: {len(c) * sizes[k]} spp in {spent[k]:.1f} s (passes of {sizes[k]})"
+                         for k, c in chunks.items()))
+    return {k: RenderResult(np.mean(c, 0).astype(np.float32), len(c) * sizes[k], spent[k], c, compiled[k])
             for k, c in chunks.items()}
 
 
@@ -173,7 +200,7 @@ def score_scene(name: str, cfg: SceneReportConfig, log=print) -> tuple[dict, dic
         fl, fmap = flip(ref["image"], r.image)
         m = mse(ref["image"], r.image)
         row[key] = {"spp": r.spp, "seconds": round(r.seconds, 2), "seconds_per_spp": r.seconds / r.spp,
-                    "compile_seconds_excluded": round(r.compile_seconds, 2),
+                    "compile_seconds_excluded": round(r.compile_seconds, 2), "pass_spp": r.spp // len(r.chunks),
                     "mse": m, "mse_minus_ref_noise": max(m - ref["noise_mse"], 0.0), "flip": fl,
                     "noise_mse": own_noise_mse(r.chunks)}
         # what is left of the error once both renders' noise is taken out: the bias (0 for the unbiased MC,
@@ -181,6 +208,11 @@ def score_scene(name: str, cfg: SceneReportConfig, log=print) -> tuple[dict, dic
         row[key]["bias_mse"] = max(m - ref["noise_mse"] - row[key]["noise_mse"], 0.0)
         images[key], images[f"err_{key}"], images[f"flip_{key}"] = r.image, np.mean((r.image - ref["image"]) ** 2, 2), fmap
     row["mse_ratio_mc_over_neural"] = row["mc"]["mse"] / max(row["neural"]["mse"], 1e-30)
+    # against the true image: the reference's own noise (independent of both renders) taken out of both
+    row["mse_ratio_mc_over_neural_ref_noise_removed"] = (row["mc"]["mse_minus_ref_noise"]
+                                                         / max(row["neural"]["mse_minus_ref_noise"], 1e-30))
+    for key in ("neural", "mc"):  # noise variance of one sample per pixel: what a method's spp buy
+        row[key]["noise_per_spp"] = row[key]["noise_mse"] * row[key]["spp"]
     # the equal time is only as equal as a loaded machine allows: the MC's MSE moved to the neural's time by
     # MSE ~ 1/t (its noise part; the reference's noise stays)
     mc_at_t = row["mc"]["mse_minus_ref_noise"] * mc.seconds / neural.seconds + ref["noise_mse"]
@@ -198,25 +230,31 @@ def markdown(result: dict) -> str:
     lines = [f"Equal-time MSE against the converged Monte Carlo reference ({w}x{h}, path tracer max depth 8; "
              "this machine). Paper (Table 3, 1024x1024, Mitsuba on a workstation): neural vs Guo et al.",
              "",
-             "| scene | neural spp | MC spp | time/frame (s) | MSE neural | MSE MC | MC/neural (time-matched) | FLIP neural | "
+             "| scene | neural spp (pass) | MC spp (pass) | time/frame (s) | MSE neural | MSE MC | MC/neural (time-matched) | "
+             "MC/neural, ref. noise removed | FLIP neural | "
              "FLIP MC | neural noise / bias MSE | MC noise / bias MSE | ref spp (noise MSE) | crossover (s, extrapolated) | "
              "paper neural / MC |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in result["scenes"]:
         p = PAPER_TABLE3.get(r["scene"])
         paper = f"{p[0]:.1e} / {p[1]:.1e} ({p[1] / p[0]:.1f}x)" if p else "-"
         cross = r["crossover_seconds"]
         lines.append(
-            f"| {r['scene']} | {r['neural']['spp']} | {r['mc']['spp']} | {r['neural']['seconds']:.1f} / "
+            f"| {r['scene']} | {r['neural']['spp']} ({r['neural'].get('pass_spp', '-')}) | {r['mc']['spp']} "
+            f"({r['mc'].get('pass_spp', '-')}) | {r['neural']['seconds']:.1f} / "
             f"{r['mc']['seconds']:.1f} | {r['neural']['mse']:.2e} | {r['mc']['mse']:.2e} | "
             f"{r['mse_ratio_mc_over_neural']:.2f}x ({r['mse_ratio_mc_over_neural_time_matched']:.2f}x) | "
+            f"{r['mse_ratio_mc_over_neural_ref_noise_removed']:.2f}x | "
             f"{r['neural']['flip']:.3f} | {r['mc']['flip']:.3f} | "
             f"{r['neural']['noise_mse']:.1e} / {r['neural']['bias_mse']:.1e} | "
             f"{r['mc']['noise_mse']:.1e} / {r['mc']['bias_mse']:.1e} | "
             f"{r['reference']['spp']} ({r['reference']['noise_mse']:.1e}) | "
             f"{'never' if math.isinf(cross) else f'{cross:.0f}'} | {paper} |")
     lines += ["", "MSE ~ 1/time for the unbiased Monte Carlo: the crossover is the time at which it would reach the "
-              "neural material's error (both corrected for the reference's own noise). An extrapolation. Times: "
+              "neural material's error (both corrected for the reference's own noise). An extrapolation. The MSE against "
+              "the true image is the MSE against the reference less the reference's own noise (independent of both "
+              "renders): the ratio of those is the column 'ref. noise removed'. Passes: each method's grow from "
+              "--chunk while one takes at most 1/8 of the budget at its warm-up pace (same rule for both). Times: "
               "sampling only, both methods in Dr.Jit's wavefront mode with the same path tracer; the LLVM compilation "
               "of kernels not yet in Dr.Jit's cache is excluded from both (scenes.json: compile_seconds_excluded). "
               "Noise: each "

@@ -41,7 +41,13 @@ from nbrdf.neural.stack import (  # noqa: F401
     params_to_material,
     params_to_stack,
 )
-from nbrdf.training.distributions import clear_top_slabs, darken_top_slabs, sample_params, sharpen_coats  # noqa: F401
+from nbrdf.training.distributions import (  # noqa: F401
+    clear_top_slabs,
+    darken_top_slabs,
+    paint_base_coats,
+    sample_params,
+    sharpen_coats,
+)
 
 Tensor = torch.Tensor
 
@@ -61,6 +67,7 @@ class DataConfig:
     bright_bases: float = 1.0  # share of those sharp-coated stacks whose base is redrawn bright (the rest keep theirs)
     clear_top_slabs: float = 0.0  # share of stacks whose top slab is redrawn clear (sigma_t 0, or U(0, 0.3))
     dark_top_slabs: float = 0.0  # share of stacks whose top slab is redrawn dark and thick (darken_top_slabs)
+    paint_base_coats: float = 0.0  # share of three-layered stacks whose lower half is redrawn a car paint's base coat
 
 
 PRESETS: dict[str, DataConfig] = {
@@ -80,6 +87,13 @@ PRESETS: dict[str, DataConfig] = {
                            val_counts=dict(conductor=0, dielectric=0, two_layer=64, three_layer=32, diffuse_base=32,
                                            three_layer_diffuse=16),
                            pairs=768, spp=32, seed=1, sharp_coats=0.4, clear_top_slabs=0.3),
+    # the same stacks without the clear top slab redraw: the shipped bundle's first
+    # layering set (the layering preset as it was before that redraw)
+    "layering_open": DataConfig(counts=dict(conductor=0, dielectric=0, two_layer=2496, three_layer=640,
+                                            diffuse_base=640, three_layer_diffuse=320),
+                                val_counts=dict(conductor=0, dielectric=0, two_layer=64, three_layer=32,
+                                                diffuse_base=32, three_layer_diffuse=16),
+                                pairs=768, spp=32, seed=1, sharp_coats=0.4),
     # look-development stacks for fine-tuning the layering network: most carry
     # a sharp coat over a clear (or thin) top slab -- clear-coated metals,
     # lacquers and three-layer car paints (issue 16)
@@ -97,6 +111,15 @@ PRESETS: dict[str, DataConfig] = {
                                            three_layer_diffuse=16),
                            pairs=768, spp=128, seed=5, sharp_coats=0.7, bright_bases=0.5, clear_top_slabs=0.4,
                            dark_top_slabs=0.4),
+    # car paints and coated metals, the look-development stacks the other presets
+    # rarely draw: a sharp clear coat over a rough low-index inner interface and
+    # a coloured, often dark, thick base coat (paint_base_coats)
+    "paints": DataConfig(counts=dict(conductor=0, dielectric=0, two_layer=128, three_layer=256, diffuse_base=0,
+                                     three_layer_diffuse=256),
+                         val_counts=dict(conductor=0, dielectric=0, two_layer=16, three_layer=16, diffuse_base=0,
+                                         three_layer_diffuse=16),
+                         pairs=768, spp=64, seed=11, sharp_coats=0.9, bright_bases=0.5, clear_top_slabs=0.9,
+                         paint_base_coats=0.8),
     "paper": DataConfig(counts=dict(conductor=300, dielectric=300, two_layer=12720, three_layer=1800,
                                     diffuse_base=1200),
                         val_counts=dict(conductor=32, dielectric=32, two_layer=128, three_layer=64, diffuse_base=32),
@@ -206,7 +229,8 @@ def make_shard(cfg: DataConfig, shard: Shard) -> dict[str, np.ndarray]:
     params = sample_params(shard.cls, shard.count, g)
     # the look-development redraws, in this order, each from its own stream
     redraws = (("coats", cfg.sharp_coats, lambda p, share, g: sharpen_coats(p, share, g, cfg.bright_bases)),
-               ("slabs", cfg.clear_top_slabs, clear_top_slabs), ("dark", cfg.dark_top_slabs, darken_top_slabs))
+               ("slabs", cfg.clear_top_slabs, clear_top_slabs), ("dark", cfg.dark_top_slabs, darken_top_slabs),
+               ("paint", cfg.paint_base_coats, paint_base_coats))
     for stream, share, redraw in redraws:
         if share > 0:
             redraw(params, share, torch.Generator().manual_seed(

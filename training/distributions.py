@@ -146,6 +146,25 @@ def darken_top_slabs(p: Tensor, share: float, g: torch.Generator) -> Tensor:
     return p
 
 
+def paint_base_coats(p: Tensor, share: float, g: torch.Generator) -> Tensor:
+    """Redraws the lower half of a ``share`` of the three-layered stacks in
+    ``p`` (in place; returned) as a car paint's base coat: a rough, low-index
+    inner interface (roughness U(0.1, 0.4), ior U(1.25, 1.6)) over a coloured,
+    thick slab (albedo U(0, 1)^2, so half of them below 0.25; sigma_t U(1, 5)).
+    The paper's distributions give such a slab (dark and thick) under a clear
+    coat to about one three-layer stack in a hundred. Other classes are left
+    alone; a fixed number of uniforms per row."""
+    u, pick = _pick_stacks(p, share, g)
+    v = torch.rand(p.shape[0], 2, generator=g, dtype=torch.float64)
+    pick = pick & torch.isin(p[:, P["class"]].round().long(),
+                             torch.tensor([CLASSES.index(c) for c in THREE_LAYERED]))
+    p[pick, P["mid_roughness"]] = 0.1 + 0.3 * u[pick, 1]
+    p[pick, P["mid_ior"]] = 1.25 + 0.35 * u[pick, 2]
+    p[pick, P["albedo_2"]] = v[pick, 0] ** 2
+    p[pick, P["sigma_t_2"]] = 1.0 + 4.0 * v[pick, 1]
+    return p
+
+
 def mixed_params(n: int, g: torch.Generator) -> Tensor:
     """n parameter vectors over every class (even shares, the rest two-layer)."""
     per = [n // len(CLASSES)] * len(CLASSES)

@@ -13,7 +13,17 @@ where nothing else looks). Each round simulates new pairs, adds them to the
 fitted pool and continues the projection (``neural.projection.project``, the
 one fitting loop) from the best code so far; a held-out set of pairs scores
 every code, the network's included. Rounds stop when the held-out error
-stops falling, or when the next round would overrun the budget.
+stops falling, or when the budget is spent.
+
+The budget is a bound, not a hope: the work comes in small units (a chunk of
+``chunk_pairs`` simulated pairs, one fitting step), each unit's cost is
+measured on the refinement's own clock as it runs (a material's paths may
+be 20 times longer than another's, and a shared machine's speed changes by
+the minute), and a unit starts only when its measured cost fits in the time
+left. A round is sized to the time left (fewer new pairs and steps near the
+end), and a slow material gets a smaller held-out set. The overrun is at
+most the misestimate of one unit; the first chunk, which has no estimate,
+is kept small.
 
 Refined codes are cached per user (``$XDG_CACHE_HOME/nbrdf/refined``) by the
 material's content and the decoder, so reopening a material costs nothing.
@@ -71,14 +81,30 @@ class RefineConfig:
     """Rounds at most (the pool then holds ``round_pairs * max_rounds`` pairs)."""
     seed: int = 0
     """Seed of the pairs and of the simulation."""
+    chunk_pairs: int = 64
+    """Pairs per walk call: the least unit of simulation (the budget and a cancel are checked between chunks)."""
+    probe_pairs: int = 8
+    """Pairs of the very first chunk, whose cost nothing measured yet bounds (it sets the overrun's worst case)."""
+    heldout_share: float = 0.3
+    """Share of the budget the held-out set may take once it holds ``min_heldout_pairs`` (a slow material gets
+    fewer held-out pairs, so that rounds remain)."""
+    min_heldout_pairs: int = 128
+    """Held-out pairs the refinement simulates whatever their cost (fewer score codes too noisily to choose)."""
+    min_round_pairs: int = 64
+    """New pairs a round needs to start (a round sized smaller than this by the time left is not run)."""
+    min_steps: int = 20
+    """Fitting steps a round needs to start."""
 
     def check(self) -> None:
         """One line for a setting out of range."""
         if not (math.isfinite(self.budget) and self.budget > 0):
             raise NbrdfError(f"--budget: {self.budget} seconds must be a positive number")
-        for name in ("round_pairs", "heldout_pairs", "spp", "steps", "fit_pairs", "max_rounds"):
+        for name in ("round_pairs", "heldout_pairs", "spp", "steps", "fit_pairs", "max_rounds", "chunk_pairs",
+                     "probe_pairs", "min_heldout_pairs", "min_round_pairs", "min_steps"):
             if getattr(self, name) < 1:
                 raise NbrdfError(f"refinement: {name} {getattr(self, name)} must be at least 1")
+        if not 0.0 < self.heldout_share <= 1.0:
+            raise NbrdfError(f"refinement: heldout_share {self.heldout_share} must lie in (0, 1]")
 
 
 @dataclass
@@ -185,14 +211,38 @@ def heldout_error(dec: Decoder, code: Tensor, h: HeldOut) -> float:
 
 
 # --- the refinement ------------------------------------------------------------------------
+@dataclass
+class WorkCosts:
+    """Wall-clock costs of a refinement's units, measured on its own clock as it runs."""
+
+    pair: float | None = None
+    """Seconds per simulated pair (``spp`` paths): the latest chunk's rate or the mean so far, the larger."""
+    fit: float | None = None
+    """Seconds per fitting step and fitted pair (the latest fit's)."""
+    score: float = 0.0
+    """Seconds to score one code on the held-out set."""
+    pairs_done: int = 0
+    """Pairs simulated so far."""
+    pair_seconds: float = 0.0
+    """Seconds their simulation took."""
+
+    def add_chunk(self, n: int, seconds: float) -> None:
+        """Records a walk call of n pairs that took ``seconds``."""
+        self.pairs_done += n
+        self.pair_seconds += seconds
+        self.pair = max(seconds / n, self.pair_seconds / self.pairs_done)
+
+
 class Refiner:
     """One material's refinement in rounds: ``start`` simulates the held-out
-    set and scores the network's code; each ``step`` is one round. ``stop``
-    (checked between the projection's steps) ends a round early without
-    using it, so a caller can cancel at once."""
+    set and scores the network's code; each ``step`` is one round sized to
+    the time left (module docstring). ``stop`` (checked between chunks of
+    the simulation and between the projection's steps) ends a round early
+    without using it, so a caller can cancel at once. ``clock`` (seconds,
+    monotonic) measures the budget and the units' costs."""
 
     def __init__(self, dec: Decoder, material: Material, network_code: Tensor,
-                 cfg: RefineConfig = RefineConfig()):
+                 cfg: RefineConfig = RefineConfig(), clock: Callable[[], float] = time.perf_counter):
         cfg.check()
         check_refinable(material)
         if not dec.spec.coat:
@@ -200,72 +250,189 @@ class Refiner:
         code = torch.as_tensor(network_code, dtype=torch.float32).reshape(3, -1)
         if code.shape[1] != dec.spec.code:
             raise NbrdfError(f"refinement: a code has {dec.spec.code} floats per channel, got {code.shape[1]}")
-        self.dec, self.material, self.cfg = dec, material, cfg
+        self.dec, self.material, self.cfg, self.clock = dec, material, cfg, clock
         self.coat = code[:1, dec.spec.latent:]  # (1, 2): the material's coat, as the network's code has it
         self.roughness = body_roughness(material)
         self.g = torch.Generator().manual_seed(cfg.seed)
+        self.costs = WorkCosts()
         self._network_code = code
         self._pool: list[tuple[Tensor, Tensor, Tensor]] = []
+        self._held: list[tuple[Tensor, Tensor, Tensor]] = []  # held-out chunks simulated so far
         self._heldout: HeldOut | None = None
+        self._chunks = 0  # walk calls so far (each its own seed)
+        self._largest = 0  # pairs of the largest walk call so far
         self._spent = (0.0, 0.0)  # (wall, processor) seconds inside start and step: a set-aside run is not charged
-        self._round_seconds = 0.0
+        self._call = (0.0, 0.0)  # (clock, process_time) at the start of the current call
         self._stale = 0
         self.state: RefineState | None = None
 
-    def _simulate(self, n: int, seed: int) -> tuple[Tensor, Tensor, Tensor]:
-        wi, wo = placed_pairs(n, self.g, self.roughness)
-        return wi, wo, body_values(self.material, wi, wo, self.cfg.spp, seed)
+    # --- time ---------------------------------------------------------------------------------
+    def _begin(self) -> None:
+        self._call = (self.clock(), time.process_time())
 
-    def _tick(self, t0: float, c0: float) -> None:
-        """Charges the time since (t0, c0) (``perf_counter``, ``process_time``) to the refinement."""
+    def _end(self) -> None:
+        """Charges the current call's time to the refinement."""
         w, c = self._spent
-        self._spent = (w + time.perf_counter() - t0, c + time.process_time() - c0)
+        self._spent = (w + self.clock() - self._call[0], c + time.process_time() - self._call[1])
+        self._call = (self.clock(), time.process_time())
         if self.state is not None:
             self.state.seconds, self.state.cpu_seconds = self._spent
 
-    def start(self) -> RefineState:
-        """Simulates the held-out set and scores the network's code."""
+    def _left(self) -> float:
+        """Seconds of the budget left now."""
+        return self.cfg.budget - self._spent[0] - (self.clock() - self._call[0])
+
+    # --- work units ---------------------------------------------------------------------------
+    def _chunk(self, n: int) -> tuple[Tensor, Tensor, Tensor]:
+        """n newly simulated pairs (one walk call), its cost measured."""
+        t = self.clock()
+        wi, wo = placed_pairs(n, self.g, self.roughness)
+        f = body_values(self.material, wi, wo, self.cfg.spp, self.cfg.seed * 7919 + 1 + self._chunks)
+        self._chunks += 1
+        self._largest = max(self._largest, n)
+        self.costs.add_chunk(n, self.clock() - t)
+        return wi, wo, f
+
+    def _next_chunk(self, want: int) -> int:
+        """Pairs in the next chunk: the first one is a small probe, and a chunk is at most twice the largest so far
+        (a cost measured on few pairs is checked on a few more before it is trusted with ``chunk_pairs``)."""
+        if self.costs.pair is None:
+            return min(want, self.cfg.probe_pairs)
+        return min(want, self.cfg.chunk_pairs, 2 * self._largest)
+
+    def _score(self, code: Tensor) -> float:
+        t = self.clock()
+        e = heldout_error(self.dec, code, self._heldout)
+        self.costs.score = self.clock() - t
+        return e
+
+    def _measure_fit(self) -> None:
+        """The fit's cost per step and pair, from two steps on the held-out pairs (before any round)."""
+        h, t = self._heldout, self.clock()
+        wi, wo = h.wi[None].expand(3, -1, -1), h.wo[None].expand(3, -1, -1)
+        project(self.dec, wi, wo, h.f.T.contiguous(), ProjectionConfig(steps=2, lr=0.0), z0=self._network_code)
+        self.costs.fit = (self.clock() - t) / (2 * h.wi.shape[0])
+
+    def _pooled(self) -> int:
+        return sum(p[0].shape[0] for p in self._pool)
+
+    def _round_cost(self, n: int, steps: int) -> float:
+        """Estimated seconds of a round of n new pairs and ``steps`` steps."""
+        fitted = min(n + self._pooled(), self.cfg.fit_pairs)
+        return n * self.costs.pair + steps * fitted * self.costs.fit + self.costs.score
+
+    def _plan(self) -> tuple[int, int] | None:
+        """(new pairs, steps) of the next round that fit in the time left, or None: none does."""
+        c, left = self.cfg, self._left()
+        scale = 1.0
+        while True:
+            n, steps = int(c.round_pairs * scale), int(c.steps * scale)
+            if n < min(c.min_round_pairs, c.round_pairs) or steps < min(c.min_steps, c.steps):
+                return None
+            if self._round_cost(n, steps) <= left:
+                return n, steps
+            scale *= 0.8
+
+    # --- the refinement -----------------------------------------------------------------------
+    def start(self, stop: Callable[[], bool] | None = None) -> RefineState:
+        """Simulates the held-out set (all of ``heldout_pairs``, or fewer when
+        the walk is slow: at least ``min_heldout_pairs`` while the budget
+        lasts) and scores the network's code. ``stop`` pauses it (what was
+        simulated is kept); until it is scored, the state holds the network's
+        code with infinite errors."""
+        if self.state is not None and self._heldout is not None:
+            return self.state
+        c = self.cfg
         if self.state is None:
-            t0, c0 = time.perf_counter(), time.process_time()
-            wi, wo, body = self._simulate(self.cfg.heldout_pairs, self.cfg.seed * 7919 + 1)
-            coat = coat_eval(self.coat.expand(3, -1)[:, None, :], wi[None].expand(3, -1, -1),
-                             wo[None].expand(3, -1, -1)).T
-            self._heldout = HeldOut(wi, wo, body + coat.float())
-            e = heldout_error(self.dec, self._network_code, self._heldout)
-            self.state = RefineState(self._network_code, e, e, pairs=self.cfg.heldout_pairs, history=[e])
-            self._tick(t0, c0)
-        return self.state
+            self.state = RefineState(self._network_code, math.inf, math.inf)
+        st = self.state
+        self._begin()
+        have = sum(h[0].shape[0] for h in self._held)
+        while have < c.heldout_pairs:
+            if stop is not None and stop():
+                self._end()
+                return st
+            k = self._next_chunk(c.heldout_pairs - have)
+            if self.costs.pair is not None:
+                cost = k * self.costs.pair
+                spent = self._spent[0] + self.clock() - self._call[0]
+                if have >= c.min_heldout_pairs and spent + cost > c.heldout_share * c.budget:
+                    break  # a slow walk: fewer held-out pairs, so that rounds remain
+                if cost > self._left():
+                    break  # the budget ends here
+            self._held.append(self._chunk(k))
+            have += k
+        wi, wo, body = (torch.cat(x) for x in zip(*self._held))
+        coat = coat_eval(self.coat.expand(3, -1)[:, None, :], wi[None].expand(3, -1, -1),
+                         wo[None].expand(3, -1, -1)).T
+        self._heldout = HeldOut(wi, wo, body + coat.float())
+        e = self._score(self._network_code)
+        st.network_error = st.error = e
+        st.pairs, st.history = have, [e]
+        self._measure_fit()
+        if self._plan() is None:
+            st.done = True  # the held-out set took the budget
+        self._end()
+        return st
 
     def step(self, stop: Callable[[], bool] | None = None) -> RefineState:
-        """One round (module docstring); a round cut short by ``stop`` changes nothing."""
-        st = self.start()
-        if st.seconds >= self.cfg.budget:  # the held-out set alone spent it
-            st.done = True
-        if st.done:
+        """One round (module docstring) sized to the time left; a round cut
+        short by ``stop`` changes nothing."""
+        st = self.start(stop)
+        if st.done or self._heldout is None:
             return st
-        c, t0, c0 = self.cfg, time.perf_counter(), time.process_time()
-        k = st.rounds
-        self._pool.append(self._simulate(c.round_pairs, c.seed * 7919 + 2 + k))
+        c = self.cfg
+        self._begin()
+        plan = self._plan()
+        if plan is None or st.rounds >= c.max_rounds:
+            st.done = True
+            self._end()
+            return st
+        n, steps = plan
+        # Simulation, chunk by chunk, while the time left keeps room for the fit's least share and the score.
+        new: list[tuple[Tensor, Tensor, Tensor]] = []
+        have = 0
+        while have < n:
+            if stop is not None and stop():
+                self._end()
+                return st
+            k = self._next_chunk(n - have)
+            fit_least = min(c.min_steps, c.steps) * min(have + k + self._pooled(), c.fit_pairs) * self.costs.fit
+            if have > 0 and k * self.costs.pair + fit_least + self.costs.score > self._left():
+                break  # slower than measured: fit what there is
+            new.append(self._chunk(k))
+            have += k
+        self._pool.append(tuple(torch.cat(x) for x in zip(*new)))
         wi, wo, f = (torch.cat(x) for x in zip(*self._pool))
         if wi.shape[0] > c.fit_pairs:  # the newest round whole, the rest drawn from the earlier ones
-            old = wi.shape[0] - c.round_pairs
-            keep = torch.randperm(old, generator=self.g)[:max(0, c.fit_pairs - c.round_pairs)]
+            old = wi.shape[0] - have
+            keep = torch.randperm(old, generator=self.g)[:max(0, c.fit_pairs - have)]
             keep = torch.cat([keep, torch.arange(old, wi.shape[0])])
             wi, wo, f = wi[keep], wo[keep], f[keep]
+        fitted = wi.shape[0]
+        steps = max(1, min(steps, int((self._left() - self.costs.score) / (fitted * self.costs.fit))))
         wi, wo, f = wi[None].expand(3, -1, -1), wo[None].expand(3, -1, -1), f.T.contiguous()
-        cut = [False]
+        cancelled, ran = [False], [0]
+        t_fit = self.clock()
 
         def hook(_step: int) -> bool:
-            cut[0] = cut[0] or (stop is not None and stop())
-            return cut[0]
+            if stop is not None and stop():
+                cancelled[0] = True
+                return True
+            if _step > 0 and fitted * self.costs.fit + self.costs.score > self._left():
+                return True  # the time is up: keep the fit as it is
+            ran[0] += 1
+            return False
 
-        z = project(self.dec, wi, wo, f, ProjectionConfig(steps=c.steps, lr=c.lr), z0=st.code, stop=hook)
-        if cut[0]:
-            self._tick(t0, c0)
+        z = project(self.dec, wi, wo, f, ProjectionConfig(steps=steps, lr=c.lr), z0=st.code, stop=hook)
+        if cancelled[0]:
+            self._pool.pop()
+            self._end()
             return st
+        self.costs.fit = (self.clock() - t_fit) / (max(ran[0], 1) * fitted)
         code = with_coat(z[:, :self.dec.spec.latent], self.coat.expand(3, -1))
-        e = heldout_error(self.dec, code, self._heldout)
-        st.rounds, st.pairs = k + 1, st.pairs + c.round_pairs
+        e = self._score(code)
+        st.rounds, st.pairs = st.rounds + 1, st.pairs + have
         st.history.append(e)
         if e < st.error * (1 - c.min_gain):
             self._stale = 0
@@ -273,17 +440,16 @@ class Refiner:
             self._stale += 1
         if e < st.error:
             st.code, st.error = code, e
-        self._round_seconds = max(self._round_seconds, time.perf_counter() - t0)
-        self._tick(t0, c0)
         if self._stale >= c.patience:
             st.done = st.converged = True
-        elif st.rounds >= c.max_rounds or st.seconds + self._round_seconds * (1 + 0.1 * st.rounds) > c.budget:
-            st.done = True  # the next round (a growing pool: a little longer) would overrun the budget
+        elif st.rounds >= c.max_rounds or self._plan() is None:
+            st.done = True  # no round fits in the time left
+        self._end()
         return st
 
     def run(self, stop: Callable[[], bool] | None = None) -> RefineState:
         """Rounds until done (or ``stop``)."""
-        st = self.start()
+        st = self.start(stop)
         while not st.done and not (stop is not None and stop()):
             st = self.step(stop)
         return st

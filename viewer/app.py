@@ -44,6 +44,7 @@ from nbrdf.viewer.autosave import WindowAutosave
 from nbrdf.viewer.gl import check_version
 from nbrdf.viewer.gl_faults import FrameGuard, GlContextLost, fault_types
 from nbrdf.viewer.lookdev import MAX_PASSES, LookDev
+from nbrdf.viewer.program_warmup import ProgramWarmup, reachable
 from nbrdf.viewer.refinement import Refinement
 
 
@@ -172,6 +173,11 @@ class App:
         if not getattr(opts, "session", None):
             self.frame()  # the object fits the view (whatever the window's shape)
         self.autosave = WindowAutosave(self.lookdev, getattr(opts, "restore", None))  # may restore a crashed session
+        ld = self.lookdev
+        self.warmup = ProgramWarmup(ld.renderer, lambda: reachable(
+            ld.renderer, ld.pipeline.loaded_decoder, bool(ld.bodies.use_tables), ld.material,
+            ld.pipeline.belcour_loaded))
+        """The shader variants the views can reach, compiled on idle frames (viewer/program_warmup.py)."""
 
     # --- input -----------------------------------------------------------------------
     def _on_key(self, window, key, scancode, action, mods) -> None:
@@ -309,9 +315,11 @@ class App:
         self.autosave.frame()  # written a few seconds after a change
         if self.lookdev.side_by_side != self._side:  # entering or leaving side by side: fit the halves
             self.frame()
+        had_input = bool(self._events) or imgui.is_any_item_active()
         self._mouse()
         ld = self.lookdev
         self._trim_due |= ld.passes == 0  # an edit or a view change: its CPU work freed memory
+        changed = ld.passes == 0 or self.dragging or had_input
         drew = self.gl_guard.run(lambda: self._draw_view(w, h, passes_per_frame))
         self.screen.viewport = (0, 0, w, h)  # the panels' pass covers the window (after a failed view too)
         imgui.render()
@@ -322,6 +330,8 @@ class App:
         if drew:
             self.gl_guard.frame_done()
         ld.frame_done()
+        if self.warmup.frame(changed) is not None:
+            self._trim_due = True  # a compile frees tens of MB of the driver's heap
         self._trim()
         self.clock.presented()
         ld.timings.fps, ld.timings.frame_ms = self.clock.fps, self.clock.frame_ms

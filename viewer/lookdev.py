@@ -287,6 +287,7 @@ class LookDev(SessionEdits):
         self.ref_brdf = self.pipeline.build(m, BrdfMode.ANALYTIC) if analytic_capable(m) else None
         self.renderer.set_part_brdfs(self.material_parts.brdfs(m, len(self.renderer.mesh.draw_ranges)))
         self.brdf = brdf
+        self.pipeline.retain([m, *(p.material for p in self.material_parts.parts)])  # earlier edits' textures
         self.timings.latent_ms = (time.perf_counter() - t0) * 1000.0
         self._edit_t0 = t0
         self.invalidate()

@@ -15,7 +15,7 @@ import json
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Callable, Iterable
 
 import moderngl
 import torch
@@ -150,6 +150,11 @@ def gpu_brdf(ctx: moderngl.Context, material: Material, decoder: "GpuDecoder | N
                    latent_share(decoder.dec, latent).astype("f4").tobytes(), gtex, nmap)
 
 
+#: Latent textures a pipeline keeps beside those of the materials in use (``retain``): the most
+#: recently used, so that an undo back to one of them is instant (an older one is built again).
+TEXTURES_KEPT = 4
+
+
 class MaterialPipeline:
     """Material -> latents -> ``GpuBrdf``, with the model, the decoder on the
     GPU, normal maps and latent textures loaded once per context."""
@@ -176,6 +181,16 @@ class MaterialPipeline:
             from nbrdf.viewer.neural_gpu import GpuDecoder
 
             self._decoder = GpuDecoder(self.ctx, self.model.decoder)
+        return self._decoder
+
+    @property
+    def belcour_loaded(self) -> bool:
+        """Whether Belcour's tables are on the GPU (a material was shaded with ``--brdf belcour``)."""
+        return self._belcour is not None
+
+    @property
+    def loaded_decoder(self) -> "GpuDecoder | None":
+        """The decoder if it is on the GPU already (None: no neural material drawn yet)."""
         return self._decoder
 
     @staticmethod
@@ -213,7 +228,7 @@ class MaterialPipeline:
             from nbrdf.neural.svbrdf import latent_texture
 
             self._textures[key] = self.upload_texture(key, latent_texture(self.model, material, progress=progress))
-        return self._textures[key]
+        return self._used(key)
 
     def upload_texture(self, key: str, tex: "LatentTexture") -> "GpuLatentTexture":
         """Keeps a latent texture built elsewhere (the session's worker thread) under ``key``."""
@@ -221,10 +236,27 @@ class MaterialPipeline:
 
         if key not in self._textures:
             self._textures[key] = GpuLatentTexture(self.ctx, self.decoder, tex)
-        return self._textures[key]
+        return self._used(key)
 
     def cached_texture(self, material: Material) -> "GpuLatentTexture | None":
-        return self._textures.get(material_key(material))
+        key = material_key(material)
+        return self._used(key) if key in self._textures else None
+
+    def _used(self, key: str) -> "GpuLatentTexture":
+        """The texture of ``key``, now the most recently used (the cache's order is its use)."""
+        self._textures[key] = self._textures.pop(key)
+        return self._textures[key]
+
+    def retain(self, in_use: Iterable[Material]) -> list[str]:
+        """Releases the latent textures of materials other than ``in_use`` (those the session
+        draws) beyond the ``TEXTURES_KEPT`` most recently used: each edit of a texture-mapped
+        material makes a new one. Returns the keys released."""
+        pinned = {material_key(m) for m in in_use if m.is_textured}
+        spare = [k for k in self._textures if k not in pinned]  # the least recently used first
+        drop = spare[:max(0, len(spare) - TEXTURES_KEPT)]
+        for k in drop:
+            self._textures.pop(k).release()
+        return drop
 
     @property
     def belcour(self) -> "BelcourTextures":

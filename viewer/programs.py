@@ -92,6 +92,12 @@ class ProgramCache:
         self.ctx = ctx
         self._programs: dict[ProgramKey, moderngl.Program | moderngl.ComputeShader] = {}
 
+    def __contains__(self, key: ProgramKey) -> bool:
+        return key in self._programs
+
+    def __len__(self) -> int:
+        return len(self._programs)
+
     def get(self, key: ProgramKey, brdf: GpuBrdf | None = None):
         """The program of ``key`` (``brdf``: the BRDF of ``key.kind``, for its source)."""
         if key not in self._programs:

@@ -102,3 +102,14 @@ def test_report_interpolation_draws_the_figure(tmp_path, capsys):
     assert (tmp_path / "i.png").stat().st_size > 5000
     # a latent blend narrows the highlight gradually: its peak falls monotonically from smooth to rough
     assert all(x >= y for x, y in zip(r["latent_peak"], r["latent_peak"][1:]))
+
+
+@pytest.mark.parametrize("flags, words", [(["--set", "deep"], "heldout, lookdev or depth"),
+                                          (["--set", "depth", "--per-depth", 0], "must be positive"),
+                                          (["--max-spp", 0], "must be positive"),
+                                          (["--methods", "neural,exact"], "--methods")])
+def test_report_operations_rejects_a_bad_set_or_reference_setting(tmp_path, capsys, flags, words):
+    code, out, err = run(["report", "operations", "--refs", tmp_path / "r", "--out", tmp_path / "o"] + flags, capsys)
+    assert_one_line_error(code, err)
+    assert words in err
+    assert not (tmp_path / "r").exists()  # nothing built before the settings are checked

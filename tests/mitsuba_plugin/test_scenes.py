@@ -70,6 +70,12 @@ def test_unknown_preset_and_bad_size_exit_2(tmp_path, capsys):
     assert len(err) == 2 and "moon_landing" in err[0] and "WxH" in err[1]
 
 
+def test_report_scenes_max_chunk_below_chunk_exits_2(tmp_path, capsys):
+    assert nbrdf_main(["report", "scenes", "--chunk", "32", "--max-chunk", "16", "--out", str(tmp_path / "r")]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "--max-chunk" in line and not (tmp_path / "r").exists()
+
+
 @pytest.mark.parametrize("n", [4, 8])
 def test_teapot_mesh_from_the_bezier_patches(n):
     """32 patches; the classic bounding box (spout tip 3.43, handle -3,
@@ -117,6 +123,19 @@ def test_crossover():
     assert crossover_seconds(4e-3, 10.0, 0.0) == float("inf")
 
 
+def test_pass_size_doubles_within_the_budget_share():
+    """A method's passes double from --chunk while one stays within 1/8 of the
+    budget at its pace, and never past --max-chunk; a slow method keeps --chunk."""
+    from nbrdf.mitsuba.scene_report import SceneReportConfig, pass_spp
+
+    cfg = SceneReportConfig(out=Path("."), time_budget=20.0, chunk=16, max_chunk=256)
+    assert pass_spp(0.5, cfg) == 16  # 16 spp already take 8 s > 2.5 s
+    assert pass_spp(0.05, cfg) == 32  # 32 x 0.05 = 1.6 s; 64 x 0.05 = 3.2 s > 2.5 s
+    assert pass_spp(0.019, cfg) == 128  # 128 x 0.019 = 2.4 s
+    assert pass_spp(1e-6, cfg) == 256
+    assert pass_spp(1e-6, SceneReportConfig(out=Path("."), chunk=16, max_chunk=16)) == 16
+
+
 @pytest.mark.slow
 def test_scene_report_on_a_tiny_scene(tmp_path):
     """Both methods render at equal time (each until it has spent the budget);
@@ -144,6 +163,10 @@ def test_scene_report_on_a_tiny_scene(tmp_path):
         assert 0 <= row[k]["flip"] <= 1
     assert row["neural"]["mse"] > 0 and row["mc"]["mse"] > 0
     assert row["mse_ratio_mc_over_neural"] == pytest.approx(row["mc"]["mse"] / row["neural"]["mse"])
+    assert row["mse_ratio_mc_over_neural_ref_noise_removed"] == pytest.approx(
+        row["mc"]["mse_minus_ref_noise"] / max(row["neural"]["mse_minus_ref_noise"], 1e-30))
+    for k in ("neural", "mc"):  # whole passes of one size per method
+        assert row[k]["spp"] % row[k]["pass_spp"] == 0 and row[k]["pass_spp"] >= cfg.chunk
     assert np.isfinite(row["mse_ratio_mc_over_neural_time_matched"]) and row["crossover_is_extrapolated"]
     for k in ("neural", "mc"):  # the bias is what is left of the MSE after both noises, never negative
         assert 0 <= row[k]["bias_mse"] <= row[k]["mse"]

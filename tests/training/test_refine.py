@@ -131,3 +131,98 @@ def test_refined_is_at_least_as_close_to_the_reference_as_neural(name, model, ca
     f_neural = flip(ref.image, shade(latent_brdf(model.decoder, z, m).eval, geo))[0]
     f_refined = flip(ref.image, shade(latent_brdf(model.decoder, code, m).eval, geo))[0]
     assert f_refined <= f_neural, (f_refined, f_neural, st.history)
+
+
+class WorkClock:
+    """A clock that only work moves (the suite reads no wall clock): each
+    simulated pair costs ``pair`` seconds, each fitting step ``step_pair``
+    seconds per fitted pair; reading it costs nothing."""
+
+    def __init__(self):
+        self.t, self.pair, self.step_pair = 0.0, 0.0, 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+@pytest.fixture
+def work_clock(monkeypatch):
+    """A ``WorkClock`` charged by a stand-in walk (a smooth body, no paths) and by the fit's steps."""
+    clock = WorkClock()
+    real_project = R.project
+
+    def simulated(material, wi, wo, spp, seed):
+        clock.t += clock.pair * wi.shape[0]
+        return (0.05 + 0.2 * wi[:, 2:3] * wo[:, 2:3]).expand(-1, 3).float().contiguous()
+
+    def charged(dec, wi, wo, f, cfg, z0=None, weight=None, coat=None, stop=None):
+        def hook(i):
+            if stop is not None and stop(i):
+                return True
+            clock.t += clock.step_pair * wi.shape[1]  # the step about to run
+            return False
+
+        return real_project(dec, wi, wo, f, cfg, z0=z0, weight=weight, coat=coat, stop=hook)
+
+    monkeypatch.setattr(R, "body_values", simulated)
+    monkeypatch.setattr(R, "project", charged)
+    return clock
+
+
+#: A small refinement whose work the clock charges: held-out set 256 pairs, rounds of 128 pairs and 30 steps.
+SMALL = dict(round_pairs=128, heldout_pairs=256, steps=30, fit_pairs=384, max_rounds=3, chunk_pairs=32,
+             min_heldout_pairs=64, min_round_pairs=32, min_steps=10, spp=8)
+
+
+def _budgeted(model, clock, budget, **cfg):
+    m = load_material(LOOKDEV / "tinted-silver.json")
+    config = R.RefineConfig(budget=budget, **{**SMALL, **cfg})
+    r = R.Refiner(model.decoder, m, model.material_latent(m), config, clock=clock)
+    return r, r.run()
+
+
+@pytest.mark.parametrize("pair, budget", [(0.02, 3.0), (0.02, 6.0), (0.002, 1.0), (0.0005, 4.0), (0.05, 0.5)])
+def test_a_refinement_returns_within_its_budget(model, work_clock, pair, budget):
+    """Whatever the walk's speed (a long-path material under load: 20-50 ms
+    a pair, 5 s for the held-out set alone; a quick one: 0.5 ms), the work is
+    sized by its measured cost: the refinement returns within its budget
+    plus the one unit it could not measure before running it (the first,
+    small, probe chunk). A fitting step costs 10 ms at 384 pairs."""
+    work_clock.pair, work_clock.step_pair = pair, 0.01 / 384
+    r, st = _budgeted(model, work_clock, budget)
+    margin = r.cfg.probe_pairs * pair + 0.01  # the probe chunk, and the first step of a fit that always runs
+    assert st.done and st.seconds <= work_clock.t <= budget + margin, (work_clock.t, st.rounds, st.pairs)
+    assert st.error <= st.network_error
+
+
+def test_a_slow_walk_gets_a_smaller_held_out_set_and_smaller_rounds(model, work_clock):
+    """20 ms a pair, 4 s: the held-out set (256 pairs, 5.1 s) and a round
+    (128 pairs, 2.6 s) cannot both fit; the held-out set stops at its share
+    of the budget (past its minimum) and a smaller round sized to the rest
+    still runs."""
+    work_clock.pair, work_clock.step_pair = 0.02, 0.01 / 384
+    r, st = _budgeted(model, work_clock, 4.0)
+    held = r._heldout.wi.shape[0]
+    assert r.cfg.min_heldout_pairs <= held < r.cfg.heldout_pairs
+    assert st.rounds == 1 and 0 < st.pairs - held < r.cfg.round_pairs
+
+
+def test_a_quick_walk_runs_full_rounds(model, work_clock):
+    """0.1 ms a pair: the full held-out set and full rounds (the sizing only bites when time is short)."""
+    work_clock.pair, work_clock.step_pair = 0.0001, 0.001 / 384
+    r, st = _budgeted(model, work_clock, 10.0, max_rounds=2, patience=5)
+    assert r._heldout.wi.shape[0] == r.cfg.heldout_pairs
+    assert st.rounds == 2 and st.pairs == r.cfg.heldout_pairs + 2 * r.cfg.round_pairs
+
+
+def test_a_cancel_during_the_simulation_is_taken_between_chunks(model, work_clock):
+    """A stop asked while the held-out set is simulated pauses it within one chunk; resuming finishes it."""
+    work_clock.pair = 0.001
+    m = gold()
+    cfg = R.RefineConfig(budget=60.0, **SMALL)
+    r = R.Refiner(model.decoder, m, model.material_latent(m), cfg, clock=work_clock)
+    calls = []
+    st = r.start(stop=lambda: calls.append(1) or len(calls) > 3)
+    assert [h[0].shape[0] for h in r._held] == [8, 16, 32] and r._heldout is None and st.error == float("inf") and not st.done
+    st = r.start()
+    assert r._heldout.wi.shape[0] == cfg.heldout_pairs and st.error < float("inf")

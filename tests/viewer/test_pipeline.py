@@ -97,3 +97,32 @@ def test_the_offscreen_renderer_is_the_pipeline(gl_ctx):
     z = default_model().material_latent(m)
     assert r.brdf.kind == BrdfKind.NEURAL
     np.testing.assert_allclose(r.brdf.latent.numpy(), z.numpy(), atol=1e-6)
+
+
+@pytest.mark.gl
+def test_latent_textures_of_earlier_edits_are_released(gl_ctx):
+    """Each edit of a texture-mapped material is a new latent texture: the pipeline keeps
+    those of the materials in use and the ``TEXTURES_KEPT`` most recently used, and
+    releases the rest (a session editing one texture-mapped material stays flat)."""
+    from dataclasses import replace
+
+    from nbrdf.neural.latent_texture import LatentTexture
+    from nbrdf.viewer.pipeline import TEXTURES_KEPT, material_key
+
+    pipe = MaterialPipeline(gl_ctx)
+    tiles = load_material(DEFAULT_MATERIAL.parent / "worn_tiles.json")
+    assert tiles.is_textured
+    edits = [replace(tiles, name=f"worn tiles, edit {k}") for k in range(TEXTURES_KEPT + 4)]
+    z = pipe.latent(load_material(DEFAULT_MATERIAL))
+    flat = LatentTexture(z.expand(2, 2, 3, z.shape[-1]).clone())
+    made = []
+    for m in edits:  # the first stays in use (another part of the mesh), the last is the one edited
+        made.append(pipe.upload_texture(material_key(m), flat))
+        pipe.retain([edits[0], m])
+    kept = [m for m in edits if pipe.cached_texture(m) is not None]
+    assert kept == [edits[0]] + edits[-TEXTURES_KEPT - 1:]
+    released = [t for m, t in zip(edits, made) if m not in kept]
+    assert len(released) == len(edits) - TEXTURES_KEPT - 2
+    for t in released:
+        with pytest.raises(AttributeError):
+            t.texture.use(0)  # moderngl: a released texture has no GL object left to bind
