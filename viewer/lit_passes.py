@@ -17,7 +17,9 @@ from typing import TYPE_CHECKING
 import moderngl
 import numpy as np
 
+from nbrdf.viewer.body_guide import BodyGuides
 from nbrdf.viewer.gl_state import accumulating, depth_tested, masked
+from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.modes import View
 from nbrdf.viewer.neural_gpu import SHARE_UNIT
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf
@@ -46,6 +48,8 @@ class LitPasses:
         self.r = renderer
         self.gbuffers: SizeCache[tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = SizeCache(release_all)
         """The G-buffer of each (slot, w, h), a few sizes per slot (viewer/size_cache.py)."""
+        self.guides = BodyGuides(renderer.ctx)
+        """The decoder's resampling-target tables, one per uniform latent drawn (viewer/body_guide.py)."""
 
     def view_compute(self, view: View, state: ViewState, w: int, h: int, brdf: GpuBrdf,
                       tex: moderngl.Texture) -> None:
@@ -151,5 +155,28 @@ class LitPasses:
         bind_uniforms(p, state)
         table = brdf is not None and brdf.kind == BrdfKind.TABLE and self.r.table_sampling is not None
         sampling = self.r.table_sampling if table else self.r.sampling
-        (sampling.quick() if self.r.quick else sampling).bind(p)
+        sampling = sampling.quick() if self.r.quick else sampling
+        sampling.bind(p)
+        self.bind_target(p, brdf, sampling)
         self.r.env.bind(p, math.radians(state.env_rotation))
+
+    def bind_target(self, p: moderngl.Program | moderngl.ComputeShader, brdf: GpuBrdf | None,
+                    sampling: LitSampling) -> None:
+        """The resampling target's table (``u_ris_table``, lit_shade.glsl ``ris_target``): a
+        table-shaded body's own table, the decoder's baked guide (a uniform latent,
+        viewer/body_guide.py), or none (the proxy target: latent textures, ``table_target`` off)."""
+        from nbrdf.viewer.renderer import TABLE_UNIT
+
+        if "u_ris_table" not in p:
+            if "u_ris_lobe" in p:
+                p["u_ris_lobe"].value = 0
+            return
+        on = sampling.table_target and brdf is not None and brdf.kind == BrdfKind.TABLE
+        if sampling.table_target and brdf is not None and brdf.kind == BrdfKind.NEURAL and sampling.ris_samples > 0:
+            guide = self.guides.texture(brdf)
+            if guide is not None:
+                guide.use(TABLE_UNIT)
+                on = True
+        p["u_ris_table"].value = int(on)
+        if "u_ris_lobe" in p:
+            p["u_ris_lobe"].value = int(sampling.ris_lobe_candidates) if on else 0

@@ -8,7 +8,9 @@ object's pixels. The renderer's random numbers are deterministic per pixel,
 pass and seed, so every figure here is reproducible.
 
 ``python -m nbrdf.viewer.noise`` prints the default render's figures as JSON
-(``--size``, ``--spp``, ``--renders``, ``--terms``, ``--coat-samples``, ``--clamp``).
+(``--size``, ``--spp``, ``--renders``, ``--terms``, ``--coat-samples``, ``--clamp``),
+``--material`` another material's, ``--target proxy`` with the decoder resampled
+by the proxy target instead of the body's table (``LitSampling.table_target``).
 """
 from __future__ import annotations
 
@@ -179,10 +181,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--clamp", type=float, default=None, help="firefly clamp (default: the renderer's)")
     ap.add_argument("--strategies", type=int, choices=(3, 4), default=None)
     ap.add_argument("--bias", action="store_true", help="also the clamp's bias against a long unclamped render")
+    ap.add_argument("--material", type=Path, default=None, help="material file (default: the default material)")
+    ap.add_argument("--target", choices=("table", "proxy"), default=None,
+                    help="the decoder's resampling target: the body's baked table or the proxy pdf "
+                         "(default: the renderer's)")
     args = ap.parse_args(argv)
+    from nbrdf.neural.errors import NbrdfError
     from nbrdf.viewer.gl import offscreen_context
 
-    r, state = default_setup(offscreen_context())
+    try:
+        r, state = default_setup(offscreen_context(), args.material)
+    except (NbrdfError, OSError) as e:
+        ap.exit(2, f"{ap.prog}: {e}\n")
+    if args.target is not None:
+        r.sampling.table_target = args.target == "table"
     if args.coat_samples is not None:
         r.sampling.coat_samples = args.coat_samples
     if args.ris is not None:
@@ -197,7 +209,9 @@ def main(argv: list[str] | None = None) -> int:
     out = measure_noise(r, state, cfg, progress=True).as_dict()
     out.update(size=f"{args.size}x{args.size}", spp=args.spp, renders=args.renders,
                ris=r.sampling.ris_samples, candidates=r.sampling.ris_candidates,
-               coat_samples=r.sampling.coat_samples, clamp=r.sampling.clamp, strategies=r.sampling.strategies)
+               coat_samples=r.sampling.coat_samples, clamp=r.sampling.clamp, strategies=r.sampling.strategies,
+               target="table" if r.sampling.table_target else "proxy",
+               material=str(args.material) if args.material else "default")
     if args.bias:
         out["clamp_bias"] = clamp_bias(r, state, r.sampling.clamp, (args.size, args.size), args.spp, progress=True)
     print(json.dumps(out))

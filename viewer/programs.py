@@ -53,12 +53,15 @@ class ProgramKey:
 def neural_snippets(brdf: GpuBrdf) -> tuple[dict[str, str], dict[str, object]]:
     """The ``brdf`` snippet of a neural kind and its defines: the decoder (at a
     uniform latent or a latent texture), or the baked body table (NB_BODY_TABLE,
-    no decoder compiled in)."""
+    no decoder compiled in). The decoder at a uniform latent compiles the table in
+    too, as the lit pass's resampling target (NB_GUIDE_TABLE, viewer/body_guide.py)."""
     code = shaders.read("neural_brdf.glsl")
     if brdf.kind == BrdfKind.TEXTURED:
         code = shaders.read("latent_texture.glsl") + "\n" + code
     if brdf.kind == BrdfKind.TABLE:
         return {"brdf": code, "neural_decoder.glsl": ""}, {"NB_BODY_TABLE": 1}
+    if brdf.kind == BrdfKind.NEURAL:
+        return {"brdf": code}, {"NB_GUIDE_TABLE": 1}
     return {"brdf": code, "body_table.glsl": ""}, {}
 
 

@@ -146,10 +146,10 @@ class Renderer:
 
     def bind_brdf(self, prog: moderngl.Program, brdf: GpuBrdf, compute: bool = False) -> None:
         """Makes ``brdf`` the program's BRDF: weights, latent share (or latent texture), uniforms."""
+        if "u_body_table" in prog:  # also the decoder's resampling target: never on unit 0 beside 2D samplers
+            prog["u_body_table"].value = TABLE_UNIT
         if brdf.kind == BrdfKind.TABLE:
             brdf.body_table.use(TABLE_UNIT)
-            if "u_body_table" in prog:
-                prog["u_body_table"].value = TABLE_UNIT
         elif brdf.neural:
             brdf.decoder.bind(prog, brdf.decoder.compute_storage if compute else None)
             if brdf.share is not None and "u_nb_share" in prog:

@@ -89,7 +89,7 @@ def test_every_candidate_estimator_cuts_the_noise_of_resampling(table_setup):
     try:
         r.sampling = EVERY
         every = measure_noise(r, state, NoiseConfig(size=SIZE, spp=16, renders=6))
-        r.sampling = LitSampling(ris_samples=2, ris_candidates=8)
+        r.sampling = LitSampling(ris_samples=2, ris_candidates=8, table_target=False)  # as it was (proxy target)
         resampled = measure_noise(r, state, NoiseConfig(size=SIZE, spp=16, renders=6))
     finally:
         r.sampling = old

@@ -8,8 +8,9 @@
 // The environment integral, per pass and pixel (viewer/lit_sampling.py):
 // - The body (the whole BRDF when it is not split): u_ris_samples decoder
 //   samples by resampled importance sampling (ris_body_sample: candidates from
-//   the environment CDF and the body's lobe, target lighting x lobe, no
-//   decoder); with u_ris_samples 0, one sample each of the environment CDF,
+//   the environment CDF and the body's lobe, target the lighting times the
+//   body's baked table where the draw has one, else times the lobe sampler's
+//   pdf; no decoder); with u_ris_samples 0, one sample each of the environment CDF,
 //   the body's lobe and the cosine lobe, balance heuristic (u_strategies = 3
 //   drops the cosine lobe; u_one_sample draws one sample from their mixture).
 //   Where the body is cheap (the baked table), u_body_every > 0: no resampling,
@@ -43,6 +44,8 @@ uniform float u_clamp;       // > 0: a sample's contribution is scaled down to t
 uniform int u_ris_samples;   // > 0: the body's environment light by resampling, this many decoder samples per pass
 uniform int u_ris_candidates;  // candidates per resampled sample (even: half environment, half body lobe)
 uniform int u_body_every;      // > 0: no resampling, the body at every candidate, this many of them from its lobe
+uniform int u_ris_lobe;        // resampling: > 0, this many of each sample's candidates from the body's lobe
+                               // (a contiguous run, the rest from the environment); 0: half, alternating
 
 // Terms of the estimator (u_terms bits), as viewer/lit_sampling.py Term.
 const int TERM_LIGHT = 1;      // the directional and the point light
@@ -93,31 +96,47 @@ vec3 coat_candidate(vec3 wo, vec3 l, vec3 radiance, float pe, float pb) {
 
 // Resampled importance sampling of the body (Talbot et al. 2005): ``m`` cheap
 // candidates, half from the environment's CDF and half from the body's lobe,
-// weighted by the target lum(L(l)) x (pdf_body(l) + cos(l) / (4 pi)) (lighting
-// times lobe, no decoder); one is kept with probability proportional to its
-// weight, and the decoder runs at it alone. Returns the kept direction (local;
-// z <= 0: none) and in ``weight`` the radiance over its effective pdf,
-// L(l) x (sum of weights) / (m x target(l)). Every candidate also feeds the
-// coat's balance-heuristic estimator, added to ``coat_sum``.
+// weighted by a target without the decoder; one is kept with probability
+// proportional to its weight, and the decoder runs at it alone. Returns the
+// kept direction (local; z <= 0: none) and in ``weight`` the radiance over its
+// effective pdf, L(l) x (sum of weights) / (m x target(l)): unbiased for any
+// target that is positive wherever the body and the lighting are. Every
+// candidate also feeds the coat's balance-heuristic estimator, added to ``coat_sum``.
+// The target: where the draw has the body's baked table (u_ris_table, a uniform
+// latent), lum(T(l) L(l)) cos(l), the table T the body to its interpolation
+// error (one fetch), so the kept sample's weight is nearly constant; else
+// lighting times the lobe sampler's pdf, lum(L(l)) x (pdf_body(l) + cos(l) / (4 pi)).
+#ifdef NB_BODY_GUIDE
+uniform int u_ris_table;  // 1: the resampling target from the body's baked table
+#endif
 float ris_target(vec3 wo, vec3 l, vec3 radiance) {
+#ifdef NB_BODY_GUIDE
+    if (u_ris_table != 0) return dot(NB_BODY_GUIDE(l, wo) * radiance, LUMA) * l.z;
+#endif
     return dot(radiance, LUMA) * (pdf_body(wo, l) + max(l.z, 0.0) * (0.25 / PI));
 }
 
-vec3 ris_body_sample(mat3 tbn, vec3 wo, uvec2 px, uint draw, int m, inout vec3 coat_sum, out vec3 weight) {
+// ``n_lobe`` > 0: that many candidates from the lobe, the rest from the environment,
+// each strategy a contiguous run of its Sobol sequence (0: alternating halves).
+vec3 ris_body_sample(mat3 tbn, vec3 wo, uvec2 px, uint draw, int m, int n_lobe, inout vec3 coat_sum,
+                     out vec3 weight) {
     float u = rand3(px, draw, STREAM_PICK, u_seed).x;
     float wsum = 0.0, target = 0.0;
     vec3 kept = vec3(0.0, 0.0, -1.0), kept_radiance = vec3(0.0);
-    int half_m = m / 2;
+    int half_m = m / 2, n_env = m - n_lobe;
     for (int i = 0; i < m; ++i) {
-        uint index = draw * uint(half_m) + uint(i / 2);
+        bool env = n_lobe > 0 ? i < n_env : i % 2 == 0;
+        uint index = n_lobe == 0 ? draw * uint(half_m) + uint(i / 2)
+                   : env ? draw * uint(n_env) + uint(i) : draw * uint(n_lobe) + uint(i - n_env);
         vec3 l;
         float unused;
-        if (i % 2 == 0) l = transpose(tbn) * sample_env(rand3(px, index, STREAM_ENV, u_seed).xy, unused);
+        if (env) l = transpose(tbn) * sample_env(rand3(px, index, STREAM_ENV, u_seed).xy, unused);
         else l = sample_body(wo, rand3(px, index, STREAM_LOBE, u_seed));
         if (l.z <= 0.0) continue;
         vec3 lw = tbn * l;
         float pe = pdf_env(lw), pb = pdf_body(wo, l);
-        float q = 0.5 * (pe + pb);  // the candidates' mixture
+        // The candidates' mixture (balance heuristic over the two strategies' counts).
+        float q = n_lobe > 0 ? (float(n_env) * pe + float(n_lobe) * pb) / float(m) : 0.5 * (pe + pb);
         if (q <= 0.0) continue;
         vec3 radiance = env_radiance(lw) * u_env_intensity;
 #ifdef NB_SPLIT_COAT
@@ -179,7 +198,8 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
     bool ris = u_ris_samples > 0 && u_ris_candidates > 1;
     int m = ris ? u_ris_candidates - u_ris_candidates % 2 : 0;
     bool every = ris && u_body_every > 0;
-    int n_lobe = every ? min(u_body_every, u_ris_candidates - 1) : 0;
+    // Candidates per resampled sample or per every-candidate draw from the body's lobe (0: half, alternating).
+    int n_lobe = every ? min(u_body_every, u_ris_candidates - 1) : ris && u_ris_lobe > 0 ? min(u_ris_lobe, m - 1) : 0;
     if (every) m = u_ris_candidates;
     int count = u_env_on == 0 ? 1 : ris ? 1 + u_ris_samples : u_one_sample != 0 ? 2 : u_strategies;
     bool cosine = u_strategies > 3 || u_one_sample != 0;
@@ -189,6 +209,8 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
     coat_n = coated ? max(u_coat_samples, 0) : 0;
     // The coat estimator's sample counts per strategy (environment, body lobe, coat).
     coat_counts = every ? vec3(float((m - n_lobe) * u_ris_samples), float(n_lobe * u_ris_samples), float(coat_n))
+                : ris && n_lobe > 0 ? vec3(float((m - n_lobe) * u_ris_samples), float(n_lobe * u_ris_samples),
+                                           float(coat_n))
                 : ris ? vec3(float(m / 2 * u_ris_samples), float(m / 2 * u_ris_samples), float(coat_n))
                       : vec3(u_one_sample != 0 ? 1.0 / 3.0 : 1.0, 0.0, float(coat_n));
     coat_pass = coated ? coat : vec2(0.05, 1.0);
@@ -213,7 +235,8 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
             if ((u_terms & TERM_ENV_BODY) != 0) color += e / float(u_ris_samples);
             continue;
         }
-        else l = ris_body_sample(tbn, wo, px, pass_index * uint(u_ris_samples) + uint(k - 1), m, coat_sum, ris_weight);
+        else l = ris_body_sample(tbn, wo, px, pass_index * uint(u_ris_samples) + uint(k - 1), m, n_lobe, coat_sum,
+                                 ris_weight);
         if (l.z <= 0.0) continue;
         int term = s <= 0 ? TERM_LIGHT : s == 1 || s == 4 ? TERM_ENV_BODY : s == 2 ? TERM_LOBE_BODY : TERM_COS_BODY;
         vec3 radiance;

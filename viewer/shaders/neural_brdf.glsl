@@ -5,9 +5,15 @@
 // mixed with the body's learned proxy pdf (u_proxy_sigma, u_proxy_w,
 // computed once per material on the CPU), as neural/sampling.py coated_sample.
 // NB_BODY_TABLE: the body from the material's baked table (body_table.glsl; the
-// code then supplies no decoder), else the decoder itself.
-#ifdef NB_BODY_TABLE
+// code then supplies no decoder), else the decoder itself. NB_GUIDE_TABLE (the
+// decoder at a uniform latent): the body's table is compiled in too, as the lit
+// pass's resampling target (NB_BODY_GUIDE, lit_shade.glsl ris_target); the
+// decoder stays the body.
+#if defined(NB_BODY_TABLE) || defined(NB_GUIDE_TABLE)
 //@INCLUDE body_table.glsl
+#define NB_BODY_GUIDE(wi, wo) nb_table(wi, wo)
+#endif
+#ifdef NB_BODY_TABLE
 #define NB_BODY(wi, wo) nb_table(wi, wo)
 #else
 //@INCLUDE neural_decoder.glsl
