@@ -22,7 +22,7 @@ run: setup
 # The default suite (no wall-clock assertions; tests marked slow left out): what CI runs
 # (.ci/run), within its 20 minutes. The slow set takes about 25 minutes more: `make test-slow`.
 test: setup lint
-	@$(BIN)/python -m pytest -m "not slow"
+	@$(BIN)/python -m pytest -m "not slow" --durations=20
 
 # The slow tests alone (multi-seed statistics, long Monte Carlo runs, installs).
 test-slow: setup
