@@ -7,6 +7,7 @@ histogram (the power of its own BSDF tests)."""
 from __future__ import annotations
 
 import pytest
+from chi2_adapter import sampler_and_pdf
 
 pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
 
@@ -28,17 +29,7 @@ def _adapter(mi, bsdf, theta_deg: float):
         s.wi = mi.Vector3f(*wi)
         return s
 
-    def sample(u):
-        n = dr.width(u)
-        bs, weight = bsdf.sample(mi.BSDFContext(), si(n), u[0], mi.Point2f(u[1], u[2]))
-        w = dr.full(mi.Float, 1.0, n)
-        w[dr.all(weight == 0)] = 0
-        return bs.wo, w
-
-    def pdf(wo):
-        return bsdf.pdf(mi.BSDFContext(), si(dr.width(wo)), wo)
-
-    return sample, pdf
+    return sampler_and_pdf(mi, bsdf, si)
 
 
 @pytest.mark.slow

@@ -167,7 +167,7 @@ def test_sampler_with_a_tilted_normal_passes_mitsubas_chi2(mi, maps, theta):
     frame): the directions drawn (those below the unperturbed surface
     dropped) follow the pdf reported, at significance 1e-3 over the set,
     Mitsuba's default 1M samples, ``ires=8`` as the untilted test."""
-    import drjit as dr
+    from chi2_adapter import sampler_and_pdf
     from mitsuba.chi2 import ChiSquareTest, SphericalDomain
 
     bsdf = mi.load_dict({"type": "nbrdf", "material": maps["tilt"]})
@@ -176,16 +176,7 @@ def test_sampler_with_a_tilted_normal_passes_mitsubas_chi2(mi, maps, theta):
     def si(n):
         return _hits(mi, np.repeat(wi, n, 0), np.full((n, 2), 0.3, np.float32))
 
-    def sample(u):
-        n = dr.width(u)
-        bs, weight = bsdf.sample(mi.BSDFContext(), si(n), u[0], mi.Point2f(u[1], u[2]))
-        w = dr.full(mi.Float, 1.0, n)
-        w[dr.all(weight == 0)] = 0
-        return bs.wo, w
-
-    def pdf(wo):
-        return bsdf.pdf(mi.BSDFContext(), si(dr.width(wo)), wo)
-
+    sample, pdf = sampler_and_pdf(mi, bsdf, si)
     test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample, pdf_func=pdf, sample_dim=3, seed=3, ires=8)
     assert test.run(significance_level=1e-3, test_count=len(CHI2_CASES), quiet=True), test.messages
 
