@@ -24,6 +24,8 @@ pytestmark = pytest.mark.gl
 def setup(gl_ctx):
     pipe = MaterialPipeline(gl_ctx)
     r = Renderer(gl_ctx, mesh="sphere")
+    # one estimator for both draws (the decoder's table-guided resampling would draw other candidates)
+    r.sampling = LitSampling(table_target=False)
     brdf = pipe.build(load_material(DEFAULT_MATERIAL), "neural")
     state = ViewState(background=False)
     state.camera.distance = 2.2
