@@ -21,7 +21,7 @@ import moderngl
 import torch
 
 from nbrdf.neural.body_table import TableSize
-from nbrdf.viewer.body_table_gpu import BodyTables
+from nbrdf.viewer.body_table_gpu import BodyTables, table_texture
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf
 
 #: The target's table. Coarser than the window's interactive body table (32 x 16 x 8): the
@@ -57,10 +57,8 @@ class BodyGuides:
             return hit[1]
         t0 = time.perf_counter()
         values = self._baker.bake(dec, z, self.size)
-        k, m, n = self.size.shape
-        tex = self.ctx.texture3d((n, m, k), 3, values.numpy().astype("f4").tobytes(), dtype="f4")
-        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+        tex = table_texture(self.ctx, self.size)
+        tex.write(values.numpy().astype("f4").tobytes())
         if hit is not None:
             hit[1].release()
         self._tex[key] = (dec, tex)

@@ -28,6 +28,16 @@ INTERACTIVE = TableSize(32, 16, 8)
 STILL = TableSize(48, 24, 12)
 
 
+def table_texture(ctx: moderngl.Context, size: TableSize) -> moderngl.Texture:
+    """An empty RGB float 3D texture for a table of ``size``: trilinear between the nodes,
+    clamped at the grid's edges (what ``body_table.glsl`` samples)."""
+    k, m, n = size.shape
+    tex = ctx.texture3d((n, m, k), 3, dtype="f4")
+    tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+    tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+    return tex
+
+
 class BodyTables:
     """Bakes bodies into tables and keeps the textures (one per ``TableSize``)."""
 
@@ -74,11 +84,7 @@ class BodyTables:
         values = self.bake(base.decoder.dec, base.latent, size)
         tex = self._tex.get(size)
         if tex is None:
-            k, m, n = size.shape
-            tex = self.ctx.texture3d((n, m, k), 3, dtype="f4")
-            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            tex.repeat_x = tex.repeat_y = tex.repeat_z = False
-            self._tex[size] = tex
+            tex = self._tex[size] = table_texture(self.ctx, size)
         tex.write(values.numpy().astype("f4").tobytes())
         self.bake_ms = (time.perf_counter() - t0) * 1000.0
         return replace(base, kind=BrdfKind.TABLE, body_table=tex, share=None)
@@ -90,4 +96,4 @@ class BodyTables:
         self._pre.clear()
 
 
-__all__ = ["INTERACTIVE", "STILL", "BodyTables"]
+__all__ = ["INTERACTIVE", "STILL", "BodyTables", "table_texture"]
