@@ -137,19 +137,23 @@ def test_pass_size_doubles_within_the_budget_share():
 
 
 @pytest.mark.slow
-def test_scene_report_on_a_tiny_scene(tmp_path):
+@pytest.mark.parametrize("body, mode", [("decoder", "wavefront"), ("table", "symbolic")])
+def test_scene_report_on_a_tiny_scene(tmp_path, body, mode):
     """Both methods render at equal time (each until it has spent the budget);
     the MSEs are those of the saved images against the cached converged
-    reference, which a second run reads back instead of rendering."""
+    reference, which a second run reads back instead of rendering. The neural
+    body and each method's Dr.Jit mode are stated."""
     from nbrdf.mitsuba.scene_report import SceneReportConfig, converged_reference, mse, run_scene_report
     from nbrdf.mitsuba.scenes import load_scene
 
     coated = str(Path(__file__).resolve().parents[2] / "viewer/assets/materials/coated_copper.json")
     scene = _tiny_scene(tmp_path / "tiny.json", coated)
     cfg = SceneReportConfig(out=tmp_path / "rep", scenes=(scene,), size=(12, 9), time_budget=0.5, ref_spp=8,
-                            chunk=2)
+                            chunk=2, neural_body=body)
     result = run_scene_report(cfg, log=lambda s: None)
     (row,) = result["scenes"]
+    assert row["neural_body"] == [body] and row["mode"] == {"neural": mode, "mc": "wavefront"}
+    assert f"| tiny | {body} ({mode}) |" in (tmp_path / "rep" / "scenes.md").read_text()
     assert row["scene"] == "tiny" and row["reference"]["spp"] == 8 and not row["reference"]["cached"]
     assert row["mc"]["spp"] % 2 == 0 and row["mc"]["spp"] >= 2 and row["neural"]["spp"] >= 2
     for k in ("neural", "mc"):  # each rendered until it had spent the budget
