@@ -55,7 +55,9 @@ def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 
     a texture-mapped material JSON gives a ``TexturedCodeKernel`` over its
     latent texture (mip-mapped by the ray cone of ``pixel_angle`` radians).
     ``body``: ``"decoder"`` (the decoder per query) or ``"table"`` (the body
-    baked once into a table, ``TableBody``; uniform materials only)."""
+    baked once into a table: ``TableBody`` for a uniform material, a
+    parametric table over its (at most two) mapped albedos for a
+    texture-mapped one, ``param_table``)."""
     from nbrdf.neural.errors import NbrdfError
     from nbrdf.neural.material_code import code_parts, load_code
 
@@ -68,8 +70,7 @@ def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 
             m = load_material(material)
             if m.is_textured:
                 if body == "table":
-                    raise PluginError(f'nbrdf: {material}: a texture-mapped material has a body per texel, which '
-                                      'one table cannot hold; use body "decoder"')
+                    return _param_table_kernel(m, weights, pixel_angle)
                 return _textured_kernel(m, weights, pixel_angle)
         model, code = load_code(material, weights)
         (r, ior), (sigma, w) = code_parts(model, code)
@@ -122,6 +123,14 @@ def _textured_kernel(material, weights: str | None, pixel_angle: float) -> Textu
     return TexturedCodeKernel(DecoderKernel.from_torch(model.decoder, mean), kernel, Proxy(sigma, w), pixel_angle)
 
 
+def _param_table_kernel(material, weights: str | None, pixel_angle: float):
+    """A texture-mapped material's body from a parametric table (``param_table``)."""
+    from nbrdf.mitsuba.param_table import param_table_kernel
+    from nbrdf.neural.model import default_model, load_model
+
+    return param_table_kernel(material, load_model(weights) if weights else default_model(), pixel_angle)
+
+
 class NbrdfBSDF(mi.BSDF):
     """``{"type": "nbrdf", "material": PATH[, "weights": BUNDLE, "pixel_angle": RADIANS, "body": "decoder"|"table"]}``:
     ``body`` "table" reads a uniform material's body from a table baked once
@@ -146,7 +155,9 @@ class NbrdfBSDF(mi.BSDF):
         self.body = str(_prop(props, "body", "decoder"))
         self.kernel = code_kernel(self.path, _prop(props, "weights"), self.pixel_angle, self.body)
         self.normal_map = material_normal_map(self.path, "nbrdf")
-        textured = isinstance(self.kernel, TexturedCodeKernel)
+        from nbrdf.mitsuba.param_table import ParamTableCodeKernel
+
+        textured = isinstance(self.kernel, (TexturedCodeKernel, ParamTableCodeKernel))
         diffuse = not textured and not self.kernel.coat.present and self.kernel.proxy.w > DIFFUSE_W
         self._lobe = mi.BSDFFlags.DiffuseReflection if diffuse else mi.BSDFFlags.GlossyReflection
         self.m_components = [self._lobe | mi.BSDFFlags.FrontSide]
@@ -195,6 +206,10 @@ class NbrdfBSDF(mi.BSDF):
 
     def to_string(self):
         c, p = self.kernel.coat, self.kernel.proxy
+        if hasattr(self.kernel, "maps"):
+            return (f"NbrdfBSDF[material={self.path!r}, parametric body table {self.kernel.decoder.nodes} over "
+                    f"{self.kernel.maps.size} maps, pixel_angle {self.kernel.pixel_angle:g}, proxy=(sigma {p.sigma:g}, "
+                    f"w {p.w:g})]")
         if isinstance(self.kernel, TexturedCodeKernel):
             return (f"NbrdfBSDF[material={self.path!r}, latent texture {self.kernel.texture.size}, "
                     f"pixel_angle {self.kernel.pixel_angle:g}, proxy=(sigma {p.sigma:g}, w {p.w:g})]")

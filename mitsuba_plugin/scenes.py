@@ -252,15 +252,16 @@ def load_scene(spec: str) -> Scene:
 def with_method(scene: Scene, method: str, body: str = "decoder") -> Scene:
     """The scene with every nbrdf material rendered as ``neural`` or ``reference``;
     ``body`` (neural): the plugin's ``body`` for every uniform material
-    ("table": a baked table, ``bsdf.TableBody``); texture-mapped materials
-    keep the decoder (a table holds one body, not one per texel)."""
+    ("table": a baked table, ``bsdf.TableBody``; a parametric one for a
+    texture-mapped material whose maps vary at most two albedos); other
+    texture-mapped materials keep the decoder."""
     shapes = []
     for s in scene.spec["shapes"]:
         m = s["material"]
         if "diffuse" not in m:
             path = next(iter(m.values()))
             m = {method: path}
-            if method == "neural" and body != "decoder" and not is_textured(path):
+            if method == "neural" and body != "decoder" and (not is_textured(path) or table_fits(path)):
                 m["body"] = body
         shapes.append({**s, "material": m})
     return Scene({**scene.spec, "shapes": shapes}, scene.name)
@@ -273,6 +274,20 @@ def is_textured(path: str) -> bool:
     from nbrdf.neural.material import load_material
 
     return load_material(path).is_textured
+
+
+def table_fits(path: str) -> bool:
+    """Whether a texture-mapped material can read its body from a parametric table
+    (``neural.param_table.table_params``)."""
+    from nbrdf.neural.errors import NbrdfError
+    from nbrdf.neural.material import load_material
+    from nbrdf.neural.param_table import table_params
+
+    try:
+        table_params(load_material(path))
+    except NbrdfError:
+        return False
+    return True
 
 
 def neural_bodies(scene: Scene) -> set[str]:
