@@ -259,7 +259,8 @@ class ScenesReport:
     """seed of the renders"""
     neural_body: str = "decoder"
     """the neural material's body: decoder (per query, wavefront mode) or table (baked once per uniform material,
-    symbolic mode; texture-mapped materials keep the decoder)"""
+    symbolic mode; a texture-mapped material varying at most two albedos gets a parametric table, others keep
+    the decoder)"""
 
 
 def cmd_report_scenes(ns: argparse.Namespace) -> int:

@@ -12,7 +12,8 @@ mode on this backend (``render.is_wavefront``): the Monte Carlo always in the
 wavefront mode (the walk needs it), the neural material there too when its
 body is the decoder, in symbolic mode when every uniform material reads its
 body from a baked table (``neural_body="table"``; a texture-mapped material
-keeps the decoder, and the wavefront mode with it). The LLVM compilation of any kernel met later for the first time (a
+whose maps vary at most two albedos reads a parametric table, ``param_table``;
+any other keeps the decoder, and the wavefront mode with it). The LLVM compilation of any kernel met later for the first time (a
 wavefront of one lane gets kernels of its own) is taken out of both times
 and stated.
 
@@ -72,8 +73,9 @@ class SceneReportConfig:
     figure: Path | None = field(default=None)
     """the figure's path (default: OUT/scenes.png)"""
     neural_body: str = "decoder"
-    """the ``nbrdf`` plugin's ``body`` for the uniform materials: "decoder" (per query) or "table" (baked once,
-    ``bsdf.TableBody``: noise-free, its interpolation error a bias; renders in symbolic mode)"""
+    """the ``nbrdf`` plugin's ``body``: "decoder" (per query) or "table" (baked once, ``bsdf.TableBody``, or
+    ``param_table`` for a texture-mapped material that fits one: noise-free, its interpolation error a bias;
+    renders in symbolic mode)"""
 
 
 def mse(a: np.ndarray, b: np.ndarray) -> float:

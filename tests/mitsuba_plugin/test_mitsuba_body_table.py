@@ -102,13 +102,20 @@ def test_bad_body_option_is_one_line(mi, materials):
         code_kernel(materials["coated"], body="mlp")
 
 
-def test_a_texture_mapped_material_refuses_a_table(mi, tmp_path, monkeypatch):
+def test_a_texture_mapped_roughness_refuses_a_table(mi, tmp_path):
+    """A parametric table holds mapped albedos only (``test_mitsuba_param_table``); a
+    mapped coat roughness is one line pointing to the decoder."""
+    import imageio.v3 as iio
+
     from nbrdf.mitsuba import PluginError
     from nbrdf.mitsuba.bsdf import code_kernel
-    from nbrdf.mitsuba.generated import globe_material
 
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    iio.imwrite(tmp_path / "r.png", np.full((4, 4), 128, np.uint8))
+    p = tmp_path / "m.json"
+    p.write_text('{"format": "nbrdf-material/1", "name": "m", "layers": [{"type": "dielectric", "roughness": '
+                 '{"texture": "r.png", "channel": "r", "range": [0.05, 0.4]}, "ior": 1.5}, '
+                 '{"type": "diffuse", "albedo": 0.5}]}')
     with pytest.raises(PluginError) as e:
-        code_kernel(str(globe_material()), body="table")
+        code_kernel(str(p), body="table")
     msg = str(e.value)
-    assert "texture-mapped" in msg and 'body "decoder"' in msg and "\n" not in msg
+    assert "layers[0].roughness" in msg and 'body "decoder"' in msg and "\n" not in msg

@@ -232,8 +232,8 @@ def test_table_body_scenes_render_in_symbolic_mode(tmp_path, monkeypatch):
     assert entered == []
     assert render_mod.is_wavefront(with_method(scene, "neural")) and render_mod.is_wavefront(with_method(scene, "reference"))
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
-    globe = with_method(load_scene("globe"), "neural", "table")
-    assert neural_bodies(globe) == {"decoder"} and render_mod.is_wavefront(globe)
+    globe = with_method(load_scene("globe"), "neural", "table")  # a parametric table over its two albedo maps
+    assert neural_bodies(globe) == {"table"} and not render_mod.is_wavefront(globe)
 
 
 def test_report_scenes_bad_neural_body_exits_2(tmp_path, capsys):
