@@ -72,7 +72,8 @@ def _compare(mi, kernel, path, a: float, b: float, rng) -> np.ndarray:
 
 def test_param_table_at_nodes_is_the_neural_path(mi, globe):
     """At grid nodes only the angular table's error is left (``bsdf._body_table_size``'s
-    64 x 32 x 16 grade: mean 0.3-0.6 %): bounds mean 1.2 %, 99th percentile 6 %."""
+    64 x 32 x 16 grade): measured mean 0.18-0.26 %, 99th percentile 1.6-1.9 % (three nodes);
+    bounds mean 0.6 %, 99th percentile 4 %."""
     from nbrdf.mitsuba.param_table import GRID
 
     path, bsdf = globe
@@ -83,13 +84,13 @@ def test_param_table_at_nodes_is_the_neural_path(mi, globe):
         a = lo_a + i * (hi_a - lo_a) / (GRID[0] - 1)
         b = lo_b + j * (hi_b - lo_b) / (GRID[1] - 1)
         rel = _compare(mi, kernel, path, a, b, rng)
-        assert rel.mean() < 1.2e-2 and np.quantile(rel, 0.99) < 6e-2, (i, j, rel.mean(), np.quantile(rel, 0.99))
+        assert rel.mean() < 6e-3 and np.quantile(rel, 0.99) < 4e-2, (i, j, rel.mean(), np.quantile(rel, 0.99))
 
 
 def test_param_table_between_nodes_within_its_bound(mi, globe):
     """Cell centres (the interpolation's worst place in each cell) over the maps' ranges:
-    measured over random (a, b) mean 0.41 %, 99th percentile 1.8 % (``param_table.GRID``);
-    bounds at cell centres mean 2 %, 99th percentile 8 %."""
+    measured there mean 0.83 %, 99th percentile 2.4 % (over random (a, b): 0.41 %, 1.8 %,
+    ``param_table.GRID``); bounds mean 1.6 %, 99th percentile 5 %."""
     from nbrdf.mitsuba.param_table import GRID
 
     path, bsdf = globe
@@ -102,13 +103,14 @@ def test_param_table_between_nodes_within_its_bound(mi, globe):
         b = lo_b + (j + 0.5) * (hi_b - lo_b) / (GRID[1] - 1)
         rels.append(_compare(mi, kernel, path, a, b, rng))
     rel = np.concatenate(rels)
-    assert rel.mean() < 2e-2 and np.quantile(rel, 0.99) < 8e-2, (rel.mean(), np.quantile(rel, 0.99))
+    assert rel.mean() < 1.6e-2 and np.quantile(rel, 0.99) < 5e-2, (rel.mean(), np.quantile(rel, 0.99))
 
 
 def test_param_table_eval_at_hits_is_the_latent_texture_at_the_finest_level(mi, globe):
     """At the finest level (pixel_angle 0) both read the hit's texels bilinearly:
     the latent texture mixes codes, the table mixes albedos; on the globe's
-    smooth maps they agree to the table's error (measured mean 0.43 %, 99th 2.3 %)."""
+    smooth maps they agree to the table's error (measured mean 0.45 %, 99th 2.9 %;
+    bounds 1 %, 6 %)."""
     import drjit as dr
 
     path, table = globe
@@ -120,7 +122,7 @@ def test_param_table_eval_at_hits_is_the_latent_texture_at_the_finest_level(mi, 
     si.uv = mi.Point2f(rng.random((2, N)).astype(np.float32))
     f = [np.array(b.eval(mi.BSDFContext(), si, mi.Vector3f(light.T))).T for b in (table, decoder)]
     rel = np.abs(f[0] - f[1]) / (np.abs(f[1]) + 1e-3)
-    assert rel.mean() < 1e-2 and np.quantile(rel, 0.99) < 5e-2, (rel.mean(), np.quantile(rel, 0.99))
+    assert rel.mean() < 1e-2 and np.quantile(rel, 0.99) < 6e-2, (rel.mean(), np.quantile(rel, 0.99))
 
 
 def _png(path, rng, shape):
