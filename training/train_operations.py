@@ -22,7 +22,7 @@ import json
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -32,7 +32,7 @@ from nbrdf.neural.decoder import DEFAULT_WEIGHTS, encode, loss_target, predicted
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC
-from nbrdf.neural.layering import CODE, LATENT, LayeringNet, layering_spec
+from nbrdf.neural.layering import CODE, LATENT, MEDIUM_SETS, LayeringNet, layering_spec
 from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
 from nbrdf.neural.model import NeuralModel, layered_latents, load_model, save_model
 from nbrdf.neural.sampling import SamplerNet, lambert_pdf, proxy_pdf, proxy_sample
@@ -71,6 +71,10 @@ class OpsConfig:
     """layering: hidden units per layer of the layering network (0: the default, 256)"""
     depth: int = 0
     """layering: hidden layers of the layering network (0: the default, 3)"""
+    medium: str = "basic"
+    """layering: the slab features the network takes (``neural.layering.MEDIUM_SETS``): basic, or slab (adds the
+    slab's closed-form diffuse transmittance 2 E3(sigma_t) and Kubelka-Munk reflectance and transmittance); a
+    bundle network with fewer features is fine-tuned from its weights, the added inputs' weights starting at zero"""
     loss: str = "log"
     """layering: log (the decoder's training loss) or mean (``neural.decoder.unbiased_error``: fits the
     Monte Carlo mean, where the log loss fits a geometric mean that skewed noise pulls too dark)"""
@@ -359,9 +363,13 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
     three = train.index_of(*THREE_LAYERED)
     if two.numel() == 0:
         raise NbrdfError(f"{cfg.data}: no two-layer or diffuse-base stacks to train the layering network on")
-    net = LayeringNet(layering_spec(width=cfg.width or 256, depth=cfg.depth or 3))
-    if model.layering is not None and model.layering.spec == net.spec:
-        net.load_state_dict(model.layering.state_dict())  # fine-tune the bundle's network
+    net = LayeringNet(layering_spec(width=cfg.width or 256, depth=cfg.depth or 3, medium=cfg.medium))
+    old = model.layering
+    if old is not None and old.spec == net.spec:
+        net.load_state_dict(old.state_dict())  # fine-tune the bundle's network
+    elif old is not None and replace(old.spec, inputs=net.spec.inputs, medium=net.spec.medium) == net.spec \
+            and MEDIUM_SETS[old.spec.medium] < MEDIUM_SETS[net.spec.medium]:
+        net = old.widened(net.spec.medium)  # fine-tune it, starting exactly where it is
     else:
         with torch.no_grad():  # start as the identity "the top hides nothing"
             net.mlp.net[-1].weight.mul_(0.1)
