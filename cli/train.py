@@ -12,7 +12,7 @@ from nbrdf.cli.common import at_least, in_range
 from nbrdf.cli.config import Parser, add_arguments, build, values
 
 #: Operation-only fields that the leaf and sampler commands do not take.
-LAYERING_ONLY = ("data", "recursion_steps", "width", "depth", "medium", "loss", "loss_scale", "relative_scale")
+LAYERING_ONLY = ("data", "recursion_steps", "width", "depth", "medium", "medium_lr_scale", "loss", "loss_scale", "relative_scale")
 #: The decoder architecture fields set from the command line, with their help
 #: (``DecoderSpec`` lives in the library; its other fields are fixed).
 SPEC_HELP = {"width": "hidden units per decoder layer", "depth": "hidden layers of the decoder",

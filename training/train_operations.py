@@ -75,6 +75,9 @@ class OpsConfig:
     """layering: the slab features the network takes (``neural.layering.MEDIUM_SETS``): basic, or slab (adds the
     slab's closed-form diffuse transmittance 2 E3(sigma_t) and Kubelka-Munk reflectance and transmittance); a
     bundle network with fewer features is fine-tuned from its weights, the added inputs' weights starting at zero"""
+    medium_lr_scale: float = 1.0
+    """layering: learning-rate multiplier of the first-layer weights on the features a widened network added
+    (a short fine-tune moves every weight by about a percent, too little for weights that start at zero)"""
     loss: str = "log"
     """layering: log (the decoder's training loss) or mean (``neural.decoder.unbiased_error``: fits the
     Monte Carlo mean, where the log loss fits a geometric mean that skewed noise pulls too dark)"""
@@ -126,12 +129,14 @@ class SamplerConfig(OpsConfig):
 # --- a small resumable loop ---------------------------------------------------------------
 def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], total: int,
               step: Callable[[int], Tensor], validate: Callable[[], float], progress: bool,
-              rng: torch.Generator) -> dict:
+              rng: torch.Generator, scaled: tuple[tuple[Tensor, tuple, float], ...] = ()) -> dict:
     """Adam with a cosine schedule; checkpoints every 250 steps into
     ``<out>/<name>.ckpt.pt`` and resumes from it (with the batches' generator
     ``rng``, so a resumed run equals one that ran through); returns the history. With
     ``cfg.ema`` the modules end with (and are validated at) the moving
-    average of their weights."""
+    average of their weights. ``scaled``: (parameter, index, k) entries whose
+    Adam step is k times the others' (Adam's step is elementwise, so this is a
+    learning rate of k lr on those entries alone)."""
     from tqdm import tqdm
 
     out = Path(cfg.out)
@@ -169,7 +174,11 @@ def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], to
         loss = step(s)
         opt.zero_grad(set_to_none=True)
         loss.backward()
+        before = [p.detach()[i].clone() for p, i, _ in scaled]
         opt.step()
+        with torch.no_grad():
+            for (p, i, k), b in zip(scaled, before):
+                p[i] = b + k * (p[i] - b)
         sched.step()
         if ema:  # warm-up: a plain mean of the steps so far while that is shorter than the window
             d = min(cfg.ema, (s + 1) / (s + 2))
@@ -364,16 +373,20 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
     if two.numel() == 0:
         raise NbrdfError(f"{cfg.data}: no two-layer or diffuse-base stacks to train the layering network on")
     net = LayeringNet(layering_spec(width=cfg.width or 256, depth=cfg.depth or 3, medium=cfg.medium))
-    old = model.layering
+    old, added = model.layering, None
     if old is not None and old.spec == net.spec:
         net.load_state_dict(old.state_dict())  # fine-tune the bundle's network
     elif old is not None and replace(old.spec, inputs=net.spec.inputs, medium=net.spec.medium) == net.spec \
             and MEDIUM_SETS[old.spec.medium] < MEDIUM_SETS[net.spec.medium]:
         net = old.widened(net.spec.medium)  # fine-tune it, starting exactly where it is
+        added = (slice(None), slice(old.spec.inputs, None))
     else:
         with torch.no_grad():  # start as the identity "the top hides nothing"
             net.mlp.net[-1].weight.mul_(0.1)
             net.mlp.net[-1].bias.zero_()
+    if not cfg.medium_lr_scale > 0:
+        raise NbrdfError(f"--medium-lr-scale: {cfg.medium_lr_scale} must be positive")
+    scaled = ((net.mlp.net[0].weight, added, cfg.medium_lr_scale),) if added and cfg.medium_lr_scale != 1 else ()
 
     if cfg.loss not in ("log", "mean"):
         raise NbrdfError(f"--loss: {cfg.loss!r} is not one of log, mean")
@@ -400,7 +413,8 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
         return out
 
     t0 = time.perf_counter()
-    history = _run_loop("layering", cfg, {"layering": net}, cfg.steps, step, validate, progress, rng=g)
+    history = _run_loop("layering", cfg, {"layering": net}, cfg.steps, step, validate, progress, rng=g,
+                        scaled=scaled)
     model.layering = net
     model.sampler = None  # trained on the old layered latents: retrain it on these
     model.trained_on.pop("sampler", None)

@@ -133,6 +133,12 @@ def test_a_basic_bundle_is_fine_tuned_onto_the_slab_features(bundles):
     w_old, w_new = old.mlp.net[0].weight, new.mlp.net[0].weight
     assert (w_new[:, :-3] - w_old).abs().max() < 1e-3 < w_old.abs().mean()  # 5 Adam steps of 1e-4 from the old
     assert w_new[:, -3:].abs().max() < 1e-3
+    fast = load_model(train_layering(replace(cfg, out=str(root / "lay_slab_fast"), medium_lr_scale=10.0),
+                                     progress=False)).layering.mlp.net[0].weight
+    assert fast[:, -3:].abs().max() > 3 * w_new[:, -3:].abs().max()  # Adam's step on the added weights, x10
+    assert (fast[:, :-3] - w_old).abs().max() < 1e-3  # the others' step unchanged
+    with pytest.raises(NbrdfError, match="--medium-lr-scale"):
+        train_layering(replace(cfg, out=str(root / "lay_slab_bad"), medium_lr_scale=0.0), progress=False)
 
 
 @pytest.mark.slow
