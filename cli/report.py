@@ -257,6 +257,9 @@ class ScenesReport:
     """the figure's path (default: OUT/scenes.png)"""
     seed: int = 0
     """seed of the renders"""
+    neural_body: str = "decoder"
+    """the neural material's body: decoder (per query, wavefront mode) or table (baked once per uniform material,
+    symbolic mode; texture-mapped materials keep the decoder)"""
 
 
 def cmd_report_scenes(ns: argparse.Namespace) -> int:
@@ -265,6 +268,8 @@ def cmd_report_scenes(ns: argparse.Namespace) -> int:
         raise NbrdfError(f"report scenes: --time-budget must be positive, --ref-spp at least 2, --chunk at least 1 "
                          f"and --max-chunk at least --chunk (got {c.time_budget}, {c.ref_spp}, {c.chunk}, "
                          f"{c.max_chunk})")
+    if c.neural_body not in ("decoder", "table"):
+        raise NbrdfError(f"report scenes: --neural-body must be decoder or table, got {c.neural_body!r}")
     try:
         import nbrdf.mitsuba  # noqa: F401
     except ImportError as e:
@@ -279,7 +284,7 @@ def cmd_report_scenes(ns: argparse.Namespace) -> int:
         load_scene(n)  # bad scenes fail before minutes of rendering
     cfg = SceneReportConfig(out=Path(c.out), scenes=names, size=c.size, time_budget=c.time_budget,
                             ref_spp=c.ref_spp, chunk=c.chunk, max_chunk=c.max_chunk, cache=Path(c.cache) if c.cache else None,
-                            seed=c.seed, figure=Path(c.figure) if c.figure else None)
+                            seed=c.seed, figure=Path(c.figure) if c.figure else None, neural_body=c.neural_body)
     print(markdown(run_scene_report(cfg, log=lambda s: print(s, file=sys.stderr))))
     return 0
 

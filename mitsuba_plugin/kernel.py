@@ -274,12 +274,55 @@ class DecoderKernel:
         return out
 
 
+class TableBody:
+    """A uniform material's decoded body read from a baked table
+    (``neural.body_table``: log f per RGB channel over theta_h, theta_d and the
+    folded phi_d) by one trilinear ``Texture3f`` lookup per query instead of the
+    decoder. The table's interpolation error is a bias against the decoder
+    (noise-free); the coat is not in the table (closed form, ``Coat``). Inside
+    a symbolic call a lookup is 8 gathers per channel, where the decoder's
+    weights would each be a per-lane gather on the LLVM backend."""
+
+    def __init__(self, values: np.ndarray):
+        """``values``: (K, M, N, 3) float32, ``neural.body_table.bake_body``'s layout."""
+        values = np.ascontiguousarray(values, np.float32)
+        if values.ndim != 4 or values.shape[-1] != 3 or min(values.shape[:3]) < 2:
+            raise ValueError(f"a body table is (K, M, N, 3) with each side >= 2, got {values.shape}")
+        self.shape = values.shape[:3]
+        self.texture = mi.Texture3f(mi.TensorXf(values), use_accel=False, filter_mode=dr.FilterMode.Linear,
+                                    wrap_mode=dr.WrapMode.Clamp)
+
+    @staticmethod
+    def from_torch(decoder, code, size) -> "TableBody":
+        """The table of a ``neural.decoder.Decoder`` at a code (3, 34) or latent (3, 32), ``size`` a ``TableSize``."""
+        from nbrdf.neural.body_table import bake_body
+
+        return TableBody(bake_body(decoder, code, size).numpy())
+
+    def body(self, wi, wo, shares: list | None = None) -> list:
+        """Body values [f_r, f_g, f_b] (1/sr), zero below the horizon (``DecoderKernel.body``);
+        a table holds one material, so per-lane ``shares`` are refused."""
+        if shares is not None:
+            raise ValueError("a body table holds one material's body: it takes no per-lane latent shares")
+        k, m, n = self.shape
+        r = rusink5(wi, wo)  # sqrt(2 theta_h / pi), 2 theta_d / pi, cos 2 phi_d, ...
+        u = dr.clip(r[0], 0.0, 1.0)
+        v = dr.clip(r[1], 0.0, 1.0)
+        w = dr.acos(dr.clip(r[2], -1.0, 1.0)) * (1.0 / math.pi)
+        # node i at i / (n - 1) -> texel centre (i + 0.5) / n of the linear-filtered texture
+        pos = mi.Point3f((u * (n - 1) + 0.5) / n, (v * (m - 1) + 0.5) / m, (w * (k - 1) + 0.5) / k)
+        y = self.texture.eval(pos)
+        up = (wi.z > 0) & (wo.z > 0)
+        return [dr.select(up, dr.exp(dr.minimum(c, 80.0)), 0.0) for c in y]
+
+
 class CodeKernel:
     """A whole material code: decoded body plus closed-form coat, and its
     sampler. ``si`` (the hit) is what a textured material looks up; a
     uniform one ignores it."""
 
-    def __init__(self, decoder: DecoderKernel, coat: Coat, proxy: Proxy):
+    def __init__(self, decoder: "DecoderKernel | TableBody", coat: Coat, proxy: Proxy):
+        """``decoder``: what gives the body (``DecoderKernel`` or ``TableBody``)."""
         self.decoder, self.coat, self.proxy = decoder, coat, proxy
 
     def at(self, si) -> tuple[list | None, Coat]:

@@ -5,7 +5,9 @@ is their average (equal weights: every chunk has the same spp).
 
 Scenes with nbrdf materials render in Dr.Jit's wavefront mode on the LLVM
 backend (``bsdf.wants_wavefront``): the reference needs it, and the neural
-decoder runs about ten times faster there than inside a symbolic call."""
+decoder runs about ten times faster there than inside a symbolic call. A scene
+whose neural materials all read their body from a table (``body: "table"``)
+and that has no reference renders in symbolic mode, its fastest."""
 from __future__ import annotations
 
 import time
@@ -14,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from nbrdf.mitsuba.scenes import Scene, mitsuba_dict, uses_neural, uses_reference
+from nbrdf.mitsuba.scenes import Scene, mitsuba_dict, neural_bodies, uses_reference
 
 #: Samples per pixel per ``mi.render`` call unless asked otherwise.
 CHUNK_SPP = 4
@@ -47,6 +49,13 @@ def load(scene: Scene, size: tuple[int, int], chunk_spp: int = CHUNK_SPP):
     return mi.load_dict(mitsuba_dict(scene, size, chunk_spp))
 
 
+def is_wavefront(scene: Scene) -> bool:
+    """Whether ``render`` renders ``scene`` in Dr.Jit's wavefront mode (module docstring)."""
+    from nbrdf.mitsuba.bsdf import wants_wavefront
+
+    return uses_reference(scene) or any(wants_wavefront(b) for b in neural_bodies(scene))
+
+
 def render(scene: Scene, size: tuple[int, int], spp: int, seed: int = 0, chunk_spp: int = CHUNK_SPP,
            progress: Callable[[int], None] | None = None, keep_chunks: bool = False, loaded=None,
            max_seconds: float | None = None, exclude_compile: bool = False) -> RenderResult:
@@ -61,7 +70,6 @@ def render(scene: Scene, size: tuple[int, int], spp: int, seed: int = 0, chunk_s
     import mitsuba as mi
 
     from nbrdf.mitsuba import wavefront_mode
-    from nbrdf.mitsuba.bsdf import wants_wavefront
 
     chunk_spp = max(1, min(chunk_spp, spp))
     n_chunks = -(-spp // chunk_spp)
@@ -71,7 +79,7 @@ def render(scene: Scene, size: tuple[int, int], spp: int, seed: int = 0, chunk_s
     done = 0
     t0 = time.perf_counter()
     compile_s = 0.0
-    wavefront = uses_reference(scene) or (uses_neural(scene) and wants_wavefront())
+    wavefront = is_wavefront(scene)
     history = dr.flag(dr.JitFlag.KernelHistory)
     if exclude_compile:
         dr.set_flag(dr.JitFlag.KernelHistory, True)

@@ -7,8 +7,12 @@ Monte Carlo at high spp, cached) by MSE and HDR-FLIP. The time: after one
 untimed chunk each (kernel compilation), the two renders take turns, a chunk
 of spp at a time, the one with less time spent going next, until each has
 spent the budget: on a machine whose load drifts both meet the same
-conditions. Both render in Dr.Jit's wavefront mode with the same path tracer,
-and the LLVM compilation of any kernel met later for the first time (a
+conditions. Both render with the same path tracer, each in its fastest Dr.Jit
+mode on this backend (``render.is_wavefront``): the Monte Carlo always in the
+wavefront mode (the walk needs it), the neural material there too when its
+body is the decoder, in symbolic mode when every uniform material reads its
+body from a baked table (``neural_body="table"``; a texture-mapped material
+keeps the decoder, and the wavefront mode with it). The LLVM compilation of any kernel met later for the first time (a
 wavefront of one lane gets kernels of its own) is taken out of both times
 and stated.
 
@@ -29,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from nbrdf.mitsuba.render import RenderResult, load, render
-from nbrdf.mitsuba.scenes import Scene, load_scene, with_method
+from nbrdf.mitsuba.render import RenderResult, is_wavefront, load, render
+from nbrdf.mitsuba.scenes import Scene, load_scene, neural_bodies, with_method
 from nbrdf.neural.errors import NbrdfError
 
 #: The paper's Table 3: equal-time MSE, (neural, Guo et al. Monte Carlo), at 1024 x 1024.
@@ -67,6 +71,9 @@ class SceneReportConfig:
     """seed of the renders (the converged reference uses seed + 1000)"""
     figure: Path | None = field(default=None)
     """the figure's path (default: OUT/scenes.png)"""
+    neural_body: str = "decoder"
+    """the ``nbrdf`` plugin's ``body`` for the uniform materials: "decoder" (per query) or "table" (baked once,
+    ``bsdf.TableBody``: noise-free, its interpolation error a bias; renders in symbolic mode)"""
 
 
 def mse(a: np.ndarray, b: np.ndarray) -> float:
@@ -188,10 +195,11 @@ def score_scene(name: str, cfg: SceneReportConfig, log=print) -> tuple[dict, dic
     log(f"[{scene.name}] converged reference ({cfg.ref_spp} spp)")
     ref = converged_reference(scene, cfg)
     log(f"[{scene.name}] neural and Monte Carlo at {cfg.time_budget:g} s each, interleaved")
-    res = equal_time({"neural": with_method(scene, "neural"), "mc": with_method(scene, "reference")}, cfg,
-                     {"neural": cfg.seed, "mc": cfg.seed + 2}, log)
+    methods = {"neural": with_method(scene, "neural", cfg.neural_body), "mc": with_method(scene, "reference")}
+    res = equal_time(methods, cfg, {"neural": cfg.seed, "mc": cfg.seed + 2}, log)
     neural, mc = res["neural"], res["mc"]
-    row: dict = {"scene": scene.name, "size": list(cfg.size),
+    row: dict = {"scene": scene.name, "size": list(cfg.size), "neural_body": sorted(neural_bodies(methods["neural"])),
+                 "mode": {k: "wavefront" if is_wavefront(sc) else "symbolic" for k, sc in methods.items()},
                  "reference": {"spp": ref["spp"], "seconds": round(ref["seconds"], 2), "cached": ref["cached"],
                                "noise_mse": ref["noise_mse"],
                                "half_flip": flip(ref["half_a"], ref["half_b"])[0]}}
@@ -230,17 +238,18 @@ def markdown(result: dict) -> str:
     lines = [f"Equal-time MSE against the converged Monte Carlo reference ({w}x{h}, path tracer max depth 8; "
              "this machine). Paper (Table 3, 1024x1024, Mitsuba on a workstation): neural vs Guo et al.",
              "",
-             "| scene | neural spp (pass) | MC spp (pass) | time/frame (s) | MSE neural | MSE MC | MC/neural (time-matched) | "
+             "| scene | neural body (mode) | neural spp (pass) | MC spp (pass) | time/frame (s) | MSE neural | MSE MC | MC/neural (time-matched) | "
              "MC/neural, ref. noise removed | FLIP neural | "
              "FLIP MC | neural noise / bias MSE | MC noise / bias MSE | ref spp (noise MSE) | crossover (s, extrapolated) | "
              "paper neural / MC |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in result["scenes"]:
         p = PAPER_TABLE3.get(r["scene"])
         paper = f"{p[0]:.1e} / {p[1]:.1e} ({p[1] / p[0]:.1f}x)" if p else "-"
         cross = r["crossover_seconds"]
         lines.append(
-            f"| {r['scene']} | {r['neural']['spp']} ({r['neural'].get('pass_spp', '-')}) | {r['mc']['spp']} "
+            f"| {r['scene']} | {'+'.join(r.get('neural_body', ['decoder']))} ({r.get('mode', {}).get('neural', 'wavefront')}) "
+            f"| {r['neural']['spp']} ({r['neural'].get('pass_spp', '-')}) | {r['mc']['spp']} "
             f"({r['mc'].get('pass_spp', '-')}) | {r['neural']['seconds']:.1f} / "
             f"{r['mc']['seconds']:.1f} | {r['neural']['mse']:.2e} | {r['mc']['mse']:.2e} | "
             f"{r['mse_ratio_mc_over_neural']:.2f}x ({r['mse_ratio_mc_over_neural_time_matched']:.2f}x) | "
@@ -255,7 +264,9 @@ def markdown(result: dict) -> str:
               "the true image is the MSE against the reference less the reference's own noise (independent of both "
               "renders): the ratio of those is the column 'ref. noise removed'. Passes: each method's grow from "
               "--chunk while one takes at most 1/8 of the budget at its warm-up pace (same rule for both). Times: "
-              "sampling only, both methods in Dr.Jit's wavefront mode with the same path tracer; the LLVM compilation "
+              "sampling only, the same path tracer, each method in its fastest Dr.Jit mode (column 'mode'; the Monte "
+              "Carlo always wavefront: the walk needs it; a neural body read from a baked table renders symbolic, the "
+              "decoder wavefront: its weights are per-lane gathers in a symbolic call on LLVM); the LLVM compilation "
               "of kernels not yet in Dr.Jit's cache is excluded from both (scenes.json: compile_seconds_excluded). "
               "Noise: each "
               "render's own, from its even and odd chunks; bias: the MSE left after both renders' noise (the neural "
@@ -323,7 +334,7 @@ def run_scene_report(cfg: SceneReportConfig, log=print) -> dict:
         for k in ("reference", "neural", "mc"):
             np.save(cfg.out / f"{row['scene']}-{k}.npy", im[k])
     result = {"config": {"scenes": list(cfg.scenes), "size": list(cfg.size), "time_budget": cfg.time_budget,
-                         "ref_spp": cfg.ref_spp, "chunk": cfg.chunk, "seed": cfg.seed},
+                         "ref_spp": cfg.ref_spp, "chunk": cfg.chunk, "seed": cfg.seed, "neural_body": cfg.neural_body},
               "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine()},
               "paper_table3": {k: {"neural": v[0], "mc": v[1]} for k, v in PAPER_TABLE3.items()},
               "scenes": rows}

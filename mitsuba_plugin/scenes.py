@@ -249,15 +249,35 @@ def load_scene(spec: str) -> Scene:
     return parse_scene(data, p.parent, p.stem)
 
 
-def with_method(scene: Scene, method: str) -> Scene:
-    """The scene with every nbrdf material rendered as ``neural`` or ``reference``."""
+def with_method(scene: Scene, method: str, body: str = "decoder") -> Scene:
+    """The scene with every nbrdf material rendered as ``neural`` or ``reference``;
+    ``body`` (neural): the plugin's ``body`` for every uniform material
+    ("table": a baked table, ``bsdf.TableBody``); texture-mapped materials
+    keep the decoder (a table holds one body, not one per texel)."""
     shapes = []
     for s in scene.spec["shapes"]:
         m = s["material"]
         if "diffuse" not in m:
-            m = {method: next(iter(m.values()))}
+            path = next(iter(m.values()))
+            m = {method: path}
+            if method == "neural" and body != "decoder" and not is_textured(path):
+                m["body"] = body
         shapes.append({**s, "material": m})
     return Scene({**scene.spec, "shapes": shapes}, scene.name)
+
+
+def is_textured(path: str) -> bool:
+    """Whether the material at ``path`` is texture-mapped (a code file never is)."""
+    if not str(path).lower().endswith(".json"):
+        return False
+    from nbrdf.neural.material import load_material
+
+    return load_material(path).is_textured
+
+
+def neural_bodies(scene: Scene) -> set[str]:
+    """The ``body`` options of the scene's ``nbrdf`` materials ("decoder" unless set)."""
+    return {s["material"].get("body", "decoder") for s in scene.spec["shapes"] if "neural" in s["material"]}
 
 
 def uses_neural(scene: Scene) -> bool:
@@ -291,7 +311,10 @@ def _bsdf(m: dict[str, Any], pixel_angle: float) -> dict[str, Any]:
         return {"type": "diffuse", "reflectance": {"type": "rgb", "value": m["diffuse"]}}
     if "neural" in m:
         # the camera's angle per pixel: a latent texture's mip level per hit follows from it
-        return {"type": "nbrdf", "material": m["neural"], "pixel_angle": pixel_angle}
+        d = {"type": "nbrdf", "material": m["neural"], "pixel_angle": pixel_angle}
+        if "body" in m:
+            d["body"] = m["body"]
+        return d
     return {"type": "nbrdf_reference", "material": m["reference"]}
 
 

@@ -15,6 +15,9 @@ pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not insta
 #: is a few cells wide at the horizon, where Mitsuba's default 4 overestimates its integral by 2 %.
 IRES = 8
 CASES = [("coated", 0.0), ("coated", 50.0), ("coated", 80.0), ("uncoated", 0.0), ("uncoated", 60.0)]
+#: The same sampler with the body read from a baked table (``body: "table"``): its zero-weight
+#: samples (the chi-square test's "no sample") come from the table's eval.
+TABLE_CASES = [("coated", 50.0), ("uncoated", 60.0)]
 
 
 def _adapter(mi, bsdf, theta_deg: float):
@@ -34,11 +37,11 @@ def _adapter(mi, bsdf, theta_deg: float):
 
 @pytest.mark.slow
 @pytest.mark.ci_slow
-@pytest.mark.parametrize("role,theta", CASES)
-def test_sampler_passes_mitsubas_chi2(mi, materials, role, theta):
+@pytest.mark.parametrize("role,theta,body", [c + ("decoder",) for c in CASES] + [c + ("table",) for c in TABLE_CASES])
+def test_sampler_passes_mitsubas_chi2(mi, materials, role, theta, body):
     from mitsuba.chi2 import ChiSquareTest, SphericalDomain
 
-    bsdf = mi.load_dict({"type": "nbrdf", "material": materials[role]})
+    bsdf = mi.load_dict({"type": "nbrdf", "material": materials[role], "body": body})
     sample, pdf = _adapter(mi, bsdf, theta)
     test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample, pdf_func=pdf, sample_dim=3, seed=3, ires=IRES)
-    assert test.run(significance_level=1e-3, test_count=len(CASES), quiet=True), test.messages
+    assert test.run(significance_level=1e-3, test_count=len(CASES) + len(TABLE_CASES), quiet=True), test.messages

@@ -137,19 +137,23 @@ def test_pass_size_doubles_within_the_budget_share():
 
 
 @pytest.mark.slow
-def test_scene_report_on_a_tiny_scene(tmp_path):
+@pytest.mark.parametrize("body, mode", [("decoder", "wavefront"), ("table", "symbolic")])
+def test_scene_report_on_a_tiny_scene(tmp_path, body, mode):
     """Both methods render at equal time (each until it has spent the budget);
     the MSEs are those of the saved images against the cached converged
-    reference, which a second run reads back instead of rendering."""
+    reference, which a second run reads back instead of rendering. The neural
+    body and each method's Dr.Jit mode are stated."""
     from nbrdf.mitsuba.scene_report import SceneReportConfig, converged_reference, mse, run_scene_report
     from nbrdf.mitsuba.scenes import load_scene
 
     coated = str(Path(__file__).resolve().parents[2] / "viewer/assets/materials/coated_copper.json")
     scene = _tiny_scene(tmp_path / "tiny.json", coated)
     cfg = SceneReportConfig(out=tmp_path / "rep", scenes=(scene,), size=(12, 9), time_budget=0.5, ref_spp=8,
-                            chunk=2)
+                            chunk=2, neural_body=body)
     result = run_scene_report(cfg, log=lambda s: None)
     (row,) = result["scenes"]
+    assert row["neural_body"] == [body] and row["mode"] == {"neural": mode, "mc": "wavefront"}
+    assert f"| tiny | {body} ({mode}) |" in (tmp_path / "rep" / "scenes.md").read_text()
     assert row["scene"] == "tiny" and row["reference"]["spp"] == 8 and not row["reference"]["cached"]
     assert row["mc"]["spp"] % 2 == 0 and row["mc"]["spp"] >= 2 and row["neural"]["spp"] >= 2
     for k in ("neural", "mc"):  # each rendered until it had spent the budget
@@ -199,6 +203,43 @@ def test_neural_scenes_render_in_wavefront_mode_on_llvm(tmp_path, monkeypatch):
     res = render_mod.render(scene, (8, 6), 2, chunk_spp=1)
     assert res.spp == 2 and np.isfinite(res.image).all()
     assert len(entered) == 2  # one per chunk
+
+
+def test_table_body_scenes_render_in_symbolic_mode(tmp_path, monkeypatch):
+    """A body read from a baked table has no weights to gather: a scene whose neural
+    materials all use it renders symbolically (no wavefront mode entered); the
+    reference and a texture-mapped material (which keeps the decoder) stay wavefront."""
+    import contextlib
+
+    import nbrdf.mitsuba
+    from nbrdf.mitsuba import render as render_mod
+    from nbrdf.mitsuba.scenes import load_scene, neural_bodies, with_method
+
+    entered = []
+
+    @contextlib.contextmanager
+    def recording():
+        entered.append(True)
+        with nbrdf.mitsuba.bsdf.wavefront_mode():
+            yield
+
+    monkeypatch.setattr(nbrdf.mitsuba, "wavefront_mode", recording)
+    scene = load_scene(_tiny_scene(tmp_path / "s.json", GOLD))
+    table = with_method(scene, "neural", "table")
+    assert neural_bodies(table) == {"table"} and neural_bodies(with_method(scene, "neural")) == {"decoder"}
+    res = render_mod.render(table, (8, 6), 2, chunk_spp=1)
+    assert res.spp == 2 and np.isfinite(res.image).all() and res.image.max() > 0
+    assert entered == []
+    assert render_mod.is_wavefront(with_method(scene, "neural")) and render_mod.is_wavefront(with_method(scene, "reference"))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    globe = with_method(load_scene("globe"), "neural", "table")
+    assert neural_bodies(globe) == {"decoder"} and render_mod.is_wavefront(globe)
+
+
+def test_report_scenes_bad_neural_body_exits_2(tmp_path, capsys):
+    assert nbrdf_main(["report", "scenes", "--neural-body", "mlp", "--out", str(tmp_path / "r")]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "--neural-body" in line and "mlp" in line and not (tmp_path / "r").exists()
 
 
 def test_generated_globe_maps_and_material(tmp_path, monkeypatch):
