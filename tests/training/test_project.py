@@ -2,8 +2,9 @@
 fitted to the material's reference samples, the coat kept in closed form) held to
 HDR-FLIP ceilings on the cached sphere renders of ``shipped_renders.py``, the
 references the shipped networks are held to (``test_shipped_renders.py``). A
-worse sampling of the reference, a broken coat split or a decoder that can no
-longer represent these materials fails here."""
+projection 10 % off or without its coat split fails here, as does the older
+schedule (200 steps at lr 0.08: the bare conductor 0.057); a change within a
+sample seed's spread does not (16 paths per sample: up to 0.009 worse, all under)."""
 from __future__ import annotations
 
 import numpy as np
