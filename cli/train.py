@@ -12,7 +12,7 @@ from nbrdf.cli.common import at_least, in_range
 from nbrdf.cli.config import Parser, add_arguments, build, values
 
 #: Operation-only fields that the leaf and sampler commands do not take.
-LAYERING_ONLY = ("data", "recursion_steps", "width", "depth", "loss", "loss_scale", "relative_scale")
+LAYERING_ONLY = ("data", "recursion_steps", "width", "depth", "medium", "medium_lr_scale", "loss", "loss_scale", "relative_scale")
 #: The decoder architecture fields set from the command line, with their help
 #: (``DecoderSpec`` lives in the library; its other fields are fixed).
 SPEC_HELP = {"width": "hidden units per decoder layer", "depth": "hidden layers of the decoder",
@@ -84,8 +84,11 @@ def _operation_flags(what: str) -> Callable[[Parser], None]:
 
         cls = {"leaf": to.LeafConfig, "layering": to.LayeringConfig, "sampler": to.SamplerConfig}[what]
         p.description = cls.__doc__
+        from nbrdf.neural.layering import MEDIUM_SETS
+
         add_arguments(p, cls, exclude=() if what == "layering" else LAYERING_ONLY,
-                      required=("data",) if what == "layering" else (), defaults={"decoder": None})
+                      required=("data",) if what == "layering" else (), defaults={"decoder": None},
+                      choices={"medium": tuple(MEDIUM_SETS)} if what == "layering" else {})
 
     return populate
 

@@ -19,7 +19,7 @@ from nbrdf.neural.coat import with_coat
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bundle, save_decoder
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, LATENT
-from nbrdf.neural.layering import CODE, LayeringNet
+from nbrdf.neural.layering import CODE, LayeringNet, LayeringSpec
 from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
 from nbrdf.neural.material import Material, Measured
 from nbrdf.neural.nets import MLPSpec, load_state, prefixed
@@ -187,7 +187,7 @@ def load_model(path: str | Path | None = None) -> NeuralModel:
             model.leaf = LeafEncoders({k: MLPSpec(**specs["leaf"][k]) for k in LEAF_PARAMS})
             load_state(model.leaf, tensors, "leaf", str(path))
         if "layering" in specs:
-            model.layering = LayeringNet(MLPSpec(**specs["layering"]))
+            model.layering = LayeringNet(LayeringSpec(**specs["layering"]))
             load_state(model.layering, tensors, "layering", str(path))
         if "sampler" in specs:
             model.sampler = SamplerNet(MLPSpec(**specs["sampler"]))

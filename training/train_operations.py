@@ -22,7 +22,7 @@ import json
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -32,7 +32,7 @@ from nbrdf.neural.decoder import DEFAULT_WEIGHTS, encode, loss_target, predicted
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC
-from nbrdf.neural.layering import CODE, LATENT, LayeringNet, layering_spec
+from nbrdf.neural.layering import CODE, LATENT, MEDIUM_SETS, LayeringNet, layering_spec
 from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
 from nbrdf.neural.model import NeuralModel, layered_latents, load_model, save_model
 from nbrdf.neural.sampling import SamplerNet, lambert_pdf, proxy_pdf, proxy_sample
@@ -71,6 +71,13 @@ class OpsConfig:
     """layering: hidden units per layer of the layering network (0: the default, 256)"""
     depth: int = 0
     """layering: hidden layers of the layering network (0: the default, 3)"""
+    medium: str = "basic"
+    """layering: the slab features the network takes (``neural.layering.MEDIUM_SETS``): basic, or slab (adds the
+    slab's closed-form diffuse transmittance 2 E3(sigma_t) and Kubelka-Munk reflectance and transmittance); a
+    bundle network with fewer features is fine-tuned from its weights, the added inputs' weights starting at zero"""
+    medium_lr_scale: float = 1.0
+    """layering: learning-rate multiplier of the first-layer weights on the features a widened network added
+    (a short fine-tune moves every weight by about a percent, too little for weights that start at zero)"""
     loss: str = "log"
     """layering: log (the decoder's training loss) or mean (``neural.decoder.unbiased_error``: fits the
     Monte Carlo mean, where the log loss fits a geometric mean that skewed noise pulls too dark)"""
@@ -122,12 +129,14 @@ class SamplerConfig(OpsConfig):
 # --- a small resumable loop ---------------------------------------------------------------
 def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], total: int,
               step: Callable[[int], Tensor], validate: Callable[[], float], progress: bool,
-              rng: torch.Generator) -> dict:
+              rng: torch.Generator, scaled: tuple[tuple[Tensor, tuple, float], ...] = ()) -> dict:
     """Adam with a cosine schedule; checkpoints every 250 steps into
     ``<out>/<name>.ckpt.pt`` and resumes from it (with the batches' generator
     ``rng``, so a resumed run equals one that ran through); returns the history. With
     ``cfg.ema`` the modules end with (and are validated at) the moving
-    average of their weights."""
+    average of their weights. ``scaled``: (parameter, index, k) entries whose
+    Adam step is k times the others' (Adam's step is elementwise, so this is a
+    learning rate of k lr on those entries alone)."""
     from tqdm import tqdm
 
     out = Path(cfg.out)
@@ -165,7 +174,11 @@ def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], to
         loss = step(s)
         opt.zero_grad(set_to_none=True)
         loss.backward()
+        before = [p.detach()[i].clone() for p, i, _ in scaled]
         opt.step()
+        with torch.no_grad():
+            for (p, i, k), b in zip(scaled, before):
+                p[i] = b + k * (p[i] - b)
         sched.step()
         if ema:  # warm-up: a plain mean of the steps so far while that is shorter than the window
             d = min(cfg.ema, (s + 1) / (s + 2))
@@ -359,13 +372,21 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
     three = train.index_of(*THREE_LAYERED)
     if two.numel() == 0:
         raise NbrdfError(f"{cfg.data}: no two-layer or diffuse-base stacks to train the layering network on")
-    net = LayeringNet(layering_spec(width=cfg.width or 256, depth=cfg.depth or 3))
-    if model.layering is not None and model.layering.spec == net.spec:
-        net.load_state_dict(model.layering.state_dict())  # fine-tune the bundle's network
+    net = LayeringNet(layering_spec(width=cfg.width or 256, depth=cfg.depth or 3, medium=cfg.medium))
+    old, added = model.layering, None
+    if old is not None and old.spec == net.spec:
+        net.load_state_dict(old.state_dict())  # fine-tune the bundle's network
+    elif old is not None and replace(old.spec, inputs=net.spec.inputs, medium=net.spec.medium) == net.spec \
+            and MEDIUM_SETS[old.spec.medium] < MEDIUM_SETS[net.spec.medium]:
+        net = old.widened(net.spec.medium)  # fine-tune it, starting exactly where it is
+        added = (slice(None), slice(old.spec.inputs, None))
     else:
         with torch.no_grad():  # start as the identity "the top hides nothing"
             net.mlp.net[-1].weight.mul_(0.1)
             net.mlp.net[-1].bias.zero_()
+    if not cfg.medium_lr_scale > 0:
+        raise NbrdfError(f"--medium-lr-scale: {cfg.medium_lr_scale} must be positive")
+    scaled = ((net.mlp.net[0].weight, added, cfg.medium_lr_scale),) if added and cfg.medium_lr_scale != 1 else ()
 
     if cfg.loss not in ("log", "mean"):
         raise NbrdfError(f"--loss: {cfg.loss!r} is not one of log, mean")
@@ -392,7 +413,8 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
         return out
 
     t0 = time.perf_counter()
-    history = _run_loop("layering", cfg, {"layering": net}, cfg.steps, step, validate, progress, rng=g)
+    history = _run_loop("layering", cfg, {"layering": net}, cfg.steps, step, validate, progress, rng=g,
+                        scaled=scaled)
     model.layering = net
     model.sampler = None  # trained on the old layered latents: retrain it on these
     model.trained_on.pop("sampler", None)

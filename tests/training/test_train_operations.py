@@ -120,6 +120,27 @@ def test_layering_shape_and_loss_scale_are_chosen(bundles):
         train_layering(replace(cfg, out=str(root / "lay_neg"), loss_scale=-1.0), progress=False)
 
 
+def test_a_basic_bundle_is_fine_tuned_onto_the_slab_features(bundles):
+    """``medium="slab"`` on a bundle whose network takes the basic features
+    fine-tunes that network widened (its weights, zeros on the added inputs),
+    not a fresh one, and the bundle records the feature set."""
+    root, _, lay, _ = bundles
+    old = load_model(lay).layering
+    cfg = OpsConfig(decoder=str(lay), out=str(root / "lay_slab"), steps=5, batch=8, pairs=32, lr=1e-4,
+                    data=str(root / "data"), recursion_steps=2, width=32, medium="slab")
+    new = load_model(train_layering(cfg, progress=False)).layering
+    assert new.spec.medium == "slab" and new.spec.inputs == old.spec.inputs + 3
+    w_old, w_new = old.mlp.net[0].weight, new.mlp.net[0].weight
+    assert (w_new[:, :-3] - w_old).abs().max() < 1e-3 < w_old.abs().mean()  # 5 Adam steps of 1e-4 from the old
+    assert w_new[:, -3:].abs().max() < 1e-3
+    fast = load_model(train_layering(replace(cfg, out=str(root / "lay_slab_fast"), medium_lr_scale=10.0),
+                                     progress=False)).layering.mlp.net[0].weight
+    assert fast[:, -3:].abs().max() > 3 * w_new[:, -3:].abs().max()  # Adam's step on the added weights, x10
+    assert (fast[:, :-3] - w_old).abs().max() < 1e-3  # the others' step unchanged
+    with pytest.raises(NbrdfError, match="--medium-lr-scale"):
+        train_layering(replace(cfg, out=str(root / "lay_slab_bad"), medium_lr_scale=0.0), progress=False)
+
+
 @pytest.mark.slow
 @pytest.mark.ci_slow
 def test_moving_average_of_weights_is_shipped_and_survives_a_resume(bundles, monkeypatch):
