@@ -29,7 +29,7 @@ import torch
 
 from nbrdf.neural.body_table import TableSize, bake_body
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import Diffuse, Material, Medium, TextureRef
+from nbrdf.neural.material import Material
 
 #: Parameters a parametric table may vary: per-channel albedos that enter the body only.
 VARIABLE = {("medium", "albedo"), ("diffuse", "albedo")}
@@ -73,6 +73,8 @@ def table_params(material: Material, texels=None) -> TableParams:
     ranges: dict[str, tuple[float, float]] = {}
     for place, ref in refs:
         m = re.match(r"(layers\[(\d+)\]\.(\w+))", place)
+        if m is None:
+            raise NbrdfError(f"{place}: not a layer's parameter")
         key, layer, field = m.group(1), material.layers[int(m.group(2))], m.group(3)
         if (layer.type, field) not in VARIABLE:
             raise NbrdfError(f"{key}: a texture-mapped {layer.type} {field} cannot be a parametric body table's "
@@ -83,7 +85,7 @@ def table_params(material: Material, texels=None) -> TableParams:
             t = texels(ref, key)[:, 0]
             span = (float(t.min()), float(t.max()))
         else:
-            span = tuple(float(x) for x in ref.range)
+            span = (float(ref.range[0]), float(ref.range[1]))
         lo, hi = ranges.get(key, span)
         ranges[key] = (min(lo, *span), max(hi, *span))
     if len(places) > 2:
@@ -123,10 +125,12 @@ def node_codes(model, material: Material, params: TableParams, grid: ParamGrid) 
 
 
 @torch.no_grad()
-def bake_param_body(model, material: Material, params: TableParams, grid: ParamGrid = ParamGrid(),
-                    size: TableSize = TableSize()) -> torch.Tensor:
+def bake_param_body(model, material: Material, params: TableParams, grid: ParamGrid | None = None,
+                    size: TableSize | None = None) -> torch.Tensor:
     """(A, B, K, M, N) float32 log f: a texture-mapped material's parametric body
-    table over ``params`` (``table_params``; module docstring). Three nodes per decoder pass."""
+    table over ``params`` (``table_params``; module docstring) at ``grid`` and
+    ``size`` (None: their defaults). Three nodes per decoder pass."""
+    grid, size = grid or ParamGrid(), size or TableSize()
     codes = node_codes(model, material, params, grid)
     a, b = codes.shape[:2]
     flat = codes.reshape(a * b, -1)
