@@ -19,9 +19,9 @@ body under a dark, thick slab does.
 """
 from __future__ import annotations
 
-import torch
 from dataclasses import asdict, dataclass, replace
 
+import torch
 from torch import nn
 
 from nbrdf.neural.coat import COAT_PARAMS, coat_features, with_coat

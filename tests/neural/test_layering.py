@@ -12,8 +12,16 @@ from safetensors import safe_open
 
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.layering import (LATENT, MEDIUM_SETS, LayeringNet, LayeringSpec, diffuse_transmittance,
-                                   kubelka_munk, layering_spec, medium_features)
+from nbrdf.neural.layering import (
+    LATENT,
+    MEDIUM_SETS,
+    LayeringNet,
+    LayeringSpec,
+    diffuse_transmittance,
+    kubelka_munk,
+    layering_spec,
+    medium_features,
+)
 from nbrdf.neural.model import NeuralModel, load_model, save_model
 from nbrdf.neural.nets import MLPSpec
 
