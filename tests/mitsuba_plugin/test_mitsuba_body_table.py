@@ -7,28 +7,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from hits import directions, interactions
 
 pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
 
 N = 8192
 
 
-def _dirs(rng, n=N) -> np.ndarray:
-    v = rng.normal(size=(n, 3))
-    v[:, 2] = np.abs(v[:, 2])
-    return (v / np.linalg.norm(v, axis=1, keepdims=True)).astype(np.float32)
-
-
-def _si(mi, wi_np):
-    import drjit as dr
-
-    si = dr.zeros(mi.SurfaceInteraction3f, wi_np.shape[0])
-    si.wi = mi.Vector3f(np.ascontiguousarray(wi_np.T))
-    return si
-
-
 def _eval(mi, bsdf, view, light) -> np.ndarray:
-    return np.array(bsdf.eval(mi.BSDFContext(), _si(mi, view), mi.Vector3f(np.ascontiguousarray(light.T)))).T
+    return np.array(bsdf.eval(mi.BSDFContext(), interactions(mi, view), mi.Vector3f(np.ascontiguousarray(light.T)))).T
 
 
 @pytest.mark.parametrize("role", ["uncoated", "car_paint"])
@@ -41,7 +28,7 @@ def test_table_body_is_the_baked_table_lookup(mi, materials, role):
     from nbrdf.neural.material_code import load_code
 
     rng = np.random.default_rng(3)
-    light, view = _dirs(rng), _dirs(rng)
+    light, view = directions(rng, N), directions(rng, N)
     model, code = load_code(materials[role], None)
     values = bake_body(model.decoder, code, _body_table_size())
     body = TableBody(values.numpy())
@@ -55,7 +42,7 @@ def test_table_eval_is_the_decoder_within_the_tables_error(mi, materials, role):
     """Stated (``bsdf._body_table_size``): mean relative error 0.08-0.15 % over random pairs,
     99th percentile 0.8-1.5 %; bounds at 2x those. Below the horizon both are 0."""
     rng = np.random.default_rng(7)
-    light, view = _dirs(rng), _dirs(rng)
+    light, view = directions(rng, N), directions(rng, N)
     light[:8, 2] *= -1
     dec = _eval(mi, mi.load_dict({"type": "nbrdf", "material": materials[role]}), view, light)
     tab = _eval(mi, mi.load_dict({"type": "nbrdf", "material": materials[role], "body": "table"}), view, light)
@@ -69,9 +56,9 @@ def test_table_sampler_is_the_decoders_and_weight_is_eval_over_pdf(mi, materials
     the decoder's; the weight is the table's eval / pdf (the estimator stays unbiased
     for the table's BRDF)."""
     rng = np.random.default_rng(5)
-    view = _dirs(rng)
+    view = directions(rng, N)
     u = rng.random((N, 3)).astype(np.float32)
-    ctx, si = mi.BSDFContext(), _si(mi, view)
+    ctx, si = mi.BSDFContext(), interactions(mi, view)
     out = {}
     for body in ("decoder", "table"):
         bsdf = mi.load_dict({"type": "nbrdf", "material": materials["coated"], "body": body})

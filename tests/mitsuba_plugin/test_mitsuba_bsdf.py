@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from hits import directions, interactions
 
 from nbrdf.neural.material import load_material
 from nbrdf.training.brdfs import brdf_for
@@ -13,21 +14,6 @@ from nbrdf.training.brdfs import brdf_for
 pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
 
 N = 4096
-
-
-def _dirs(rng, n=N, upper=True) -> np.ndarray:
-    v = rng.normal(size=(n, 3))
-    if upper:
-        v[:, 2] = np.abs(v[:, 2])
-    return (v / np.linalg.norm(v, axis=1, keepdims=True)).astype(np.float32)
-
-
-def _si(mi, wi_np):
-    import drjit as dr
-
-    si = dr.zeros(mi.SurfaceInteraction3f, wi_np.shape[0])
-    si.wi = mi.Vector3f(np.ascontiguousarray(wi_np.T))
-    return si
 
 
 def _within_spec(a: np.ndarray, b: np.ndarray) -> float:
@@ -38,10 +24,10 @@ def _within_spec(a: np.ndarray, b: np.ndarray) -> float:
 @pytest.mark.parametrize("role", ["coated", "car_paint", "uncoated"])
 def test_eval_equals_the_torch_neural_brdf(mi, materials, role):
     rng = np.random.default_rng(11)
-    light, view = _dirs(rng), _dirs(rng)
+    light, view = directions(rng, N), directions(rng, N)
     light[:8, 2] *= -1  # a few below the horizon: zero on both sides
     bsdf = mi.load_dict({"type": "nbrdf", "material": materials[role]})
-    value = np.array(bsdf.eval(mi.BSDFContext(), _si(mi, view), mi.Vector3f(light.T))).T
+    value = np.array(bsdf.eval(mi.BSDFContext(), interactions(mi, view), mi.Vector3f(light.T))).T
     ref = brdf_for(load_material(materials[role]), "neural").eval(torch.from_numpy(light), torch.from_numpy(view))
     ref = ref.numpy() * np.clip(light[:, 2:3], 0, None)  # Mitsuba's eval carries cos(theta_i), i the light
     assert _within_spec(value, ref) <= 1.0
@@ -52,10 +38,10 @@ def test_eval_equals_the_torch_neural_brdf(mi, materials, role):
 @pytest.mark.parametrize("role", ["coated", "uncoated"])
 def test_sample_and_pdf_equal_the_torch_sampler(mi, materials, role):
     rng = np.random.default_rng(5)
-    view = _dirs(rng)
+    view = directions(rng, N)
     u = rng.random((N, 3)).astype(np.float32)
     bsdf = mi.load_dict({"type": "nbrdf", "material": materials[role]})
-    ctx, si = mi.BSDFContext(), _si(mi, view)
+    ctx, si = mi.BSDFContext(), interactions(mi, view)
     bs, weight = bsdf.sample(ctx, si, mi.Float(u[:, 0]), mi.Point2f(u[:, 1], u[:, 2]))
     wo, pdf, weight = np.array(bs.wo).T, np.array(bs.pdf), np.array(weight).T
     ref = brdf_for(load_material(materials[role]), "neural").sample(torch.from_numpy(view), torch.from_numpy(u))
@@ -82,12 +68,12 @@ def test_a_code_file_renders_as_its_material(mi, materials, tmp_path):
     z = model.material_latent(load_material(materials["car_paint"]))
     save_latent(tmp_path / "z.safetensors", MaterialLatent(z, model.decoder_id, {"material": "car paint"}))
     rng = np.random.default_rng(2)
-    light, view = _dirs(rng, 512), _dirs(rng, 512)
+    light, view = directions(rng, 512), directions(rng, 512)
     a = mi.load_dict({"type": "nbrdf", "material": str(tmp_path / "z.safetensors")})
     b = mi.load_dict({"type": "nbrdf", "material": materials["car_paint"]})
     ctx = mi.BSDFContext()
-    va = np.array(a.eval(ctx, _si(mi, view), mi.Vector3f(light.T)))
-    vb = np.array(b.eval(ctx, _si(mi, view), mi.Vector3f(light.T)))
+    va = np.array(a.eval(ctx, interactions(mi, view), mi.Vector3f(light.T)))
+    vb = np.array(b.eval(ctx, interactions(mi, view), mi.Vector3f(light.T)))
     np.testing.assert_array_equal(va, vb)
 
 

@@ -10,16 +10,11 @@ import json
 import numpy as np
 import pytest
 import torch
+from hits import directions
 
 pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
 
 N = 2048
-
-
-def _dirs(rng, n=N) -> np.ndarray:
-    v = rng.normal(size=(n, 3))
-    v[:, 2] = np.abs(v[:, 2])
-    return (v / np.linalg.norm(v, axis=1, keepdims=True)).astype(np.float32)
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +55,7 @@ def _compare(mi, kernel, path, a: float, b: float, rng) -> np.ndarray:
     ``brdf_for(uniform material, "neural")`` at (a, b) on every channel."""
     from nbrdf.training.brdfs import brdf_for
 
-    light, view = _dirs(rng), _dirs(rng)
+    light, view = directions(rng, N), directions(rng, N)
     x = [[mi.Float(a), mi.Float(b)] for _ in range(3)]
     wi, wo = mi.Vector3f(light.T), mi.Vector3f(view.T)
     body = kernel.decoder.body(wi, wo, x)
@@ -116,7 +111,7 @@ def test_param_table_eval_at_hits_is_the_latent_texture_at_the_finest_level(mi, 
     path, table = globe
     decoder = mi.load_dict({"type": "nbrdf", "material": path})
     rng = np.random.default_rng(13)
-    light, view = _dirs(rng), _dirs(rng)
+    light, view = directions(rng, N), directions(rng, N)
     si = dr.zeros(mi.SurfaceInteraction3f, N)
     si.wi = mi.Vector3f(view.T)
     si.uv = mi.Point2f(rng.random((2, N)).astype(np.float32))
@@ -228,7 +223,7 @@ def test_param_table_body_is_the_torch_twin(mi, globe):
     values = bake_param_body(default_model(), material, params, ParamGrid(3, 3), TableSize(16, 8, 4))
     body = ParamTableBody(values.numpy(), params.ranges)
     rng = np.random.default_rng(14)
-    light, view = _dirs(rng), _dirs(rng)
+    light, view = directions(rng, N), directions(rng, N)
     x = rng.random((N, 2)).astype(np.float32) * 1.2 - 0.1  # a tenth beyond each end: clamped at the last node
     got = np.array(body.body(mi.Vector3f(light.T), mi.Vector3f(view.T), [[mi.Float(x[:, 0]), mi.Float(x[:, 1])]])[0])
     want = param_table_lookup(values, params, torch.from_numpy(x), torch.from_numpy(light), torch.from_numpy(view))

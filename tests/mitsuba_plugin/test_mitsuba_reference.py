@@ -5,18 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hits import directions
 
 from nbrdf.cli.main import nbrdf_main
 
 pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
 
 CALLS, SPP = 24, 16  # 384 paths per pair through the plugin
-
-
-def _dirs(rng, n) -> np.ndarray:
-    v = rng.normal(size=(n, 3))
-    v[:, 2] = np.abs(v[:, 2]) + 0.2
-    return (v / np.linalg.norm(v, axis=1, keepdims=True)).astype(np.float32)
 
 
 @pytest.mark.slow
@@ -30,7 +25,7 @@ def test_reference_plugin_agrees_with_nbrdf_eval_reference(mi, materials, tmp_pa
 
     rng = np.random.default_rng(21)
     n = 48
-    light, view = _dirs(rng, n), _dirs(rng, n)
+    light, view = directions(rng, n, lift=0.2), directions(rng, n, lift=0.2)
     bsdf = mi.load_dict({"type": "nbrdf_reference", "material": materials["coated"], "spp": SPP, "seed": 4})
     si = dr.zeros(mi.SurfaceInteraction3f, n)
     si.wi = mi.Vector3f(np.ascontiguousarray(view.T))

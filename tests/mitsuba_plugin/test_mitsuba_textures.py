@@ -8,14 +8,9 @@ import json
 
 import numpy as np
 import pytest
+from hits import directions
 
 pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
-
-
-def _dirs(rng, n) -> np.ndarray:
-    v = rng.normal(size=(n, 3))
-    v[:, 2] = np.abs(v[:, 2]) + 0.2
-    return (v / np.linalg.norm(v, axis=1, keepdims=True)).astype(np.float32)
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +73,7 @@ def test_textured_eval_equals_torch_latent_texture(mi, textured, pixel_angle):
     6 x 4 texture's 4 and between them. Tolerance: float32 decoding."""
     rng = np.random.default_rng(7)
     n = 64
-    light, view = _dirs(rng, n), _dirs(rng, n)
+    light, view = directions(rng, n, lift=0.2), directions(rng, n, lift=0.2)
     uv = (rng.random((n, 2)) * 1.6 - 0.3).astype(np.float32)  # outside [0, 1] too: wraps
     t = np.geomspace(0.5, 32.0, n).astype(np.float32)
     bsdf = mi.load_dict({"type": "nbrdf", "material": textured, "pixel_angle": pixel_angle})
@@ -94,7 +89,7 @@ def test_textured_sampler_pdf_matches_its_samples(mi, textured):
 
     rng = np.random.default_rng(3)
     n = 256
-    view = _dirs(rng, n)
+    view = directions(rng, n, lift=0.2)
     uv = rng.random((n, 2)).astype(np.float32)
     bsdf = mi.load_dict({"type": "nbrdf", "material": textured})
     si = _hits(mi, uv, view)
@@ -133,7 +128,7 @@ def test_textured_reference_is_the_walk_of_the_hits_texel(mi, textured, tmp_path
     bsdf = mi.load_dict({"type": "nbrdf_reference", "material": textured, "spp": spp, "seed": 2})
     zs = []
     for row, col in ((0, 1), (3, 4)):  # image rows from the top
-        light, view = _dirs(rng, n), _dirs(rng, n)
+        light, view = directions(rng, n, lift=0.2), directions(rng, n, lift=0.2)
         uv = np.tile(np.array([[(col + 0.5) / 6, (row + 0.5) / 4]], np.float32), (n, 1))
         with wavefront_mode():
             runs = np.stack([np.array(bsdf.eval(mi.BSDFContext(), _hits(mi, uv, view),

@@ -179,57 +179,52 @@ def test_scene_report_on_a_tiny_scene(tmp_path, body, mode):
     json.loads((tmp_path / "rep" / "scenes.json").read_text())
 
 
-def test_neural_scenes_render_in_wavefront_mode_on_llvm(tmp_path, monkeypatch):
-    """Inside a symbolic call Dr.Jit's LLVM back end loads every decoder weight
-    with a per-lane gather (10x slower, record 071): ``render`` must render a
-    neural scene in wavefront mode, as it does the reference."""
+@pytest.fixture
+def wavefront_entries(monkeypatch):
+    """A list that grows by one each time ``render`` enters Dr.Jit's wavefront mode."""
     import contextlib
 
     pytest.importorskip("mitsuba")
     import nbrdf.mitsuba
+
+    entered = []
+
+    @contextlib.contextmanager
+    def recording():
+        entered.append(True)
+        with nbrdf.mitsuba.bsdf.wavefront_mode():
+            yield
+
+    monkeypatch.setattr(nbrdf.mitsuba, "wavefront_mode", recording)
+    return entered
+
+
+def test_neural_scenes_render_in_wavefront_mode_on_llvm(tmp_path, wavefront_entries):
+    """Inside a symbolic call Dr.Jit's LLVM back end loads every decoder weight
+    with a per-lane gather (10x slower, record 071): ``render`` must render a
+    neural scene in wavefront mode, as it does the reference."""
     from nbrdf.mitsuba import render as render_mod
     from nbrdf.mitsuba.scenes import load_scene
 
-    entered = []
-
-    @contextlib.contextmanager
-    def recording():
-        entered.append(True)
-        with nbrdf.mitsuba.bsdf.wavefront_mode():
-            yield
-
-    monkeypatch.setattr(nbrdf.mitsuba, "wavefront_mode", recording)
     scene = load_scene(_tiny_scene(tmp_path / "s.json", GOLD))
     res = render_mod.render(scene, (8, 6), 2, chunk_spp=1)
     assert res.spp == 2 and np.isfinite(res.image).all()
-    assert len(entered) == 2  # one per chunk
+    assert len(wavefront_entries) == 2  # one per chunk
 
 
-def test_table_body_scenes_render_in_symbolic_mode(tmp_path, monkeypatch):
+def test_table_body_scenes_render_in_symbolic_mode(tmp_path, monkeypatch, wavefront_entries):
     """A body read from a baked table has no weights to gather: a scene whose neural
-    materials all use it renders symbolically (no wavefront mode entered); the
-    reference and a texture-mapped material (which keeps the decoder) stay wavefront."""
-    import contextlib
-
-    import nbrdf.mitsuba
+    materials all use it renders symbolically (no wavefront mode entered), the globe's
+    parametric table too; the reference and the decoder stay wavefront."""
     from nbrdf.mitsuba import render as render_mod
     from nbrdf.mitsuba.scenes import load_scene, neural_bodies, with_method
 
-    entered = []
-
-    @contextlib.contextmanager
-    def recording():
-        entered.append(True)
-        with nbrdf.mitsuba.bsdf.wavefront_mode():
-            yield
-
-    monkeypatch.setattr(nbrdf.mitsuba, "wavefront_mode", recording)
     scene = load_scene(_tiny_scene(tmp_path / "s.json", GOLD))
     table = with_method(scene, "neural", "table")
     assert neural_bodies(table) == {"table"} and neural_bodies(with_method(scene, "neural")) == {"decoder"}
     res = render_mod.render(table, (8, 6), 2, chunk_spp=1)
     assert res.spp == 2 and np.isfinite(res.image).all() and res.image.max() > 0
-    assert entered == []
+    assert wavefront_entries == []
     assert render_mod.is_wavefront(with_method(scene, "neural")) and render_mod.is_wavefront(with_method(scene, "reference"))
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     globe = with_method(load_scene("globe"), "neural", "table")  # a parametric table over its two albedo maps

@@ -7,7 +7,6 @@ schedule (200 steps at lr 0.08: the bare conductor 0.057); a change within a
 sample seed's spread does not (16 paths per sample: up to 0.009 worse, all under)."""
 from __future__ import annotations
 
-import numpy as np
 import pytest
 import shipped_renders as sr
 
@@ -34,28 +33,16 @@ COATED = [n for n in sr.NAMES if n != "conductor-000"]
 pytestmark = pytest.mark.slow  # nine projections: about 30 s of one core, minutes on a loaded 2-core box
 
 
-@pytest.fixture(scope="module")
-def references():
-    return np.load(sr.REFERENCES)
+
 
 
 @pytest.fixture(scope="module")
-def geo():
-    return sr.geometry()
-
-
-@pytest.fixture(scope="module")
-def materials():
-    return {n: sr.material(n) for n in sr.NAMES}
-
-
-@pytest.fixture(scope="module")
-def projected(geo, materials):
+def projected(sphere_geometry, sphere_materials):
     """The projection's renders (sample seed 0: ``brdf_for``'s default)."""
     from nbrdf.training.brdfs import brdf_for
     from nbrdf.training.render_report import shade
 
-    return {n: shade(brdf_for(materials[n], "projected", seed=0).eval, geo) for n in sr.NAMES}
+    return {n: shade(brdf_for(sphere_materials[n], "projected", seed=0).eval, sphere_geometry) for n in sr.NAMES}
 
 
 def test_every_shipped_reference_has_a_ceiling():
@@ -63,20 +50,20 @@ def test_every_shipped_reference_has_a_ceiling():
 
 
 @pytest.mark.parametrize("name", sr.NAMES)
-def test_projected_render_flip_ceiling(references, projected, name):
-    got = sr.flip(references[name], projected[name])
+def test_projected_render_flip_ceiling(sphere_references, projected, name):
+    got = sr.flip(sphere_references[name], projected[name])
     assert got <= CEILINGS[name], f"{name}: HDR-FLIP {got:.4f} over its ceiling {CEILINGS[name]}"
 
 
 @pytest.mark.parametrize("scale", [1.1, 0.9])
-def test_a_projected_render_10_percent_off_breaks_every_ceiling(references, projected, scale):
+def test_a_projected_render_10_percent_off_breaks_every_ceiling(sphere_references, projected, scale):
     """The ceilings' power on the rendered values: the projected render scaled by 1.1 or 0.9 is over the ceiling
     for every material (measured 0.104-0.147)."""
-    kept = [n for n in sr.NAMES if sr.flip(references[n], scale * projected[n]) <= CEILINGS[n]]
+    kept = [n for n in sr.NAMES if sr.flip(sphere_references[n], scale * projected[n]) <= CEILINGS[n]]
     assert not kept, kept
 
 
-def test_a_projection_without_the_coat_split_breaks_every_ceiling(references, geo, materials):
+def test_a_projection_without_the_coat_split_breaks_every_ceiling(sphere_references, sphere_geometry, sphere_materials):
     """The ceilings' power on the projection's coat split: the same samples fitted into the body latent alone,
     the coat's sharp reflection included (no closed-form coat in the code), are over the ceiling for every
     coated material (measured 0.14-0.24)."""
@@ -88,10 +75,10 @@ def test_a_projection_without_the_coat_split_breaks_every_ceiling(references, ge
     dec = default_model().decoder
     kept = []
     for n in COATED:
-        s = material_samples(materials[n], seed=0)
+        s = material_samples(sphere_materials[n], seed=0)
         assert s.coat is not None
         s.coat = None
-        img = shade(latent_brdf(dec, fit(dec, s), materials[n]).eval, geo)
-        if sr.flip(references[n], img) <= CEILINGS[n]:
+        img = shade(latent_brdf(dec, fit(dec, s), sphere_materials[n]).eval, sphere_geometry)
+        if sr.flip(sphere_references[n], img) <= CEILINGS[n]:
             kept.append(n)
     assert not kept, kept

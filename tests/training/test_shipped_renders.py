@@ -31,53 +31,42 @@ CEILINGS = {
 LAYERED = [n for n in sr.NAMES if n != "conductor-000"]
 
 
-@pytest.fixture(scope="module")
-def references():
-    return np.load(sr.REFERENCES)
+
 
 
 @pytest.fixture(scope="module")
-def geo():
-    return sr.geometry()
-
-
-@pytest.fixture(scope="module")
-def materials():
-    return {n: sr.material(n) for n in sr.NAMES}
-
-
-@pytest.fixture(scope="module")
-def shipped(geo, materials):
+def shipped(sphere_geometry, sphere_materials):
     """The shipped bundle's renders."""
-    return {n: sr.neural_render(materials[n], geo) for n in sr.NAMES}
+    return {n: sr.neural_render(sphere_materials[n], sphere_geometry) for n in sr.NAMES}
 
 
-def test_every_reference_has_a_ceiling_and_is_fresh(references, materials):
+def test_every_reference_has_a_ceiling_and_is_fresh(sphere_references, sphere_materials):
     assert set(CEILINGS) == set(sr.NAMES)
-    assert set(references.files) == set(sr.NAMES) | {f"{n}.material" for n in sr.NAMES}
+    assert set(sphere_references.files) == set(sr.NAMES) | {f"{n}.material" for n in sr.NAMES}
     for n in sr.NAMES:
-        assert str(references[f"{n}.material"]) == sr.material_json(materials[n]), (
+        assert str(sphere_references[f"{n}.material"]) == sr.material_json(sphere_materials[n]), (
             f"{n}: the stored reference was rendered from another material: `make goldens` rewrites it")
-        assert references[n].shape == (sr.SIZE, sr.SIZE, 3) and np.isfinite(references[n]).all()
+        assert sphere_references[n].shape == (sr.SIZE, sr.SIZE, 3) and np.isfinite(sphere_references[n]).all()
     assert sr.REFERENCES.stat().st_size < 250_000  # compact
 
 
 @pytest.mark.parametrize("name", sr.NAMES)
-def test_shipped_render_flip_ceiling(references, shipped, name):
-    got = sr.flip(references[name], shipped[name])
+def test_shipped_render_flip_ceiling(sphere_references, shipped, name):
+    got = sr.flip(sphere_references[name], shipped[name])
     assert got <= CEILINGS[name], f"{name}: HDR-FLIP {got:.4f} over its ceiling {CEILINGS[name]}"
 
 
 @pytest.mark.parametrize("scale", [1.1, 0.9])
-def test_a_render_10_percent_off_breaks_every_ceiling(references, shipped, scale):
+def test_a_render_10_percent_off_breaks_every_ceiling(sphere_references, shipped, scale):
     """The ceilings' power on the rendered values: the shipped render scaled by 1.1 or 0.9 is over the ceiling
     for every material (measured 0.099-0.163 against ceilings 0.057-0.096)."""
-    kept = [n for n in sr.NAMES if sr.flip(references[n], scale * shipped[n]) <= CEILINGS[n]]
+    kept = [n for n in sr.NAMES if sr.flip(sphere_references[n], scale * shipped[n]) <= CEILINGS[n]]
     assert not kept, kept
 
 
 @pytest.mark.parametrize("kind", sl.WORSE)
-def test_a_worse_bundle_saved_and_reloaded_breaks_the_ceilings(references, geo, materials, kind, tmp_path):
+def test_a_worse_bundle_saved_and_reloaded_breaks_the_ceilings(sphere_references, sphere_geometry, sphere_materials,
+                                                               kind, tmp_path):
     """The ceilings' power on the networks, through the bundle file a retrain writes: the decoded body 10 %
     high or low breaks every ceiling; the layering network's output 10 % larger (every layered latent shifted)
     breaks every layered material's (measured FLIP 0.061-0.229; the bare conductor has no layering)."""
@@ -85,5 +74,6 @@ def test_a_worse_bundle_saved_and_reloaded_breaks_the_ceilings(references, geo, 
     save_model(sl.worse_bundle(kind), path)
     model = load_model(path)
     names = LAYERED if kind == "layering" else sr.NAMES
-    kept = [n for n in names if sr.flip(references[n], sr.neural_render(materials[n], geo, model)) <= CEILINGS[n]]
+    renders = {n: sr.neural_render(sphere_materials[n], sphere_geometry, model) for n in names}
+    kept = [n for n in names if sr.flip(sphere_references[n], renders[n]) <= CEILINGS[n]]
     assert not kept, kept
