@@ -31,6 +31,10 @@ class RenderConfig:
     """PNG only: exposure in EV before tone mapping"""
     tonemap: str = field(default="neutral", metadata={"choices": ("linear", "aces", "agx", "neutral")})
     """PNG only: the display transform (the previewer's default: Khronos PBR Neutral)"""
+    neural_body: str = field(default="decoder", metadata={"choices": ("decoder", "table")})
+    """the nbrdf materials' body: decoder (the network in the kernel, Dr.Jit's wavefront mode) or table (baked
+    once at load, no weights: renders in symbolic mode, several times faster on a CPU; materials a table
+    cannot hold keep the decoder)"""
 
 
 def cmd_render(a: argparse.Namespace) -> int:
@@ -51,9 +55,9 @@ def cmd_render(a: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from nbrdf.mitsuba.render import render
-    from nbrdf.mitsuba.scenes import load_scene
+    from nbrdf.mitsuba.scenes import load_scene, with_body
 
-    scene = load_scene(c.scene)
+    scene = with_body(load_scene(c.scene), c.neural_body)
     try:
         import nbrdf.mitsuba  # noqa: F401
     except ImportError as e:

@@ -259,12 +259,26 @@ def with_method(scene: Scene, method: str, body: str = "decoder") -> Scene:
     for s in scene.spec["shapes"]:
         m = s["material"]
         if "diffuse" not in m:
-            path = next(iter(m.values()))
-            m = {method: path}
-            if method == "neural" and body != "decoder" and (not is_textured(path) or table_fits(path)):
-                m["body"] = body
+            path = m.get("neural", m.get("reference"))
+            m = _neural_entry(path, body) if method == "neural" else {method: path}
         shapes.append({**s, "material": m})
     return Scene({**scene.spec, "shapes": shapes}, scene.name)
+
+
+def with_body(scene: Scene, body: str) -> Scene:
+    """The scene with ``body`` for every ``nbrdf`` (neural) material that can take it
+    (see ``with_method``); reference and diffuse materials are left as they are."""
+    shapes = [{**s, "material": _neural_entry(s["material"]["neural"], body)} if "neural" in s["material"] else s
+              for s in scene.spec["shapes"]]
+    return Scene({**scene.spec, "shapes": shapes}, scene.name)
+
+
+def _neural_entry(path: str, body: str) -> dict[str, Any]:
+    """A neural material entry with ``body`` where the material can take it."""
+    m: dict[str, Any] = {"neural": path}
+    if body != "decoder" and (not is_textured(path) or table_fits(path)):
+        m["body"] = body
+    return m
 
 
 def is_textured(path: str) -> bool:

@@ -42,6 +42,40 @@ def test_tiny_scene_renders_to_exr_and_png(tmp_path):
     assert png.shape == (12, 16, 3) and png.dtype == np.uint8 and png.max() > 0
 
 
+@pytest.mark.slow
+def test_render_with_a_table_body_is_the_decoders_image(tmp_path):
+    """``nbrdf render --neural-body table``: the same sampler draws as the decoder's (the
+    sampler does not read the body), so the two images differ by the table's error only."""
+    from nbrdf.viewer.image_io import read_exr
+
+    scene = _tiny_scene(tmp_path / "tiny.json", GOLD)
+    args = ["render", scene, "--spp", "4", "--size", "16x12"]
+    assert nbrdf_main([*args, "--out", str(tmp_path / "d.exr")]) == 0
+    assert nbrdf_main([*args, "--neural-body", "table", "--out", str(tmp_path / "t.exr")]) == 0
+    d, t = read_exr(tmp_path / "d.exr"), read_exr(tmp_path / "t.exr")
+    assert np.abs(t - d).mean() < 0.01 * d.mean() and not np.array_equal(t, d)
+
+
+def test_with_body_touches_neural_materials_only(tmp_path):
+    from nbrdf.mitsuba.scenes import load_scene, neural_bodies, with_body
+
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps({
+        "camera": {"origin": [0, -4, 1], "target": [0, 0, 0.5], "fov": 30}, "environment": "studio",
+        "shapes": [{"type": "sphere", "center": [-1, 0, 0.5], "radius": 0.5, "material": GOLD},
+                   {"type": "sphere", "center": [1, 0, 0.5], "radius": 0.5, "material": {"reference": GOLD}},
+                   {"type": "rectangle", "size": [4, 4], "material": {"diffuse": 0.4}}]}))
+    scene = load_scene(str(path))
+    table = with_body(scene, "table")
+    assert neural_bodies(table) == {"table"} and neural_bodies(with_body(scene, "decoder")) == {"decoder"}
+    assert [s["material"] for s in table.spec["shapes"][1:]] == [s["material"] for s in scene.spec["shapes"][1:]]
+
+
+def test_render_bad_neural_body_exits_2(tmp_path, capsys):
+    assert nbrdf_main(["render", "teapot", "--neural-body", "mlp", "--out", str(tmp_path / "x.png")]) == 2
+    assert "--neural-body" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("content, words", [
     ("{not json", "not valid JSON"),
     ('{"camera": {"origin": [0, 0, 1], "target": [0, 0, 0]}, "shapes": []}', "no light"),
