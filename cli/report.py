@@ -257,7 +257,7 @@ class ScenesReport:
     """the figure's path (default: OUT/scenes.png)"""
     seed: int = 0
     """seed of the renders"""
-    neural_body: str = "decoder"
+    neural_body: str = field(default="decoder", metadata={"choices": ("decoder", "table")})
     """the neural material's body: decoder (per query, wavefront mode) or table (baked once per uniform material,
     symbolic mode; a texture-mapped material varying at most two albedos gets a parametric table, others keep
     the decoder)"""
@@ -269,8 +269,6 @@ def cmd_report_scenes(ns: argparse.Namespace) -> int:
         raise NbrdfError(f"report scenes: --time-budget must be positive, --ref-spp at least 2, --chunk at least 1 "
                          f"and --max-chunk at least --chunk (got {c.time_budget}, {c.ref_spp}, {c.chunk}, "
                          f"{c.max_chunk})")
-    if c.neural_body not in ("decoder", "table"):
-        raise NbrdfError(f"report scenes: --neural-body must be decoder or table, got {c.neural_body!r}")
     try:
         import nbrdf.mitsuba  # noqa: F401
     except ImportError as e:
