@@ -304,16 +304,23 @@ class TableBody:
         a table holds one material, so per-lane ``shares`` are refused."""
         if shares is not None:
             raise ValueError("a body table holds one material's body: it takes no per-lane latent shares")
-        k, m, n = self.shape
-        r = rusink5(wi, wo)  # sqrt(2 theta_h / pi), 2 theta_d / pi, cos 2 phi_d, ...
-        u = dr.clip(r[0], 0.0, 1.0)
-        v = dr.clip(r[1], 0.0, 1.0)
-        w = dr.acos(dr.clip(r[2], -1.0, 1.0)) * (1.0 / math.pi)
-        # node i at i / (n - 1) -> texel centre (i + 0.5) / n of the linear-filtered texture
-        pos = mi.Point3f((u * (n - 1) + 0.5) / n, (v * (m - 1) + 0.5) / m, (w * (k - 1) + 0.5) / k)
-        y = self.texture.eval(pos)
+        u, v, w = table_coordinates(wi, wo, self.shape)
+        y = self.texture.eval(mi.Point3f(u, v, w / self.shape[0]))
         up = (wi.z > 0) & (wo.z > 0)
         return [dr.select(up, dr.exp(dr.minimum(c, 80.0)), 0.0) for c in y]
+
+
+def table_coordinates(wi, wo, shape: tuple[int, int, int]) -> tuple:
+    """Where a direction pair reads a baked body table of ``shape`` (K, M, N) nodes
+    (``neural.body_table``'s layout): u, v as texture coordinates of the N theta_h
+    and M theta_d nodes, and the folded phi_d in texels (0.5 ... K - 0.5). Node i
+    sits at the centre (i + 0.5) / n of a linear-filtered texel."""
+    k, m, n = shape
+    r = rusink5(wi, wo)  # sqrt(2 theta_h / pi), 2 theta_d / pi, cos 2 phi_d, ...
+    u = (dr.clip(r[0], 0.0, 1.0) * (n - 1) + 0.5) / n
+    v = (dr.clip(r[1], 0.0, 1.0) * (m - 1) + 0.5) / m
+    w = dr.acos(dr.clip(r[2], -1.0, 1.0)) * ((k - 1) / math.pi) + 0.5
+    return u, v, w
 
 
 class CodeKernel:

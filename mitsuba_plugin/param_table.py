@@ -13,13 +13,11 @@ where a footprint straddles texels (the body is not linear in its parameters).
 """
 from __future__ import annotations
 
-import math
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from nbrdf.mitsuba.kernel import Coat, CodeKernel, Proxy, rusink5
+from nbrdf.mitsuba.kernel import Coat, CodeKernel, Proxy, table_coordinates
 
 #: Nodes per varying parameter and angle: over the globe's map ranges (medium albedo 0.30-0.97, base albedo
 #: 0.05-0.75) against the neural path at random (a, b) and directions, 13 x 13 nodes at 64 x 32 x 16 gives
@@ -62,12 +60,9 @@ class ParamTableBody:
         channel [x_0, x_1] per lane (the varying parameters' values)."""
         if params is None:
             raise ValueError("a parametric body table needs the hit's parameters")
-        k, m, n = self.shape
+        k = self.shape[0]
         na, nb = self.nodes
-        r = rusink5(wi, wo)
-        u = (dr.clip(r[0], 0.0, 1.0) * (n - 1) + 0.5) / n
-        v = (dr.clip(r[1], 0.0, 1.0) * (m - 1) + 0.5) / m
-        w = dr.acos(dr.clip(r[2], -1.0, 1.0)) * ((k - 1) / math.pi) + 0.5  # texels into a slab
+        u, v, w = table_coordinates(wi, wo, self.shape)  # w: texels into a slab
         depth = float(na * nb * k)
         up = (wi.z > 0) & (wo.z > 0)
         out = []
@@ -114,7 +109,7 @@ def param_table_kernel(material, model, pixel_angle: float) -> ParamTableCodeKer
     from nbrdf.mitsuba.textures import MipBuffer, mip_chain
     from nbrdf.neural.body_table import TableSize
     from nbrdf.neural.coat import code_coat
-    from nbrdf.neural.param_table import ParamGrid, bake_param_body, node_codes, table_params
+    from nbrdf.neural.param_table import ParamGrid, bake_param_body, node_codes, param_value, table_params
     from nbrdf.neural.svbrdf import TextureValues, latent_texture
 
     texels = TextureValues(material)
@@ -125,7 +120,7 @@ def param_table_kernel(material, model, pixel_angle: float) -> ParamTableCodeKer
     cols = []
     for place in params.places:
         # the parameter's three channels (a uniform channel of a partly mapped albedo stays constant)
-        v = texels(_param_value(material, place), place)
+        v = texels(param_value(material, place), place)
         cols.append(v.expand(h * w, 3).reshape(h, w, 3))
     maps = MipBuffer(mip_chain(torch.cat(cols, -1).numpy()))
     spec = model.decoder.spec
@@ -136,8 +131,3 @@ def param_table_kernel(material, model, pixel_angle: float) -> ParamTableCodeKer
     return ParamTableCodeKernel(ParamTableBody(values.numpy(), params.ranges), maps, Coat(float(r), float(ior)),
                                 Proxy(sigma, wgt), pixel_angle)
 
-
-def _param_value(material, place: str):
-    """The parameter at ``layers[i].field`` of ``material``."""
-    i = int(place.split("[")[1].split("]")[0])
-    return getattr(material.layers[i], place.split(".")[1])

@@ -33,6 +33,8 @@ from nbrdf.neural.material import Material
 
 #: Parameters a parametric table may vary: per-channel albedos that enter the body only.
 VARIABLE = {("medium", "albedo"), ("diffuse", "albedo")}
+#: A layer's parameter, ``layers[i].field`` (a texture reference's place may go on with a channel).
+_PLACE = re.compile(r"layers\[(\d+)\]\.(\w+)")
 #: The smallest span of a parameter's nodes.
 MIN_SPAN = 1e-3
 
@@ -72,10 +74,10 @@ def table_params(material: Material, texels=None) -> TableParams:
     places: list[str] = []
     ranges: dict[str, tuple[float, float]] = {}
     for place, ref in refs:
-        m = re.match(r"(layers\[(\d+)\]\.(\w+))", place)
+        m = _PLACE.match(place)
         if m is None:
             raise NbrdfError(f"{place}: not a layer's parameter")
-        key, layer, field = m.group(1), material.layers[int(m.group(2))], m.group(3)
+        key, layer, field = m.group(0), material.layers[int(m.group(1))], m.group(2)
         if (layer.type, field) not in VARIABLE:
             raise NbrdfError(f"{key}: a texture-mapped {layer.type} {field} cannot be a parametric body table's "
                              "parameter (only a medium's or a diffuse base's albedo); use body \"decoder\"")
@@ -95,6 +97,14 @@ def table_params(material: Material, texels=None) -> TableParams:
     spans = tuple((lo, max(hi, lo + MIN_SPAN)) for lo, hi in (ranges[p] for p in places))
     return TableParams(tuple(places), spans)
 
+
+
+def param_value(material: Material, place: str):
+    """The value (number, colour or texture reference) at ``place``, ``layers[i].field``."""
+    m = _PLACE.fullmatch(place)
+    if m is None:
+        raise NbrdfError(f"{place}: not a layer's parameter")
+    return getattr(material.layers[int(m.group(1))], m.group(2))
 
 def node_values(params: TableParams, grid: ParamGrid) -> list[torch.Tensor]:
     """The nodes (float64) of each varying parameter."""
