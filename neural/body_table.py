@@ -14,6 +14,10 @@ float32, the decoder's log f per RGB channel, index [k, j, i] at the grid nodes
 - theta_d = j / (M - 1) * pi / 2
 - phi_d   = k / (K - 1) * pi / 2       (folded: 0.5 acos(cos 2 phi_d))
 
+A body that is not reciprocal (Belcour's model, viewer/belcour_gpu.py) needs
+the swap of wi and wo apart: an ``ordered`` table keeps phi_d over [0, pi],
+measured from the half vector's tilt away from the normal (``cos_phi_d``).
+
 Log space keeps trilinear interpolation of a peaked lobe accurate. Nodes whose
 directions fall below the horizon keep the network's value (a smooth
 continuation); the shader zeroes f there as the decoder does. The clear coat
@@ -39,7 +43,10 @@ class TableSize:
     theta_d: int = 32
     """Nodes over theta_d (linear)."""
     phi_d: int = 16
-    """Nodes over the folded phi_d in [0, pi/2] (linear)."""
+    """Nodes over the folded phi_d in [0, pi/2] (linear; [0, pi] when ``ordered``)."""
+    ordered: bool = False
+    """phi_d over [0, pi] with wi's side kept: a body that is not reciprocal (Belcour's
+    model, viewer/belcour_gpu.py); False: folded by the swap of wi and wo as well."""
 
     def check(self) -> "TableSize":
         if min(self.theta_h, self.theta_d, self.phi_d) < 2 or max(self.theta_h, self.theta_d, self.phi_d) > 512:
@@ -59,7 +66,7 @@ def table_directions(size: TableSize) -> tuple[torch.Tensor, torch.Tensor]:
     k, m, n = size.shape
     th = (torch.linspace(0.0, 1.0, n, dtype=torch.float64) ** 2) * (math.pi / 2)
     td = torch.linspace(0.0, 1.0, m, dtype=torch.float64) * (math.pi / 2)
-    pd = torch.linspace(0.0, 1.0, k, dtype=torch.float64) * (math.pi / 2)
+    pd = torch.linspace(0.0, 1.0, k, dtype=torch.float64) * (math.pi if size.ordered else math.pi / 2)
     pd, td, th = torch.meshgrid(pd, td, th, indexing="ij")
     # The difference vector in the half vector's frame, then rotated by theta_h about y.
     dx, dy, dz = torch.sin(td) * torch.cos(pd), torch.sin(td) * torch.sin(pd), torch.cos(td)
@@ -87,15 +94,29 @@ def bake_body(decoder: Decoder, z: torch.Tensor, size: TableSize = TableSize()) 
     return y.clamp(-80.0, 80.0).reshape(*size.shape, 3).contiguous()
 
 
-def table_lookup(values: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
+def cos_phi_d(wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
+    """cos(phi_d) (P,) of wi about the pair's half vector, from the half vector's tilt away
+    from the normal: the third angle of an ``ordered`` table (body_table.glsl nb_cos_phi_d)."""
+    h = wi + wo
+    h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    t = wi - (wi * h).sum(-1, keepdim=True) * h
+    ex = h[..., 2:3] * h - torch.tensor([0.0, 0.0, 1.0], dtype=wi.dtype)
+    en = ex.norm(dim=-1, keepdim=True)
+    ex = torch.where(en > 1e-7, ex / en.clamp_min(1e-12), torch.tensor([1.0, 0.0, 0.0], dtype=wi.dtype))
+    tn = t.norm(dim=-1)
+    return torch.where(tn > 1e-7, (t * ex).sum(-1) / tn.clamp_min(1e-12), torch.ones_like(tn))
+
+
+def table_lookup(values: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor, ordered: bool = False) -> torch.Tensor:
     """f (P, 3) of a baked table at pairs (P, 3) each, trilinear in log space as
     the shader's filtered fetch (a CPU twin for tests and error measurements);
-    0 where a direction is below the horizon."""
+    0 where a direction is below the horizon. ``ordered``: the table's phi_d spans [0, pi]."""
     k, m, n = values.shape[:3]
     r = rusink5(wi, wo)  # sqrt(2 theta_h / pi), 2 theta_d / pi, cos 2 phi_d, ...
     u = r[:, 0].clamp(0, 1) * (n - 1)
     v = r[:, 1].clamp(0, 1) * (m - 1)
-    w = torch.acos(r[:, 2].clamp(-1, 1)) / math.pi * (k - 1)
+    c = cos_phi_d(wi, wo) if ordered else r[:, 2]
+    w = torch.acos(c.clamp(-1, 1)) / math.pi * (k - 1)
     out = torch.zeros(wi.shape[0], 3, dtype=values.dtype)
     i0, j0, k0 = (t.floor().long().clamp(0, s - 2) for t, s in ((u, n), (v, m), (w, k)))
     fu, fv, fw = u - i0, v - j0, w - k0
@@ -109,4 +130,4 @@ def table_lookup(values: torch.Tensor, wi: torch.Tensor, wo: torch.Tensor) -> to
     return torch.where(up, f, torch.zeros_like(f))
 
 
-__all__ = ["TableSize", "bake_body", "table_directions", "table_lookup"]
+__all__ = ["TableSize", "bake_body", "cos_phi_d", "table_directions", "table_lookup"]

@@ -10,14 +10,19 @@ directions.
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import moderngl
 import numpy as np
 import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
-from nbrdf.training.belcour import Atom, BelcourTables, atoms_of, decompose, default_tables
+from nbrdf.training.belcour import ALPHA_MAX, ALPHA_MIN, Atom, BelcourTables, atoms_of, decompose, default_tables
 from nbrdf.viewer import shaders
+
+if TYPE_CHECKING:
+    from nbrdf.neural.body_table import TableSize
 
 #: Atoms the shader holds: four interfaces, each over a medium, and the base.
 MAX_ATOMS = 9
@@ -25,6 +30,8 @@ MAX_ATOMS = 9
 ATOM_KINDS = ("interface", "medium", "conductor", "dielectric", "diffuse")
 DIELECTRIC_UNIT = 14  # texture unit of the dielectric table (R_down, T_down, R_up, T_up)
 SCHLICK_UNIT = 15     # texture unit of the conductor's Schlick terms (A, B)
+#: The largest ior coat.glsl holds (coat_params); a steeper top interface stays in the body.
+COAT_IOR_MAX = 3.0
 
 
 def kinds_snippet() -> str:
@@ -71,8 +78,14 @@ def belcour_uniforms(material: Material, tables: BelcourTables | None = None) ->
     for lobe in dec.lobes:
         k = next(i for i, a in enumerate(atoms) if a is lobe.atom)
         sample_w[k], sample_alpha[k] = float(lobe.energy.mean()), float(lobe.roughness[0])
-    total = sum(sample_w)
+    # The lit pass estimates a coat (the top interface over more stack) apart, in closed form
+    # (coat.glsl: the same GGX reflection as the model's top lobe; its ior clamp is 3).
+    coated = n > 1 and atoms[0].kind == "interface" and float(atoms[0].ior) <= COAT_IOR_MAX
+    coat = (min(max(float(atoms[0].roughness), ALPHA_MIN), ALPHA_MAX), float(atoms[0].ior)) if coated else (0.05, 1.0)
+    body_w = [0.0 if (coated and k == 0) else w for k, w in enumerate(sample_w)]
+    total, body_total = sum(sample_w), sum(body_w)
     sample_w = [w / total for w in sample_w] if total > 0 else [1.0] + [0.0] * (MAX_ATOMS - 1)
+    body_w = [w / body_total for w in body_w] if body_total > 0 else [0.0] * MAX_ATOMS
     for s in dec.slabs:
         k = next(i for i, a in enumerate(atoms) if a is s.atom)
         slab[k], eta[k] = 1, float(s.eta)
@@ -91,7 +104,53 @@ def belcour_uniforms(material: Material, tables: BelcourTables | None = None) ->
         "u_bc_eta": eta,
         "u_bc_sample_w": sample_w,
         "u_bc_sample_alpha": sample_alpha,
+        "u_bc_body_w": body_w,
+        "u_bc_coat": coat,
     }
+
+
+def coat_of(material: Material) -> tuple[float, float] | None:
+    """The (roughness, ior) the lit pass estimates apart as the closed-form coat, or None (no split)."""
+    coat = belcour_uniforms(material)["u_bc_coat"]
+    return coat if coat[1] > 1.0 else None
+
+
+@torch.no_grad()
+def bake_body(material: Material, size: "TableSize", tables: BelcourTables | None = None) -> torch.Tensor:
+    """log f (K, M, N, 3) float32 of the model's body -- the whole model less the coat the
+    lit pass splits off (``coat_of``) -- at the nodes of a body table of ``size``
+    (neural/body_table.py; an ``ordered`` one: the model is not reciprocal): what the
+    window's table program shades where the per-pixel model is too slow (viewer/body_source.py)."""
+    from nbrdf.neural.body_table import table_directions
+    from nbrdf.neural.coat import coat_eval
+
+    if not size.ordered:
+        raise NbrdfError("belcour body table: the model is not reciprocal, its table must be ordered")
+    from nbrdf.training.belcour import belcour_eval_atoms
+
+    wi, wo = (d.reshape(-1, 3).double() for d in table_directions(size))
+    f = belcour_eval_atoms(atoms_for_gpu(material), wi, wo, tables or default_tables())
+    coat = coat_of(material)
+    if coat is not None:
+        f = f - coat_eval(torch.tensor(coat, dtype=torch.float64), wi, wo)[:, None]
+    return f.clamp_min(1e-30).log().clamp(-80.0, 80.0).float().reshape(*size.shape, 3).contiguous()
+
+
+def table_uniforms(material: Material) -> dict:
+    """The table program's uniforms for the model's baked body: the coat (``u_coat``; ior 1:
+    none) and the body's lobe strategy as the proxy pdf -- a Gaussian over the projected half
+    vector as wide as the strongest remaining lobe's GGX slopes (alpha / sqrt 2), plus a
+    cosine share of one half where diffuse slabs scatter (all of it where no lobe is left)."""
+    u = belcour_uniforms(material)
+    coat = coat_of(material) or (0.05, 1.0)
+    w = u["u_bc_body_w"]
+    if max(w) <= 0.0:
+        sigma, cosine = 0.5, 1.0
+    else:
+        sigma = min(max(u["u_bc_sample_alpha"][w.index(max(w))] / 2 ** 0.5, 0.02), 1.0)
+        cosine = 0.5 if any(u["u_bc_slab"]) else 0.1
+    return {"u_proxy_sigma": float(sigma), "u_proxy_w": float(cosine), "u_coat": tuple(float(c) for c in coat),
+            "u_body_table_ordered": 1}
 
 
 class BelcourTextures:

@@ -3,7 +3,8 @@
 On a GPU the decoder runs per pixel in every frame. On software OpenGL
 (llvmpipe) four decoder evaluations per pixel and pass make a frame take
 seconds, so a uniform neural material's body is baked after each edit into a
-table (viewer/body_table_gpu.py): a coarse one for interactive frames, a finer
+table (viewer/body_table_gpu.py), and so is Belcour's model, whose per-pixel
+evaluation costs about three of the table's passes (docs/decisions/101): a coarse one for interactive frames, a finer
 one for the still view (render-space error against the decoder in
 docs/decisions/020-baked-body-table.md). Latent textures always use the
 decoder. The choice is made once at start from the decoder's measured speed
@@ -14,13 +15,19 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, replace
 
+from typing import TYPE_CHECKING, Callable
+
 import moderngl
 import numpy as np
+import torch
 
 from nbrdf.neural.body_table import TableSize
 from nbrdf.viewer.body_table_gpu import INTERACTIVE, STILL, BodyTables
 from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf
+
+if TYPE_CHECKING:
+    from nbrdf.viewer.neural_gpu import GpuDecoder
 
 #: Directions per pass of a table-shaded body from the environment's CDF (a power of two:
 #: a pass's directions are then a stratum-complete run of the pixel's Sobol sequence).
@@ -47,9 +54,13 @@ class BodySettings:
 class BodySource:
     """Hands each frame the BRDF to shade with (module docstring)."""
 
-    def __init__(self, ctx: moderngl.Context, settings: BodySettings | None = None):
+    def __init__(self, ctx: moderngl.Context, settings: BodySettings | None = None,
+                 decoder: "Callable[[], GpuDecoder] | None" = None):
         self.ctx = ctx
         self.settings = settings or BodySettings()
+        self.decoder = decoder
+        """The shared decoder on the GPU, on demand: timed by ``calibrate`` when the first
+        material is not neural, and the source of the table program of a Belcour body."""
         self.tables = BodyTables(ctx)
         self.use_tables: bool | None = None
         """Decided by ``calibrate`` (None: not yet; frames use the decoder)."""
@@ -63,8 +74,11 @@ class BodySource:
         the material's latent, after one warm-up) and decides; returns the notice."""
         from nbrdf.viewer.neural_gpu import probe_fragment
 
-        if brdf.decoder is None or brdf.latent is None:
+        gdec = brdf.decoder if brdf.decoder is not None else self.decoder() if self.decoder is not None else None
+        if gdec is None or brdf.kind not in (BrdfKind.NEURAL, BrdfKind.BELCOUR):
             return self.notice
+        # The probe's cost does not depend on the latent's values: a Belcour material times a zero code.
+        latent = brdf.latent if brdf.latent is not None else torch.zeros(3, gdec.dec.spec.code)
         from nbrdf.viewer import shaders
 
         def pairs(n: int) -> np.ndarray:
@@ -73,17 +87,16 @@ class BodySource:
             v[..., 2] = np.abs(v[..., 2])
             return v
 
-        gdec = brdf.decoder
         prog = self.ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
                                 fragment_shader=gdec.source("decoder_probe.frag"))
         n = self.settings.probe_pairs
         try:
             v = pairs(64)
-            probe_fragment(self.ctx, gdec, brdf.latent, v[0], v[1], prog)  # warm-up
+            probe_fragment(self.ctx, gdec, latent, v[0], v[1], prog)  # warm-up
             while True:  # enough evaluations that the pass, not its set-up and read-back, is timed
                 v = pairs(n)
                 t0 = time.perf_counter()
-                probe_fragment(self.ctx, gdec, brdf.latent, v[0], v[1], prog)
+                probe_fragment(self.ctx, gdec, latent, v[0], v[1], prog)
                 dt = time.perf_counter() - t0
                 if dt >= 0.02 or n >= 1 << 20:
                     break
@@ -106,14 +119,17 @@ class BodySource:
 
     def for_frame(self, brdf: GpuBrdf, interactive: bool) -> GpuBrdf:
         """The BRDF a frame shades with: ``brdf`` itself, or (tables in use, a uniform
-        neural material) its body baked into the interactive or the still table
-        (baked once per ``brdf``, i.e. once per edit)."""
-        if not self.use_tables or brdf.kind != BrdfKind.NEURAL or brdf.latent is None:
+        neural material or Belcour's model) its body baked into the interactive or the
+        still table (baked once per ``brdf``, i.e. once per edit)."""
+        neural = brdf.kind == BrdfKind.NEURAL and brdf.latent is not None
+        belcour = brdf.kind == BrdfKind.BELCOUR and self.decoder is not None
+        if not self.use_tables or not (neural or belcour):
             return brdf
         size = self.settings.interactive if interactive else self.settings.still
         done = self._baked.get(size)
         if done is None or done[0] is not brdf:
-            done = (brdf, self.tables.brdf(brdf, size))
+            baked = self.tables.brdf(brdf, size) if neural else self.tables.belcour(brdf, size, self.decoder())
+            done = (brdf, baked)
             self._baked[size] = done
         return done[1]
 

@@ -1,10 +1,11 @@
-"""A uniform neural material's baked body table on the GPU.
+"""A uniform material's baked body table on the GPU.
 
 ``BodyTables.brdf`` turns a NEURAL ``GpuBrdf`` into a TABLE one: the body
 baked on the CPU (neural/body_table.py, one batched torch decoder pass over
 the table's nodes) and written into a float 3D texture, the coat unchanged
-(closed form in the shader). The direction features of the nodes and their
-part of the decoder's first layer do not depend on the material, so they are
+(closed form in the shader). ``BodyTables.belcour`` does the same for
+Belcour's model (its body from the torch model, ``belcour_gpu.bake_body``).
+The direction features of the nodes and their part of the decoder's first layer do not depend on the material, so they are
 computed once per table size; an edit then costs the decoder's hidden layers
 over the nodes. One texture per size is kept and rewritten per edit.
 """
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import moderngl
 import torch
@@ -20,6 +22,9 @@ from nbrdf.neural.body_table import TableSize, table_directions
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf
+
+if TYPE_CHECKING:
+    from nbrdf.viewer.neural_gpu import GpuDecoder
 
 #: The table of interactive frames (while the user edits): HDR-FLIP against the per-pixel
 #: decoder 0.007 mean, 0.013 worst over the look-development set (docs/decisions/020).
@@ -81,13 +86,34 @@ class BodyTables:
         if base.kind != BrdfKind.NEURAL or base.latent is None:
             raise NbrdfError(f"body table: a uniform neural material only (got {base.kind.value})")
         t0 = time.perf_counter()
-        values = self.bake(base.decoder.dec, base.latent, size)
+        tex = self._upload(self.bake(base.decoder.dec, base.latent, size), size)
+        self.bake_ms = (time.perf_counter() - t0) * 1000.0
+        return replace(base, kind=BrdfKind.TABLE, body_table=tex, share=None,
+                       uniforms={**base.uniforms, "u_body_table_ordered": 0})
+
+    def belcour(self, base: GpuBrdf, size: TableSize, decoder: "GpuDecoder") -> GpuBrdf:
+        """``base`` (a BELCOUR ``GpuBrdf``) as a TABLE one: the model's body baked at the
+        nodes of ``size`` (viewer/belcour_gpu.py ``bake_body``), its coat in closed form, its
+        lobe strategy as the proxy pdf. ``decoder`` only assembles the table program's source
+        (the table program is the neural one with the decoder left out)."""
+        from nbrdf.viewer.belcour_gpu import bake_body, table_uniforms
+
+        if base.kind != BrdfKind.BELCOUR:
+            raise NbrdfError(f"body table: a belcour material only (got {base.kind.value})")
+        t0 = time.perf_counter()
+        size = replace(size, ordered=True)
+        tex = self._upload(bake_body(base.material, size), size)
+        self.bake_ms = (time.perf_counter() - t0) * 1000.0
+        return GpuBrdf(base.material, BrdfKind.TABLE, table_uniforms(base.material), decoder,
+                       normal_map=base.normal_map, body_table=tex)
+
+    def _upload(self, values: torch.Tensor, size: TableSize) -> moderngl.Texture:
+        """``values`` (K, M, N, 3) into the texture of ``size`` (made on first use)."""
         tex = self._tex.get(size)
         if tex is None:
             tex = self._tex[size] = table_texture(self.ctx, size)
         tex.write(values.numpy().astype("f4").tobytes())
-        self.bake_ms = (time.perf_counter() - t0) * 1000.0
-        return replace(base, kind=BrdfKind.TABLE, body_table=tex, share=None)
+        return tex
 
     def release(self) -> None:
         for t in self._tex.values():

@@ -9,7 +9,7 @@ pass and seed, so every figure here is reproducible.
 
 ``python -m nbrdf.viewer.noise`` prints the default render's figures as JSON
 (``--size``, ``--spp``, ``--renders``, ``--terms``, ``--coat-samples``, ``--clamp``),
-``--material`` another material's, ``--target proxy`` with the decoder resampled
+``--material`` another material's, ``--brdf`` another BRDF (belcour), ``--target proxy`` with the decoder resampled
 by the proxy target instead of the body's table (``LitSampling.table_target``).
 """
 from __future__ import annotations
@@ -69,14 +69,14 @@ class NoiseReport:
         return out
 
 
-def default_setup(ctx, material: Path | None = None):
+def default_setup(ctx, material: Path | None = None, brdf: str = "auto"):
     """The default offscreen preview's renderer and state (``nbrdf-view --offscreen``:
-    ``material``, default the default material, studio environment, the framed
-    three-quarter camera), object only."""
+    ``material``, default the default material, shaded by ``brdf`` (``--brdf``),
+    studio environment, the framed three-quarter camera), object only."""
     from nbrdf.viewer.options import ViewOptions
     from nbrdf.viewer.renderer import make_renderer
 
-    opts = ViewOptions() if material is None else ViewOptions(material=material)
+    opts = ViewOptions(brdf=brdf) if material is None else ViewOptions(material=material, brdf=brdf)
     r = make_renderer(ctx, opts.load_material()[0], opts)
     state = replace(opts.state, background=False)
     return r, state
@@ -182,6 +182,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--strategies", type=int, choices=(3, 4), default=None)
     ap.add_argument("--bias", action="store_true", help="also the clamp's bias against a long unclamped render")
     ap.add_argument("--material", type=Path, default=None, help="material file (default: the default material)")
+    ap.add_argument("--brdf", default="auto", help="the BRDF shaded (nbrdf-view --brdf; default auto)")
     ap.add_argument("--target", choices=("table", "proxy"), default=None,
                     help="the decoder's resampling target: the body's baked table or the proxy pdf "
                          "(default: the renderer's)")
@@ -190,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
     from nbrdf.viewer.gl import offscreen_context
 
     try:
-        r, state = default_setup(offscreen_context(), args.material)
+        r, state = default_setup(offscreen_context(), args.material, args.brdf)
     except (NbrdfError, OSError) as e:
         ap.exit(2, f"{ap.prog}: {e}\n")
     if args.target is not None:
@@ -211,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
                ris=r.sampling.ris_samples, candidates=r.sampling.ris_candidates,
                coat_samples=r.sampling.coat_samples, clamp=r.sampling.clamp, strategies=r.sampling.strategies,
                target="table" if r.sampling.table_target else "proxy",
-               material=str(args.material) if args.material else "default")
+               material=str(args.material) if args.material else "default", brdf=args.brdf)
     if args.bias:
         out["clamp_bias"] = clamp_bias(r, state, r.sampling.clamp, (args.size, args.size), args.spp, progress=True)
     print(json.dumps(out))

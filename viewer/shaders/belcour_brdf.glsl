@@ -29,6 +29,8 @@ uniform vec3 u_bc_r_below[BC_MAX_ATOMS];   // ... of it and the stack below it
 uniform float u_bc_eta[BC_MAX_ATOMS];      // a slab's absolute ior
 uniform float u_bc_sample_w[BC_MAX_ATOMS];      // the lobe strategy's mixture weights (see sample_lobe)
 uniform float u_bc_sample_alpha[BC_MAX_ATOMS];  // ... and roughnesses
+uniform float u_bc_body_w[BC_MAX_ATOMS];   // the same mixture without the coat's lobe (all 0: no lobe left)
+uniform vec2 u_bc_coat;  // the top interface's (roughness, ior) when it is a coat, estimated apart; ior 1: none
 uniform sampler3D u_bc_dielectric;
 uniform sampler2D u_bc_schlick;
 
@@ -216,12 +218,20 @@ vec3 bc_lobe_shape(int k, vec3 wi, vec3 wo, float a) {
     return vec3(bc_div(fresnel_dielectric(cos_h, eta) * dg, bc_dielectric(wi.z, a, eta).x));
 }
 
-vec3 brdf(vec3 wi, vec3 wo) {
+// wo's chain: the energy that reaches each slab along it (the diffuse light's
+// exit), kept for the wo it was made for (a pixel's evaluations share their wo).
+float bc_exit_mu = -1.0;
+vec3 bc_exit_T[BC_MAX_ATOMS];
+
+// The model's value with the reflecting atoms' lobes from ``first_lobe`` on
+// (0: the whole BRDF; 1: without the top interface's lobe, the coat).
+vec3 bc_eval(vec3 wi, vec3 wo, int first_lobe) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
-    // wo's chain: the energy that reaches each slab along it (the diffuse light's exit)
-    bc_decompose(wo.z);
-    vec3 exit_T[BC_MAX_ATOMS];
-    for (int k = 0; k < BC_MAX_ATOMS; ++k) exit_T[k] = bc_slab_T[k];
+    if (wo.z != bc_exit_mu) {
+        bc_decompose(wo.z);
+        for (int k = 0; k < BC_MAX_ATOMS; ++k) bc_exit_T[k] = bc_slab_T[k];
+        bc_exit_mu = wo.z;
+    }
     bc_decompose(wi.z);
     vec3 f = vec3(0.0);
     for (int k = 0; k < u_bc_n; ++k) {
@@ -233,14 +243,26 @@ vec3 brdf(vec3 wi, vec3 wo) {
                 up = 0.5 * bc_slab_T[k] * bc_scattered(k, bc_slab_mu[k]) * (1.0 + u_bc_r_below[k]);
             }
             vec3 series = 1.0 / (1.0 - u_bc_r_above[k] * u_bc_r_below[k]);
-            f += up * series * exit_T[k] / (PI * u_bc_eta[k] * u_bc_eta[k]);
+            f += up * series * bc_exit_T[k] / (PI * u_bc_eta[k] * u_bc_eta[k]);
         }
         int kind = u_bc_kind[k];
-        if (kind == BC_INTERFACE || kind == BC_CONDUCTOR || kind == BC_DIELECTRIC)
+        if (k >= first_lobe && (kind == BC_INTERFACE || kind == BC_CONDUCTOR || kind == BC_DIELECTRIC))
             f += bc_lobe_energy[k] * bc_lobe_shape(k, wi, wo, bc_lobe_alpha[k]);
     }
     return f;
 }
+
+vec3 brdf(vec3 wi, vec3 wo) { return bc_eval(wi, wo, 0); }
+
+// The split for the lit pass (lit_shade.glsl): where the top atom is a coat
+// (an interface over more stack), its lobe -- the interface's own GGX
+// reflection, energy R12 times shape F D G / R12 -- is the closed-form coat
+// (coat.glsl) and is estimated apart with its visible normals; the body is
+// the rest, sampled by the mixture of the other lobes.
+//@INCLUDE coat.glsl
+#define NB_SPLIT_COAT 1
+vec2 coat_code() { return u_bc_coat; }
+vec3 body_brdf(vec3 wi, vec3 wo) { return bc_eval(wi, wo, u_bc_coat.y > 1.0 ? 1 : 0); }
 
 // The lit view's lobe strategy: a mixture of GGX visible-normal reflections,
 // one per lobe at its roughness at normal incidence, weighted by its energy
@@ -264,4 +286,32 @@ float pdf_lobe(vec3 wo, vec3 wi) {
     for (int k = 0; k < u_bc_n; ++k)
         if (u_bc_sample_w[k] > 0.0) p += u_bc_sample_w[k] * pdf_ggx_reflection(wo, wi, u_bc_sample_alpha[k]);
     return p;
+}
+
+// The body's lobe strategy: the lobes' mixture without the coat (u_bc_body_w);
+// with no lobe left (a coat over a diffuse base), the cosine lobe.
+vec3 sample_body(vec3 wo, vec3 u) {
+    int pick = -1;
+    float acc = 0.0;
+    for (int k = 0; k < u_bc_n; ++k) {
+        if (u_bc_body_w[k] <= 0.0) continue;
+        pick = k;
+        acc += u_bc_body_w[k];
+        if (u.z < acc) break;
+    }
+    if (pick < 0) {
+        float unused;
+        return sample_cosine(u.xy, unused);
+    }
+    return reflect(-wo, sample_vndf(wo, u_bc_sample_alpha[pick], u.xy));
+}
+
+float pdf_body(vec3 wo, vec3 wi) {
+    float p = 0.0, total = 0.0;
+    for (int k = 0; k < u_bc_n; ++k) {
+        if (u_bc_body_w[k] <= 0.0) continue;
+        total += u_bc_body_w[k];
+        p += u_bc_body_w[k] * pdf_ggx_reflection(wo, wi, u_bc_sample_alpha[k]);
+    }
+    return total > 0.0 ? p : pdf_cosine(wi);
 }
