@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
-
 from typing import TYPE_CHECKING, Callable
 
 import moderngl
