@@ -72,15 +72,27 @@ def test_feature_sets_extend_each_other():
         medium_features(albedo, sigma_t, "thick")
 
 
-def test_the_shipped_bundle_loads_as_the_basic_network():
-    """The shipped file records no feature set; it loads as ``basic`` with its
-    43 inputs, unchanged."""
+def test_the_shipped_bundle_is_basic_and_a_file_without_the_feature_set_loads_as_basic(tmp_path):
+    """The shipped layering network is ``basic`` with its 43 inputs; a file written before
+    feature sets existed (no ``medium`` in its spec, as v7) loads as ``basic``, unchanged."""
+    from safetensors.torch import save_file
+
     with safe_open(str(DEFAULT_WEIGHTS), framework="pt") as fh:
-        spec = json.loads(fh.metadata()["operations"])["specs"]["layering"]
-    assert "medium" not in spec
+        meta = dict(fh.metadata())
+        tensors = {k: fh.get_tensor(k) for k in fh.keys()}
+    ops = json.loads(meta["operations"])
+    spec = ops["specs"]["layering"]
+    assert spec.get("medium", "basic") == "basic"
     net = load_model(DEFAULT_WEIGHTS).layering
     assert net.spec.medium == "basic" and net.spec.inputs == spec["inputs"] == 43
+    spec.pop("medium", None)
     assert LayeringNet(MLPSpec(**spec)).spec == net.spec
+    meta["operations"] = json.dumps(ops)
+    save_file(tensors, str(tmp_path / "old.safetensors"), metadata=meta)
+    old = load_model(tmp_path / "old.safetensors").layering
+    assert old.spec == net.spec
+    for a, b in zip(old.state_dict().values(), net.state_dict().values()):
+        assert torch.equal(a, b)
 
 
 def test_a_widened_network_starts_exactly_where_it_was_and_can_learn_the_new_inputs():
