@@ -252,6 +252,8 @@ class Refiner:
             raise NbrdfError(f"refinement: a code has {dec.spec.code} floats per channel, got {code.shape[1]}")
         self.dec, self.material, self.cfg, self.clock = dec, material, cfg, clock
         self.coat = code[:1, dec.spec.latent:]  # (1, 2): the material's coat, as the network's code has it
+        self.coat_only = not material.interfaces and float(self.coat[0, 1]) > 1.0
+        """A single layer that the code holds as its coat (a lone dielectric): exact in closed form, no body to fit."""
         self.roughness = body_roughness(material)
         self.g = torch.Generator().manual_seed(cfg.seed)
         self.costs = WorkCosts()
@@ -340,7 +342,10 @@ class Refiner:
         lasts) and scores the network's code. ``stop`` pauses it (what was
         simulated is kept); until it is scored, the state holds the network's
         code with infinite errors."""
-        if self.state is not None and self._heldout is not None:
+        if self.state is not None and (self._heldout is not None or self.state.done):
+            return self.state
+        if self.coat_only:  # nothing below the coat: the network's code is already exact
+            self.state = RefineState(self._network_code, 0.0, 0.0, done=True, converged=True, history=[0.0])
             return self.state
         c = self.cfg
         if self.state is None:
