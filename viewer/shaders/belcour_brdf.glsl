@@ -267,36 +267,17 @@ vec3 body_brdf(vec3 wi, vec3 wo) { return bc_eval(wi, wo, u_bc_coat.y > 1.0 ? 1 
 // The lit view's lobe strategy: a mixture of GGX visible-normal reflections,
 // one per lobe at its roughness at normal incidence, weighted by its energy
 // there (u_bc_sample_w sums to 1); the environment and cosine strategies take
-// the diffuse slabs by MIS.
+// the diffuse slabs by MIS. The body's (the split's) is the same mixture
+// without the coat's lobe (u_bc_body_w); with no lobe left (a coat over a
+// diffuse base), the cosine lobe.
 //@INCLUDE sampling.glsl
-vec3 sample_lobe(vec3 wo, vec3 u) {
-    int pick = 0;
-    float acc = 0.0;
-    for (int k = 0; k < u_bc_n; ++k) {
-        if (u_bc_sample_w[k] <= 0.0) continue;
-        pick = k;
-        acc += u_bc_sample_w[k];
-        if (u.z < acc) break;
-    }
-    return reflect(-wo, sample_vndf(wo, u_bc_sample_alpha[pick], u.xy));
-}
-
-float pdf_lobe(vec3 wo, vec3 wi) {
-    float p = 0.0;
-    for (int k = 0; k < u_bc_n; ++k)
-        if (u_bc_sample_w[k] > 0.0) p += u_bc_sample_w[k] * pdf_ggx_reflection(wo, wi, u_bc_sample_alpha[k]);
-    return p;
-}
-
-// The body's lobe strategy: the lobes' mixture without the coat (u_bc_body_w);
-// with no lobe left (a coat over a diffuse base), the cosine lobe.
-vec3 sample_body(vec3 wo, vec3 u) {
+vec3 bc_sample_mixture(vec3 wo, vec3 u, float w[BC_MAX_ATOMS]) {
     int pick = -1;
     float acc = 0.0;
     for (int k = 0; k < u_bc_n; ++k) {
-        if (u_bc_body_w[k] <= 0.0) continue;
+        if (w[k] <= 0.0) continue;
         pick = k;
-        acc += u_bc_body_w[k];
+        acc += w[k];
         if (u.z < acc) break;
     }
     if (pick < 0) {
@@ -306,12 +287,17 @@ vec3 sample_body(vec3 wo, vec3 u) {
     return reflect(-wo, sample_vndf(wo, u_bc_sample_alpha[pick], u.xy));
 }
 
-float pdf_body(vec3 wo, vec3 wi) {
+float bc_pdf_mixture(vec3 wo, vec3 wi, float w[BC_MAX_ATOMS]) {
     float p = 0.0, total = 0.0;
     for (int k = 0; k < u_bc_n; ++k) {
-        if (u_bc_body_w[k] <= 0.0) continue;
-        total += u_bc_body_w[k];
-        p += u_bc_body_w[k] * pdf_ggx_reflection(wo, wi, u_bc_sample_alpha[k]);
+        if (w[k] <= 0.0) continue;
+        total += w[k];
+        p += w[k] * pdf_ggx_reflection(wo, wi, u_bc_sample_alpha[k]);
     }
     return total > 0.0 ? p : pdf_cosine(wi);
 }
+
+vec3 sample_lobe(vec3 wo, vec3 u) { return bc_sample_mixture(wo, u, u_bc_sample_w); }
+float pdf_lobe(vec3 wo, vec3 wi) { return bc_pdf_mixture(wo, wi, u_bc_sample_w); }
+vec3 sample_body(vec3 wo, vec3 u) { return bc_sample_mixture(wo, u, u_bc_body_w); }
+float pdf_body(vec3 wo, vec3 wi) { return bc_pdf_mixture(wo, wi, u_bc_body_w); }
