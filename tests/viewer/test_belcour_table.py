@@ -116,3 +116,21 @@ def test_the_window_bakes_belcour_when_it_bakes_bodies(setup):
     finally:
         slow.release()
         fast.release()
+
+
+def test_the_split_takes_the_top_interface_as_the_coat_and_samples_the_rest():
+    """The lit pass's split (belcour_brdf.glsl NB_SPLIT_COAT): a coat over more stack is the coat, its lobe left
+    out of the body's mixture (which sums to 1, or is empty over a diffuse base: the cosine lobe then); a stack
+    whose top is no interface (a lone conductor) has no coat and keeps its whole mixture as the body's."""
+    from nbrdf.neural.material import parse_material
+    from nbrdf.viewer.belcour_gpu import belcour_uniforms
+
+    metal = belcour_uniforms(load_material(DEFAULT_MATERIAL))
+    top = load_material(DEFAULT_MATERIAL).layers[0]
+    assert metal["u_bc_coat"] == (top.roughness, top.ior)
+    assert metal["u_bc_body_w"][0] == 0.0 and abs(sum(metal["u_bc_body_w"]) - 1.0) < 1e-12
+    plastic = belcour_uniforms(load_material(ASSETS / "clear_coat_plastic.json"))
+    assert plastic["u_bc_coat"][1] > 1.0 and sum(plastic["u_bc_body_w"]) == 0.0
+    gold = belcour_uniforms(parse_material({"format": "nbrdf-material/1", "name": "au", "layers": [
+        {"type": "conductor", "roughness": 0.3, "r0": [1.0, 0.8, 0.3]}]}))
+    assert gold["u_bc_coat"][1] == 1.0 and gold["u_bc_body_w"] == gold["u_bc_sample_w"]
