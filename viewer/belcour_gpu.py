@@ -18,7 +18,16 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
-from nbrdf.training.belcour import ALPHA_MAX, ALPHA_MIN, Atom, BelcourTables, atoms_of, decompose, default_tables
+from nbrdf.training.belcour import (
+    ALPHA_MAX,
+    ALPHA_MIN,
+    Atom,
+    BelcourTables,
+    atoms_of,
+    belcour_eval_atoms,
+    decompose,
+    default_tables,
+)
 from nbrdf.viewer import shaders
 
 if TYPE_CHECKING:
@@ -126,8 +135,6 @@ def bake_body(material: Material, size: "TableSize", tables: BelcourTables | Non
 
     if not size.ordered:
         raise NbrdfError("belcour body table: the model is not reciprocal, its table must be ordered")
-    from nbrdf.training.belcour import belcour_eval_atoms
-
     wi, wo = (d.reshape(-1, 3).double() for d in table_directions(size))
     f = belcour_eval_atoms(atoms_for_gpu(material), wi, wo, tables or default_tables())
     coat = coat_of(material)
@@ -142,7 +149,7 @@ def table_uniforms(material: Material) -> dict:
     vector as wide as the strongest remaining lobe's GGX slopes (alpha / sqrt 2), plus a
     cosine share of one half where diffuse slabs scatter (all of it where no lobe is left)."""
     u = belcour_uniforms(material)
-    coat = coat_of(material) or (0.05, 1.0)
+    coat = u["u_bc_coat"]  # (0.05, 1): no coat
     w = u["u_bc_body_w"]
     if max(w) <= 0.0:
         sigma, cosine = 0.5, 1.0

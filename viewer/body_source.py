@@ -3,10 +3,10 @@
 On a GPU the decoder runs per pixel in every frame. On software OpenGL
 (llvmpipe) four decoder evaluations per pixel and pass make a frame take
 seconds, so a uniform neural material's body is baked after each edit into a
-table (viewer/body_table_gpu.py), and so is Belcour's model, whose per-pixel
-evaluation costs about three of the table's passes (docs/decisions/101): a coarse one for interactive frames, a finer
+table (viewer/body_table_gpu.py): a coarse one for interactive frames, a finer
 one for the still view (render-space error against the decoder in
-docs/decisions/020-baked-body-table.md). Latent textures always use the
+docs/decisions/020-baked-body-table.md). So is Belcour's model, whose
+per-pixel evaluation costs about three table passes (docs/decisions/101). Latent textures always use the
 decoder. The choice is made once at start from the decoder's measured speed
 (``calibrate``) and said in one line (``notice``).
 """

@@ -5,9 +5,10 @@ baked on the CPU (neural/body_table.py, one batched torch decoder pass over
 the table's nodes) and written into a float 3D texture, the coat unchanged
 (closed form in the shader). ``BodyTables.belcour`` does the same for
 Belcour's model (its body from the torch model, ``belcour_gpu.bake_body``).
-The direction features of the nodes and their part of the decoder's first layer do not depend on the material, so they are
-computed once per table size; an edit then costs the decoder's hidden layers
-over the nodes. One texture per size is kept and rewritten per edit.
+The direction features of the nodes and their part of the decoder's first
+layer do not depend on the material, so they are computed once per table
+size; an edit then costs the decoder's hidden layers over the nodes. One
+texture per size (and ordering) is kept and rewritten per edit.
 """
 from __future__ import annotations
 

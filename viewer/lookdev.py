@@ -120,7 +120,8 @@ class LookDev(SessionEdits):
                 self.material_parts.set(parts, len(self.renderer.mesh.draw_ranges), mesh))
         self.compare_part = Compare(ctx, self.renderer)
         self.backdrop_part = Backdrop(ctx, self.renderer)
-        self.bodies = BodySource(ctx, decoder=lambda: self.pipeline.decoder)  # the window's frames: decoder or baked body table (viewer/body_source.py)
+        # The window's frames: decoder or baked body table (viewer/body_source.py).
+        self.bodies = BodySource(ctx, decoder=lambda: self.pipeline.decoder)
         # A still uniform material's code refined in the worker process (viewer/refine_job.py).
         self.idle_refine = IdleRefiner(lambda: self.worker, lambda: self.pipeline.model.decoder)
         self._apply_material()

@@ -81,3 +81,19 @@ def test_bad_input():
         bake_body(dec, torch.full((3, dec.spec.latent), float("nan")))
     with pytest.raises(NbrdfError):
         bake_body(dec, latent(dec), TableSize(1, 8, 8))
+
+
+def test_an_ordered_table_tells_the_swapped_pair_apart():
+    """An ordered table (a body that is not reciprocal) is read back at its own nodes (but where
+    theta_d = 0: there every phi_d is the same pair), and a pair and its swap read different
+    nodes; folding the swap (an unordered lookup) does not."""
+    size = TableSize(6, 5, 7, ordered=True)
+    values = torch.randn(*size.shape, 3, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    wi, wo = (d.reshape(-1, 3).double() for d in table_directions(size))
+    up = (wi[:, 2] > 1e-3) & (wo[:, 2] > 1e-3) & ((wi - wo).norm(dim=-1) > 1e-6)
+    got = table_lookup(values, wi[up], wo[up], ordered=True)
+    assert torch.allclose(got, values.reshape(-1, 3)[up].exp(), rtol=1e-4)
+    swapped = table_lookup(values, wo[up], wi[up], ordered=True)
+    assert (swapped - got).abs().max() > 0.1
+    folded = table_lookup(values, wi[up], wo[up])
+    assert not torch.allclose(folded, got, rtol=1e-3)
