@@ -328,7 +328,7 @@ def test_64_path_errors_hold_over_a_medium_and_a_near_mirror():
 STILL_HEAVY_TAILED = ("three_layer-001",)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 14, open: this held-out stack still fails it at 64 paths with "
+@pytest.mark.xfail(strict=True, reason="issue 14 (resolved) left one held-out stack open: it still fails it at 64 paths with "
                    "estimator v7 (KS p 3.6e-8 in red; docs/RESULTS.md). Remove the marker when it passes.")
 def test_64_path_errors_hold_on_the_remaining_heavy_tailed_stacks():
     """The issue's target on every stack: the same check on the held-out stack that still fails it."""
