@@ -118,18 +118,21 @@ def belcour_uniforms(material: Material, tables: BelcourTables | None = None) ->
     }
 
 
-def coat_of(material: Material) -> tuple[float, float] | None:
-    """The (roughness, ior) the lit pass estimates apart as the closed-form coat, or None (no split)."""
-    coat = belcour_uniforms(material)["u_bc_coat"]
+def coat_of(material: Material, uniforms: dict | None = None) -> tuple[float, float] | None:
+    """The (roughness, ior) the lit pass estimates apart as the closed-form coat, or None (no split);
+    ``uniforms``: the material's ``belcour_uniforms`` when they are at hand (its ``GpuBrdf``'s)."""
+    coat = (uniforms or belcour_uniforms(material))["u_bc_coat"]
     return coat if coat[1] > 1.0 else None
 
 
 @torch.no_grad()
-def bake_body(material: Material, size: "TableSize", tables: BelcourTables | None = None) -> torch.Tensor:
+def bake_body(material: Material, size: "TableSize", tables: BelcourTables | None = None,
+              uniforms: dict | None = None) -> torch.Tensor:
     """log f (K, M, N, 3) float32 of the model's body -- the whole model less the coat the
     lit pass splits off (``coat_of``) -- at the nodes of a body table of ``size``
     (neural/body_table.py; an ``ordered`` one: the model is not reciprocal): what the
-    window's table program shades where the per-pixel model is too slow (viewer/body_source.py)."""
+    window's table program shades where the per-pixel model is too slow (viewer/body_source.py).
+    ``uniforms`` as ``coat_of``."""
     from nbrdf.neural.body_table import table_directions
     from nbrdf.neural.coat import coat_eval
 
@@ -137,18 +140,19 @@ def bake_body(material: Material, size: "TableSize", tables: BelcourTables | Non
         raise NbrdfError("belcour body table: the model is not reciprocal, its table must be ordered")
     wi, wo = (d.reshape(-1, 3).double() for d in table_directions(size))
     f = belcour_eval_atoms(atoms_for_gpu(material), wi, wo, tables or default_tables())
-    coat = coat_of(material)
+    coat = coat_of(material, uniforms)
     if coat is not None:
         f = f - coat_eval(torch.tensor(coat, dtype=torch.float64), wi, wo)[:, None]
     return f.clamp_min(1e-30).log().clamp(-80.0, 80.0).float().reshape(*size.shape, 3).contiguous()
 
 
-def table_uniforms(material: Material) -> dict:
+def table_uniforms(material: Material, uniforms: dict | None = None) -> dict:
     """The table program's uniforms for the model's baked body: the coat (``u_coat``; ior 1:
     none) and the body's lobe strategy as the proxy pdf -- a Gaussian over the projected half
     vector as wide as the strongest remaining lobe's GGX slopes (alpha / sqrt 2), plus a
-    cosine share of one half where diffuse slabs scatter (all of it where no lobe is left)."""
-    u = belcour_uniforms(material)
+    cosine share of one half where diffuse slabs scatter (all of it where no lobe is left).
+    ``uniforms`` as ``coat_of``."""
+    u = uniforms or belcour_uniforms(material)
     coat = u["u_bc_coat"]  # (0.05, 1): no coat
     w = u["u_bc_body_w"]
     if max(w) <= 0.0:

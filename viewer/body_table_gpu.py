@@ -103,9 +103,10 @@ class BodyTables:
             raise NbrdfError(f"body table: a belcour material only (got {base.kind.value})")
         t0 = time.perf_counter()
         size = replace(size, ordered=True)
-        tex = self._upload(bake_body(base.material, size), size)
+        # base's uniforms are the model's decomposition for this material: made once per edit, reused here
+        tex = self._upload(bake_body(base.material, size, uniforms=base.uniforms), size)
         self.bake_ms = (time.perf_counter() - t0) * 1000.0
-        return GpuBrdf(base.material, BrdfKind.TABLE, table_uniforms(base.material), decoder,
+        return GpuBrdf(base.material, BrdfKind.TABLE, table_uniforms(base.material, base.uniforms), decoder,
                        normal_map=base.normal_map, body_table=tex)
 
     def _upload(self, values: torch.Tensor, size: TableSize) -> moderngl.Texture:

@@ -110,6 +110,7 @@ def test_the_window_bakes_belcour_when_it_bakes_bodies(setup):
         assert "baked body tables" in slow.calibrate(brdf) and slow.use_tables
         a = slow.for_frame(brdf, interactive=True)
         assert a.kind == BrdfKind.TABLE and a.body_table.size == (32, 16, 8)
+        assert a.uniforms == table_uniforms(brdf.material)  # from the GpuBrdf's own decomposition
         assert slow.for_frame(brdf, interactive=True) is a  # one bake per edit
         assert "decoder in every frame" in fast.calibrate(brdf)
         assert fast.for_frame(brdf, interactive=True) is brdf  # a fast GPU shades the model per pixel
