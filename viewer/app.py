@@ -24,8 +24,11 @@ from a table baked per edit (viewer/body_source.py).
 """
 from __future__ import annotations
 
+import signal
+import threading
 import time
 from collections import deque
+from typing import Callable
 
 import numpy as np
 import torch
@@ -408,6 +411,10 @@ class App:
         return np.frombuffer(data, dtype=np.uint8).reshape(h, w, 3)[::-1].copy()
 
     def run(self) -> None:
+        """The window's loop until it is closed: by its close button, Esc, or SIGTERM / SIGHUP
+        (a logout, ``kill``, a service manager), which close it the same way -- the session
+        written and the lock released, so the next window offers no recovery."""
+        restore = self._close_on_signals()
         try:
             while not glfw.window_should_close(self.window):
                 self.step()
@@ -416,7 +423,27 @@ class App:
         except GlContextLost:
             self.close(abnormal=True)
             raise
+        finally:
+            restore()
         self.close()
+
+    def _close_on_signals(self) -> Callable[[], None]:
+        """Makes SIGTERM and SIGHUP ask the loop to close the window (from the main thread
+        only, where Python delivers signals); returns what puts the old handlers back."""
+        if threading.current_thread() is not threading.main_thread():
+            return lambda: None
+        window = self.window
+
+        def close(signum, frame) -> None:
+            glfw.set_window_should_close(window, True)
+
+        sigs = [s for s in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None)) if s is not None]
+        old = {s: signal.signal(s, close) for s in sigs}
+
+        def restore() -> None:
+            for s, handler in old.items():
+                signal.signal(s, handler)
+        return restore
 
     def close(self, abnormal: bool = False) -> None:
         """Closes the window; ``abnormal`` (the GL gave up): the session is written but kept

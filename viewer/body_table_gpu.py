@@ -27,6 +27,8 @@ from nbrdf.viewer.pipeline import BrdfKind, GpuBrdf
 if TYPE_CHECKING:
     from nbrdf.viewer.neural_gpu import GpuDecoder
 
+#: The texture unit a baked body table is bound to (the table body and the decoder's resampling guide).
+TABLE_UNIT = 13
 #: The table of interactive frames (while the user edits): HDR-FLIP against the per-pixel
 #: decoder 0.007 mean, 0.013 worst over the look-development set (docs/decisions/020).
 INTERACTIVE = TableSize(32, 16, 8)

@@ -18,6 +18,7 @@ import moderngl
 import numpy as np
 
 from nbrdf.viewer.body_guide import BodyGuides
+from nbrdf.viewer.body_table_gpu import TABLE_UNIT
 from nbrdf.viewer.gl_state import accumulating, depth_tested, masked
 from nbrdf.viewer.lit_sampling import LitSampling
 from nbrdf.viewer.modes import View
@@ -165,8 +166,6 @@ class LitPasses:
         """The resampling target's table (``u_ris_table``, lit_shade.glsl ``ris_target``): a
         table-shaded body's own table, the decoder's baked guide (a uniform latent,
         viewer/body_guide.py), or none (the proxy target: latent textures, ``table_target`` off)."""
-        from nbrdf.viewer.renderer import TABLE_UNIT
-
         if "u_ris_table" not in p:
             if "u_ris_lobe" in p:
                 p["u_ris_lobe"].value = 0

@@ -243,7 +243,7 @@ class LookDev(SessionEdits):
     def invalidate(self) -> None:
         """Starts the progressive accumulation over (and a screenshot being rendered:
         it shows the session as it is when it ends)."""
-        self.frames.passes = 0
+        self.frames.restart()
         self.shots.restart()
 
     # --- material -> latents -> GPU -------------------------------------------------------
@@ -320,7 +320,8 @@ class LookDev(SessionEdits):
         refined = self.idle_refine.poll()
         if refined is not None:  # a code that beats the network's on the material's own simulation
             self.brdf = self.pipeline.build(self.material, BrdfMode.NEURAL, latent=refined)
-            self.invalidate()
+            self.frames.handover()  # the image so far fades into the refined code's, no restart from noise
+            self.shots.restart()
         if self.turntables.capture is not None and self.brdf is not None:
             self.guarded(self.turntables.step)
 

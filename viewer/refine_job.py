@@ -34,6 +34,11 @@ class IdleRefineSettings:
     variable NBRDF_IDLE_REFINE=0 turns it off: the test suite's windows show the network's codes)."""
     still_seconds: float = 0.5
     """Seconds without an edit before the refinement starts."""
+    reswap_ratio: float = 0.7
+    """While the refinement runs, a later round's code replaces a refined code already shown only
+    when its held-out error is at most this fraction of the shown one's (each swap fades the still
+    view into a new accumulation, record 103); the best code is always shown when the refinement
+    ends. The first code that beats the network's is shown at once."""
     config: RefineConfig = field(default_factory=RefineConfig)
     """The refinement's settings (its ``budget``: seconds from the start of the work)."""
 
@@ -109,6 +114,10 @@ class _RefineRun:
         return res, st.rounds, st.done, None
 
 
+#: The status's tail while a refined code is shown and later rounds still run.
+RUNNING = ", refining..."
+
+
 def job_key(material: Material, decoder_id: str) -> str:
     return f"refine:{material_hash(material)}:{decoder_id[:12]}"
 
@@ -129,7 +138,8 @@ class IdleRefiner:
         self._since = 0.0
         self._shown = float("inf")  # the held-out error of the refined code on screen (inf: the network's)
         self.status = ""
-        """What the panel says: "" (nothing refined), "refining...", "refined, N s"."""
+        """What the panel says: "" (nothing refined), "refining...", "refined, N s" (with
+        ``RUNNING`` while later rounds run)."""
 
     def _decoder_id(self) -> str:
         return self._decoder().weights_id()
@@ -185,11 +195,14 @@ class IdleRefiner:
             return None
         if r.done:
             self._key = None
+            self.status = self.status.removesuffix(RUNNING)
             if not r.improved:
                 self.status = "" if self._shown == float("inf") else self.status
-        if r.improved and r.heldout < self._shown:
+        first = self._shown == float("inf")
+        if r.improved and r.heldout < self._shown and (
+                first or r.done or r.heldout <= self.settings.reswap_ratio * self._shown):
             self._shown = r.heldout
-            self.status = f"refined, {r.seconds:.0f} s"
+            self.status = f"refined, {r.seconds:.0f} s" + ("" if r.done else RUNNING)
             return torch.from_numpy(r.code)
         return None
 

@@ -39,6 +39,7 @@ import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
+from nbrdf.viewer.body_table_gpu import TABLE_UNIT
 from nbrdf.viewer.env_presets import resolve_environment
 from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
 from nbrdf.viewer.gl import use_compute
@@ -62,7 +63,6 @@ if TYPE_CHECKING:
 VIEWS = View.words()
 LOBE_SIZE = 64
 NORMAL_UNIT = 9  # texture unit of a material's normal map
-TABLE_UNIT = 13  # texture unit of a material's baked body table
 MAIN = "main"    # the default accumulation slot
 
 

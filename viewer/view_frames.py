@@ -24,6 +24,10 @@ if TYPE_CHECKING:
 MAX_PASSES = 1024
 #: The accumulation slots of the window's view: the image, the second image of a BRDF blend.
 VIEW_SLOTS = ("main", "other")
+#: The two slots the window's image alternates between when a code is handed over (``ViewFrames.handover``).
+MAIN_SLOTS = ("main", "main_b")
+#: Passes of a handed-over code over which the image it replaces fades out (or fewer: that image's own passes).
+HANDOVER_PASSES = 8
 
 
 class ViewFrames:
@@ -38,6 +42,36 @@ class ViewFrames:
         self._accum_key: tuple | None = None  # the (size, view) the accumulation is for
         self._view_tex: dict[str, moderngl.Texture] = {}  # the lobe / slice image of each slot
         self._body: GpuBrdf | None = None  # the BRDF the accumulation was shaded with
+        self._slot = MAIN_SLOTS[0]  # the slot the image accumulates in
+        self._held: tuple[str, int] | None = None  # (slot, passes) of the image a handover fades out
+
+    def restart(self) -> None:
+        """Starts the accumulation over on the next frame (an edit, a view change)."""
+        self.passes, self._held = 0, None
+
+    def handover(self) -> None:
+        """The shown BRDF changed without an edit (idle refinement swapped a better code
+        in): the image so far stays on screen and fades out linearly over the new code's
+        first ``HANDOVER_PASSES`` passes (or its own passes, if fewer), so the still view
+        never drops back to one noisy pass for a change the user did not make. The two
+        codes are close (the refined one starts from the shown one), so the blend is a
+        short, smooth transition. A second handover during a fade keeps whichever image
+        has more passes. The compare and BRDF-blend views start over instead."""
+        ld = self.session
+        plain = (View.parse(ld.state.view) == View.OBJECT and not ld.compare_active()
+                 and not (ld.interp.brdf_blend and ld.other_brdf is not None))
+        if not plain:
+            self.restart()
+            return
+        if self.passes > 0 and (self._held is None or self.passes >= self._held[1]):
+            self._held = (self._slot, self.passes)
+            self._slot = MAIN_SLOTS[1] if self._slot == MAIN_SLOTS[0] else MAIN_SLOTS[0]
+        self.passes = 0
+
+    @property
+    def fading(self) -> bool:
+        """Whether the view still shows part of the image a handover replaces."""
+        return self._held is not None
 
     def render(self, target: moderngl.Framebuffer, size: tuple[int, int], passes: int = 1,
                scale: float = 1.0, interactive: bool = False, quick: bool | None = None) -> None:
@@ -54,7 +88,7 @@ class ViewFrames:
         key = (w, h, view, ld.side_by_side)
         if key != self._accum_key:  # what is accumulated was for another viewport
             self._accum_key = key
-            self.passes = 0
+            self.restart()
         # The lobe and slice views: the decoder itself; a change of body restarts the accumulation.
         body = ld.bodies.for_frame(ld.brdf, interactive) if view == View.OBJECT else ld.brdf
         if body is not self._body:
@@ -62,21 +96,25 @@ class ViewFrames:
             self.passes = 0
         ld.renderer.quick = interactive if quick is None else quick  # the quick estimator (one pass per frame)
         before = self.passes
-        self.passes = self.draw(target, w, h, self.passes, passes, VIEW_SLOTS, body=body, view_size=size)
+        self.passes = self.draw(target, w, h, self.passes, passes, (self._slot, VIEW_SLOTS[1]), body=body,
+                                view_size=size, held=self._held)
+        if self._held is not None and self.passes >= min(self._held[1], HANDOVER_PASSES):
+            self._held = None  # faded out: the new code's image alone from the next frame
         ld.timings.render_ms = (time.perf_counter() - t0) * 1000.0
         if view == View.OBJECT and self.passes > before:
             self.ms_per_pixel_pass = ld.timings.render_ms / (w * h * (self.passes - before))
 
     def draw(self, target: moderngl.Framebuffer, w: int, h: int, first: int, passes: int,
              slots: tuple[str, str], camera=None, body: GpuBrdf | None = None,
-             view_size: tuple[int, int] | None = None) -> int:
+             view_size: tuple[int, int] | None = None, held: tuple[str, int] | None = None) -> int:
         """Adds up to ``passes`` passes after ``first`` into the accumulation
         ``slots`` (the image, the second image of a blend) at (w, h) and draws
         the composite into ``target``; returns the passes accumulated. The
         lobe and slice views are drawn once (``first`` 0) and shown from then on.
         ``camera``: another camera than the view's (a screenshot's tile); ``body``: the
         BRDF the image is shaded with (None: the decoder's, ``brdf``); ``view_size``: the
-        view's full size before the render scale (the Monte Carlo reference's resolution)."""
+        view's full size before the render scale (the Monte Carlo reference's resolution);
+        ``held``: (slot, passes) of the image a handover fades out (``handover``)."""
         ld = self.session
         comparing = ld.compare_active()
         blending = ld.interp.brdf_blend and ld.other_brdf is not None
@@ -103,13 +141,17 @@ class ViewFrames:
         elif blending:
             b = self._accumulated(view, lit, vw, h, first, n, ld.other_brdf, slots[1])
             weight = ld.interp.t
+        elif held is not None and view == View.OBJECT:
+            # The image being replaced, weighted out linearly over the new code's first passes.
+            b, pb = ld.renderer.frame_texture(view, vw, h, held[0]), float(held[1])
+            weight = max(0.0, 1.0 - done / min(held[1], HANDOVER_PASSES))
         s = ld.compare_settings
         if comparing and s.mode == CompareMode.FLIP:
             ld.compare_part.update_flip(a, pa, b, pb)
         if view == View.OBJECT and not (comparing and s.mode in (CompareMode.ERROR, CompareMode.FLIP)):
             # The backdrop on what is shown (the error views score the object alone).
             a, pa = ld.backdrop_part.apply(a, pa, state, ld.backdrop, slots[0]), 1.0
-            if b is not None and (blending or (comparing and b.size == a.size)):
+            if b is not None and (weight is not None or (comparing and b.size == a.size)):
                 b, pb = ld.backdrop_part.apply(b, pb, state, ld.backdrop, slots[1]), 1.0
         if b is None:
             b, pb = a, pa

@@ -221,8 +221,6 @@ WINDOW = textwrap.dedent("""
 """)
 
 
-@pytest.mark.gl
-@pytest.mark.slow
 def _ppid(pid: int) -> int:
     """The parent of ``pid`` (0 once it is gone or a zombie)."""
     try:
@@ -237,6 +235,7 @@ def _children(pid: int) -> list[int]:
     return [int(d) for d in os.listdir("/proc") if d.isdigit() and _ppid(int(d)) == pid]
 
 
+@pytest.mark.gl
 def test_a_killed_window_restores_its_last_autosave_exactly(xvfb_display, tmp_path):
     env = dict(os.environ, DISPLAY=xvfb_display, NBRDF_STATE_DIR=str(tmp_path / "state"))
     args = [str(DEFAULT_MATERIAL), "--out", str(tmp_path / "x.png")]
@@ -273,3 +272,42 @@ def test_a_killed_window_restores_its_last_autosave_exactly(xvfb_display, tmp_pa
     assert restored == expected
     assert restored["material"]["layers"][-1]["roughness"] == 0.37 and restored["view"]["exposure"] == 1.25
     assert not (tmp_path / "state" / "session.lock").exists()  # that window closed cleanly
+
+
+RUN = textwrap.dedent("""
+    import sys
+    from nbrdf.cli.view import parse_args
+    from nbrdf.viewer.app import App
+    app = App(parse_args(sys.argv[1:]), size=(64, 48))
+    app.autosave.saver.delay = 0.2
+    app.lookdev.set_param(len(app.lookdev.material.layers) - 1, "roughness", 0.41)
+    app.run()
+    print("closed", flush=True)
+""")
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGHUP"])
+def test_sigterm_and_sighup_close_the_window_cleanly(xvfb_display, tmp_path, sig):
+    """A logout or ``kill`` closes the window as its close button does: the session
+    written, the lock released, no recovery offered to the next window."""
+    state = tmp_path / "state"
+    env = dict(os.environ, DISPLAY=xvfb_display, NBRDF_STATE_DIR=str(state))
+    p = subprocess.Popen([sys.executable, "-c", RUN, str(DEFAULT_MATERIAL)], env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120  # a guard against a hang, not a timing assertion
+        while time.monotonic() < deadline and p.poll() is None and not (state / "autosave.json").exists():
+            time.sleep(0.1)  # the loop runs (it writes the autosave), so its handlers are in place
+        assert (state / "autosave.json").exists(), p.stderr.read()[-2000:] if p.poll() is not None else ""
+        p.send_signal(getattr(signal, sig))
+        out, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 0 and out.strip() == "closed", err[-2000:]
+    assert not (state / "session.lock").exists()
+    saved = json.loads((state / "autosave.json").read_text())
+    assert saved["material"]["layers"][-1]["roughness"] == 0.41
+    assert Autosave(state).start() is False  # a clean exit: nothing to recover
+

@@ -75,10 +75,32 @@ def test_waits_for_a_still_moment_then_swaps_a_better_code_in(setup):
     w.results[job.key] = result(better, 0.4)
     got = r.poll()
     assert got is not None and np.array_equal(got.numpy(), better)
-    assert r.status == "refined, 3 s"
+    assert r.status == "refined, 3 s, refining..."  # later rounds still run
     assert r.poll() is None  # the same result is not swapped twice
     w.results[job.key] = result(better * 2, 0.6, done=True)  # worse than what is shown: kept
     assert r.poll() is None and r.status == "refined, 3 s"
+
+
+def test_later_rounds_swap_only_a_clearly_better_code_until_the_end(setup):
+    """Each swap starts the still view's accumulation anew (faded, record 103): while
+    rounds run, a code replaces the refined one shown only when its held-out error is at
+    most ``reswap_ratio`` of the shown one's; the best code is shown when the work ends."""
+    r, w, clock = setup
+    assert r.settings.reswap_ratio == 0.7
+    r.edited(load_material(BLACK), torch.zeros(3, 34))
+    clock.t = 1.0
+    r.poll()
+    key = w.requests[0].key
+    codes = [np.full((3, 34), k, np.float32) for k in range(5)]
+    w.results[key] = result(codes[1], 0.5)  # the first beats the network's: shown at once
+    assert np.array_equal(r.poll().numpy(), codes[1])
+    w.results[key] = result(codes[2], 0.4, seconds=5.0)  # 0.8 of the shown error: kept back
+    assert r.poll() is None and r.status == "refined, 3 s, refining..."
+    w.results[key] = result(codes[3], 0.34, seconds=6.0)  # 0.68: shown
+    assert np.array_equal(r.poll().numpy(), codes[3]) and r.status == "refined, 6 s, refining..."
+    w.results[key] = result(codes[4], 0.33, seconds=9.6, done=True)  # the end: the best code, however close
+    assert np.array_equal(r.poll().numpy(), codes[4]) and r.status == "refined, 10 s"
+    assert r.poll() is None
 
 
 def test_a_result_worse_than_the_network_is_never_shown(setup):
