@@ -8,8 +8,9 @@ about 80 % of the screen (viewer/session.py ``WindowPrefs``), and frames the
 object for the view's aspect. Mouse: left-drag orbits, right-drag pans, the
 wheel zooms (when the pointer is in the view); a click on a glTF file's
 object selects its material. Keys: F frames the object, T toggles the
-turntable, H hides the panels, Ctrl+Z undoes, Ctrl+Shift+Z / Ctrl+Y redo, Esc
-quits; while a text field has the focus, keys go to it alone. Files dropped on
+turntable, H hides the panels, Ctrl+Z undoes, Ctrl+Shift+Z / Ctrl+Y redo, Ctrl+Q
+quits (Esc does not: it leaves a text field or a popup); while a text field has
+the focus, keys go to it alone. Files dropped on
 the window open by kind (``LookDev.open_file``).
 
 Every input event that arrived since the last frame is handled in the frame:
@@ -217,9 +218,9 @@ class App:
                 self.lookdev.redo() if io.key_shift else self.lookdev.undo()
             elif pressed(K.y):
                 self.lookdev.redo()
+            elif pressed(K.q):  # not Esc: a stray Esc (leaving a field, closing a popup) must not end the session
+                glfw.set_window_should_close(self.window, True)
             return
-        if pressed(K.escape):
-            glfw.set_window_should_close(self.window, True)
         if pressed(K.f):
             self.frame()
         if pressed(K.t):
@@ -411,7 +412,7 @@ class App:
         return np.frombuffer(data, dtype=np.uint8).reshape(h, w, 3)[::-1].copy()
 
     def run(self) -> None:
-        """The window's loop until it is closed: by its close button, Esc, or SIGTERM / SIGHUP
+        """The window's loop until it is closed: by its close button, Ctrl+Q, or SIGTERM / SIGHUP
         (a logout, ``kill``, a service manager), which close it the same way -- the session
         written and the lock released, so the next window offers no recovery."""
         restore = self._close_on_signals()

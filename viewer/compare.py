@@ -81,6 +81,7 @@ class Compare:
         self._tex: moderngl.Texture | None = None
         self._tex_key: tuple | None = None
         self._job: str | None = None      # the key of the Monte Carlo job the view shows
+        self._shown = None                 # the job's result the picture (and its label) shows
         self.labels = Labels(ctx)
         self.show_labels = True
         """Draw "neural" / "reference (...)" on the compared images."""
@@ -223,8 +224,9 @@ class Compare:
         r = self.worker.result(key)
         if (r is None or not (r.done or r.error)) and self.worker.current != key:
             self.worker.request(self.job(material, state, key, size, brdf, vw / vh))  # new, or set aside by another
-        self._job = key
-        self._ref_label = f"reference (MC, {r.spp if r else 0} spp)"
+        self._job, self._shown = key, r
+        # Until the first round at this size arrives, the body is not there yet: say so, not "0 spp".
+        self._ref_label = f"reference (MC, {r.spp} spp)" if r is not None and r.spp else "reference (MC, computing...)"
         img = r.image if r is not None else np.zeros((1, 1, 3), np.float32)
         if view != View.OBJECT:
             return self._upload((key, r.spp if r else 0), img, flip=view != View.LOBE), 1.0
@@ -313,12 +315,13 @@ class Compare:
         return coat + r.image
 
     def status(self, material: Material, view: View | str) -> str:
-        """One line on what the reference is and how far it has got."""
+        """One line on what the reference is and how far it has got: the result the picture
+        shows, so the line and the image's label agree (not a newer round the next frame shows)."""
         if material.is_textured:
             return "no reference for texture-mapped materials"
         if analytic_capable(material):
             return "reference: closed form on the GPU"
-        r = self.worker.result(self._job) if self._job else None
+        r = self._shown if self._job else None
         if r is not None and r.error:
             return f"reference failed: {r.error}"
         noise = r.noise if r is not None else None

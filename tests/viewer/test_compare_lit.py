@@ -123,6 +123,7 @@ def test_switching_compare_modes_keeps_the_reference(gl_ctx):
         fbo = gl_ctx.simple_framebuffer(size, components=4)
         assert ld.set_compare("wipe")
         ld.render(fbo, size, 2)
+        assert ld.compare_part._ref_label == "reference (MC, computing...)"  # no round yet: not "0 spp"
         key = ld.compare_part._job
         r = ld.worker.wait(key, 16, timeout=300)
         assert r is not None and r.spp >= 16 and r.error is None

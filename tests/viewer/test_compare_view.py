@@ -129,9 +129,10 @@ def test_the_status_line_states_the_references_noise(gl_ctx):
     img = np.zeros((2, 2, 3), np.float32)
     img[0] = 0.5  # two lit pixels at 0.5, two dark ones that must not dilute the figure
     se = np.where(img > 0, 0.01, 0.0).astype(np.float32)
-    w._cache["k"] = ReferenceImage(img, 512, False, None, se)
-    c._job = "k"
+    c._job, c._shown = "k", ReferenceImage(img, 512, False, None, se)  # what the last frame drew
     assert c.status(parse_material(STANDARD_STACK), "lobe") == "reference: Monte Carlo, 512 paths per pixel, noise 2.0 %..."
-    w._cache["k"] = ReferenceImage(img, 4096, True, None, se / 4)
+    w._cache["k"] = ReferenceImage(img, 1024, False, None, se / 2)  # a newer round, not drawn yet: the line waits
+    assert c.status(parse_material(STANDARD_STACK), "lobe").startswith("reference: Monte Carlo, 512 paths per pixel")
+    c._shown = ReferenceImage(img, 4096, True, None, se / 4)
     assert c.status(parse_material(STANDARD_STACK), "object") == (
         "reference: Monte Carlo lights and body, 4096 samples per pixel, noise 0.5 %; the coat in closed form on the GPU")

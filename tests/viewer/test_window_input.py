@@ -196,6 +196,16 @@ SCRIPT = textwrap.dedent("""
             drop(win, [str(tmp / "notes.txt")])
             app.step()
             out["drop_bad"] = ld.error
+        with section("9"):
+            # 9. Esc in the view leaves the window open (it leaves fields and popups); Ctrl+Q closes it.
+            key(glfw.KEY_ESCAPE)
+            app.step()
+            out["esc_closes"] = bool(glfw.window_should_close(win))
+            key(glfw.KEY_LEFT_CONTROL, glfw.MOD_CONTROL, glfw.PRESS)
+            key(glfw.KEY_Q, glfw.MOD_CONTROL)
+            key(glfw.KEY_LEFT_CONTROL, 0, glfw.RELEASE)
+            app.step()
+            out["ctrl_q_closes"] = bool(glfw.window_should_close(win))
     finally:
         app.close()
     (tmp / "out.json").write_text(json.dumps(out, default=str))
@@ -282,3 +292,8 @@ def test_dropped_files_open_by_kind_and_a_bad_one_is_one_line(run):
     name, err = out["drop_material"]
     assert name == "rough gold" and err is None
     assert out["drop_bad"] and "notes.txt" in out["drop_bad"] and "\n" not in out["drop_bad"]
+
+
+def test_esc_does_not_quit_and_ctrl_q_does(run):
+    _, out = run
+    assert out["esc_closes"] is False and out["ctrl_q_closes"] is True, out
