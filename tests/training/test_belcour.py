@@ -211,6 +211,34 @@ def test_the_generator_is_what_the_tables_hold():
     assert bool((spec_tables.t["A"] >= spec_tables.t["B"]).all()) and bool((spec_tables.t["B"] >= 0).all())
 
 
+def test_the_shipped_tables_load_without_generating_and_hold_the_generators_values(monkeypatch, tmp_path):
+    """The default tables ship with the package (the window's first switch to Belcour
+    froze it for tens of seconds while they were generated): they load with an empty
+    cache and no generation, and interior entries equal the generator's."""
+    import nbrdf.training.belcour as bc
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.setattr(bc, "generate_tables", lambda spec: (_ for _ in ()).throw(AssertionError("generated")))
+    shipped = bc.BelcourTables.load(cache=False).t
+    assert not any(tmp_path.iterdir())
+    spec = bc.TableSpec()
+    mu, alpha, eta = bc._axes(spec)
+    i_mu, i_alpha, i_eta = [3, 17, 30], [1, 12, 26], 9
+    d = bc._vndf_moments(mu[i_mu], alpha[i_alpha], float(eta[i_eta]), spec.n_strata)
+    c = bc._vndf_moments(mu[i_mu], alpha[i_alpha], None, spec.n_strata)
+    sub = np.ix_(i_alpha, i_mu)
+    assert np.allclose(shipped["R_down"][i_eta].numpy()[sub], d["R"].numpy(), atol=1e-6)
+    assert np.allclose(shipped["T_down"][i_eta].numpy()[sub], d["T"].numpy(), atol=1e-6)
+    assert np.allclose(shipped["A"].numpy()[sub], c["A"].numpy(), atol=1e-6)
+    assert np.allclose(shipped["B"].numpy()[sub], c["B"].numpy(), atol=1e-6)
+    # A damaged shipped file is not used: the tables come from the generator instead.
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, A=np.zeros((2, 2)))
+    monkeypatch.setattr(bc, "shipped_tables_path", lambda: bad)
+    with pytest.raises(AssertionError, match="generated"):
+        bc.BelcourTables.load(cache=False)
+
+
 def test_the_reciprocal_variant_is_reciprocal_and_the_papers_is_not():
     atoms = [Atom("interface", 0.1, 1.5), Atom("medium", color=(0.5, 0.7, 0.9), sigma_t=1.0),
              Atom("conductor", 0.3, color=(0.9, 0.6, 0.3))]
