@@ -19,10 +19,15 @@ $(STAMP): pyproject.toml constraints.txt tools/setup_system.sh
 run: setup
 	@$(BIN)/nbrdf-view
 
+# Test files run side by side in TEST_WORKERS processes (pytest-xdist; a file's tests stay in one process, so its
+# module fixtures are made once): 2 halves the suite's wall time on a 2-core machine (record 104); 0 runs serially.
+TEST_WORKERS ?= 2
+XDIST := $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile)
+
 # The default suite (no wall-clock assertions; tests marked slow left out): what CI runs
 # (.ci/run), within its 20 minutes. The slow set takes about 25 minutes more: `make test-slow`.
 test: setup lint
-	@$(BIN)/python -m pytest -m "not slow" --durations=20
+	@$(BIN)/python -m pytest -m "not slow" $(XDIST) --durations=20
 
 # The slow tests alone (multi-seed statistics, long Monte Carlo runs, installs).
 test-slow: setup
@@ -31,7 +36,7 @@ test-slow: setup
 # The slow tests CI runs after `make test` (.ci/run): those also marked ci_slow, chosen by measured duration to
 # fit CI's 20 minutes (the list and the ones left to `make test-slow`: docs/decisions/076-ci-slow-subset.md).
 test-ci-slow: setup
-	@$(BIN)/python -m pytest -m "slow and ci_slow"
+	@$(BIN)/python -m pytest -m "slow and ci_slow" $(XDIST)
 
 # Rewrites every stored render or array the tests compare against (golden images, the
 # session render: tests/viewer/goldens.py; the look-development reference lobes and sphere

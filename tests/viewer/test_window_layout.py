@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 import textwrap
-import time
 
 import pytest
+from xvfb import xvfb_server
 
 pytestmark = pytest.mark.gl
 
@@ -75,40 +74,9 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
-def _screen(size: str):
-    """An Xvfb server with a screen of ``size``; -displayfd says when it accepts clients."""
-    import select
-
-    exe = shutil.which("Xvfb")
-    if exe is None:
-        pytest.skip("Xvfb is not installed (run `make test`, which installs it)")
-    r, w = os.pipe()
-    proc = subprocess.Popen([exe, "-displayfd", str(w), "-screen", "0", f"{size}x24", "-nolisten", "tcp", "-noreset"],
-                            pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    os.close(w)
-    text = b""
-    end = time.monotonic() + 60  # a loaded machine starts Xvfb slowly
-    while not text.endswith(b"\n") and time.monotonic() < end and proc.poll() is None:
-        if select.select([r], [], [], 1.0)[0]:
-            chunk = os.read(r, 16)
-            if not chunk:
-                break
-            text += chunk
-    os.close(r)
-    if not text.strip().isdigit():
-        proc.kill()
-        proc.wait(5)
-        pytest.skip("could not start Xvfb")
-    try:
-        yield f":{text.strip().decode()}"
-    finally:
-        proc.terminate()
-        proc.wait(5)
-
-
 @pytest.fixture(scope="module")
 def screen_1280():
-    yield from _screen("1280x800")
+    yield from xvfb_server("1280x800")
 
 
 def _layout(display: str, tmp) -> dict:
@@ -126,7 +94,7 @@ def layout(screen_1280, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def layout_1920(tmp_path_factory):
-    screen = _screen("1920x1080")
+    screen = xvfb_server("1920x1080")
     display = next(screen)
     try:
         yield _layout(display, tmp_path_factory.mktemp("layout1920"))
