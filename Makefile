@@ -36,7 +36,7 @@ test-slow: setup
 # The slow tests CI runs after `make test` (.ci/run): those also marked ci_slow, chosen by measured duration to
 # fit CI's 20 minutes (the list and the ones left to `make test-slow`: docs/decisions/076-ci-slow-subset.md).
 test-ci-slow: setup
-	@$(BIN)/python -m pytest -m "slow and ci_slow" $(XDIST)
+	@$(BIN)/python -m pytest -m "slow and ci_slow"
 
 # Rewrites every stored render or array the tests compare against (golden images, the
 # session render: tests/viewer/goldens.py; the look-development reference lobes and sphere
