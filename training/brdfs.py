@@ -162,7 +162,8 @@ class BelcourBRDF(ExactRGB, _DefensivelySampled):
     """Belcour 2018's layered model of a uniform stack (float64 inside, the input's dtype out)."""
 
     def __init__(self, material: Material):
-        from nbrdf.training.belcour import atoms_of, default_tables
+        from nbrdf.training.belcour import atoms_of
+        from nbrdf.training.belcour_tables import default_tables
 
         self.atoms = atoms_of(material)
         self.tables = default_tables()

@@ -18,16 +18,8 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
-from nbrdf.training.belcour import (
-    ALPHA_MAX,
-    ALPHA_MIN,
-    Atom,
-    BelcourTables,
-    atoms_of,
-    belcour_eval_atoms,
-    decompose,
-    default_tables,
-)
+from nbrdf.training.belcour import ALPHA_MAX, Atom, atoms_of, belcour_eval_atoms, decompose
+from nbrdf.training.belcour_tables import ALPHA_MIN, BelcourTables, default_tables
 from nbrdf.viewer import shaders
 
 if TYPE_CHECKING:

@@ -17,16 +17,13 @@ from nbrdf.neural.metrics import directional_albedo, lobe_image, lobe_psnr
 from nbrdf.training.analytic import GGXConductor
 from nbrdf.training.belcour import (
     Atom,
-    BelcourTables,
-    TableSpec,
     belcour_eval,
     belcour_eval_atoms,
     decompose,
-    default_tables,
-    generate_tables,
     roughness_to_variance,
     variance_to_roughness,
 )
+from nbrdf.training.belcour_tables import BelcourTables, TableSpec, default_tables, generate_tables
 from nbrdf.training.brdfs import BelcourBRDF, ClosedFormBRDF, brdf_for
 from nbrdf.training.dataset import sample_pairs
 
@@ -215,7 +212,7 @@ def test_the_shipped_tables_load_without_generating_and_hold_the_generators_valu
     """The default tables ship with the package (the window's first switch to Belcour
     froze it for tens of seconds while they were generated): they load with an empty
     cache and no generation, and interior entries equal the generator's."""
-    import nbrdf.training.belcour as bc
+    import nbrdf.training.belcour_tables as bc
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     monkeypatch.setattr(bc, "generate_tables", lambda spec: (_ for _ in ()).throw(AssertionError("generated")))

@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from nbrdf.neural.material import load_material, parse_material
-from nbrdf.training.belcour import BelcourTables, default_tables
+from nbrdf.training.belcour_tables import BelcourTables, default_tables
 from nbrdf.training.brdfs import brdf_for
 from nbrdf.viewer.belcour_gpu import MAX_ATOMS, BelcourTextures
 from nbrdf.viewer.brdf_probe import probe_brdf

@@ -14,7 +14,8 @@ import torch
 from nbrdf.neural.body_table import TableSize, table_directions
 from nbrdf.neural.coat import coat_eval
 from nbrdf.neural.material import load_material
-from nbrdf.training.belcour import atoms_of, belcour_eval_atoms, default_tables
+from nbrdf.training.belcour import atoms_of, belcour_eval_atoms
+from nbrdf.training.belcour_tables import default_tables
 from nbrdf.viewer.belcour_gpu import bake_body, coat_of, table_uniforms
 from nbrdf.viewer.body_table_gpu import INTERACTIVE, STILL, BodyTables
 from nbrdf.viewer.options import DEFAULT_MATERIAL
