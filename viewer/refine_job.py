@@ -198,9 +198,9 @@ class IdleRefiner:
             self.status = self.status.removesuffix(RUNNING)
             if not r.improved:
                 self.status = "" if self._shown == float("inf") else self.status
-        first = self._shown == float("inf")
+        # The first code that beats the network's passes at once (``_shown`` is inf until then).
         if r.improved and r.heldout < self._shown and (
-                first or r.done or r.heldout <= self.settings.reswap_ratio * self._shown):
+                r.done or r.heldout <= self.settings.reswap_ratio * self._shown):
             self._shown = r.heldout
             self.status = f"refined, {r.seconds:.0f} s" + ("" if r.done else RUNNING)
             return torch.from_numpy(r.code)

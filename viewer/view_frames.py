@@ -58,15 +58,18 @@ class ViewFrames:
         short, smooth transition. A second handover during a fade keeps whichever image
         has more passes. The compare and BRDF-blend views start over instead."""
         ld = self.session
-        plain = (View.parse(ld.state.view) == View.OBJECT and not ld.compare_active()
-                 and not (ld.interp.brdf_blend and ld.other_brdf is not None))
-        if not plain:
+        if View.parse(ld.state.view) != View.OBJECT or ld.compare_active() or self._blending():
             self.restart()
             return
         if self.passes > 0 and (self._held is None or self.passes >= self._held[1]):
             self._held = (self._slot, self.passes)
             self._slot = MAIN_SLOTS[1] if self._slot == MAIN_SLOTS[0] else MAIN_SLOTS[0]
         self.passes = 0
+
+    def _blending(self) -> bool:
+        """Whether the view shows a BRDF-value blend of two materials (two accumulations)."""
+        ld = self.session
+        return bool(ld.interp.brdf_blend and ld.other_brdf is not None)
 
     @property
     def fading(self) -> bool:
@@ -117,7 +120,7 @@ class ViewFrames:
         ``held``: (slot, passes) of the image a handover fades out (``handover``)."""
         ld = self.session
         comparing = ld.compare_active()
-        blending = ld.interp.brdf_blend and ld.other_brdf is not None
+        blending = self._blending()
         vw = max(1, w // 2) if ld.side_by_side else w
         full = view_size or (w, h)
         n = 0 if first >= MAX_PASSES else min(passes, MAX_PASSES - first)

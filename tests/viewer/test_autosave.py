@@ -310,4 +310,3 @@ def test_sigterm_and_sighup_close_the_window_cleanly(xvfb_display, tmp_path, sig
     saved = json.loads((state / "autosave.json").read_text())
     assert saved["material"]["layers"][-1]["roughness"] == 0.41
     assert Autosave(state).start() is False  # a clean exit: nothing to recover
-
