@@ -54,7 +54,7 @@ LINT_ROOT := $(VENV)/lint
 lint: setup
 	@$(BIN)/ruff check --quiet .
 	@mkdir -p $(LINT_ROOT)/nbrdf
-	@for d in cli neural training viewer; do ln -sfn ../../../$$d $(LINT_ROOT)/nbrdf/$$d; done
+	@for d in cli neural training imaging viewer; do ln -sfn ../../../$$d $(LINT_ROOT)/nbrdf/$$d; done
 	@cd $(LINT_ROOT) && ../bin/mypy --config-file ../../pyproject.toml $(addprefix -p ,$(MYPY_PACKAGES))
 
 # Every input format fuzzed (tools/fuzz.py): 10,000 byte-level mutations per format, then the

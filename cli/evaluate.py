@@ -14,7 +14,7 @@ from nbrdf.cli.common import at_least, load_pairs, model_or_default, out_path, p
 from nbrdf.cli.config import add_arguments, build
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
-from nbrdf.training.methods import Method
+from nbrdf.neural.methods import Method
 
 if TYPE_CHECKING:
     import torch

@@ -38,7 +38,7 @@ class RenderConfig:
 
 
 def cmd_render(a: argparse.Namespace) -> int:
-    from nbrdf.viewer.image_io import check_output, write_image
+    from nbrdf.imaging.image_io import check_output, write_image
 
     c: RenderConfig = build(RenderConfig, a)
     if not c.scene:

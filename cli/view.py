@@ -41,7 +41,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not has_display():
             render_offscreen(opts, fallback="no display found")
             return 0
-        from nbrdf.viewer.app import App, WindowUnavailable
+        from nbrdf.viewer.window.app import App, WindowUnavailable
 
         try:
             app = App(opts)

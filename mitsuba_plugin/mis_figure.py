@@ -105,8 +105,8 @@ def mis_figure(cfg: MisFigureConfig, log=print) -> dict:
     mis.json; returns {strategy: {"mse", "seconds"}} and the reference's spp."""
     import json
 
+    from nbrdf.imaging.image_io import tonemap
     from nbrdf.training.plots import _plt
-    from nbrdf.viewer.image_io import tonemap
 
     log(f"MIS reference ({cfg.spp * cfg.ref_factor} spp)")
     ref, _ = render_strategy(cfg, "MIS", cfg.spp * cfg.ref_factor, cfg.seed + 1000)

@@ -36,8 +36,8 @@ class NormalMapKernel:
 
     def __init__(self, path: str | Path):
         """Reads ``path`` (``NbrdfError``: unreadable, or not RGB)."""
+        from nbrdf.imaging.image_io import read_normal_map
         from nbrdf.mitsuba.textures import MipBuffer, mip_chain
-        from nbrdf.viewer.image_io import read_normal_map
 
         self.path = str(path)
         self.texels = MipBuffer(mip_chain(read_normal_map(path)))

@@ -279,8 +279,8 @@ def markdown(result: dict) -> str:
 def save_figure(rows: list[dict], images: list[dict], path: Path) -> None:
     """Per scene: converged reference, neural, MC at equal time, a 2x crop of
     each, and their per-pixel squared-error maps (shared scale per scene)."""
+    from nbrdf.imaging.image_io import tonemap
     from nbrdf.training.plots import _plt
-    from nbrdf.viewer.image_io import tonemap
 
     plt = _plt()
     cols = ["reference", "neural", "mc", "crop reference", "crop neural", "crop mc", "err_neural", "err_mc"]

@@ -22,7 +22,7 @@ generated globe material, ``generated.globe_material``), ``{"reference": PATH}``
 (its Monte Carlo ground truth, ``nbrdf_reference``) or ``{"diffuse": [r, g, b]}``.
 Relative paths are relative to the scene file; preset scenes use the bundled
 materials. World z is up; the environment is one of the project's generated
-presets (``viewer/env_presets.py``), oriented as the previewer shows it.
+presets (``imaging/env_presets.py``), oriented as the previewer shows it.
 """
 from __future__ import annotations
 
@@ -181,7 +181,7 @@ def parse_scene(spec: Any, base: Path, name: str) -> Scene:
         raise NbrdfError(f"camera.fov: expected below 170 degrees, got {out['camera']['fov']}")
     env = spec.get("environment")
     if env is not None:
-        from nbrdf.viewer.env_presets import ENV_PRESETS
+        from nbrdf.imaging.env_presets import ENV_PRESETS
 
         env = {"preset": env} if isinstance(env, str) else env
         if not isinstance(env, dict) or env.get("preset") not in ENV_PRESETS:
@@ -329,7 +329,7 @@ def environment_bitmap(preset: str, scale: float = 1.0, size: tuple[int, int] = 
     """The preset at ``size`` (w, h) as a Mitsuba RGB bitmap (linear radiance)."""
     import mitsuba as mi
 
-    from nbrdf.viewer.env_presets import make_environment
+    from nbrdf.imaging.env_presets import make_environment
 
     img = make_environment(preset, *size) * np.float32(scale)
     return mi.Bitmap(np.ascontiguousarray(img, np.float32), mi.Bitmap.PixelFormat.RGB)

@@ -14,7 +14,7 @@ float32, the decoder's log f per RGB channel, index [k, j, i] at the grid nodes
 - theta_d = j / (M - 1) * pi / 2
 - phi_d   = k / (K - 1) * pi / 2       (folded: 0.5 acos(cos 2 phi_d))
 
-A body that is not reciprocal (Belcour's model, viewer/belcour_gpu.py) needs
+A body that is not reciprocal (Belcour's model, viewer/gpu/belcour_gpu.py) needs
 the swap of wi and wo apart: an ``ordered`` table keeps phi_d over [0, pi],
 measured from the half vector's tilt away from the normal (``cos_phi_d``).
 
@@ -46,7 +46,7 @@ class TableSize:
     """Nodes over the folded phi_d in [0, pi/2] (linear; [0, pi] when ``ordered``)."""
     ordered: bool = False
     """phi_d over [0, pi] with wi's side kept: a body that is not reciprocal (Belcour's
-    model, viewer/belcour_gpu.py); False: folded by the swap of wi and wo as well."""
+    model, viewer/gpu/belcour_gpu.py); False: folded by the swap of wi and wo as well."""
 
     def check(self) -> "TableSize":
         if min(self.theta_h, self.theta_d, self.phi_d) < 2 or max(self.theta_h, self.theta_d, self.phi_d) > 512:

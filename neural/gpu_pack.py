@@ -28,7 +28,7 @@ from nbrdf.neural.errors import NbrdfError
 TEXTURE_WIDTH = 256  # texels per row of the weight texture
 #: Where the shader reads the weights (``NB_STORAGE``): a float texture
 #: (texelFetch), a shader storage buffer, a uniform buffer, or literals compiled
-#: into the shader (viewer/neural_gpu.py WeightStorage names them).
+#: into the shader (viewer/gpu/neural_gpu.py WeightStorage names them).
 STORE_TEXTURE, STORE_SSBO, STORE_UBO, STORE_CONST = 0, 1, 2, 3
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
-from nbrdf.viewer.labels import rasterise
+from nbrdf.viewer.gpu.labels import rasterise
 from nbrdf.viewer.options import DEFAULT_MATERIAL
 
 ASSETS = DEFAULT_MATERIAL.parent
@@ -67,10 +67,10 @@ def time_frames(size: int, repeats: int) -> int:
     from dataclasses import replace
 
     from nbrdf.neural.material import load_material
-    from nbrdf.viewer.body_table_gpu import STILL, BodyTables
-    from nbrdf.viewer.gl import offscreen_context
-    from nbrdf.viewer.pipeline import MaterialPipeline
-    from nbrdf.viewer.renderer import Renderer
+    from nbrdf.viewer.gpu.body_table_gpu import STILL, BodyTables
+    from nbrdf.viewer.gpu.gl import offscreen_context
+    from nbrdf.viewer.gpu.pipeline import MaterialPipeline
+    from nbrdf.viewer.gpu.renderer import Renderer
     from nbrdf.viewer.view_settings import ViewState
 
     ctx = offscreen_context()

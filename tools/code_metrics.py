@@ -18,7 +18,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 #: Repository folder -> the package it is installed as (pyproject.toml's package-dir).
-PACKAGES = {"cli": "nbrdf.cli", "neural": "nbrdf.neural", "training": "nbrdf.training", "viewer": "nbrdf.viewer"}
+PACKAGES = {"cli": "nbrdf.cli", "neural": "nbrdf.neural", "training": "nbrdf.training", "imaging": "nbrdf.imaging",
+            "viewer": "nbrdf.viewer", "mitsuba_plugin": "nbrdf.mitsuba"}
 
 
 def modules() -> dict[str, Path]:

@@ -58,20 +58,20 @@ def _load_material(path: Path) -> None:
 
 
 def _load_session(path: Path) -> None:
-    from nbrdf.viewer.session import SessionDoc
+    from nbrdf.viewer.session.document import SessionDoc
 
     SessionDoc.load(path)
 
 
 def _load_mesh(path: Path) -> None:
-    from nbrdf.viewer.mesh import load_mesh
+    from nbrdf.viewer.scene.mesh import load_mesh
 
     load_mesh(path)
 
 
 def _load_environment(path: Path) -> None:
-    from nbrdf.viewer.env_presets import resolve_environment
-    from nbrdf.viewer.environment import EnvironmentMap
+    from nbrdf.imaging.env_presets import resolve_environment
+    from nbrdf.imaging.environment import EnvironmentMap
 
     EnvironmentMap(resolve_environment(str(path)))
 
@@ -185,7 +185,7 @@ def seeds(name: str) -> list[bytes]:
         return [p.read_bytes() for p in sorted((ROOT / "viewer/assets/materials").glob("*.json"))]
     if name == "session":
         from nbrdf.neural.material import load_material
-        from nbrdf.viewer.session import SessionDoc
+        from nbrdf.viewer.session.document import SessionDoc
 
         doc = SessionDoc(load_material(ROOT / "viewer/assets/materials/car_paint.json"))
         return [(ROOT / "tests/viewer/data/session_v1.json").read_bytes(),

@@ -24,7 +24,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 #: nbrdf.<name> -> repository folder (pyproject's [tool.setuptools.package-dir]).
-PACKAGES = {"neural": "neural", "training": "training", "viewer": "viewer", "cli": "cli"}
+PACKAGES = {"neural": "neural", "training": "training", "imaging": "imaging", "viewer": "viewer", "cli": "cli"}
 #: Verdicts that count as killed: a test failed, the mutant ran past its time, or it crashed the interpreter.
 KILLED = ("killed", "timeout", "segfault", "caught by type check")
 #: Verdicts that count as alive: every selected test passed, or none of them reaches the mutated function.

@@ -18,10 +18,10 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
-from nbrdf.viewer.app import App
-from nbrdf.viewer.labels import rasterise
+from nbrdf.viewer.gpu.labels import rasterise
 from nbrdf.viewer.options import ViewOptions
-from nbrdf.viewer.session_edits import presets
+from nbrdf.viewer.session.edits import presets
+from nbrdf.viewer.window.app import App
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "figures" / "viewer" / "presets_vs_reference.png"
 

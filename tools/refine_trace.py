@@ -16,8 +16,8 @@ import json
 import sys
 import time
 
-from nbrdf.viewer.app import App
 from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
+from nbrdf.viewer.window.app import App
 
 
 def trace(size: tuple[int, int], roughness: float, seconds: float, settle: float, quiet: bool) -> dict:

@@ -9,7 +9,7 @@ squares line through the samples gives the slope per 100 edits.
     python tools/soak.py --edits 1000 --seed 1 --out soak.json   # needs a display (Xvfb: make soak)
 
 Warm-up, left out of the measurement: frames without edits until the window's
-own idle warm-up has built every shader variant (viewer/program_warmup.py);
+own idle warm-up has built every shader variant (viewer/window/program_warmup.py);
 every view and compare mode in each kind of state (a preset of each BRDF kind
 with and without a closed-form reference, every mesh with its materials built,
 the texture-mapped material edited until the pipeline's latent textures of
@@ -201,19 +201,19 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
     (a large mesh's, a compare view's) is then told apart from memory that grows.
     ``leak_kb``, ``leak_gl``: a leak put in on purpose (that many KB of heap, one small GL
     texture kept per edit), to check that the soak's criteria see one."""
-    from nbrdf.viewer import allocator
-    from nbrdf.viewer.app import App
-    from nbrdf.viewer.lookdev import presets
+    from nbrdf.viewer.gpu.pipeline import TEXTURES_KEPT
+    from nbrdf.viewer.gpu.programs import ProgramCache
     from nbrdf.viewer.options import ViewOptions
-    from nbrdf.viewer.pipeline import TEXTURES_KEPT
-    from nbrdf.viewer.programs import ProgramCache
+    from nbrdf.viewer.session.lookdev import presets
+    from nbrdf.viewer.window import allocator
+    from nbrdf.viewer.window.app import App
 
     rng = random.Random(seed)
     app = App(ViewOptions(size=size), size=size)
     # Render sizes that do not depend on the machine's speed (the interactive scale steps up frame by frame
     # as on a fast machine, never down): the same edits make the same targets, the measurement is of leaks.
     app.refine.settings.budget_ms = 1e9
-    # The compare labels' textures are a cache of 16 texts (viewer/labels.py) whose texts follow the Monte
+    # The compare labels' textures are a cache of 16 texts (viewer/gpu/labels.py) whose texts follow the Monte
     # Carlo worker's timing ("reference (MC, 24 spp)"): off, so the same edits leave the same GL objects.
     app.lookdev.compare_part.show_labels = False
     ld = app.lookdev
@@ -263,7 +263,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         live = gl_names()
         out = {"rss_mb": rss_mb(), "rss_parts_mb": rss_parts_mb(), "smaps_mb": smaps_mb(), "gl": gl_objects(live),
                "gl_mb": gl_bytes(live), "malloc_mb": malloc_mb()}
-        # The same after the trim the window makes within 2 s of an edit (viewer/allocator.py): free heap
+        # The same after the trim the window makes within 2 s of an edit (viewer/window/allocator.py): free heap
         # pages are resident or not by when the last trim ran; after one, what is resident is held.
         allocator.trim()
         out["rss_trimmed_mb"] = rss_mb()
@@ -285,7 +285,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
 
     ProgramCache._build = traced_build
     try:
-        # Warm-up, 1: the window's own idle warm-up (viewer/program_warmup.py) compiles every shader
+        # Warm-up, 1: the window's own idle warm-up (viewer/window/program_warmup.py) compiles every shader
         # variant its views can reach, frames without edits until it has none left.
         t_idle = time.perf_counter()
         while not app.warmup.done and time.perf_counter() - t_idle < 600:

@@ -30,8 +30,8 @@ from nbrdf.neural.brdf import RGBBRDF, ExactRGB, Sample
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured
+from nbrdf.neural.methods import METHODS
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
-from nbrdf.training.methods import METHODS
 
 Tensor = torch.Tensor
 

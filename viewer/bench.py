@@ -108,8 +108,8 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
     interleaved rounds (fair ratios on a shared machine). Never needs a display; the GPU's name picks
     its peak (``GPU_PEAK_GFMA``), software OpenGL the CPU's."""
     from nbrdf.neural.errors import NbrdfError
-    from nbrdf.viewer.gl import COMPUTE_VERSION, describe, half_float_extensions, offscreen_context
-    from nbrdf.viewer.neural_gpu import GpuDecoder, WeightStorage
+    from nbrdf.viewer.gpu.gl import COMPUTE_VERSION, describe, half_float_extensions, offscreen_context
+    from nbrdf.viewer.gpu.neural_gpu import GpuDecoder, WeightStorage
 
     try:
         chosen = [WeightStorage(x) for x in storages]
@@ -170,8 +170,8 @@ def _decoder_paths(ctx, gdec, dec, z, size: tuple[int, int], storages: list, rep
     the pairs, timed in interleaved rounds: (path times, torch time, torch pairs)."""
     import moderngl
 
-    from nbrdf.viewer import shaders
-    from nbrdf.viewer.neural_gpu import ComputeDecoderPass
+    from nbrdf.viewer.gpu import shaders
+    from nbrdf.viewer.gpu.neural_gpu import ComputeDecoderPass
 
     w, h = size
     n = w * h
@@ -229,8 +229,8 @@ def _lit_frames(ctx, gdec, z, size: tuple[int, int], repeats: int, compute: bool
     resampled estimator, the balance heuristic over three strategies and over
     two), the first frame's seconds, and the same per 1080p frame."""
     from nbrdf.neural.material import load_material
+    from nbrdf.viewer.gpu.renderer import Renderer
     from nbrdf.viewer.options import DEFAULT_MATERIAL
-    from nbrdf.viewer.renderer import Renderer
     from nbrdf.viewer.view_settings import ViewState
 
     w, h = size
@@ -269,7 +269,7 @@ def _lit_frames(ctx, gdec, z, size: tuple[int, int], repeats: int, compute: bool
 def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int = 3,
               noise_target: float = 0.01, noise_renders: int = 4, noise_spp: int = 4) -> dict:
     """The look-development window (needs a display; Xvfb will do) as a user gets
-    it, adaptive resolution on (viewer/refinement.py):
+    it, adaptive resolution on (viewer/window/refinement.py):
 
     - ``first_frame_s``: from opening the window to its first frame on screen;
     - a slider drag: ``edits`` base-roughness edits, one frame each, no still
@@ -281,7 +281,7 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
     - ``still_converged_s``: from the last edit until the accumulated image's relative
       noise is under ``noise_target``: the full-resolution preview, then as many
       passes of the still view's estimator as the noise needs at the measured time per pass. The noise is
-      measured on the still view's own estimator and body, as viewer/noise.py
+      measured on the still view's own estimator and body, as viewer/gpu/noise.py
       defines it (``noise_renders`` renders that differ only in their seed, at half the
       view's size); the passes it needs are measured, not extrapolated
       (``passes_to_target``: the passes are stratified, so the noise falls faster than
@@ -293,9 +293,9 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
     - the machine's load average (1 minute) before and after: other work on the machine slows every figure."""
     import statistics
 
-    from nbrdf.viewer.app import App
-    from nbrdf.viewer.noise import per_pixel_noise
+    from nbrdf.viewer.gpu.noise import per_pixel_noise
     from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
+    from nbrdf.viewer.window.app import App
 
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
@@ -414,7 +414,7 @@ def passes_to_target(noise, spp0: int, target: float, rounds: int = 4) -> tuple[
 def _seeds(renderer, state, vw: int, vh: int, spp: int, renders: int, brdf) -> tuple:
     """``noise.render_seeds`` with ``brdf`` as the renderer's default BRDF (the still view's
     table) and the sampling the window uses for it (render_seeds varies ``sampling``'s seed)."""
-    from nbrdf.viewer.noise import render_seeds
+    from nbrdf.viewer.gpu.noise import render_seeds
 
     old = renderer.brdf, renderer.sampling, renderer.table_sampling
     renderer.brdf = brdf
@@ -429,7 +429,7 @@ def _seeds(renderer, state, vw: int, vh: int, spp: int, renders: int, brdf) -> t
 def bench_body_table(sizes: tuple[str, ...] = ("32x16x8", "48x24x12"), size: int = 128, spp: int = 4,
                      materials: str | Path | None = None) -> dict:
     """The baked body table's render-space error against the per-pixel decoder
-    (viewer/body_table_gpu.py): the lit sphere (default environment, no background)
+    (viewer/gpu/body_table_gpu.py): the lit sphere (default environment, no background)
     of each uniform material of the look-development set (training/sets/lookdev)
     rendered ``size`` x ``size`` with ``spp`` passes both ways, with the same random
     numbers (the difference is the table's alone), scored with HDR-FLIP; per table
@@ -437,10 +437,10 @@ def bench_body_table(sizes: tuple[str, ...] = ("32x16x8", "48x24x12"), size: int
     from nbrdf.neural.body_table import TableSize
     from nbrdf.neural.material import load_material
     from nbrdf.training.render_report import flip
-    from nbrdf.viewer.body_table_gpu import BodyTables
-    from nbrdf.viewer.gl import offscreen_context
-    from nbrdf.viewer.pipeline import MaterialPipeline
-    from nbrdf.viewer.renderer import Renderer
+    from nbrdf.viewer.gpu.body_table_gpu import BodyTables
+    from nbrdf.viewer.gpu.gl import offscreen_context
+    from nbrdf.viewer.gpu.pipeline import MaterialPipeline
+    from nbrdf.viewer.gpu.renderer import Renderer
     from nbrdf.viewer.view_settings import ViewState
 
     root = Path(materials) if materials else Path(__file__).resolve().parents[1] / "training" / "sets" / "lookdev"

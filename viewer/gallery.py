@@ -52,12 +52,12 @@ class TileRenderer:
     preset browser's thumbnails (viewer/thumbnails.py). Owns an EGL context's resources."""
 
     def __init__(self, ctx=None):
-        from nbrdf.viewer.backdrop import Backdrop
-        from nbrdf.viewer.env_presets import resolve_environment
-        from nbrdf.viewer.gl import offscreen_context
+        from nbrdf.imaging.env_presets import resolve_environment
+        from nbrdf.viewer.gpu.backdrop import Backdrop
+        from nbrdf.viewer.gpu.gl import offscreen_context
+        from nbrdf.viewer.gpu.pipeline import MaterialPipeline
+        from nbrdf.viewer.gpu.renderer import Renderer
         from nbrdf.viewer.options import ViewOptions
-        from nbrdf.viewer.pipeline import MaterialPipeline
-        from nbrdf.viewer.renderer import Renderer
         from nbrdf.viewer.view_settings import ViewState
 
         self.opts = ViewOptions()
@@ -69,7 +69,7 @@ class TileRenderer:
 
     def render(self, material, size: int, spp: int) -> np.ndarray:
         """The tone-mapped tile, uint8 (size, size, 3), row 0 on top."""
-        from nbrdf.viewer.image_io import tonemap
+        from nbrdf.imaging.image_io import tonemap
         from nbrdf.viewer.modes import BrdfMode
 
         brdf = self.pipeline.build(material, BrdfMode.AUTO)
@@ -85,9 +85,9 @@ def render_gallery(cfg: GalleryConfig) -> Path:
     """Renders the tiles (a progress bar per material) and writes the grid; returns its path."""
     from tqdm import tqdm
 
+    from nbrdf.imaging.image_io import check_output
     from nbrdf.neural.material import load_material
-    from nbrdf.viewer.image_io import check_output
-    from nbrdf.viewer.lookdev import presets
+    from nbrdf.viewer.session.lookdev import presets
 
     if cfg.tile < 16 or cfg.spp < 1 or cfg.columns < 1:
         raise NbrdfError("gallery: --tile >= 16, --spp >= 1 and --columns >= 1")
@@ -106,7 +106,7 @@ def render_gallery(cfg: GalleryConfig) -> Path:
     for k, t in enumerate(tiles):
         r, c = divmod(k, cfg.columns)
         grid[r * cfg.tile:(r + 1) * cfg.tile, c * cfg.tile:(c + 1) * cfg.tile] = t
-    from nbrdf.viewer.image_io import write_png8
+    from nbrdf.imaging.image_io import write_png8
 
     out.parent.mkdir(parents=True, exist_ok=True)
     write_png8(out, grid)

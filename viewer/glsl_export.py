@@ -10,7 +10,7 @@ import numpy as np
 import torch
 
 from nbrdf.neural.gpu_pack import STORE_CONST, _glsl_float, latent_share, pack
-from nbrdf.viewer.shaders import MODE_DEFINES, source
+from nbrdf.viewer.gpu.shaders import MODE_DEFINES, source
 
 TEMPLATE = "export.glsl"
 

@@ -8,18 +8,7 @@ a shader never hard-codes a mode number.
 from __future__ import annotations
 
 from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
-from nbrdf.training.methods import Method as Method  # the one definition; named here with the other modes
-from nbrdf.training.methods import WordEnum
-
-
-class _Mode(WordEnum):
-    """A mode whose value is its command-line word and whose position is its
-    shader constant."""
-
-    @property
-    def code(self) -> int:
-        """The integer the shaders receive for this mode (its position)."""
-        return list(type(self)).index(self)
+from nbrdf.neural.methods import CodedWordEnum as _Mode
 
 
 class View(_Mode):
@@ -36,14 +25,6 @@ class CompareMode(_Mode):
     WIPE = "wipe"       #: an A/B wipe at a movable split
     ERROR = "error"     #: false-colour relative error with a scale bar
     FLIP = "flip"       #: HDR-FLIP error map (magma) with its mean
-
-
-class ToneMap(_Mode):
-    """The display transform from linear radiance."""
-    LINEAR = "linear"   #: clamp, then sRGB
-    ACES = "aces"       #: fitted ACES filmic curve, then sRGB
-    AGX = "agx"         #: AgX base (Blender 4), then sRGB
-    NEUTRAL = "neutral" #: Khronos PBR Neutral, then sRGB
 
 
 class BrdfMode(_Mode):
@@ -72,7 +53,7 @@ def glsl_defines(*enums: type[_Mode]) -> str:
 
 
 class Background(_Mode):
-    """What is behind the object, independent of what lights it (viewer/backdrop.py)."""
+    """What is behind the object, independent of what lights it (viewer/gpu/backdrop.py)."""
     ENV = "env"     #: the environment itself
     BLUR = "blur"   #: the environment pre-filtered (a soft backdrop that still reads as the room)
     FLAT = "flat"   #: one flat colour

@@ -26,10 +26,10 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     preview: on software OpenGL at most 256 x 256 and 32 passes (the default
     32 take about 20 s on two cores with the compute lit pass and leave 0.93 %
     relative noise; full size costs minutes)."""
-    from nbrdf.viewer.gl import check_target_size, offscreen_context
-    from nbrdf.viewer.image_io import check_output, write_image
-    from nbrdf.viewer.lookdev import LookDev
-    from nbrdf.viewer.turntable import turntable_kind
+    from nbrdf.imaging.image_io import check_output, write_image
+    from nbrdf.viewer.gpu.gl import check_target_size, offscreen_context
+    from nbrdf.viewer.jobs.turntable import turntable_kind
+    from nbrdf.viewer.session.lookdev import LookDev
 
     out = Path(opts.out or HEADLESS_OUT)
     if opts.turntable:

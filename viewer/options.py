@@ -32,7 +32,7 @@ def parse_size(text: str) -> tuple[int, int]:
 
 if TYPE_CHECKING:
     from nbrdf.neural.material import Material
-    from nbrdf.viewer.gltf_import import MaterialGroup
+    from nbrdf.viewer.scene.gltf_import import MaterialGroup
 
 
 @dataclass
@@ -96,8 +96,8 @@ class ViewOptions:
         return BrdfMode.BELCOUR if self.brdf == BrdfMode.BELCOUR else BrdfMode.NEURAL
 
     def backdrop(self):
-        """The backdrop settings of these options (viewer/backdrop.py)."""
-        from nbrdf.viewer.backdrop import BackdropSettings
+        """The backdrop settings of these options (viewer/gpu/backdrop.py)."""
+        from nbrdf.viewer.gpu.backdrop import BackdropSettings
 
         return BackdropSettings(self.background, ground=self.ground)
 
@@ -105,7 +105,7 @@ class ViewOptions:
         """When no MATERIAL is given and --mesh is a glTF file: the file's materials
         (with their notes), one per draw range of the mesh, in its order; else None."""
         if self.material == DEFAULT_MATERIAL and Path(self.mesh).suffix.lower() in (".gltf", ".glb"):
-            from nbrdf.viewer.gltf_import import imported_scene, material_groups
+            from nbrdf.viewer.scene.gltf_import import imported_scene, material_groups
 
             return material_groups(imported_scene(self.mesh))
         return None

@@ -84,7 +84,7 @@ class ThumbnailCache:
         """``material``'s thumbnail, uint8 (size, size, 3): read from the cache, or rendered once and stored."""
         import imageio.v3 as iio
 
-        from nbrdf.viewer.image_io import write_png8
+        from nbrdf.imaging.image_io import write_png8
 
         p = self.path(material)
         if p.is_file():

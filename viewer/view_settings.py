@@ -15,7 +15,7 @@ each setting goes besides the renderer:
 
 A new view setting of the lit pass is then one field here and the shader code
 that reads its uniform (and, when it changes the light, the Monte Carlo
-reference's model of it, viewer/compare.py).
+reference's model of it, viewer/reference/compare.py).
 """
 from __future__ import annotations
 
@@ -27,9 +27,10 @@ from typing import Any
 
 import numpy as np
 
+from nbrdf.imaging.tonemap import ToneMap
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.viewer.camera import OrbitCamera
-from nbrdf.viewer.modes import ToneMap, View
+from nbrdf.viewer.modes import View
+from nbrdf.viewer.scene.camera import OrbitCamera
 
 
 def parse_point(text: str) -> tuple[float, float, float]:

@@ -6,6 +6,6 @@ import pytest
 
 @pytest.fixture(scope="session")
 def gl_ctx():
-    from nbrdf.viewer.gl import offscreen_context
+    from nbrdf.viewer.gpu.gl import offscreen_context
 
     return offscreen_context()

@@ -12,8 +12,9 @@ import pytest
 
 from nbrdf.cli.config import Parser, add_arguments, build, field_docs, flag_name
 from nbrdf.cli.main import build_parser, nbrdf_main, run_guarded
+from nbrdf.imaging.tonemap import ToneMap
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.viewer.modes import Method, ToneMap
+from nbrdf.neural.methods import Method
 
 
 def _pair(text: str) -> tuple[int, int]:

@@ -44,7 +44,8 @@ def test_wheel_holds_only_the_nbrdf_package(wheel):
     dist = [t for t in tops if t.endswith(".dist-info")]
     assert len(dist) == 1 and dist[0].startswith("nbrdf-"), tops
     assert tops == {"nbrdf", dist[0]}, tops
-    for pkg in ("cli", "neural", "training", "viewer", "viewer/ui", "viewer/assets"):
+    for pkg in ("cli", "neural", "training", "imaging", "viewer", "viewer/ui", "viewer/assets", "viewer/gpu", "viewer/jobs",
+                "viewer/reference", "viewer/scene", "viewer/session", "viewer/window"):
         assert f"nbrdf/{pkg}/__init__.py" in names, pkg
     assert "nbrdf/cli/main.py" in names and "nbrdf/cli/view.py" in names
     assert "nbrdf/neural/data/nbrdf_default.safetensors" in names  # the shipped weights

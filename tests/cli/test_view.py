@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from nbrdf.cli.view import build_parser, main, parse_args
+from nbrdf.imaging.image_io import read_exr
+from nbrdf.imaging.tonemap import ToneMap
 from nbrdf.neural.material import load_material
-from nbrdf.viewer.image_io import read_exr
-from nbrdf.viewer.modes import BrdfMode, ToneMap, View
+from nbrdf.viewer.modes import BrdfMode, View
 from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
 
 
@@ -92,7 +93,7 @@ def test_cli_brdf_belcour_lobe_is_the_python_model(tmp_path, capsys):
 
 @pytest.mark.gl
 def test_cli_brdf_belcour_falls_back_to_neural_with_one_line(tmp_path, capsys):
-    from nbrdf.viewer.belcour_gpu import MAX_ATOMS
+    from nbrdf.viewer.gpu.belcour_gpu import MAX_ATOMS
 
     layers = [{"type": "dielectric", "roughness": 0.1, "ior": 1.2}] * MAX_ATOMS + [{"type": "diffuse", "albedo": 0.5}]
     (tmp_path / "deep.json").write_text(json.dumps({"format": "nbrdf-material/1", "name": "d", "layers": layers}))
@@ -131,7 +132,7 @@ def test_headless_fallback(tmp_path):
 def test_cli_renders_a_session_file(gl_ctx, tmp_path, capsys):
     import imageio.v3 as iio
 
-    from nbrdf.viewer.lookdev import LookDev
+    from nbrdf.viewer.session.lookdev import LookDev
 
     ld = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
     try:
@@ -179,8 +180,8 @@ def test_turntable_writes_one_turn_of_frames(tmp_path, capsys):
 def test_a_gltf_mesh_brings_its_material(tmp_path, capsys):
     """--mesh model.glb with no MATERIAL: every primitive, z-up, shaded with the file's converted material
     (a one-line note per property without an equivalent); a MATERIAL given wins."""
-    from nbrdf.viewer.gltf_import import import_gltf
-    from nbrdf.viewer.mesh import load_mesh
+    from nbrdf.viewer.scene.gltf_import import import_gltf
+    from nbrdf.viewer.scene.mesh import load_mesh
 
     glb = Path(DEFAULT_MATERIAL).parents[1] / "meshes" / "car_paint_pebble.glb"
     mesh = load_mesh(glb)
@@ -211,7 +212,7 @@ class _LimitedContext:
 @pytest.mark.gl
 def test_a_size_beyond_the_renderbuffer_limit_names_the_limit(gl_ctx):
     from nbrdf.neural.errors import NbrdfError
-    from nbrdf.viewer.gl import check_target_size
+    from nbrdf.viewer.gpu.gl import check_target_size
 
     check_target_size(gl_ctx, (64, 48))  # within every limit: no error
     with pytest.raises(NbrdfError, match=r"--size 65x48: .*at most 64x64 \(GL_MAX_RENDERBUFFER_SIZE"):

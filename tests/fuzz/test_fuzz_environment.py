@@ -18,7 +18,7 @@ def test_byte_mutations(worker, fmt):
 
 def test_rgbe_reads_what_was_written(tmp_path):
     """The reader returns the radiance (within RGBE's 8-bit mantissa), top row first, flat or run-length."""
-    from nbrdf.viewer.image_io import read_environment
+    from nbrdf.imaging.image_io import read_environment
 
     rng = np.random.default_rng(1)
     img = rng.uniform(0, 50, (9, 40, 3)) * (rng.uniform(size=(9, 40, 1)) > 0.3)

@@ -39,11 +39,11 @@ SS = 4
 
 
 def _mitsuba_image(mi, material: str) -> np.ndarray:
+    from nbrdf.imaging.env_presets import DEFAULT_SIZE
     from nbrdf.mitsuba import wavefront_mode
     from nbrdf.mitsuba.scenes import ENV_TO_WORLD, environment_bitmap
-    from nbrdf.viewer.camera import OrbitCamera
-    from nbrdf.viewer.env_presets import DEFAULT_SIZE
-    from nbrdf.viewer.renderer import ViewState
+    from nbrdf.viewer.gpu.renderer import ViewState
+    from nbrdf.viewer.scene.camera import OrbitCamera
 
     cam, state = OrbitCamera(), ViewState()
     to_light = np.asarray(state.light_dir, np.float64)
@@ -85,7 +85,7 @@ def _normal_mapped(tmp_path) -> str:
 
 def _previewer_image(material: str, out: Path) -> np.ndarray:
     """The previewer's image at SS x SS the size, averaged down to RES x RES."""
-    from nbrdf.viewer.image_io import read_exr
+    from nbrdf.imaging.image_io import read_exr
 
     size, spp = RES * SS, SPP // (SS * SS)
     subprocess.run([sys.executable, "-m", "nbrdf.cli.view", material, "--offscreen", "--out", str(out),

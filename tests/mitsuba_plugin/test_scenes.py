@@ -27,7 +27,7 @@ def _tiny_scene(path: Path, material) -> str:
 
 @pytest.mark.slow
 def test_tiny_scene_renders_to_exr_and_png(tmp_path):
-    from nbrdf.viewer.image_io import read_exr
+    from nbrdf.imaging.image_io import read_exr
 
     scene = _tiny_scene(tmp_path / "tiny.json", GOLD)
     assert nbrdf_main(["render", scene, "--spp", "4", "--size", "16x12", "--out", str(tmp_path / "a.exr")]) == 0
@@ -46,7 +46,7 @@ def test_tiny_scene_renders_to_exr_and_png(tmp_path):
 def test_render_with_a_table_body_is_the_decoders_image(tmp_path):
     """``nbrdf render --neural-body table``: the same sampler draws as the decoder's (the
     sampler does not read the body), so the two images differ by the table's error only."""
-    from nbrdf.viewer.image_io import read_exr
+    from nbrdf.imaging.image_io import read_exr
 
     scene = _tiny_scene(tmp_path / "tiny.json", GOLD)
     args = ["render", scene, "--spp", "4", "--size", "16x12"]

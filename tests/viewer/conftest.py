@@ -8,7 +8,7 @@ from xvfb import xvfb_server
 
 @pytest.fixture(scope="session")
 def gl_ctx():
-    from nbrdf.viewer.gl import offscreen_context
+    from nbrdf.viewer.gpu.gl import offscreen_context
 
     return offscreen_context()
 

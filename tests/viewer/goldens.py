@@ -89,8 +89,8 @@ def material_doc(case: Case) -> tuple[dict, Path]:
 def render_case(ctx, case: Case, doc: dict | None = None) -> np.ndarray:
     """The case's linear render; ``doc`` replaces its material document (an edited preset)."""
     from nbrdf.neural.material import parse_material
+    from nbrdf.viewer.gpu.renderer import ViewState, make_renderer
     from nbrdf.viewer.options import ViewOptions
-    from nbrdf.viewer.renderer import ViewState, make_renderer
 
     own, base = material_doc(case)
     material = parse_material(doc if doc is not None else own, base)
@@ -102,8 +102,8 @@ def render_case(ctx, case: Case, doc: dict | None = None) -> np.ndarray:
 def render_session(ctx) -> np.ndarray:
     """The object view of the previous version's session file, opened in the look-dev state."""
     from nbrdf.neural.material import load_material
-    from nbrdf.viewer.lookdev import LookDev
     from nbrdf.viewer.options import DEFAULT_MATERIAL
+    from nbrdf.viewer.session.lookdev import LookDev
 
     ld = LookDev(ctx, load_material(DEFAULT_MATERIAL))
     try:
@@ -146,7 +146,7 @@ def targets() -> dict[str, tuple[Path, str]]:
 
 def write_all() -> None:
     """Renders and writes every stored render, printing each one's figure to the file it replaces."""
-    from nbrdf.viewer.gl import offscreen_context
+    from nbrdf.viewer.gpu.gl import offscreen_context
 
     ctx = offscreen_context()
     for name, img in render_all(ctx).items():
@@ -158,7 +158,7 @@ def write_all() -> None:
 
 def _dump(out: str) -> None:
     """One fresh process's renders, for --spread."""
-    from nbrdf.viewer.gl import offscreen_context
+    from nbrdf.viewer.gpu.gl import offscreen_context
 
     np.savez(out, **render_all(offscreen_context()))
 

@@ -8,7 +8,7 @@ import pytest
 from nbrdf.neural.material import parse_material
 from nbrdf.neural.metrics import lobe_image
 from nbrdf.training.analytic_layering import analytic_layered_eval
-from nbrdf.viewer.renderer import Renderer, ViewState
+from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 
 pytestmark = pytest.mark.gl
 

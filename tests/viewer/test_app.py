@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 import torch
 
+from nbrdf.imaging.image_io import tonemap
 from nbrdf.neural.material import parse_material
 from nbrdf.neural.model import default_model
-from nbrdf.viewer.image_io import tonemap
 from nbrdf.viewer.options import DEFAULT_MATERIAL
 
 pytestmark = pytest.mark.gl
@@ -26,7 +26,7 @@ SCRIPT = textwrap.dedent("""
     import json, os, sys
     from pathlib import Path
     import numpy as np
-    from nbrdf.viewer.app import App
+    from nbrdf.viewer.window.app import App
     from nbrdf.viewer.options import ViewOptions
     tmp = Path(sys.argv[2])
     app = App(ViewOptions(material=sys.argv[1], size=(64, 48)), size=(64, 48))
@@ -107,11 +107,11 @@ def session_run(xvfb_display, tmp_path_factory):
 
 
 def test_slider_changes_latents_and_pixels_as_offscreen(session_run, gl_ctx):
-    from nbrdf.viewer.backdrop import Backdrop
-    from nbrdf.viewer.env_presets import resolve_environment
-    from nbrdf.viewer.neural_gpu import GpuDecoder
+    from nbrdf.imaging.env_presets import resolve_environment
+    from nbrdf.viewer.gpu.backdrop import Backdrop
+    from nbrdf.viewer.gpu.neural_gpu import GpuDecoder
+    from nbrdf.viewer.gpu.renderer import Renderer, ViewState
     from nbrdf.viewer.options import ViewOptions
-    from nbrdf.viewer.renderer import Renderer, ViewState
 
     _, out, f = session_run
     assert out["edit_ok"]
@@ -150,7 +150,7 @@ def test_bad_files_show_an_error_and_change_nothing(session_run):
 def test_screenshots(session_run):
     import imageio.v3 as iio
 
-    from nbrdf.viewer.image_io import read_exr
+    from nbrdf.imaging.image_io import read_exr
 
     tmp, out, _ = session_run
     assert out["shots"][:2] == [True, True] and out["shots"][2] is False and ".png" in out["shots"][3]
@@ -162,7 +162,7 @@ def test_screenshots(session_run):
 def test_interpolation_and_svbrdf_in_the_app(session_run):
     from nbrdf.neural.latent_texture import blend
     from nbrdf.neural.material import load_material
-    from nbrdf.viewer.lookdev import presets
+    from nbrdf.viewer.session.lookdev import presets
 
     _, out, f = session_run
     assert out["interp"] == [True, None]

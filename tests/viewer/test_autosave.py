@@ -14,9 +14,9 @@ import time
 import pytest
 
 from nbrdf.neural.material import load_material
-from nbrdf.viewer.autosave import Autosave, WindowAutosave, state_dir, write_atomic
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.session import SessionDoc
+from nbrdf.viewer.session.autosave import Autosave, WindowAutosave, state_dir, write_atomic
+from nbrdf.viewer.session.document import SessionDoc
 
 
 class Clock:
@@ -95,7 +95,7 @@ def test_a_failed_write_is_one_line_and_retried(tmp_path, monkeypatch):
     a.tick(doc(0.2))
     clock.t += 2
     assert a.tick(doc(0.2))
-    monkeypatch.setattr("nbrdf.viewer.autosave.write_atomic",
+    monkeypatch.setattr("nbrdf.viewer.session.autosave.write_atomic",
                         lambda p, t: (_ for _ in ()).throw(OSError(28, "No space left on device")))
     a.tick(doc(0.7))
     clock.t += 2
@@ -194,7 +194,7 @@ WINDOW = textwrap.dedent("""
     import json, sys, time
     from pathlib import Path
     from nbrdf.cli.view import parse_args
-    from nbrdf.viewer.app import App
+    from nbrdf.viewer.window.app import App
     opts = parse_args(sys.argv[1:])
     app = App(opts, size=(64, 48))
     app.autosave.saver.delay = 0.2
@@ -277,7 +277,7 @@ def test_a_killed_window_restores_its_last_autosave_exactly(xvfb_display, tmp_pa
 RUN = textwrap.dedent("""
     import sys
     from nbrdf.cli.view import parse_args
-    from nbrdf.viewer.app import App
+    from nbrdf.viewer.window.app import App
     app = App(parse_args(sys.argv[1:]), size=(64, 48))
     app.autosave.saver.delay = 0.2
     app.lookdev.set_param(len(app.lookdev.material.layers) - 1, "roughness", 0.41)

@@ -8,11 +8,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from nbrdf.imaging.environment import default_environment
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import parse_material
-from nbrdf.viewer.backdrop import Backdrop, BackdropSettings, blurred_environment, contact_shadow
-from nbrdf.viewer.environment import default_environment
-from nbrdf.viewer.mesh import named_mesh
+from nbrdf.viewer.gpu.backdrop import Backdrop, BackdropSettings, blurred_environment, contact_shadow
+from nbrdf.viewer.scene.mesh import named_mesh
 
 GOLD = {"format": "nbrdf-material/1", "name": "g", "layers": [{"type": "conductor", "roughness": 0.3,
                                                              "r0": [1.0, 0.78, 0.34]}]}
@@ -42,8 +42,8 @@ def test_contact_shadow_is_darkest_under_the_contact_point():
 
 @pytest.fixture(scope="module")
 def scene(gl_ctx):
-    from nbrdf.viewer.pipeline import MaterialPipeline
-    from nbrdf.viewer.renderer import Renderer, ViewState
+    from nbrdf.viewer.gpu.pipeline import MaterialPipeline
+    from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 
     r = Renderer(gl_ctx, mesh="sphere")
     brdf = MaterialPipeline(gl_ctx).build(parse_material(GOLD), "analytic")

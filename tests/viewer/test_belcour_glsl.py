@@ -15,12 +15,12 @@ import torch
 from nbrdf.neural.material import load_material, parse_material
 from nbrdf.training.belcour_tables import BelcourTables, default_tables
 from nbrdf.training.brdfs import brdf_for
-from nbrdf.viewer.belcour_gpu import MAX_ATOMS, BelcourTextures
-from nbrdf.viewer.brdf_probe import probe_brdf
+from nbrdf.viewer.gpu.belcour_gpu import MAX_ATOMS, BelcourTextures
+from nbrdf.viewer.gpu.brdf_probe import probe_brdf
+from nbrdf.viewer.gpu.pipeline import BrdfKind, MaterialPipeline, fallback_note
+from nbrdf.viewer.gpu.renderer import Renderer
 from nbrdf.viewer.modes import BrdfMode
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.pipeline import BrdfKind, MaterialPipeline, fallback_note
-from nbrdf.viewer.renderer import Renderer
 
 pytestmark = pytest.mark.gl
 
@@ -132,7 +132,7 @@ def test_lit_sphere_is_the_python_model_at_its_pixels(gl_ctx):
     alone: every covered pixel is f(wi, wo) cos(theta_i) L with the Python f at the
     G-buffer's directions (float32 directions rebuilt from the G-buffer: 2e-4 relative)."""
     from nbrdf.cli.view import parse_args
-    from nbrdf.viewer.lookdev import LookDev
+    from nbrdf.viewer.session.lookdev import LookDev
 
     opts = parse_args([str(ASSETS / "car_paint.json"), "--brdf", "belcour", "--background", "none", "--no-ground",
                        "--offscreen", "--out", "unused.png"])
@@ -173,7 +173,7 @@ def test_the_lit_pass_lobe_strategy_is_a_density(gpu, name):
     two views; |estimate - pi| within 4.5 standard errors (two-sided p ~ 7e-6) and
     the standard error under 2 % of pi. A pick that disagrees with the mixture's
     weights (e.g. the coat drawn as often as the base) is off by tens of errors."""
-    from nbrdf.viewer.brdf_probe import probe_lobe_sampling
+    from nbrdf.viewer.gpu.brdf_probe import probe_lobe_sampling
 
     pipe, r = gpu
     brdf = pipe.build(STACKS[name](), BrdfMode.BELCOUR)

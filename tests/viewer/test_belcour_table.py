@@ -1,4 +1,4 @@
-"""Belcour's model baked into the window's body table (viewer/belcour_gpu.py
+"""Belcour's model baked into the window's body table (viewer/gpu/belcour_gpu.py
 ``bake_body``, ``BodyTables.belcour``): what the window shades on software
 OpenGL, where the per-pixel model costs about three table passes.
 
@@ -16,11 +16,11 @@ from nbrdf.neural.coat import coat_eval
 from nbrdf.neural.material import load_material
 from nbrdf.training.belcour import atoms_of, belcour_eval_atoms
 from nbrdf.training.belcour_tables import default_tables
-from nbrdf.viewer.belcour_gpu import bake_body, coat_of, table_uniforms
-from nbrdf.viewer.body_table_gpu import INTERACTIVE, STILL, BodyTables
+from nbrdf.viewer.gpu.belcour_gpu import bake_body, coat_of, table_uniforms
+from nbrdf.viewer.gpu.body_table_gpu import INTERACTIVE, STILL, BodyTables
+from nbrdf.viewer.gpu.pipeline import BrdfKind, MaterialPipeline
+from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.pipeline import BrdfKind, MaterialPipeline
-from nbrdf.viewer.renderer import Renderer, ViewState
 
 pytestmark = pytest.mark.gl
 
@@ -101,7 +101,7 @@ def test_the_proxy_is_the_body_lobe_strategy():
 def test_the_window_bakes_belcour_when_it_bakes_bodies(setup):
     """A Belcour material gets the table where the window uses tables, and the probe
     that decides is timed with the shared decoder when the first material is not neural."""
-    from nbrdf.viewer.body_source import BodySettings, BodySource
+    from nbrdf.viewer.gpu.body_source import BodySettings, BodySource
 
     ctx, pipe, _, _ = setup
     brdf = pipe.build(load_material(DEFAULT_MATERIAL), "belcour")
@@ -125,7 +125,7 @@ def test_the_split_takes_the_top_interface_as_the_coat_and_samples_the_rest():
     out of the body's mixture (which sums to 1, or is empty over a diffuse base: the cosine lobe then); a stack
     whose top is no interface (a lone conductor) has no coat and keeps its whole mixture as the body's."""
     from nbrdf.neural.material import parse_material
-    from nbrdf.viewer.belcour_gpu import belcour_uniforms
+    from nbrdf.viewer.gpu.belcour_gpu import belcour_uniforms
 
     metal = belcour_uniforms(load_material(DEFAULT_MATERIAL))
     top = load_material(DEFAULT_MATERIAL).layers[0]

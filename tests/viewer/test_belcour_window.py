@@ -13,8 +13,8 @@ import textwrap
 import numpy as np
 import pytest
 
-from nbrdf.viewer.belcour_gpu import MAX_ATOMS
-from nbrdf.viewer.image_io import tonemap
+from nbrdf.imaging.image_io import tonemap
+from nbrdf.viewer.gpu.belcour_gpu import MAX_ATOMS
 from nbrdf.viewer.options import DEFAULT_MATERIAL
 
 pytestmark = pytest.mark.gl
@@ -25,7 +25,7 @@ SCRIPT = textwrap.dedent("""
     import json, sys
     from pathlib import Path
     import numpy as np
-    from nbrdf.viewer.app import App
+    from nbrdf.viewer.window.app import App
     from nbrdf.viewer.options import ViewOptions
     tmp, deep = Path(sys.argv[2]), sys.argv[3]
     app = App(ViewOptions(material=sys.argv[1], size=(48, 40), brdf="belcour"), size=(48, 40))
@@ -85,12 +85,12 @@ def test_window_opens_on_belcour_and_flips_to_neural_and_back(window_run):
 
 
 def test_window_frame_is_the_offscreen_belcour_render(window_run, gl_ctx):
+    from nbrdf.imaging.env_presets import resolve_environment
     from nbrdf.neural.material import load_material
-    from nbrdf.viewer.backdrop import Backdrop
-    from nbrdf.viewer.env_presets import resolve_environment
+    from nbrdf.viewer.gpu.backdrop import Backdrop
+    from nbrdf.viewer.gpu.pipeline import MaterialPipeline
+    from nbrdf.viewer.gpu.renderer import Renderer, ViewState
     from nbrdf.viewer.options import ViewOptions
-    from nbrdf.viewer.pipeline import MaterialPipeline
-    from nbrdf.viewer.renderer import Renderer, ViewState
 
     _, f = window_run
     opts = ViewOptions()

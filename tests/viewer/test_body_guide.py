@@ -1,4 +1,4 @@
-"""The decoder's resampling target from the body's baked table (viewer/body_guide.py,
+"""The decoder's resampling target from the body's baked table (viewer/gpu/body_guide.py,
 lit_shade.glsl ``ris_target``, ``LitSampling.table_target``): the estimate stays the
 decoder's -- unbiased against the proxy-target estimator it replaced and against the
 decoder at every candidate, term by term -- while its noise drops; a wrong resampling
@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 import torch
 
-from nbrdf.viewer import programs
-from nbrdf.viewer.body_guide import BodyGuides
-from nbrdf.viewer.environment import LUMA
-from nbrdf.viewer.lit_sampling import LitSampling, Term
-from nbrdf.viewer.noise import NoiseConfig, default_setup, measure_noise, render_seeds
+from nbrdf.imaging.environment import LUMA
+from nbrdf.viewer.gpu import programs
+from nbrdf.viewer.gpu.body_guide import BodyGuides
+from nbrdf.viewer.gpu.lit_sampling import LitSampling, Term
+from nbrdf.viewer.gpu.noise import NoiseConfig, default_setup, measure_noise, render_seeds
+from nbrdf.viewer.gpu.pipeline import BrdfKind
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.pipeline import BrdfKind
 
 pytestmark = pytest.mark.gl
 
@@ -104,7 +104,7 @@ def test_a_wrong_resampling_weight_is_rejected(decoder_setup, gl_ctx, monkeypatc
     """The unbiasedness test's power: the same comparison (body term, 8 + 8 seeds) on a
     shader whose resampling weight uses the even mixture's pdf for the 14 + 2 candidates
     fails it: |z| > 4.4 and off by more than 1 %."""
-    from nbrdf.viewer import shaders
+    from nbrdf.viewer.gpu import shaders
 
     material, _, _ = decoder_setup
     text = shaders.read("lit_shade.glsl")

@@ -1,4 +1,4 @@
-"""The baked body table on the GPU (viewer/body_table_gpu.py, body_table.glsl)
+"""The baked body table on the GPU (viewer/gpu/body_table_gpu.py, body_table.glsl)
 against the per-pixel decoder on a small offscreen render of the lit sphere.
 
 Both renders use the same random numbers per pixel and pass, so their
@@ -11,11 +11,11 @@ import torch
 
 from nbrdf.neural.body_table import TableSize
 from nbrdf.neural.material import load_material
-from nbrdf.viewer.body_table_gpu import INTERACTIVE, STILL, BodyTables
-from nbrdf.viewer.lit_sampling import LitSampling
+from nbrdf.viewer.gpu.body_table_gpu import INTERACTIVE, STILL, BodyTables
+from nbrdf.viewer.gpu.lit_sampling import LitSampling
+from nbrdf.viewer.gpu.pipeline import BrdfKind, MaterialPipeline
+from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.pipeline import BrdfKind, MaterialPipeline
-from nbrdf.viewer.renderer import Renderer, ViewState
 
 pytestmark = pytest.mark.gl
 
@@ -82,7 +82,7 @@ def test_only_uniform_neural_materials_are_baked(setup):
 
 
 def test_body_source_decides_from_the_measured_decoder_and_bakes_once_per_edit(setup):
-    from nbrdf.viewer.body_source import BodySettings, BodySource
+    from nbrdf.viewer.gpu.body_source import BodySettings, BodySource
 
     ctx, _, brdf, _, _ = setup
     slow = BodySource(ctx, BodySettings(fast_ns_per_pixel=0.0))  # any measured cost is too slow

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from nbrdf.viewer.camera import DEFAULT_YAW, FRAME_FILL, OrbitCamera, framing_distance
-from nbrdf.viewer.mesh import named_mesh
+from nbrdf.viewer.scene.camera import DEFAULT_YAW, FRAME_FILL, OrbitCamera, framing_distance
+from nbrdf.viewer.scene.mesh import named_mesh
 
 MESHES = ["sphere", "testmesh", str(__import__("pathlib").Path(__file__).parents[2] / "viewer" / "assets"
                                      / "meshes" / "car_paint_pebble.glb")]

@@ -1,5 +1,5 @@
 """The compare view's reference of the lit object under the lights and the
-environment the view shows (viewer/compare.py, viewer/reference.py): the
+environment the view shows (viewer/reference/compare.py, viewer/reference/worker.py): the
 worker's per-pixel estimator is unbiased, the reference agrees with the
 neural image where the neural image is exact, switching compare modes keeps
 the reference's samples, and the halves are labelled on the image."""
@@ -39,9 +39,9 @@ def test_lit_samples_are_unbiased_under_an_environment(tmp_path):
     paths, pixel by pixel, within 4.5 combined standard errors (two-sided, per
     value about 7e-6, 12 values: false alarm < 1e-4). A pdf off by the mixture's
     share (1/3) or a wrong rotation of the map would be off by tens of sigma."""
+    from nbrdf.imaging.environment import EnvironmentMap
     from nbrdf.training.reference import reference_eval
-    from nbrdf.viewer.environment import EnvironmentMap
-    from nbrdf.viewer.reference_lit import LitJob, env_bilinear, frames_from_normals, lit_samples, to_local
+    from nbrdf.viewer.reference.lit import LitJob, env_bilinear, frames_from_normals, lit_samples, to_local
 
     material = parse_material({"format": "nbrdf-material/1", "name": "s", "layers": [
         {"type": "dielectric", "roughness": 0.05, "ior": 1.5}, {"type": "medium", "albedo": 0.8, "sigma_t": 0.3},
@@ -78,7 +78,7 @@ def test_lit_samples_are_unbiased_under_an_environment(tmp_path):
 
 
 def _lookdev(gl_ctx, doc: dict):
-    from nbrdf.viewer.lookdev import LookDev
+    from nbrdf.viewer.session.lookdev import LookDev
 
     return LookDev(gl_ctx, parse_material(doc))
 

@@ -21,7 +21,7 @@ SCRIPT = textwrap.dedent("""
     import json, sys
     from pathlib import Path
     import numpy as np
-    from nbrdf.viewer.app import App
+    from nbrdf.viewer.window.app import App
     from nbrdf.viewer.options import ViewOptions
     tmp = Path(sys.argv[2])
     size = (1000, 620)  # the README capture's window
@@ -73,7 +73,7 @@ def test_side_by_side_frames_the_object_in_each_half(side_run):
     """Each half is half the view's width: the camera fits the object into a
     view of that aspect (it used to keep the full view's framing, so each half
     cut the sphere off at its sides)."""
-    from nbrdf.viewer.camera import framing_distance
+    from nbrdf.viewer.scene.camera import framing_distance
 
     (_, _, vw, vh), (distance, fov) = side_run["vp"], side_run["camera"]
     assert distance == pytest.approx(framing_distance(fov, (vw / 2) / vh), rel=1e-6)
@@ -90,7 +90,7 @@ def test_flip_view_shows_the_hdr_flip_of_neural_against_reference(gl_ctx):
     view draws the map in magma (black where FLIP is 0)."""
     from nbrdf.neural.material import parse_material
     from nbrdf.training.render_report import flip
-    from nbrdf.viewer.lookdev import LookDev
+    from nbrdf.viewer.session.lookdev import LookDev
 
     ld = LookDev(gl_ctx, parse_material(GOLD))
     try:
@@ -121,8 +121,8 @@ def test_the_status_line_states_the_references_noise(gl_ctx):
     trusted: paths per pixel and the relative noise of the image."""
     from nbrdf.neural.material import parse_material
     from nbrdf.training.bench import STANDARD_STACK
-    from nbrdf.viewer.compare import Compare
-    from nbrdf.viewer.reference import ReferenceImage, ReferenceWorker
+    from nbrdf.viewer.reference.compare import Compare
+    from nbrdf.viewer.reference.worker import ReferenceImage, ReferenceWorker
 
     w = ReferenceWorker()
     c = Compare(gl_ctx, None, worker=w)  # the status line needs no renderer

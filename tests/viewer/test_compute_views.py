@@ -10,11 +10,11 @@ import torch
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, DecoderSpec, load_decoder
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
-from nbrdf.viewer import gl
-from nbrdf.viewer.neural_gpu import GpuDecoder, WeightStorage, probe_compute
+from nbrdf.viewer.gpu import gl
+from nbrdf.viewer.gpu.neural_gpu import GpuDecoder, WeightStorage, probe_compute
+from nbrdf.viewer.gpu.pipeline import MaterialPipeline
+from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.pipeline import MaterialPipeline
-from nbrdf.viewer.renderer import Renderer, ViewState
 
 MATERIALS = DEFAULT_MATERIAL.parent
 CASES = [("rough_gold.json", "analytic"), ("default.json", "neural"), ("worn_tiles.json", "neural")]
@@ -102,8 +102,8 @@ def test_paired_decoder_with_literal_weights_is_a_clear_error(gl_ctx):
 def test_the_lobe_view_is_a_round_disk_in_a_view_of_any_shape(gl_ctx, size):
     """A window's view is rarely square: the lobe's disk keeps its shape (radius half the
     shorter side), nothing is drawn outside it, everything inside is lit (rough gold)."""
+    from nbrdf.viewer.gpu.renderer import make_renderer
     from nbrdf.viewer.options import ViewOptions
-    from nbrdf.viewer.renderer import make_renderer
 
     opts = ViewOptions(material=MATERIALS / "rough_gold.json", brdf="analytic")
     r = make_renderer(gl_ctx, load_material(opts.material), opts)

@@ -8,10 +8,10 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
-from nbrdf.viewer import gl
+from nbrdf.viewer.gpu import gl
+from nbrdf.viewer.gpu.pipeline import MaterialPipeline
+from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.pipeline import MaterialPipeline
-from nbrdf.viewer.renderer import Renderer, ViewState
 
 MATERIALS = DEFAULT_MATERIAL.parent
 CASES = [  # material, brdf mode, mesh

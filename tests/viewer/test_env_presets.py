@@ -10,8 +10,7 @@ import pytest
 import torch
 from stattools import chi2_sphere
 
-from nbrdf.neural.errors import NbrdfError
-from nbrdf.viewer.env_presets import (
+from nbrdf.imaging.env_presets import (
     ENV_PRESETS,
     KEY_WHITE,
     cache_dir,
@@ -22,7 +21,8 @@ from nbrdf.viewer.env_presets import (
     sun_direction,
     texel_solid_angles,
 )
-from nbrdf.viewer.environment import EnvironmentMap
+from nbrdf.imaging.environment import EnvironmentMap
+from nbrdf.neural.errors import NbrdfError
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 

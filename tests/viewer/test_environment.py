@@ -8,9 +8,9 @@ import pytest
 import torch
 from stattools import chi2_sphere
 
+from nbrdf.imaging.environment import EnvironmentMap, GpuEnvironment, default_environment
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import parse_material
-from nbrdf.viewer.environment import EnvironmentMap, GpuEnvironment, default_environment
 
 pytestmark = pytest.mark.gl
 
@@ -41,8 +41,8 @@ def test_bright_texels_are_sampled_more():
 
 
 def test_glsl_sampling_matches_numpy(gl_ctx):
-    from nbrdf.viewer import shaders
-    from nbrdf.viewer.neural_gpu import probe_pass
+    from nbrdf.viewer.gpu import shaders
+    from nbrdf.viewer.gpu.neural_gpu import probe_pass
 
     env = _env()
     genv = GpuEnvironment(gl_ctx, env)
@@ -63,7 +63,7 @@ def test_glsl_sampling_matches_numpy(gl_ctx):
 
 def test_white_furnace(gl_ctx):
     """Albedo-1 Lambertian, uniform radiance 1, no light: every pixel is 1."""
-    from nbrdf.viewer.renderer import Renderer, ViewState
+    from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 
     m = parse_material({"format": "nbrdf-material/1", "name": "white", "layers": [{"type": "diffuse", "albedo": 1.0}]})
     r = Renderer(gl_ctx, m, environment=np.ones((16, 32, 3), np.float32))

@@ -17,7 +17,7 @@ import torch
 
 from nbrdf.neural.material import load_material
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.reference import ReferenceWorker, lobe_job
+from nbrdf.viewer.reference.worker import ReferenceWorker, lobe_job
 
 
 def small_job(key: str, max_spp: int):
@@ -82,8 +82,8 @@ def test_a_job_that_keeps_killing_the_worker_is_failed_not_retried_forever():
 
 
 def test_the_compare_status_line_reports_the_restart(gl_ctx):
-    from nbrdf.viewer.compare import Compare
-    from nbrdf.viewer.renderer import Renderer
+    from nbrdf.viewer.gpu.renderer import Renderer
+    from nbrdf.viewer.reference.compare import Compare
 
     m = load_material(DEFAULT_MATERIAL)
     c = Compare(gl_ctx, Renderer(gl_ctx, m))
@@ -110,7 +110,7 @@ def _unwritable(tmp_path):
 WINDOW = textwrap.dedent("""
     import json, os, signal, sys, time
     from pathlib import Path
-    from nbrdf.viewer.app import App
+    from nbrdf.viewer.window.app import App
     from nbrdf.viewer.options import ViewOptions
     good, bad, out = Path(sys.argv[2]), Path(sys.argv[3]), {}
     app = App(ViewOptions(material=sys.argv[1], size=(48, 32)), size=(48, 32))
@@ -194,7 +194,7 @@ def test_a_full_disk_keeps_the_saved_material_and_session(tmp_path, monkeypatch)
     import nbrdf.neural.files as files
     from nbrdf.neural.errors import NbrdfError
     from nbrdf.neural.material import save_material
-    from nbrdf.viewer.session import SessionDoc
+    from nbrdf.viewer.session.document import SessionDoc
 
     m = load_material(DEFAULT_MATERIAL)
     save_material(m, tmp_path / "m.json")
@@ -210,7 +210,7 @@ def test_a_full_disk_keeps_the_saved_material_and_session(tmp_path, monkeypatch)
 
 @pytest.mark.parametrize("suffix", [".png", ".exr", ".npy"])
 def test_a_full_disk_keeps_the_saved_screenshot(tmp_path, monkeypatch, suffix):
-    import nbrdf.viewer.image_io as image_io
+    import nbrdf.imaging.image_io as image_io
     from nbrdf.neural.errors import NbrdfError
 
     img = np.full((4, 6, 3), 0.5, np.float32)
@@ -223,10 +223,10 @@ def test_a_full_disk_keeps_the_saved_screenshot(tmp_path, monkeypatch, suffix):
 
 
 def test_an_unwritable_folder_is_one_line(tmp_path):
+    from nbrdf.imaging.image_io import write_image
     from nbrdf.neural.errors import NbrdfError
     from nbrdf.neural.material import save_material
-    from nbrdf.viewer.image_io import write_image
-    from nbrdf.viewer.session import SessionDoc
+    from nbrdf.viewer.session.document import SessionDoc
 
     bad = _unwritable(tmp_path)
     m = load_material(DEFAULT_MATERIAL)

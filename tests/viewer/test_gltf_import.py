@@ -15,7 +15,7 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, TextureRef
 from nbrdf.neural.svbrdf import read_map
 from nbrdf.viewer.assets import make_gltf
-from nbrdf.viewer.gltf_import import import_gltf, srgb_to_linear
+from nbrdf.viewer.scene.gltf_import import import_gltf, srgb_to_linear
 
 BUNDLED = Path(make_gltf.__file__).parent / "meshes" / make_gltf.NAME
 

@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, TextureRef
-from nbrdf.viewer import gl
 from nbrdf.viewer.assets import make_gltf
-from nbrdf.viewer.gltf_import import import_gltf, material_groups
-from nbrdf.viewer.mesh import load_mesh
+from nbrdf.viewer.gpu import gl
 from nbrdf.viewer.options import ViewOptions
+from nbrdf.viewer.scene.gltf_import import import_gltf, material_groups
+from nbrdf.viewer.scene.mesh import load_mesh
 
 SCENE = Path(make_gltf.__file__).parent / "meshes" / make_gltf.SCENE_NAME
 SIZE = (48, 48)
@@ -68,7 +68,7 @@ def renders(gl_ctx):
     """The scene's two materials through the compute path (both ranges; all in
     one material; all in the other) and through the fragment path, plus the
     picked material per pixel and the coverage of each range drawn alone."""
-    from nbrdf.viewer.renderer import Renderer, ViewState, make_renderer
+    from nbrdf.viewer.gpu.renderer import Renderer, ViewState, make_renderer
 
     if gl_ctx.version_code < gl.COMPUTE_VERSION:
         pytest.skip("no OpenGL 4.3 here")
@@ -125,8 +125,8 @@ def test_compute_and_fragment_paths_agree_on_two_materials(renders):
 
 @pytest.mark.gl
 def test_the_editor_edits_the_selected_material_only(gl_ctx):
-    from nbrdf.viewer.lookdev import LookDev
-    from nbrdf.viewer.renderer import ViewState
+    from nbrdf.viewer.gpu.renderer import ViewState
+    from nbrdf.viewer.session.lookdev import LookDev
 
     opts = ViewOptions(mesh=str(SCENE), env=None)
     groups = opts.file_materials()
@@ -167,7 +167,7 @@ def test_the_editor_edits_the_selected_material_only(gl_ctx):
 TURNTABLE_SCRIPT = textwrap.dedent("""
     import json, sys, time
     from pathlib import Path
-    from nbrdf.viewer.app import App
+    from nbrdf.viewer.window.app import App
     from nbrdf.viewer.options import ViewOptions
     tmp = Path(sys.argv[2])
     app = App(ViewOptions(mesh=sys.argv[1], size=(48, 48), spp=1), size=(48, 48))

@@ -15,7 +15,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from nbrdf.viewer import gpu_memory
+from nbrdf.viewer.gpu import gpu_memory
 
 pytestmark = pytest.mark.gl
 
@@ -55,9 +55,9 @@ def test_the_command_line_says_one_line_and_exits_2(tmp_path, capsys, monkeypatc
 @pytest.mark.parametrize("limit", sorted(LIMITS))
 def test_the_window_keeps_the_material_it_shows(gl_ctx, tmp_path, monkeypatch, limit):
     from nbrdf.neural.material import load_material
-    from nbrdf.viewer.lookdev import LookDev
+    from nbrdf.viewer.gpu.pipeline import material_key
     from nbrdf.viewer.options import DEFAULT_MATERIAL
-    from nbrdf.viewer.pipeline import material_key
+    from nbrdf.viewer.session.lookdev import LookDev
 
     name, fake, words = LIMITS[limit]
     ld = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
@@ -87,9 +87,9 @@ def test_the_window_keeps_the_material_it_shows(gl_ctx, tmp_path, monkeypatch, l
 WINDOW = textwrap.dedent("""
     import json, sys
     import moderngl
-    from nbrdf.viewer.app import App
-    from nbrdf.viewer.gl_faults import GlContextLost
-    from nbrdf.viewer.lookdev import LookDev
+    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.window.gl_faults import GlContextLost
+    from nbrdf.viewer.session.lookdev import LookDev
     from nbrdf.viewer.options import ViewOptions
 
     def lost(*args, **kwargs):
@@ -140,7 +140,7 @@ def test_a_frame_the_gl_fails_is_one_line_and_the_window_recovers(xvfb_display, 
 
 
 def test_the_command_line_exits_with_one_line_and_keeps_the_session(xvfb_display, tmp_path):
-    from nbrdf.viewer.autosave import Autosave
+    from nbrdf.viewer.session.autosave import Autosave
 
     out, err = _window(xvfb_display, tmp_path, "cli")
     lines = [x for x in err.strip().splitlines() if x.startswith("nbrdf-view:")]

@@ -1,5 +1,5 @@
 """A code swapped in while the view is still (idle refinement) is handed over
-(viewer/view_frames.py, ``ViewFrames.handover``): the image accumulated so far
+(viewer/jobs/view_frames.py, ``ViewFrames.handover``): the image accumulated so far
 stays on screen and fades into the new code's over its first passes, where a
 restart would drop the view back to one noisy pass; once faded, the view is
 exactly the new code's own accumulation. Edits, compare views and view changes
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from nbrdf.neural.material import parse_material
+from nbrdf.viewer.jobs.view_frames import HANDOVER_PASSES
 from nbrdf.viewer.modes import BrdfMode
-from nbrdf.viewer.view_frames import HANDOVER_PASSES
 
 pytestmark = pytest.mark.gl
 
@@ -28,8 +28,8 @@ BLUE = {"format": "nbrdf-material/1", "name": "b", "layers": [
 @pytest.fixture
 def session(gl_ctx):
     from nbrdf.neural.material import load_material
-    from nbrdf.viewer.lookdev import LookDev
     from nbrdf.viewer.options import DEFAULT_MATERIAL
+    from nbrdf.viewer.session.lookdev import LookDev
 
     ld = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
     fbo = gl_ctx.simple_framebuffer(SIZE, components=4)

@@ -1,9 +1,9 @@
-"""Undo / redo over session snapshots (viewer/history.py), without GL."""
+"""Undo / redo over session snapshots (viewer/session/history.py), without GL."""
 from __future__ import annotations
 
 import pytest
 
-from nbrdf.viewer.history import History
+from nbrdf.viewer.session.history import History
 
 
 def snap(v: float) -> dict:

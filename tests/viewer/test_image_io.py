@@ -8,8 +8,8 @@ import struct
 import imageio.v3 as iio
 import numpy as np
 
-from nbrdf.viewer.image_io import write_image, write_png8
-from nbrdf.viewer.screenshot import write_display_png
+from nbrdf.imaging.image_io import write_image, write_png8
+from nbrdf.viewer.jobs.screenshot import write_display_png
 
 
 def _chunks(path) -> list[tuple[bytes, bytes]]:

@@ -1,4 +1,4 @@
-"""The lit pass's estimators (viewer/lit_sampling.py, shaders/lit_shade.glsl)
+"""The lit pass's estimators (viewer/gpu/lit_sampling.py, shaders/lit_shade.glsl)
 on a baked body table, the body of the window's frames on software OpenGL:
 the every-candidate estimator (``LitSampling.every_candidate``, the body at
 every candidate direction, balance heuristic) is unbiased against the balance
@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nbrdf.viewer.body_source import BodySettings, BodySource, table_sampling
-from nbrdf.viewer.body_table_gpu import STILL, BodyTables
-from nbrdf.viewer.environment import LUMA
-from nbrdf.viewer.lit_sampling import LitSampling, Term
-from nbrdf.viewer.noise import NoiseConfig, default_setup, measure_noise, render_seeds
+from nbrdf.imaging.environment import LUMA
+from nbrdf.viewer.gpu.body_source import BodySettings, BodySource, table_sampling
+from nbrdf.viewer.gpu.body_table_gpu import STILL, BodyTables
+from nbrdf.viewer.gpu.lit_sampling import LitSampling, Term
+from nbrdf.viewer.gpu.noise import NoiseConfig, default_setup, measure_noise, render_seeds
 from nbrdf.viewer.options import DEFAULT_MATERIAL
 
 pytestmark = pytest.mark.gl

@@ -16,7 +16,7 @@ pytestmark = pytest.mark.gl
 
 @pytest.fixture()
 def ld(gl_ctx):
-    from nbrdf.viewer.lookdev import LookDev
+    from nbrdf.viewer.session.lookdev import LookDev
 
     session = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
     yield session
@@ -79,7 +79,7 @@ def test_a_session_opened_is_one_step(ld, tmp_path):
 
 
 def test_dropped_files_open_by_kind(ld, tmp_path):
-    from nbrdf.viewer.lookdev import presets
+    from nbrdf.viewer.session.lookdev import presets
 
     assert ld.open_file(presets()["rough_gold"]) and ld.material.name == "rough gold"
     ld.save_session(tmp_path / "s.json")  # a session is a .json too: told apart by content
@@ -119,7 +119,7 @@ def test_a_tiled_screenshot_is_the_one_shot_image_up_to_noise(ld, tmp_path):
 
 
 def test_frame_clock_counts_presented_frames():
-    from nbrdf.viewer.app import FrameClock
+    from nbrdf.viewer.window.app import FrameClock
 
     c = FrameClock(window=10)
     for k in range(25):

@@ -9,7 +9,7 @@ import torch
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, DecoderSpec, load_decoder
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.gpu_pack import latent_share, pack
-from nbrdf.viewer.neural_gpu import COMPUTE_STORAGE, GpuDecoder, WeightStorage, probe_compute, probe_fragment
+from nbrdf.viewer.gpu.neural_gpu import COMPUTE_STORAGE, GpuDecoder, WeightStorage, probe_compute, probe_fragment
 
 
 def pairs(n: int, seed: int):
@@ -138,8 +138,8 @@ def test_lobe_view_matches_the_torch_lobe_image(gl_ctx):
     the torch decoder at the same latents, within 1e-3."""
     from nbrdf.neural.material import load_material
     from nbrdf.neural.metrics import lobe_image
+    from nbrdf.viewer.gpu.renderer import Renderer, ViewState
     from nbrdf.viewer.options import DEFAULT_MATERIAL
-    from nbrdf.viewer.renderer import Renderer, ViewState
 
     torch.manual_seed(6)
     dec = Decoder(DecoderSpec()).eval()
@@ -167,7 +167,7 @@ def test_bench_render_reports_both_paths():
     assert r["paths"]["torch_cpu"]["over_torch"] == 1.0
     for entry in r["paths"].values():
         assert entry["over_torch"] == pytest.approx(entry["rgb_evals_per_s"] / r["torch_cpu_rgb_evals_per_s"], rel=1e-2)
-    from nbrdf.viewer.gl import HALF_FLOAT_EXTENSIONS
+    from nbrdf.viewer.gpu.gl import HALF_FLOAT_EXTENSIONS
 
     assert set(r["f16_arithmetic_extensions"]) <= set(HALF_FLOAT_EXTENSIONS)
     # Lit frames per path: one light, and one pass with the environment (more work).
@@ -200,7 +200,7 @@ def test_gpu_peaks_by_renderer_name():
 
 
 def test_half_float_extensions_are_probed_from_the_context():
-    from nbrdf.viewer.gl import HALF_FLOAT_EXTENSIONS, half_float_extensions
+    from nbrdf.viewer.gpu.gl import HALF_FLOAT_EXTENSIONS, half_float_extensions
 
     class Ctx:
         extensions = {"GL_ARB_gpu_shader5", "GL_NV_gpu_shader5", "GL_EXT_shader_explicit_arithmetic_types_float16"}
@@ -226,7 +226,7 @@ def test_cpu_peak_from_the_cpus_own_report():
 def test_glsl_proxy_sampling_matches_torch_for_the_same_random_numbers(gl_ctx):
     """sample_proxy / pdf_proxy in GLSL against neural/sampling.py, both lobes."""
     from nbrdf.neural.sampling import proxy_sample
-    from nbrdf.viewer.neural_gpu import probe_proxy_sampling
+    from nbrdf.viewer.gpu.neural_gpu import probe_proxy_sampling
 
     g = torch.Generator().manual_seed(11)
     n = 2048
@@ -245,7 +245,7 @@ def test_glsl_coated_sampling_matches_torch_for_the_same_random_numbers(gl_ctx):
     """A code's sampler (coat lobe mixed with the proxy) in GLSL against
     neural/sampling.py coated_sample / coated_pdf."""
     from nbrdf.neural.sampling import coated_sample
-    from nbrdf.viewer.neural_gpu import probe_proxy_sampling
+    from nbrdf.viewer.gpu.neural_gpu import probe_proxy_sampling
 
     g = torch.Generator().manual_seed(12)
     n = 2048

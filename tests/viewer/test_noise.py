@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nbrdf.viewer.environment import LUMA
-from nbrdf.viewer.noise import NoiseConfig, clamp_bias, default_setup, measure_noise, render_seeds
+from nbrdf.imaging.environment import LUMA
+from nbrdf.viewer.gpu.noise import NoiseConfig, clamp_bias, default_setup, measure_noise, render_seeds
 
 SIZE = (32, 32)
 #: The estimator's subject: copper under a scattering varnish (the default material until the presets
@@ -89,7 +89,7 @@ def test_clamp_bias(default):
 
 def test_sampling_settings_out_of_range_end_in_one_line():
     from nbrdf.neural.errors import NbrdfError
-    from nbrdf.viewer.lit_sampling import LitSampling
+    from nbrdf.viewer.gpu.lit_sampling import LitSampling
 
     assert LitSampling().check().ris_samples == 3
     for bad in (LitSampling(ris_candidates=512), LitSampling(ris_samples=-1), LitSampling(clamp=float("nan")),

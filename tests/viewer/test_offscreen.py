@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from nbrdf.imaging.image_io import read_exr, write_image
 from nbrdf.neural.material import load_material, parse_material
 from nbrdf.neural.metrics import lobe_image
 from nbrdf.training.reference import single_layer_eval
-from nbrdf.viewer.image_io import read_exr, write_image
+from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.renderer import Renderer, ViewState
 
 pytestmark = pytest.mark.gl
 

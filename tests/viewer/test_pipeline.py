@@ -12,10 +12,10 @@ import pytest
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material, parse_material
 from nbrdf.neural.model import default_model
+from nbrdf.viewer.gpu.pipeline import BrdfKind, MaterialPipeline
+from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 from nbrdf.viewer.modes import BrdfMode
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.pipeline import BrdfKind, MaterialPipeline
-from nbrdf.viewer.renderer import Renderer, ViewState
 
 ROUGH_GOLD = {"format": "nbrdf-material/1", "name": "rough gold",
               "layers": [{"type": "conductor", "roughness": 0.4, "r0": [1.0, 0.78, 0.34]}]}
@@ -31,9 +31,9 @@ def test_modes_resolve_like_the_command_line():
 
 
 def test_an_edit_computes_one_latent_share_and_reads_no_file(gl_ctx, tmp_path, monkeypatch):
+    from nbrdf.imaging import image_io
     from nbrdf.neural import gpu_pack
-    from nbrdf.viewer import image_io
-    from nbrdf.viewer.lookdev import LookDev
+    from nbrdf.viewer.session.lookdev import LookDev
 
     iio.imwrite(tmp_path / "n.png", np.tile(np.array([150, 128, 240], np.uint8), (4, 4, 1)))
     doc = {"format": "nbrdf-material/1", "name": "coated", "normal_map": "n.png", "layers": [
@@ -89,8 +89,8 @@ def test_one_renderer_draws_any_material(gl_ctx):
 
 
 def test_the_offscreen_renderer_is_the_pipeline(gl_ctx):
+    from nbrdf.viewer.gpu.renderer import make_renderer
     from nbrdf.viewer.options import ViewOptions
-    from nbrdf.viewer.renderer import make_renderer
 
     m = load_material(DEFAULT_MATERIAL)
     r = make_renderer(gl_ctx, m, ViewOptions(material=DEFAULT_MATERIAL, brdf="neural"))
@@ -107,7 +107,7 @@ def test_latent_textures_of_earlier_edits_are_released(gl_ctx):
     from dataclasses import replace
 
     from nbrdf.neural.latent_texture import LatentTexture
-    from nbrdf.viewer.pipeline import TEXTURES_KEPT, material_key
+    from nbrdf.viewer.gpu.pipeline import TEXTURES_KEPT, material_key
 
     pipe = MaterialPipeline(gl_ctx)
     tiles = load_material(DEFAULT_MATERIAL.parent / "worn_tiles.json")

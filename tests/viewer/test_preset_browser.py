@@ -17,7 +17,7 @@ pytestmark = [pytest.mark.gl, pytest.mark.slow]
 SCRIPT = textwrap.dedent("""
     import json, sys
     import numpy as np
-    from nbrdf.viewer.app import App
+    from nbrdf.viewer.window.app import App
     from nbrdf.viewer.options import ViewOptions
     from nbrdf.viewer.ui import preset_browser as pb
     pb.DEFAULT_OPEN = True
@@ -53,7 +53,7 @@ def _run(env, path):
 
 
 def test_browser_shows_cached_thumbnails(xvfb_display, tmp_path):
-    from nbrdf.viewer.lookdev import presets
+    from nbrdf.viewer.session.lookdev import presets
 
     env = dict(os.environ, DISPLAY=xvfb_display, HOME=str(tmp_path), XDG_CACHE_HOME=str(tmp_path / "cache"))
     first, screen = _run(env, tmp_path / "a.json")

@@ -1,4 +1,4 @@
-"""The window's idle warm-up of shader variants (viewer/program_warmup.py): after it,
+"""The window's idle warm-up of shader variants (viewer/window/program_warmup.py): after it,
 no view of any BRDF kind builds a program (the live GL programs stay as they are
 over a session), and it builds nothing before the window has been idle."""
 from __future__ import annotations
@@ -7,12 +7,12 @@ import pytest
 
 from nbrdf.neural.latent_texture import LatentTexture
 from nbrdf.neural.material import load_material, parse_material
-from nbrdf.viewer.body_table_gpu import INTERACTIVE, BodyTables
+from nbrdf.viewer.gpu.body_table_gpu import INTERACTIVE, BodyTables
+from nbrdf.viewer.gpu.pipeline import BrdfKind, MaterialPipeline, gpu_brdf
+from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 from nbrdf.viewer.modes import View
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.pipeline import BrdfKind, MaterialPipeline, gpu_brdf
-from nbrdf.viewer.program_warmup import ProgramWarmup, WarmupSettings, reachable
-from nbrdf.viewer.renderer import Renderer, ViewState
+from nbrdf.viewer.window.program_warmup import ProgramWarmup, WarmupSettings, reachable
 
 pytestmark = pytest.mark.gl
 
@@ -50,7 +50,7 @@ def test_after_the_warmup_no_view_builds_a_program(gl_ctx, kinds, compute):
     for b in brdfs:
         for view in View:
             if b.kind == BrdfKind.TABLE and view != View.OBJECT:
-                continue  # a baked table shades the object view only (viewer/body_source.py)
+                continue  # a baked table shades the object view only (viewer/gpu/body_source.py)
             r.render_linear(ViewState(view=view, background=False), (8, 8), 1, b)
     assert len(r.programs) == built, "a view built a variant the warm-up does not list"
 

@@ -9,9 +9,9 @@ import torch
 from nbrdf.neural.material import load_material, parse_material
 from nbrdf.neural.model import default_model
 from nbrdf.training.reference import reference_eval, single_layer_eval
+from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.reference import ReferenceWorker, lobe_job, slice_job
-from nbrdf.viewer.renderer import Renderer, ViewState
+from nbrdf.viewer.reference.worker import ReferenceWorker, lobe_job, slice_job
 
 GOLD = {"format": "nbrdf-material/1", "name": "g", "layers": [{"type": "conductor", "roughness": 0.3,
                                                              "r0": [1.0, 0.78, 0.34]}]}
@@ -104,7 +104,7 @@ def test_slice_job_matches_the_glsl_slice(gl_ctx):
 def test_gbuffer_directions_reproduce_the_light_only_render(gl_ctx):
     """The object reference evaluates f at the G-buffer's (wi, wo): with the
     neural BRDF in place of the simulation it must give the rendered pixels."""
-    from nbrdf.viewer.neural_gpu import GpuDecoder
+    from nbrdf.viewer.gpu.neural_gpu import GpuDecoder
 
     model = default_model()
     m = parse_material(GOLD)
@@ -200,8 +200,8 @@ def test_the_references_kept_in_the_window_are_bounded():
     assert w.result("job-39") is not None and w.result("job-0") is not None
     assert len(w._cache) == 16 and w.result("job-1") is None
 
-    from nbrdf.viewer.reference import ReferenceImage
-    from nbrdf.viewer.reference_cache import ReferenceCache
+    from nbrdf.viewer.reference.cache import ReferenceCache
+    from nbrdf.viewer.reference.worker import ReferenceImage
 
     c = ReferenceCache(max_items=100, max_bytes=3 * 8 * 8 * 3 * 4)  # room for three 8 x 8 images
     for k in range(5):

@@ -1,4 +1,4 @@
-"""Refinement on idle in the previewer (viewer/refine_job.py): the window's
+"""Refinement on idle in the previewer (viewer/jobs/refine_job.py): the window's
 side against a scripted worker (no process, no GL), then through LookDev's
 API with the real worker process: the swap, the cancel, the cached code."""
 from __future__ import annotations
@@ -11,7 +11,7 @@ import torch
 
 from nbrdf.neural.material import load_material
 from nbrdf.training.refine import RefineConfig
-from nbrdf.viewer.refine_job import IdleRefiner, IdleRefineSettings, RefineResult, RefineSpec, job_key
+from nbrdf.viewer.jobs.refine_job import IdleRefiner, IdleRefineSettings, RefineResult, RefineSpec, job_key
 
 LOOKDEV = Path(__file__).resolve().parents[2] / "training" / "sets" / "lookdev"
 BLACK = LOOKDEV / "car-paint-black.json"
@@ -160,7 +160,7 @@ TINY = RefineConfig(budget=600.0, round_pairs=256, heldout_pairs=256, spp=32, st
 
 
 def _lookdev(gl_ctx, monkeypatch, tmp_path, config=TINY):
-    from nbrdf.viewer.lookdev import LookDev
+    from nbrdf.viewer.session.lookdev import LookDev
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))  # before the worker process starts
     ld = LookDev(gl_ctx, load_material(BLACK))
@@ -207,7 +207,7 @@ def test_lookdev_swaps_the_refined_code_in_and_reopening_shows_it_at_once(gl_ctx
 @pytest.mark.gl
 @pytest.mark.slow
 def test_an_edit_cancels_the_refinement_in_the_worker(gl_ctx, monkeypatch, tmp_path):
-    from nbrdf.viewer.reference import ReferenceJob
+    from nbrdf.viewer.reference.worker import ReferenceJob
 
     long = RefineConfig(budget=600.0, round_pairs=256, heldout_pairs=256, spp=32, steps=4000, max_rounds=24,
                         patience=24)

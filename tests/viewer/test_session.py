@@ -9,11 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from nbrdf.imaging.tonemap import ToneMap
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
-from nbrdf.viewer.modes import CompareMode, ToneMap, View
+from nbrdf.viewer.modes import CompareMode, View
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.session import SessionDoc
+from nbrdf.viewer.session.document import SessionDoc
 
 DATA = Path(__file__).parent / "data"
 V1 = DATA / "session_v1.json"  # written by the previous LookDev (before the split), with its object render
@@ -42,7 +43,7 @@ def test_a_previous_version_file_renders_as_it_did(gl_ctx):
 def test_a_generated_environment_is_kept_by_name(gl_ctx, tmp_path):
     """The Scene panel's preset buttons: the environment is a preset's name, lights the object, and a session
     saved with it reopens with it; a bad name is an error in the UI and changes nothing."""
-    from nbrdf.viewer.lookdev import LookDev
+    from nbrdf.viewer.session.lookdev import LookDev
 
     ld = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
     try:
@@ -102,7 +103,7 @@ def test_missing_and_non_json_files(tmp_path):
 
 
 def test_backdrop_round_trips_and_older_files_get_the_default():
-    from nbrdf.viewer.backdrop import BackdropSettings
+    from nbrdf.viewer.gpu.backdrop import BackdropSettings
     from nbrdf.viewer.modes import Background
 
     assert SessionDoc.load(V1).backdrop == BackdropSettings()  # written before backdrops existed
@@ -118,7 +119,7 @@ def test_backdrop_round_trips_and_older_files_get_the_default():
 
 
 def test_window_prefs_open_at_80_percent_and_remember(tmp_path):
-    from nbrdf.viewer.session import WindowPrefs
+    from nbrdf.viewer.session.document import WindowPrefs
 
     path = tmp_path / "cfg" / "window.json"
     prefs = WindowPrefs.load(path)

@@ -8,7 +8,7 @@ import ctypes
 import numpy as np
 import pytest
 
-from nbrdf.viewer.size_cache import SIZES_PER_SLOT, SizeCache
+from nbrdf.viewer.gpu.size_cache import SIZES_PER_SLOT, SizeCache
 
 
 class Res:
@@ -48,9 +48,9 @@ def _live(kind: str) -> int:
 @pytest.mark.gl
 def test_a_window_resized_many_times_keeps_the_targets_of_a_few_sizes(gl_ctx):
     from nbrdf.neural.material import parse_material
-    from nbrdf.viewer.backdrop import Backdrop, BackdropSettings
-    from nbrdf.viewer.pipeline import MaterialPipeline
-    from nbrdf.viewer.renderer import Renderer, ViewState
+    from nbrdf.viewer.gpu.backdrop import Backdrop, BackdropSettings
+    from nbrdf.viewer.gpu.pipeline import MaterialPipeline
+    from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 
     r = Renderer(gl_ctx, mesh="sphere")
     backdrop = Backdrop(gl_ctx, r)

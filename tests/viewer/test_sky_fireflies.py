@@ -28,7 +28,7 @@ PASSES = 256
 SCRIPT = textwrap.dedent("""
     import sys
     import numpy as np
-    from nbrdf.viewer.app import App
+    from nbrdf.viewer.window.app import App
     from nbrdf.viewer.modes import View
     from nbrdf.viewer.options import ViewOptions
     size = (int(sys.argv[1]), int(sys.argv[2]))
@@ -63,8 +63,8 @@ def test_window_accumulation_under_sky_has_no_fireflies(xvfb_display, tmp_path, 
     from dataclasses import replace
 
     from nbrdf.neural.material import load_material
-    from nbrdf.viewer.lookdev import LookDev
     from nbrdf.viewer.options import DEFAULT_MATERIAL
+    from nbrdf.viewer.session.lookdev import LookDev
 
     env = dict(os.environ, DISPLAY=xvfb_display, HOME=str(tmp_path))
     r = subprocess.run([sys.executable, "-c", SCRIPT, str(SIZE[0]), str(SIZE[1]), str(PASSES), str(tmp_path / "w.npz")],

@@ -8,7 +8,7 @@ import pytest
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Dielectric, Medium
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.ui.stack_editor import StackEditor
+from nbrdf.viewer.session.stack_editor import StackEditor
 
 
 @pytest.fixture

@@ -12,8 +12,8 @@ import torch
 from nbrdf.neural.latent_texture import LatentTexture
 from nbrdf.neural.material import load_material, parse_material
 from nbrdf.neural.model import default_model
-from nbrdf.viewer.neural_gpu import GpuDecoder, GpuLatentTexture, probe_fragment
-from nbrdf.viewer.renderer import Renderer, ViewState
+from nbrdf.viewer.gpu.neural_gpu import GpuDecoder, GpuLatentTexture, probe_fragment
+from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 
 ROUGH_GOLD = {"format": "nbrdf-material/1", "name": "rough gold",
               "layers": [{"type": "conductor", "roughness": 0.4, "r0": [1.0, 0.78, 0.34]}]}

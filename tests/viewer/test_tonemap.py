@@ -8,14 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from nbrdf.neural.errors import NbrdfError
-from nbrdf.viewer import shaders
-from nbrdf.viewer.modes import ToneMap, glsl_defines
-from nbrdf.viewer.tonemap import (
+from nbrdf.imaging.tonemap import (
     AGX_INSET,
     AGX_MAX_EV,
     AGX_MIN_EV,
     AGX_OUTSET,
+    ToneMap,
     aces_fitted,
     agx,
     agx_sigmoid,
@@ -25,6 +23,9 @@ from nbrdf.viewer.tonemap import (
     to_display8,
     tonemap,
 )
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.gpu import shaders
+from nbrdf.viewer.modes import glsl_defines
 
 
 def grey(v: float) -> np.ndarray:
@@ -231,7 +232,7 @@ void main() {
 @pytest.mark.gl
 @pytest.mark.parametrize("mode", list(ToneMap), ids=str)
 def test_glsl_matches_numpy(gl_ctx, mode):
-    from nbrdf.viewer.neural_gpu import probe_pass
+    from nbrdf.viewer.gpu.neural_gpu import probe_pass
 
     src = "\n".join([shaders.VERSION, glsl_defines(ToneMap), shaders.read("tonemap_operators.glsl"), PROBE])
     prog = gl_ctx.program(vertex_shader=shaders.source("fullscreen.vert"), fragment_shader=src)

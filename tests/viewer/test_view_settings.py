@@ -9,11 +9,12 @@ import re
 import pytest
 
 from nbrdf.cli.view import build_parser, parse_args
+from nbrdf.imaging.tonemap import ToneMap
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.viewer import shaders
-from nbrdf.viewer.camera import OrbitCamera
-from nbrdf.viewer.lit_sampling import LitSampling
-from nbrdf.viewer.modes import ToneMap, View
+from nbrdf.viewer.gpu import shaders
+from nbrdf.viewer.gpu.lit_sampling import LitSampling
+from nbrdf.viewer.modes import View
+from nbrdf.viewer.scene.camera import OrbitCamera
 from nbrdf.viewer.view_settings import (
     UNIFORM_FORMS,
     ViewState,
@@ -121,10 +122,10 @@ def test_sampling_knobs_are_lit_sampling_settings():
 @pytest.mark.gl
 def test_programs_are_cached_by_key(gl_ctx):
     from nbrdf.neural.material import load_material
+    from nbrdf.viewer.gpu.pipeline import MaterialPipeline
+    from nbrdf.viewer.gpu.programs import ProgramKey
+    from nbrdf.viewer.gpu.renderer import Renderer
     from nbrdf.viewer.options import DEFAULT_MATERIAL
-    from nbrdf.viewer.pipeline import MaterialPipeline
-    from nbrdf.viewer.programs import ProgramKey
-    from nbrdf.viewer.renderer import Renderer
 
     pipeline = MaterialPipeline(gl_ctx)
     m = load_material(DEFAULT_MATERIAL)

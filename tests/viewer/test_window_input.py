@@ -25,7 +25,7 @@ SCRIPT = textwrap.dedent("""
     import numpy as np
     import glfw
     from imgui_bundle import imgui
-    from nbrdf.viewer.app import App
+    from nbrdf.viewer.window.app import App
     from nbrdf.viewer.options import ViewOptions
     tmp = Path(sys.argv[2])
     rects = {}
@@ -136,7 +136,7 @@ SCRIPT = textwrap.dedent("""
             out["shot_start"] = ld.shots.start(tmp / "job.png", (160, 120), 4, budget_ms=1.0)
             progress, visible = [], []
             ld.shots.job.tiled = True  # software OpenGL or not: the tiled path
-            ld.shots.job.rects = __import__("nbrdf.viewer.screenshot", fromlist=["tiles"]).tiles((160, 120))
+            ld.shots.job.rects = __import__("nbrdf.viewer.jobs.screenshot", fromlist=["tiles"]).tiles((160, 120))
             ld.shots.job.ms_per_pixel_pass = 1.0
             for k in range(200):
                 if ld.shots.progress is None:
@@ -214,7 +214,7 @@ SCRIPT = textwrap.dedent("""
 
 @pytest.fixture(scope="module")
 def run(xvfb_display, tmp_path_factory):
-    from nbrdf.viewer.lookdev import presets
+    from nbrdf.viewer.session.lookdev import presets
 
     tmp = tmp_path_factory.mktemp("input")
     env = dict(os.environ, DISPLAY=xvfb_display, XDG_CONFIG_HOME=str(tmp / "config"))

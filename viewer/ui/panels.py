@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 from imgui_bundle import imgui
 
-from nbrdf.viewer.camera import FOV_RANGE
-from nbrdf.viewer.env_presets import ENV_PRESETS
-from nbrdf.viewer.lookdev import LookDev, presets
+from nbrdf.imaging.env_presets import ENV_PRESETS
 from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, View
+from nbrdf.viewer.scene.camera import FOV_RANGE
+from nbrdf.viewer.session.lookdev import LookDev, presets
+from nbrdf.viewer.session.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
 from nbrdf.viewer.ui.plots import error_bar, flip_bar, polar_plot
 from nbrdf.viewer.ui.preset_browser import preset_browser
-from nbrdf.viewer.ui.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
 from nbrdf.viewer.view_settings import Row, rows
 
 COMPARE_LABELS = {CompareMode.OFF: "off", CompareMode.SIDE: "side by side", CompareMode.WIPE: "A/B wipe",
@@ -433,7 +433,7 @@ class Panels:
         imgui.text(f"view {t.render_ms:6.1f} ms, passes {ld.passes}")
         imgui.text(f"latent {t.latent_ms:5.2f} ms")
         imgui.text(f"edit -> frame {t.edit_to_frame_ms:6.1f} ms")
-        if ld.idle_refine.status:  # "refined, N s" (viewer/refine_job.py)
+        if ld.idle_refine.status:  # "refined, N s" (viewer/jobs/refine_job.py)
             imgui.text(ld.idle_refine.status)
         if ld.notice:
             imgui.text_wrapped(ld.notice)

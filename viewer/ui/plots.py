@@ -1,5 +1,5 @@
 """The View panel's plots: the false-colour scales of the error and FLIP views
-and the polar plot of the plane-of-incidence curves (viewer/plane_curves.py)."""
+and the polar plot of the plane-of-incidence curves (viewer/jobs/plane_curves.py)."""
 from __future__ import annotations
 
 import numpy as np

@@ -13,7 +13,7 @@ import weakref
 import moderngl
 import numpy as np
 
-from nbrdf.viewer.lookdev import LookDev, presets
+from nbrdf.viewer.session.lookdev import LookDev, presets
 from nbrdf.viewer.thumbnails import ThumbnailCache
 
 THUMB_PX = 64      #: thumbnail side on screen and in the cache, pixels

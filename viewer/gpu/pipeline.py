@@ -1,0 +1,322 @@
+"""The material pipeline: material -> latents -> the BRDF's GPU resources.
+
+One path for the window and the offscreen command: ``MaterialPipeline.build``
+turns a material and a BRDF mode into a ``GpuBrdf`` -- the closed-form
+uniforms, or the neural latent's share of the decoder's layer 1 (computed once
+per edit, not once per program), or a latent texture on the GPU -- plus the
+material's normal map, read from disk once per file and kept. The renderer
+takes a ``GpuBrdf`` per draw, so one renderer (programs, meshes, environment
+tables) serves the neural image, its reference and a second material.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable, Iterable
+
+import moderngl
+import torch
+
+from nbrdf.neural.coat import code_coat
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
+from nbrdf.neural.material import Material, material_to_dict
+from nbrdf.viewer.gpu.materials_gpu import analytic_uniforms, proxy_hint
+from nbrdf.viewer.modes import BrdfMode
+
+if TYPE_CHECKING:
+    from nbrdf.neural.latent_texture import LatentTexture
+    from nbrdf.neural.model import NeuralModel
+    from nbrdf.viewer.gpu.belcour_gpu import BelcourTextures
+    from nbrdf.viewer.gpu.neural_gpu import GpuDecoder, GpuLatentTexture
+
+
+class BrdfKind(str, Enum):
+    """Which BRDF program family a ``GpuBrdf`` is drawn with."""
+    ANALYTIC = "analytic"   #: closed form (analytic_brdf.glsl)
+    NEURAL = "neural"       #: the decoder at one latent (neural_brdf.glsl)
+    TEXTURED = "textured"   #: the decoder at a latent texture (latent_texture.glsl)
+    TABLE = "table"         #: a uniform latent's body baked into a table (body_table.glsl), the coat exact
+    BELCOUR = "belcour"     #: Belcour 2018's layered model (belcour_brdf.glsl, tables as textures)
+
+
+def analytic_capable(m: Material) -> bool:
+    """Single layers have an exact closed form on the GPU."""
+    return not m.interfaces and not m.is_textured and m.base.type in PARAMETRIC_BASES
+
+
+def material_key(m: Material) -> str:
+    """A content hash of a material document (cache key of its derived data)."""
+    return hashlib.sha1(json.dumps(material_to_dict(m), sort_keys=True).encode()).hexdigest()
+
+
+@dataclass
+class GpuBrdf:
+    """A material's BRDF as GPU resources, handed to the renderer with each draw.
+
+    The pipeline's caches own the textures; a ``GpuBrdf`` only refers to them."""
+
+    material: Material
+    """The material these resources shade."""
+    kind: BrdfKind
+    """A ``BrdfKind``: which program family draws it."""
+    uniforms: dict = field(default_factory=dict)
+    """Closed-form uniforms, or the proxy pdf's ``u_proxy_sigma`` / ``u_proxy_w`` and the code's ``u_coat``."""
+    decoder: "GpuDecoder | None" = None
+    """The decoder's weights on the GPU (neural kinds)."""
+    latent: torch.Tensor | None = None
+    """The (3, 34) code shown (a latent texture's mean for the lobe and slice views)."""
+    share: bytes | None = None
+    """The latent's share of decoder layer 1, float32 (width, 3), ready to upload."""
+    latent_texture: "GpuLatentTexture | None" = None
+    """A texture-mapped material's per-texel share (TEXTURED)."""
+    normal_map: moderngl.Texture | None = None
+    """The material's tangent-space normal map, mip-mapped (None: the mesh normal)."""
+    body_table: moderngl.Texture | None = None
+    """TABLE: the body's log f over (theta_h, theta_d, phi_d), a float 3D texture (neural/body_table.py)."""
+    textures: tuple[tuple[str, int, moderngl.Texture], ...] = ()
+    """(sampler uniform, texture unit, texture) bound with the program (BELCOUR: its tables)."""
+
+    @property
+    def neural(self) -> bool:
+        return self.kind in (BrdfKind.NEURAL, BrdfKind.TEXTURED, BrdfKind.TABLE)
+
+
+class NormalMaps:
+    """Normal-map textures by file (path, modification time): read from disk once."""
+
+    def __init__(self, ctx: moderngl.Context):
+        self.ctx = ctx
+        self._cache: dict[tuple[str, float], moderngl.Texture] = {}
+
+    def get(self, material: Material) -> moderngl.Texture | None:
+        if material.normal_map is None:
+            return None
+        from nbrdf.imaging.image_io import read_normal_map
+
+        path = Path(material.base_dir) / material.normal_map
+        try:
+            key = (str(path.resolve()), path.stat().st_mtime)
+        except OSError:
+            key = (str(path), -1.0)
+        if key not in self._cache:
+            img = read_normal_map(path)
+            tex = self.ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), dtype="f4")
+            tex.repeat_x = tex.repeat_y = True
+            tex.build_mipmaps()
+            tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            self._cache[key] = tex
+        return self._cache[key]
+
+    def release(self) -> None:
+        for t in self._cache.values():
+            t.release()
+        self._cache.clear()
+
+
+def gpu_brdf(ctx: moderngl.Context, material: Material, decoder: "GpuDecoder | None" = None,
+             latent: torch.Tensor | None = None, proxy: tuple[float, float] | None = None,
+             latent_texture: "LatentTexture | GpuLatentTexture | None" = None,
+             normal_maps: NormalMaps | None = None) -> GpuBrdf:
+    """The GPU resources of a material whose latent (or latent texture) is known.
+
+    Without ``decoder`` the closed form is used; with it, the decoder at
+    ``latent`` (a (3, 34) code) or at ``latent_texture``. ``proxy`` is the sampler's
+    (sigma, w) (None: a guess from the top layer's roughness -- slower to
+    converge, never biased)."""
+    nmap = (normal_maps or NormalMaps(ctx)).get(material)
+    if decoder is None:
+        return GpuBrdf(material, BrdfKind.ANALYTIC, analytic_uniforms(material), normal_map=nmap)
+    gtex = None
+    if latent_texture is not None:
+        from nbrdf.viewer.gpu.neural_gpu import GpuLatentTexture
+
+        gtex = (latent_texture if isinstance(latent_texture, GpuLatentTexture)
+                else GpuLatentTexture(ctx, decoder, latent_texture))
+        latent = gtex.mean_latent if latent is None else latent
+    elif material.is_textured:
+        raise NbrdfError(f"{material.name}: a texture-mapped material needs its latent texture "
+                         "(nbrdf.neural.svbrdf.latent_texture)")
+    if latent is None:
+        raise NbrdfError("the neural renderer needs the material's latent")
+    from nbrdf.neural.gpu_pack import latent_share
+
+    sigma, w = proxy if proxy is not None else proxy_hint(material)
+    uniforms = {"u_proxy_sigma": float(sigma), "u_proxy_w": float(w), "u_coat": code_coat(decoder.dec.spec, latent)}
+    return GpuBrdf(material, BrdfKind.TEXTURED if gtex is not None else BrdfKind.NEURAL, uniforms, decoder, latent,
+                   latent_share(decoder.dec, latent).astype("f4").tobytes(), gtex, nmap)
+
+
+#: Latent textures a pipeline keeps beside those of the materials in use (``retain``): the most
+#: recently used, so that an undo back to one of them is instant (an older one is built again).
+TEXTURES_KEPT = 4
+
+
+class MaterialPipeline:
+    """Material -> latents -> ``GpuBrdf``, with the model, the decoder on the
+    GPU, normal maps and latent textures loaded once per context."""
+
+    def __init__(self, ctx: moderngl.Context, model: "NeuralModel | None" = None):
+        self.ctx = ctx
+        self._model = model
+        self._decoder: "GpuDecoder | None" = None
+        self.normal_maps = NormalMaps(ctx)
+        self._textures: dict[str, "GpuLatentTexture"] = {}
+        self._belcour: "BelcourTextures | None" = None
+
+    @property
+    def model(self) -> "NeuralModel":
+        if self._model is None:
+            from nbrdf.neural.model import default_model
+
+            self._model = default_model()
+        return self._model
+
+    @property
+    def decoder(self) -> "GpuDecoder":
+        if self._decoder is None:
+            from nbrdf.viewer.gpu.neural_gpu import GpuDecoder
+
+            self._decoder = GpuDecoder(self.ctx, self.model.decoder)
+        return self._decoder
+
+    @property
+    def belcour_loaded(self) -> bool:
+        """Whether Belcour's tables are on the GPU (a material was shaded with ``--brdf belcour``)."""
+        return self._belcour is not None
+
+    @property
+    def loaded_decoder(self) -> "GpuDecoder | None":
+        """The decoder if it is on the GPU already (None: no neural material drawn yet)."""
+        return self._decoder
+
+    @staticmethod
+    def resolve(material: Material, mode: BrdfMode | str) -> BrdfMode:
+        """``auto`` -> analytic for single layers, neural otherwise; belcour -> neural for a
+        material Belcour's model does not hold (``fallback_note`` says why); checks the mode fits."""
+        mode = BrdfMode.parse(mode, "--brdf")
+        if mode == BrdfMode.AUTO:
+            return BrdfMode.ANALYTIC if analytic_capable(material) else BrdfMode.NEURAL
+        if mode == BrdfMode.BELCOUR and belcour_unsupported(material) is not None:
+            return BrdfMode.NEURAL
+        if mode == BrdfMode.PROJECTED and material.is_textured:
+            raise NbrdfError("--brdf projected: a texture-mapped material is shaded through its latent texture "
+                             "(use --brdf neural)")
+        return mode
+
+    def latent(self, material: Material, mode: BrdfMode | str = BrdfMode.NEURAL) -> torch.Tensor:
+        """The (3, 32) latent of a uniform material: leaf encoders and layering
+        (neural), or fitted to the material's reference (projected)."""
+        if BrdfMode.parse(mode) == BrdfMode.PROJECTED:
+            from nbrdf.training.project import fit, material_samples
+
+            return fit(self.model.decoder, material_samples(material))
+        return self.model.material_latent(material)
+
+    def proxy(self, z: torch.Tensor) -> tuple[float, float] | None:
+        """The sampler network's proxy pdf (sigma, w) of a latent (None without a sampler)."""
+        return self.model.proxy(z) if self.model.sampler is not None else None
+
+    def latent_texture(self, material: Material,
+                       progress: Callable[[int, int], None] | None = None) -> "GpuLatentTexture":
+        """A texture-mapped material's latent texture on the GPU (built once per material document)."""
+        key = material_key(material)
+        if key not in self._textures:
+            from nbrdf.neural.svbrdf import latent_texture
+
+            self._textures[key] = self.upload_texture(key, latent_texture(self.model, material, progress=progress))
+        return self._used(key)
+
+    def upload_texture(self, key: str, tex: "LatentTexture") -> "GpuLatentTexture":
+        """Keeps a latent texture built elsewhere (the session's worker thread) under ``key``."""
+        from nbrdf.viewer.gpu.neural_gpu import GpuLatentTexture
+
+        if key not in self._textures:
+            self._textures[key] = GpuLatentTexture(self.ctx, self.decoder, tex)
+        return self._used(key)
+
+    def cached_texture(self, material: Material) -> "GpuLatentTexture | None":
+        key = material_key(material)
+        return self._used(key) if key in self._textures else None
+
+    def _used(self, key: str) -> "GpuLatentTexture":
+        """The texture of ``key``, now the most recently used (the cache's order is its use)."""
+        self._textures[key] = self._textures.pop(key)
+        return self._textures[key]
+
+    def retain(self, in_use: Iterable[Material]) -> list[str]:
+        """Releases the latent textures of materials other than ``in_use`` (those the session
+        draws) beyond the ``TEXTURES_KEPT`` most recently used: each edit of a texture-mapped
+        material makes a new one. Returns the keys released."""
+        pinned = {material_key(m) for m in in_use if m.is_textured}
+        spare = [k for k in self._textures if k not in pinned]  # the least recently used first
+        drop = spare[:max(0, len(spare) - TEXTURES_KEPT)]
+        for k in drop:
+            self._textures.pop(k).release()
+        return drop
+
+    @property
+    def belcour(self) -> "BelcourTextures":
+        """Belcour's tables on the GPU (loaded, or generated and cached, on first use)."""
+        if self._belcour is None:
+            from nbrdf.viewer.gpu.belcour_gpu import BelcourTextures
+
+            self._belcour = BelcourTextures(self.ctx)
+        return self._belcour
+
+    def build(self, material: Material, mode: BrdfMode | str = BrdfMode.AUTO,
+              latent: torch.Tensor | None = None) -> GpuBrdf:
+        """The GPU resources of ``material`` under ``mode``; ``latent`` overrides
+        the material's own (an interpolated latent)."""
+        mode = self.resolve(material, mode)
+        if mode == BrdfMode.ANALYTIC:
+            return gpu_brdf(self.ctx, material, normal_maps=self.normal_maps)
+        if mode == BrdfMode.BELCOUR:
+            from nbrdf.viewer.gpu.belcour_gpu import belcour_uniforms
+
+            return GpuBrdf(material, BrdfKind.BELCOUR, belcour_uniforms(material),
+                           normal_map=self.normal_maps.get(material), textures=self.belcour.bindings())
+        if material.is_textured:
+            tex = self.latent_texture(material)
+            z = tex.mean_latent
+            return gpu_brdf(self.ctx, material, self.decoder, latent=z, proxy=self.proxy(z), latent_texture=tex,
+                            normal_maps=self.normal_maps)
+        z = self.latent(material, mode) if latent is None else latent
+        return gpu_brdf(self.ctx, material, self.decoder, latent=z, proxy=self.proxy(z),
+                        normal_maps=self.normal_maps)
+
+    def release(self) -> None:
+        for t in self._textures.values():
+            t.release()
+        self._textures.clear()
+        self.normal_maps.release()
+        if self._belcour is not None:
+            self._belcour.release()
+            self._belcour = None
+
+
+def belcour_unsupported(material: Material) -> str | None:
+    """Why Belcour's model cannot shade ``material`` (one line), or None."""
+    from nbrdf.viewer.gpu.belcour_gpu import unsupported
+
+    return unsupported(material)
+
+
+def fallback_note(material: Material, mode: BrdfMode | str) -> str:
+    """The one line that says a material is shown other than ``mode`` asks, and how ("" when it is not)."""
+    if BrdfMode.parse(mode, "--brdf") != BrdfMode.BELCOUR:
+        return ""
+    why = belcour_unsupported(material)
+    return "" if why is None else f"--brdf belcour: {why}; shown with the neural BRDF instead"
+
+
+def offscreen_brdf(ctx: moderngl.Context, material: Material, mode: BrdfMode | str) -> GpuBrdf:
+    """The BRDF of an offscreen render (``nbrdf-view --offscreen``)."""
+    return MaterialPipeline(ctx).build(material, mode)
+
+
+__all__ = ["BrdfKind", "GpuBrdf", "MaterialPipeline", "NormalMaps", "analytic_capable", "belcour_unsupported",
+           "fallback_note", "gpu_brdf", "material_key", "offscreen_brdf"]

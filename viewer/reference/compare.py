@@ -1,0 +1,453 @@
+"""The compare part of the previewer: the reference of the current view and
+the compositor that shows it beside the neural image.
+
+The reference of a single layer is its closed form, drawn by the shared
+renderer into its own accumulation slot; a stack's lobe and slice come from
+the Monte Carlo worker process (viewer/reference/worker.py), fed with the pairs of
+the view and uploaded as it refines. A stack's lit object is shown under the
+same lights and environment as the neural image: its clear coat (the top
+interface's single reflection, exact in closed form) is accumulated on the GPU
+under the environment like the neural image's coat, and the worker estimates
+the rest per pixel -- the lights with the whole BRDF, the environment on the
+body -- from this module's G-buffer of shading frames (reference_sum.frag adds
+the two). The reference's key leaves out the compare mode and the render
+scale, so switching modes keeps its samples. The
+compositor draws A alone, A | B, an A/B wipe, the relative error in false
+colour, the HDR-FLIP map (NVIDIA's ``flip-evaluator``, computed on the CPU
+from the two linear images whenever either has refined, shown in magma with
+its mean), or a linear blend of two renders, with exposure and tone mapping,
+and labels each side on the image (viewer/gpu/labels.py).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import tempfile
+from dataclasses import asdict, replace
+
+import moderngl
+import numpy as np
+import torch
+
+from nbrdf.imaging.tonemap import ToneMap
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import Conductor, Dielectric, Material, material_to_dict
+from nbrdf.viewer.gpu import shaders
+from nbrdf.viewer.gpu.labels import Label, Labels
+from nbrdf.viewer.gpu.lit_sampling import Term
+from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf, analytic_capable
+from nbrdf.viewer.gpu.renderer import Renderer
+from nbrdf.viewer.modes import CompareMode, View
+from nbrdf.viewer.reference.lit import LitJob, frames_from_normals, to_local
+from nbrdf.viewer.reference.worker import ReferenceJob, ReferenceWorker, lobe_job, slice_job
+from nbrdf.viewer.view_settings import ViewState
+
+OBJECT_REF_SIZE = 160  # the Monte Carlo object reference's longest side, pixels
+SLICE_REF_SIZE = 96    # the Monte Carlo slice reference's longest side, pixels
+REFERENCE_SLOT = "reference"
+#: The lit pass's terms of the reference's GPU part: the coat's environment light alone.
+COAT_TERMS = Term.ENV_COAT | Term.LOBE_COAT
+#: The direction strategy around the mirror direction is never sharper than this GGX alpha.
+MIN_LOBE_ALPHA = 0.05
+
+
+def coat_brdf(brdf: GpuBrdf, material: Material) -> GpuBrdf:
+    """``brdf`` (a neural BRDF: its coat in closed form) with the coat set to the
+    material's top interface exactly (the code's coat may have been blended)."""
+    top = material.interfaces[0][0]
+    return replace(brdf, uniforms={**brdf.uniforms, "u_coat": (float(top.roughness), float(top.ior))})
+
+
+def lobe_alpha(material: Material) -> float | None:
+    """GGX alpha of the reference's direction strategy around the mirror direction:
+    the roughest interface's or glossy base's (a diffuse base: None, the cosine
+    lobe and the environment serve)."""
+    base = material.base
+    if not isinstance(base, (Conductor, Dielectric)):
+        return None
+    return max(MIN_LOBE_ALPHA, float(base.roughness), *(float(i.roughness) for i, _ in material.interfaces))
+
+
+class Compare:
+    """The reference source (closed form or Monte Carlo worker) and the compositor."""
+
+    def __init__(self, ctx: moderngl.Context, renderer: Renderer, worker: ReferenceWorker | None = None):
+        self.ctx, self.renderer = ctx, renderer
+        self.worker = worker or ReferenceWorker()
+        self.compositor = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
+                                      fragment_shader=shaders.source("compare.frag"))
+        self._vao = ctx.vertex_array(self.compositor, [])
+        self._tex: moderngl.Texture | None = None
+        self._tex_key: tuple | None = None
+        self._job: str | None = None      # the key of the Monte Carlo job the view shows
+        self._shown = None                 # the job's result the picture (and its label) shows
+        self.labels = Labels(ctx)
+        self.show_labels = True
+        """Draw "neural" / "reference (...)" on the compared images."""
+        self._ref_label = "reference"     # the reference's label, set by ``reference``
+        self._sum = None                  # (framebuffer, texture) of the lit object's coat + body
+        self._sum_prog = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
+                                     fragment_shader=shaders.source("reference_sum.frag"))
+        self._sum_vao = ctx.vertex_array(self._sum_prog, [])
+        self._gbuf_prog: moderngl.Program | None = None
+        self._env_file: tuple[object, str, str] | None = None  # (environment, content hash, .npy path)
+        self.flip_mean: float | None = None  # mean HDR-FLIP of the last FLIP view (None: no reference yet)
+        self._flip_tex: moderngl.Texture | None = None
+        self._flip_key: tuple | None = None
+
+    # --- Monte Carlo jobs ---------------------------------------------------------------
+    def _env_identity(self) -> tuple[str, str]:
+        """(content hash, .npy file) of the renderer's environment, written once per
+        environment for the worker process (which reads, never receives, the map)."""
+        env = self.renderer.env
+        if self._env_file is None or self._env_file[0] is not env:
+            radiance = np.ascontiguousarray(env.env.radiance, np.float32)
+            digest = hashlib.sha1(radiance.tobytes()).hexdigest()[:16]
+            path = os.path.join(tempfile.gettempdir(), f"nbrdf-reference-env-{os.getpid()}-{digest}.npy")
+            if not os.path.exists(path):
+                np.save(path, radiance)
+            if self._env_file is not None and self._env_file[2] != path:
+                _remove(self._env_file[2])
+            self._env_file = (env, digest, path)
+        return self._env_file[1], self._env_file[2]
+
+    def job_key(self, material: Material, state: ViewState, size: tuple[int, int] | None, scene: str) -> str:
+        """The cache key of a view's reference: material document, view, and what
+        decides the pairs (incidence; size; camera, lights, environment and mesh)
+        -- not the compare mode, nor the render scale."""
+        view = View.parse(state.view)
+        doc = json.dumps(material_to_dict(material), sort_keys=True)
+        extra = {View.LOBE: f"{state.theta_i:.3f}", View.SLICE: f"{size}", View.OBJECT: f"{size}"}[view]
+        cam = asdict(state.camera) if view == View.OBJECT else {}
+        light = ()
+        if view == View.OBJECT:
+            env = (self._env_identity()[0], state.env_rotation, state.env_intensity) if state.env_on else None
+            light = (tuple(state.light_dir), state.light_radiance, state.point_light, state.point_intensity, env,
+                     scene)
+        return hashlib.sha1(f"{doc}|{view.value}|{extra}|{cam}|{light}".encode()).hexdigest()
+
+    def job(self, material: Material, state: ViewState, key: str, size: tuple[int, int],
+            brdf: GpuBrdf | None, aspect: float | None = None) -> ReferenceJob | LitJob:
+        """The Monte Carlo job of a stack's view (the lit object from a G-buffer at
+        ``size`` whose projection has ``aspect``, default that of ``size``)."""
+        view = View.parse(state.view)
+        if view == View.LOBE:
+            return lobe_job(material, key, state.theta_i)
+        if view == View.SLICE:
+            return slice_job(material, key, size)
+        return self.lit_job(material, state, key, size, brdf, aspect)
+
+    def surface(self, state: ViewState, size: tuple[int, int], brdf: GpuBrdf | None = None,
+                aspect: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per pixel of the object view at ``size`` (row 0 at the top): the shading
+        normal and the position, world space, (H, W, 3) each, and the (H, W) mask
+        of pixels on the object. ``aspect``: the projection's (default w / h)."""
+        r = self.renderer
+        w, h = size
+        if self._gbuf_prog is None:
+            self._gbuf_prog = self.ctx.program(vertex_shader=shaders.source("object.vert"),
+                                               fragment_shader=shaders.source("reference_gbuffer.frag"))
+        p = self._gbuf_prog
+        vbo, ibo = r._mesh_buffers
+        vao = self.ctx.vertex_array(p, [(vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
+                                    ibo, skip_errors=True)
+        targets = [self.ctx.texture((w, h), 4, dtype="f4") for _ in range(2)]
+        depth = self.ctx.depth_renderbuffer((w, h))
+        fbo = self.ctx.framebuffer(targets, depth)
+        try:
+            fbo.use()
+            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            self.ctx.enable(moderngl.DEPTH_TEST)
+            self.ctx.disable(moderngl.BLEND)
+            self.ctx.depth_func = "<"
+            a = aspect if aspect is not None else w / h
+            r.surface_uniforms(p, state, a * h, h, brdf.normal_map if brdf is not None else None)
+            vao.render(moderngl.TRIANGLES)
+            n, x = (np.frombuffer(t.read(), np.float32).reshape(h, w, 4)[::-1] for t in targets)
+            return np.ascontiguousarray(n[..., :3]), np.ascontiguousarray(x[..., :3]), n[..., 3] > 0.5
+        finally:
+            for res in (vao, fbo, depth, *targets):
+                res.release()
+
+    def lit_job(self, material: Material, state: ViewState, key: str, size: tuple[int, int],
+                brdf: GpuBrdf | None, aspect: float | None = None) -> LitJob:
+        """The lit object's job: shading frames from ``surface``, the lights and the environment of ``state``."""
+        normal, world, mask = self.surface(state, size, brdf, aspect)
+        frame = frames_from_normals(normal[mask].astype(np.float64))
+        p = world[mask].astype(np.float64)
+        view = np.asarray(state.camera.eye(), np.float64) - p
+        wo = to_local(frame, view / np.linalg.norm(view, axis=-1, keepdims=True))
+        ld = np.asarray(state.light_dir, np.float64)
+        job = LitJob(key, material, frame, wo, mask, light_wi=to_local(frame, ld / np.linalg.norm(ld)),
+                     light_radiance=float(state.light_radiance), lobe_alpha=lobe_alpha(material))
+        if state.point_light is not None:
+            d = np.asarray(state.point_light, np.float64) - p
+            d2 = np.maximum((d * d).sum(-1, keepdims=True), 1e-8)
+            job.point_wi = to_local(frame, d / np.sqrt(d2))
+            job.point_irradiance = state.point_intensity / d2
+        if state.env_on:
+            job.env_file = self._env_identity()[1]
+            job.env_rotation, job.env_intensity = math.radians(state.env_rotation), float(state.env_intensity)
+        return job
+
+    @staticmethod
+    def mc_size(view: View, w: int, h: int) -> tuple[int, int]:
+        """The Monte Carlo reference's resolution for a (w, h) view."""
+        s = min(1.0, (OBJECT_REF_SIZE if view == View.OBJECT else SLICE_REF_SIZE) / max(w, h))
+        return max(1, round(w * s)), max(1, round(h * s))
+
+    # --- the reference of a frame -------------------------------------------------------------
+    def reference(self, material: Material, analytic: GpuBrdf | None, brdf: GpuBrdf | None, state: ViewState,
+                  scene: str, w: int, h: int, first: int, n: int, passes: int,
+                  view_size: tuple[int, int] | None = None) -> tuple[moderngl.Texture, float]:
+        """(texture, passes) of the reference of the view: ``analytic`` (the
+        closed form's GPU resources) accumulated beside the neural image, or the
+        Monte Carlo worker's latest image (never waits for it) -- for the lit
+        object with the coat's environment light added on the GPU. ``view_size``:
+        the view's full size (the Monte Carlo image's resolution follows it, not
+        the render scale; default (w, h))."""
+        view = View.parse(state.view)
+        if analytic is not None:
+            self._ref_label = "reference (closed form)"
+            if n:
+                tex = self.renderer.accumulate(state, w, h, first, n, analytic, REFERENCE_SLOT)
+            else:
+                tex = self.renderer.frame_texture(view, w, h, REFERENCE_SLOT)
+            return tex, float(max(passes, 1) if view == View.OBJECT else 1)
+        if material.is_textured:
+            self._ref_label = "no reference (texture-mapped)"
+            return self._upload(None, np.zeros((1, 1, 3), np.float32)), 1.0
+        vw, vh = view_size or (w, h)
+        size = self.mc_size(view, vw, vh)
+        key = self.job_key(material, state, None if view == View.LOBE else size, scene)
+        r = self.worker.result(key)
+        if (r is None or not (r.done or r.error)) and self.worker.current != key:
+            self.worker.request(self.job(material, state, key, size, brdf, vw / vh))  # new, or set aside by another
+        self._job, self._shown = key, r
+        # Until the first round at this size arrives, the body is not there yet: say so, not "0 spp".
+        self._ref_label = f"reference (MC, {r.spp} spp)" if r is not None and r.spp else "reference (MC, computing...)"
+        img = r.image if r is not None else np.zeros((1, 1, 3), np.float32)
+        if view != View.OBJECT:
+            return self._upload((key, r.spp if r else 0), img, flip=view != View.LOBE), 1.0
+        body = self._upload((key, r.spp if r else 0), img, coverage=True)
+        coat = brdf is not None and brdf.kind == BrdfKind.NEURAL and bool(material.interfaces)
+        if coat:
+            sampling = self.renderer.sampling
+            self.renderer.sampling = replace(sampling, terms=COAT_TERMS)
+            try:
+                tex = (self.renderer.accumulate(state, w, h, first, n, coat_brdf(brdf, material), REFERENCE_SLOT)
+                       if n else self.renderer.frame_texture(view, w, h, REFERENCE_SLOT))
+            finally:
+                self.renderer.sampling = sampling
+        else:
+            tex = self.renderer.frame_texture(view, w, h, REFERENCE_SLOT)
+        return self._add_body(tex, float(max(passes, 1)), body, r is not None), 1.0
+
+    def _add_body(self, coat: moderngl.Texture, passes: float, body: moderngl.Texture,
+                  has_body: bool) -> moderngl.Texture:
+        """The lit object's reference: the coat's accumulation (sum of ``passes``) plus the body image."""
+        size = coat.size
+        if self._sum is None or self._sum[1].size != size:
+            if self._sum is not None:
+                for res in self._sum:
+                    res.release()
+            tex = self.ctx.texture(size, 4, dtype="f4")
+            self._sum = (self.ctx.framebuffer([tex]), tex)
+        fbo, tex = self._sum
+        p = self._sum_prog
+        fbo.use()
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        coat.use(0)
+        body.use(1)
+        p["u_coat"].value, p["u_body"].value = 0, 1
+        p["u_coat_passes"].value = passes
+        p["u_has_body"].value = int(has_body)
+        self._sum_vao.render(moderngl.TRIANGLES, vertices=3)
+        self.renderer.unbind_textures(0, 1)
+        return tex
+
+    def _upload(self, key, img: np.ndarray, flip: bool = True, coverage: bool = False) -> moderngl.Texture:
+        """The worker's image as a float texture, uploaded when ``key`` changes;
+        ``coverage``: RGBA with alpha 1 where the image holds the object (reference_sum.frag)."""
+        key = None if key is None else (*key, coverage)
+        if key is None or key != self._tex_key or self._tex is None:
+            data = (img[::-1] if flip else img).astype("f4")
+            if coverage:
+                cov = (np.abs(data).sum(-1, keepdims=True) > 0).astype("f4")
+                data = np.concatenate([data, cov], -1)
+            data = np.ascontiguousarray(data)
+            if self._tex is not None:
+                self._tex.release()
+            self._tex = self.ctx.texture((data.shape[1], data.shape[0]), data.shape[2], data.tobytes(), dtype="f4")
+            self._tex_key = key
+        return self._tex
+
+    def reference_linear(self, material: Material, analytic: GpuBrdf | None, brdf: GpuBrdf | None,
+                         state: ViewState, scene: str, size: tuple[int, int], spp: int,
+                         timeout: float = 300.0, coat_passes: int = 64) -> np.ndarray:
+        """The reference image of a view (tests, batch): closed form, or Monte
+        Carlo with at least ``spp`` paths (samples per pixel for the lit object,
+        waits for the worker); the lit object (without its background) adds
+        ``coat_passes`` GPU passes of the coat's environment light."""
+        if analytic is not None:
+            return self.renderer.render_linear(state, size, spp, analytic)
+        if material.is_textured:
+            raise NbrdfError("no reference for texture-mapped materials")
+        view = View.parse(state.view)
+        if view == View.OBJECT:
+            state = replace(state, background=False)
+        key = self.job_key(material, state, None if view == View.LOBE else size, scene)
+        job = self.job(material, state, key, size, brdf)
+        job.max_spp = spp
+        self.worker.request(job)
+        r = self.worker.wait(key, spp, timeout)
+        if r is None or r.error:
+            raise NbrdfError(f"Monte Carlo reference failed: {r.error if r else 'timed out'}")
+        if view != View.OBJECT or brdf is None or brdf.kind != BrdfKind.NEURAL:
+            return r.image
+        sampling = self.renderer.sampling
+        self.renderer.sampling = replace(sampling, terms=COAT_TERMS)
+        try:
+            coat = self.renderer.render_linear(state, size, coat_passes, coat_brdf(brdf, material))
+        finally:
+            self.renderer.sampling = sampling
+        return coat + r.image
+
+    def status(self, material: Material, view: View | str) -> str:
+        """One line on what the reference is and how far it has got: the result the picture
+        shows, so the line and the image's label agree (not a newer round the next frame shows)."""
+        if material.is_textured:
+            return "no reference for texture-mapped materials"
+        if analytic_capable(material):
+            return "reference: closed form on the GPU"
+        r = self._shown if self._job else None
+        if r is not None and r.error:
+            return f"reference failed: {r.error}"
+        noise = r.noise if r is not None else None
+        level = f", noise {100 * noise:.1f} %" if noise is not None else ""
+        died = f" ({self.worker.notice})" if self.worker.notice else ""  # a killed worker, restarted
+        if View.parse(view) == View.OBJECT:
+            return (f"reference: Monte Carlo lights and body, {r.spp if r else 0} samples per pixel{level}"
+                    f"{'' if r and r.done else '...'}; the coat in closed form on the GPU{died}")
+        return (f"reference: Monte Carlo, {r.spp if r else 0} paths per pixel{level}"
+                f"{'' if r and r.done else '...'}{died}")
+
+    def label_list(self, mode: CompareMode | str, wipe: float) -> list[Label]:
+        """The labels of ``mode``'s picture: each side's name where it shows."""
+        mode = CompareMode.parse(mode)
+        ref = self._ref_label
+        if mode == CompareMode.SIDE:
+            return [Label("neural", 0.0), Label(ref, 0.5)]
+        if mode == CompareMode.WIPE:
+            return [Label("neural", wipe, "right"), Label(ref, wipe)]
+        if mode == CompareMode.ERROR:
+            return [Label(f"relative error: neural vs {ref}", 0.0)]
+        if mode == CompareMode.FLIP:
+            return [Label(f"HDR-FLIP: neural vs {ref}", 0.0)]
+        return []
+
+    def plane_curve(self, material: Material, theta_i: float, wi: torch.Tensor, wo: torch.Tensor,
+                    n: int) -> np.ndarray | None:
+        """f cos(theta_o) RGB at n plane-of-incidence pairs from the worker (None until ready)."""
+        key = hashlib.sha1(f"{json.dumps(material_to_dict(material), sort_keys=True)}|plane|{theta_i}"
+                           .encode()).hexdigest()
+        r = self.worker.result(key)
+        if (r is None or not (r.done or r.error)) and self.worker.current != key:
+            self.worker.request(ReferenceJob(key, material, wi, wo, wo[:, 2:3], np.ones((1, n), bool), 2048))
+        return None if r is None else r.image[0]
+
+    # --- HDR-FLIP -------------------------------------------------------------------------------
+    def update_flip(self, a: moderngl.Texture, pa: float, b: moderngl.Texture, pb: float) -> float | None:
+        """The HDR-FLIP map of A (sum of ``pa`` passes) against the reference B,
+        recomputed when B changes or A's passes reach the next power of two (the
+        FLIP evaluation is CPU work); returns the mean (None: no reference yet)."""
+        if b.size == (1, 1):  # the Monte Carlo worker has sent nothing yet
+            self.flip_mean, self._flip_key = None, None
+            return None
+        key = (id(b), b.size, self._tex_key if b is self._tex else int(math.log2(max(pb, 1.0))),
+               a.size, int(math.log2(max(pa, 1.0))))
+        if key != self._flip_key:
+            test = _resample(_read_linear(a, pa), b.size)
+            from nbrdf.training.render_report import flip  # the evaluation of `nbrdf report render`
+
+            self.flip_mean, fmap = flip(_read_linear(b, pb), test)
+            data = np.ascontiguousarray(fmap, dtype="f4")
+            if self._flip_tex is not None:
+                self._flip_tex.release()
+            self._flip_tex = self.ctx.texture(b.size, 1, data.tobytes(), dtype="f4")
+            self._flip_key = key
+        return self.flip_mean
+
+    # --- the composite ------------------------------------------------------------------------
+    def composite(self, target: moderngl.Framebuffer, a: moderngl.Texture, pa: float, b: moderngl.Texture,
+                  pb: float, mode: CompareMode, blend: float | None, wipe: float, error_scale: float,
+                  exposure: float, tonemap: ToneMap | str) -> None:
+        """Draws A (sum of ``pa`` passes) and B as ``mode`` to ``target``;
+        ``blend`` (a weight) draws (1 - blend) A + blend B instead."""
+        p = self.compositor
+        target.use()
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        a.use(0)
+        b.use(1)
+        p["u_a"].value, p["u_b"].value = 0, 1
+        flip = CompareMode.parse(mode) == CompareMode.FLIP and blend is None
+        if flip and self._flip_tex is not None and self._flip_key is not None:
+            self._flip_tex.use(2)
+        else:
+            self.renderer.unbind_textures(2)  # no map yet: FLIP 0 (black) until the reference arrives
+        p["u_flip"].value = 2
+        p["u_passes_a"].value, p["u_passes_b"].value = pa, pb
+        p["u_mode"].value = CompareMode.OFF.code if blend is not None else CompareMode.parse(mode).code
+        p["u_blend"].value = int(blend is not None)
+        p["u_wipe"].value = blend if blend is not None else wipe
+        p["u_err_scale"].value = error_scale
+        p["u_exposure"].value = exposure
+        p["u_tonemap"].value = ToneMap.parse(tonemap).code
+        self._vao.render(moderngl.TRIANGLES, vertices=3)
+        self.renderer.unbind_textures(0, 1, 2)
+        if self.show_labels and blend is None:
+            self.labels.draw(target, self.label_list(mode, wipe))
+
+    def close(self) -> None:
+        self.worker.close()
+        for tex in (self._tex, self._flip_tex, *(self._sum or ())):
+            if tex is not None:
+                tex.release()
+        self._tex = self._flip_tex = self._sum = None
+        self.labels.release()
+        if self._env_file is not None:
+            _remove(self._env_file[2])
+            self._env_file = None
+
+
+def _remove(path: str) -> None:
+    """Deletes a file of ours if it is there."""
+    try:
+        os.remove(path)
+    except OSError:
+        pass
+
+
+def _read_linear(tex: moderngl.Texture, passes: float) -> np.ndarray:
+    """A float texture as linear RGB (H, W, 3) in texture row order, divided by its passes."""
+    img = np.frombuffer(tex.read(), dtype="f4").reshape(tex.height, tex.width, tex.components)
+    return img[..., :3] / max(passes, 1.0)
+
+
+def _resample(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``img`` bilinearly sampled at the pixel centres of a (w, h) grid over the same
+    extent (edges clamped): what the compositor's linear filtering shows."""
+    h, w = img.shape[:2]
+    tw, th = size
+    if (w, h) == (tw, th):
+        return img
+    x = np.clip((np.arange(tw) + 0.5) * w / tw - 0.5, 0, w - 1)
+    y = np.clip((np.arange(th) + 0.5) * h / th - 0.5, 0, h - 1)
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    fx, fy = (x - x0)[None, :, None], (y - y0)[:, None, None]
+    top = img[y0][:, x0] * (1 - fx) + img[y0][:, x1] * fx
+    bottom = img[y1][:, x0] * (1 - fx) + img[y1][:, x1] * fx
+    return top * (1 - fy) + bottom * fy

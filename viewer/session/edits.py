@@ -1,0 +1,317 @@
+"""A look-development session's edits, without the GPU: the layer stack, the
+view settings, the backdrop, the compare and interpolation settings, each a
+guarded edit (a bad input is one line in ``error`` and changes nothing) and
+one undo step, and the session as a ``nbrdf-session/1`` document. The
+rendering session, viewer/session/lookdev.py's ``LookDev``, builds on it.
+"""
+from __future__ import annotations
+
+import json
+import math
+from abc import ABC, abstractmethod
+from dataclasses import asdict, fields, replace
+from pathlib import Path
+
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import Material, load_material, material_to_dict, save_material
+from nbrdf.viewer.gpu.backdrop import BackdropSettings
+from nbrdf.viewer.modes import Background, CompareMode, View
+from nbrdf.viewer.session.document import SESSION_FORMAT, CompareSettings, Interpolation, SessionDoc
+from nbrdf.viewer.session.history import GuardedEdits, History
+from nbrdf.viewer.session.stack_editor import StackEditor
+from nbrdf.viewer.view_settings import ViewState
+
+PRESETS_DIR = Path(__file__).parent.parent / "assets" / "materials"
+#: Drop targets by file suffix (``open_file``).
+ENV_SUFFIXES = (".hdr", ".exr")
+MESH_SUFFIXES = (".glb", ".gltf", ".obj")
+#: View settings that change only the display transform (no new accumulation).
+DISPLAY_FIELDS = ("exposure", "tonemap")
+
+
+def presets() -> dict[str, Path]:
+    """The bundled materials by name (file stem)."""
+    return {p.stem: p for p in sorted(PRESETS_DIR.glob("*.json"))}
+
+
+class SessionEdits(ABC):
+    """What an artist edits in a session -- the layer stack, the view settings,
+    the backdrop, the compare and interpolation settings -- as guarded edits,
+    each one undo step, and the session as a document. The rendering session
+    (``LookDev``) subclasses it and supplies the GPU side: ``_apply_material``
+    (the edited material's BRDFs), ``invalidate`` (the accumulation starts
+    over), ``restore`` and the scene (mesh, environment)."""
+
+    def __init__(self, material: Material, mesh: str, env: str | None, state: ViewState | None,
+                 backdrop: BackdropSettings | None):
+        self.editor = StackEditor.from_material(material)
+        self.state = state or ViewState()
+        self.mesh, self.env_path = mesh, env
+        self.compare_settings = CompareSettings()
+        self.interp = Interpolation()
+        self.mipmapping = True
+        self.backdrop = backdrop or BackdropSettings()
+        self.error: str | None = None
+        self.notice: str = ""
+        self.history = History()
+        """Undo / redo over the session's snapshots (``undo``, ``redo``)."""
+        self.edits = GuardedEdits(self.history, self.snapshot)
+
+    @abstractmethod
+    def _apply_material(self) -> None:
+        """Builds the edited material's GPU resources (a bad material: ``NbrdfError``)."""
+
+    @abstractmethod
+    def invalidate(self) -> None:
+        """Starts what is shown over (an edit changed the image)."""
+
+    @abstractmethod
+    def restore(self, doc: SessionDoc) -> None:
+        """Makes ``doc`` the session (a failure puts the previous one back)."""
+
+    @abstractmethod
+    def set_mesh(self, mesh: str) -> bool:
+        """A built-in mesh or a mesh file (a guarded edit)."""
+
+    @abstractmethod
+    def set_environment(self, path: str | None) -> bool:
+        """An environment preset or file, None: the built-in sky (a guarded edit)."""
+
+    # --- guarded user actions and undo ---------------------------------------------------
+    def guarded(self, fn, *args) -> bool:
+        """Runs an edit; a bad input becomes ``error`` (one line) and changes nothing.
+        A change it made is one undo step (``history``; an edit made of edits, such
+        as opening a session, is one step)."""
+        self.error = self.edits.run(fn, *args)
+        return self.error is None
+
+    def snapshot(self) -> dict:
+        """The session as the undo history keeps it: the document less the camera's
+        place (orbit, pan and zoom are navigation, not edits; the field of view is kept)."""
+        d = self.document().to_dict()
+        d["camera"] = {"fov": d["camera"]["fov"]}
+        return d
+
+    def coalescing(self, group: str | None):
+        """Edits made inside join the open step of ``group`` (one slider drag is one
+        undo step); the panels close it with ``end_group`` when the widget is let go."""
+        return self.edits.coalescing(group)
+
+    def end_group(self) -> None:
+        """The next edit is a new undo step."""
+        self.history.close_group()
+
+    def undo(self) -> bool:
+        """Goes back one edit (False: nothing to undo)."""
+        return self._travel(self.history.undo, "undo")
+
+    def redo(self) -> bool:
+        """Makes the edit undone last again (False: nothing to redo)."""
+        return self._travel(self.history.redo, "redo")
+
+    def _travel(self, step, what: str) -> bool:
+        snap = step()
+        if snap is None:
+            self.notice = f"nothing to {what}"
+            return False
+        doc = SessionDoc.parse({**snap, "camera": asdict(self.state.camera)}, what)
+        self.edits.restoring = True
+        try:
+            ok = self.guarded(lambda: self.restore(doc))
+        finally:
+            self.edits.restoring = False
+        if ok:
+            self.state.camera.set_fov(float(snap["camera"]["fov"]))
+            self.history.current = self.snapshot()  # as restored (the same document)
+            self.notice = f"{what}: {len(self.history.undo_stack)} steps back, {len(self.history.redo_stack)} ahead"
+        return ok
+
+    @property
+    def material(self) -> Material:
+        return self.editor.material
+
+    @property
+    def compare(self) -> CompareMode:
+        return self.compare_settings.mode
+
+    @property
+    def wipe(self) -> float:
+        return self.compare_settings.wipe
+
+    @property
+    def err_scale(self) -> float:
+        return self.compare_settings.error_scale
+
+    # --- the material --------------------------------------------------------------------
+    def set_param(self, index: int, key: str, value) -> bool:
+        return self.guarded(lambda: (self.editor.set_param(index, key, value), self._apply_material()))
+
+    def edit(self, op: str, *args) -> bool:
+        """A stack edit of ``StackEditor`` by name: add_coat, remove, move, toggle_medium, set_base_type, set_name."""
+        return self.guarded(lambda: (getattr(self.editor, op)(*args), self._apply_material()))
+
+    def _edit_material(self, m: Material) -> None:
+        self.editor = StackEditor.from_material(m)
+        self._apply_material()
+
+    def open_material(self, path: str | Path) -> bool:
+        return self.guarded(lambda: self._edit_material(load_material(path)))
+
+    def open_file(self, path: str | Path) -> bool:
+        """Opens a file dropped on the window by its kind: a material or a session
+        .json (told apart by content), an .hdr/.exr environment, a .glb/.gltf/.obj mesh."""
+        p = Path(path)
+        suffix = p.suffix.lower()
+        if suffix == ".json":
+            ok = self.guarded(lambda: self._open_json(p))
+        elif suffix in ENV_SUFFIXES:
+            ok = self.set_environment(str(p))
+        elif suffix in MESH_SUFFIXES:
+            ok = self.set_mesh(str(p))
+        else:
+            self.error = (f"{p.name}: cannot open a {suffix or 'file without a suffix'} (a material or session "
+                          f".json, an {'/'.join(ENV_SUFFIXES)} environment, a {'/'.join(MESH_SUFFIXES)} mesh)")
+            return False
+        if ok:
+            self.notice = f"opened {p.name}"
+        return ok
+
+    def _open_json(self, p: Path) -> None:
+        if not p.is_file():
+            raise NbrdfError(f"{p}: no such file")
+        try:
+            data = json.loads(p.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise NbrdfError(f"{p}: not JSON ({getattr(e, 'msg', e)})") from None
+        if isinstance(data, dict) and data.get("format") == SESSION_FORMAT:
+            self.restore(SessionDoc.parse(data, str(p)))
+        else:
+            self._edit_material(load_material(p))
+
+    def save_material(self, path: str | Path) -> bool:
+        return self.guarded(lambda: save_material(self.material, path))
+
+    def load_preset(self, name: str) -> bool:
+        table = presets()
+        if name not in table:
+            self.error = f"no preset {name!r} (one of {', '.join(table)})"
+            return False
+        return self.open_material(table[name])
+
+    # --- view settings (the panels and the mouse call these) ---------------------------------
+    def update_state(self, **changes) -> bool:
+        """Sets view settings (``view``, ``theta_i``, ``env_on``, ``light_dir``,
+        ``exposure``, ...); restarts the accumulation unless only the display changed."""
+        def go():
+            unknown = set(changes) - {f.name for f in fields(ViewState)}
+            if unknown:
+                raise NbrdfError(f"no view setting {sorted(unknown)[0]!r}")
+            new = replace(self.state, **changes)
+            moved = [k for k in changes if getattr(new, k) != getattr(self.state, k)]
+            self.state = new
+            if any(k not in DISPLAY_FIELDS for k in moved):
+                self.invalidate()
+        return self.guarded(go)
+
+    def set_backdrop(self, mode: Background | str | None = None, flat_colour=None, ground: bool | None = None) -> bool:
+        """The background behind the object (env, blur, flat, none), its flat
+        colour and the ground's contact shadow; None keeps a setting."""
+        def go():
+            b = self.backdrop
+            self.backdrop = BackdropSettings(b.mode if mode is None else mode,
+                                             b.flat_colour if flat_colour is None else flat_colour,
+                                             b.ground if ground is None else ground)
+        return self.guarded(go)  # display only: the accumulation goes on
+
+    def set_view(self, view: View | str) -> bool:
+        return self.update_state(view=view)
+
+    def _navigate(self, fn, *args) -> None:
+        fn(*args)
+        self.invalidate()
+
+    def orbit(self, d_yaw: float, d_pitch: float) -> None:
+        self._navigate(self.state.camera.orbit, d_yaw, d_pitch)
+
+    def pan(self, dx: float, dy: float) -> None:
+        self._navigate(self.state.camera.pan, dx, dy)
+
+    def zoom(self, factor: float) -> None:
+        self._navigate(self.state.camera.zoom, factor)
+
+    def frame(self, aspect: float = 1.0) -> None:
+        """Fits the object into a view of ``aspect`` (w / h) with a margin."""
+        self._navigate(self.state.camera.frame, aspect)
+
+    def set_fov(self, fov: float) -> bool:
+        """The camera's vertical field of view, degrees (the object keeps its size)."""
+        def go():
+            if not math.isfinite(float(fov)):
+                raise NbrdfError(f"field of view {fov} is not a number")
+            self._navigate(self.state.camera.set_fov, float(fov))
+        return self.guarded(go)
+
+    def set_compare(self, mode: CompareMode | str) -> bool:
+        def go():
+            try:
+                parsed = CompareMode.parse(mode, "compare mode")
+            except ValueError as e:
+                raise NbrdfError(str(e)) from None
+            self.compare_settings = CompareSettings(parsed, self.wipe, self.err_scale)
+            self.invalidate()
+        return self.guarded(go)
+
+    def set_wipe(self, x: float) -> bool:
+        return self.guarded(lambda: setattr(self, "compare_settings",
+                                           CompareSettings(self.compare, x, self.err_scale)))
+
+    def set_error_scale(self, scale: float) -> bool:
+        return self.guarded(lambda: setattr(self, "compare_settings",
+                                           CompareSettings(self.compare, self.wipe, scale)))
+
+    def set_interpolation(self, other: str | Path | None = None, t: float | None = None,
+                          mode: str | None = None) -> bool:
+        """The second material (a preset name or a JSON file; None keeps it), the weight t, the mode."""
+        def go():
+            doc, where = self.interp.other, self.interp.other_dir
+            if other is not None:
+                path = presets().get(str(other), Path(other))
+                m = load_material(path)
+                if m.is_textured:
+                    raise NbrdfError(f"{path}: interpolation takes uniform materials")
+                doc, where = material_to_dict(m), str(m.base_dir)
+            new = Interpolation(doc, where, self.interp.t if t is None else t,
+                                self.interp.mode if mode is None else mode)
+            old, self.interp = self.interp, new
+            try:
+                self._apply_material()
+            except NbrdfError:
+                self.interp = old
+                raise
+        return self.guarded(go)
+
+    def clear_interpolation(self) -> bool:
+        def go():
+            self.interp = Interpolation()
+            self._apply_material()
+        return self.guarded(go)
+
+    # --- files -----------------------------------------------------------------------------
+    def document(self) -> SessionDoc:
+        """The session as a document."""
+        return SessionDoc(self.material, self.mesh, self.env_path, self.state, self.compare_settings,
+                          self.mipmapping, self.interp, self.backdrop)
+
+    def session(self) -> dict:
+        return self.document().to_dict()
+
+    def save_session(self, path: str | Path) -> bool:
+        return self.guarded(lambda: self.document().save(path))
+
+    def open_session(self, path: str | Path) -> bool:
+        return self.guarded(lambda: self.restore(SessionDoc.load(path)))
+
+    def apply_session(self, data: dict, source: str = "session") -> None:
+        """Restores a session dict; validates everything before changing anything."""
+        self.restore(SessionDoc.parse(data, source))
+

@@ -1,0 +1,418 @@
+"""The look-development session behind ``nbrdf-view``, its window and its
+offscreen renders alike, without any GUI.
+
+``LookDev`` holds what an artist edits -- the layer stack, the scene, the
+lighting, the view settings, the compare and interpolation settings, as the
+guarded, undoable edits of viewer/session/edits.py -- and turns every edit
+into what the one renderer draws with. ``from_options`` opens
+it from the command line's options: the window (viewer/window/app.py) and the
+offscreen path (viewer/offscreen.py) both start there. It delegates each job:
+
+- viewer/session/document.py: the session document (its file format and validation);
+- viewer/gpu/pipeline.py: material -> latents -> the BRDF's GPU resources (``GpuBrdf``);
+- viewer/jobs/view_frames.py: the view drawn frame by frame (accumulation, composite);
+- viewer/reference/compare.py: the reference (closed form or the Monte Carlo worker
+  process) and the compositor;
+- viewer/jobs/screenshot.py, viewer/jobs/turntable.py: screenshots and turntables;
+- viewer/jobs/texture_jobs.py: latent textures built in a worker thread;
+- viewer/session/material_parts.py: a glTF file's materials, one per draw range;
+- viewer/jobs/plane_curves.py: the lobe plot's curves;
+- viewer/gpu/renderer.py: the one renderer that owns programs, mesh and
+  environment and draws any ``GpuBrdf``.
+
+The window, its panels and the tests drive the same methods; every method
+that takes user input reports a bad input in ``error`` and leaves the session
+as it was (and is one undo step).
+"""
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Sequence
+
+import moderngl
+import numpy as np
+import torch
+
+from nbrdf.imaging.env_presets import resolve_environment
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.latent_texture import blend
+from nbrdf.neural.material import Material
+from nbrdf.viewer.gpu.backdrop import Backdrop, BackdropSettings
+from nbrdf.viewer.gpu.body_source import BodySource
+from nbrdf.viewer.gpu.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, fallback_note, gpu_brdf, material_key
+from nbrdf.viewer.gpu.renderer import Renderer
+from nbrdf.viewer.jobs.plane_curves import PlaneCurves
+from nbrdf.viewer.jobs.refine_job import IdleRefiner
+from nbrdf.viewer.jobs.screenshot import Screenshots
+from nbrdf.viewer.jobs.texture_jobs import TextureJobs
+from nbrdf.viewer.jobs.turntable import Turntables
+from nbrdf.viewer.jobs.view_frames import MAX_PASSES, ViewFrames
+from nbrdf.viewer.modes import BrdfMode, CompareMode, View
+from nbrdf.viewer.reference.compare import Compare
+from nbrdf.viewer.scene.mesh import GLTF_SUFFIXES, named_mesh
+from nbrdf.viewer.session.document import SessionDoc
+from nbrdf.viewer.session.edits import SessionEdits, presets
+from nbrdf.viewer.session.material_parts import MaterialParts, PartMaterial
+from nbrdf.viewer.session.stack_editor import StackEditor
+from nbrdf.viewer.view_settings import ViewState
+
+if TYPE_CHECKING:
+    from nbrdf.viewer.options import ViewOptions
+    from nbrdf.viewer.scene.gltf_import import MaterialGroup
+
+__all__ = ["MAX_PASSES", "LookDev", "PartMaterial", "Timings", "presets"]
+
+
+@dataclass
+class Timings:
+    """What the performance overlay shows."""
+
+    latent_ms: float = 0.0
+    """Leaf encoders + layering + GPU resources of the last edit."""
+    frame_ms: float = 0.0
+    """The mean interval between frames presented by the window (1000 / ``fps``)."""
+    fps: float = 0.0
+    """Frames presented per second of wall time, over the window's last frames."""
+    render_ms: float = 0.0
+    """The last ``render`` call (the 3D view alone)."""
+    edit_to_frame_ms: float = 0.0
+    """From an edit to the end of the first frame showing it."""
+
+
+class LookDev(SessionEdits):
+    """One look-development session: the edited material, scene and view, their
+    GPU resources, and the jobs that render them (frames, screenshots, turntables)."""
+
+    def __init__(self, ctx: moderngl.Context, material: Material, mesh: str = "sphere", env: str | None = None,
+                 state: ViewState | None = None, backdrop: BackdropSettings | None = None,
+                 parts: "Sequence[MaterialGroup] | None" = None, brdf: BrdfMode | str = BrdfMode.NEURAL,
+                 threaded: bool = True):
+        """``parts``: the materials of the mesh's draw ranges (a glTF file's, from
+        ``gltf_import.material_groups``; the first is edited first); None: ``material``
+        on the whole mesh. ``brdf``: how the materials are shaded (the window: the
+        decoder; offscreen renders: any ``BrdfMode``). ``threaded``: latent textures
+        build in a worker thread (the window) rather than at once."""
+        super().__init__(material, mesh, env, state, backdrop)
+        self.ctx = ctx
+        self.brdf_mode = BrdfMode.parse(brdf, "--brdf")
+        self.brdf_note = ""
+        """One line when the edited material is shown other than ``brdf_mode`` asks (a stated fallback)."""
+        self.pipeline = MaterialPipeline(ctx)
+        self.notes: list[str] = []
+        """One line per property of the opened file without an equivalent (a glTF file's materials)."""
+        self.timings = Timings()
+        self.brdf: GpuBrdf | None = None        # the neural image's BRDF (None: a latent texture is building)
+        self.ref_brdf: GpuBrdf | None = None    # the closed form of a single layer (the reference)
+        self.other_brdf: GpuBrdf | None = None  # the second material of a BRDF blend
+        self._edit_t0: float | None = None
+        self.textures = TextureJobs(self.pipeline, threaded)
+        self.turntables = Turntables(self)
+        self.material_parts = MaterialParts(lambda m: self.pipeline.build(m, self.brdf_mode))
+        self.frames = ViewFrames(self)
+        self.shots = Screenshots(self)
+        self.curves = PlaneCurves(self)
+        self.renderer = Renderer(ctx, mesh=mesh, environment=resolve_environment(str(env)) if env else None)
+        if parts is not None:
+            self.editor = StackEditor.from_material(
+                self.material_parts.set(parts, len(self.renderer.mesh.draw_ranges), mesh))
+        self.compare_part = Compare(ctx, self.renderer)
+        self.backdrop_part = Backdrop(ctx, self.renderer)
+        # The window's frames: decoder or baked body table (viewer/gpu/body_source.py).
+        self.bodies = BodySource(ctx, decoder=lambda: self.pipeline.decoder)
+        # A still uniform material's code refined in the worker process (viewer/jobs/refine_job.py).
+        self.idle_refine = IdleRefiner(lambda: self.worker, lambda: self.pipeline.model.decoder)
+        self._apply_material()
+        self.history.reset(self.snapshot())
+
+    @classmethod
+    def from_options(cls, ctx: moderngl.Context, opts: "ViewOptions", brdf: BrdfMode | str = BrdfMode.NEURAL,
+                     threaded: bool = True) -> "LookDev":
+        """The session ``nbrdf-view``'s options open: their material (or a glTF
+        file's materials, whose notes become ``notes``), mesh, environment, view
+        settings and backdrop, then their session file if any (a bad one: ``NbrdfError``)."""
+        material, notes = opts.load_material()
+        ld = cls(ctx, material, opts.mesh, opts.env, copy.deepcopy(opts.state), opts.backdrop(),
+                 parts=opts.file_materials(), brdf=brdf, threaded=threaded)
+        ld.notes = notes
+        ld.notice = "; ".join(notes)
+        if opts.session and not ld.open_session(opts.session):
+            ld.close()
+            raise NbrdfError(ld.error or f"{opts.session}: cannot open the session")
+        return ld
+
+    @property
+    def model(self):
+        return self.pipeline.model
+
+    @property
+    def worker(self):
+        """The Monte Carlo reference worker."""
+        return self.compare_part.worker
+
+    @property
+    def parts(self) -> list[PartMaterial]:
+        """The materials of a multi-material mesh (empty: the edited material on the whole mesh)."""
+        return self.material_parts.parts
+
+    @property
+    def selected(self) -> int:
+        """The index in ``parts`` of the material the stack editor edits."""
+        return self.material_parts.selected
+
+    @property
+    def passes(self) -> int:
+        """Passes accumulated in the view so far."""
+        return self.frames.passes
+
+    @property
+    def flip_mean(self) -> float | None:
+        """The mean HDR-FLIP of the FLIP compare view (None until there is a reference)."""
+        return self.compare_part.flip_mean
+
+    # --- the scene -------------------------------------------------------------------------
+    def set_mesh(self, mesh: str) -> bool:
+        """A built-in mesh or a file; a .gltf/.glb brings its materials (the first
+        one selected in the stack editor), any other mesh is shown with the edited material."""
+        def go():
+            new = named_mesh(mesh)
+            groups = None
+            if Path(mesh).suffix.lower() in GLTF_SUFFIXES:
+                from nbrdf.viewer.scene.gltf_import import imported_scene, material_groups
+
+                groups = material_groups(imported_scene(mesh))
+            parts = self.material_parts
+            old = (self.renderer.mesh, parts.parts, parts.selected, self.editor)
+            self.renderer.set_mesh(new)
+            try:
+                if groups is None:  # the edited material on the whole mesh
+                    parts.clear()
+                else:
+                    self._edit_material(parts.set(groups, len(new.draw_ranges), mesh))
+            except NbrdfError:
+                self.renderer.set_mesh(old[0])
+                parts.parts, parts.selected, self.editor = old[1:]
+                self._apply_material()
+                raise
+            self.mesh = mesh
+            self.invalidate()
+        return self.guarded(go)
+
+    def select_material(self, index: int) -> bool:
+        """Makes material ``index`` of a multi-material mesh the one the stack editor
+        (and compare, interpolation, save) works on; the others keep their edits."""
+        def go():
+            old = (self.material_parts.selected, self.editor)
+            m = self.material_parts.select(index, self.material)
+            try:
+                self._edit_material(m)
+            except NbrdfError:
+                self.material_parts.selected, self.editor = old
+                self._apply_material()
+                raise
+        return self.guarded(go)
+
+    def pick_material(self, x: int, y: int, size: tuple[int, int]) -> int:
+        """Selects the material seen at pixel (x, y) (top-left origin) of a view of
+        ``size`` (a click in the window); returns its index, -1 off the object or
+        with a single material."""
+        if not self.parts or not (0 <= x < size[0] and 0 <= y < size[1]):
+            return -1
+        k = int(self.renderer.material_ids(self.main_state(), size)[int(y), int(x)])
+        if k >= 0 and k != self.selected and not self.select_material(k):
+            return -1
+        return k
+
+    def set_environment(self, path: str | None) -> bool:
+        def go():
+            self.renderer.set_environment(resolve_environment(str(path)) if path else None)
+            self.env_path = path
+            self.invalidate()
+        return self.guarded(go)
+
+    def set_mipmapping(self, on: bool) -> bool:
+        def go():
+            self.mipmapping = bool(on)
+            if self.brdf is not None and self.brdf.latent_texture is not None:
+                self.brdf.latent_texture.set_mipmapped(self.mipmapping)
+            self.invalidate()
+        return self.guarded(go)
+
+    def invalidate(self) -> None:
+        """Starts the progressive accumulation over (and a screenshot being rendered:
+        it shows the session as it is when it ends)."""
+        self.frames.restart()
+        self.shots.restart()
+
+    # --- material -> latents -> GPU -------------------------------------------------------
+    def latent(self) -> torch.Tensor:
+        """The (3, 34) code the shader shows (the latent blend when interpolating)."""
+        z = self.pipeline.latent(self.material)
+        other = self.interp.other_material()
+        if other is not None and self.interp.mode == "latent":
+            z = blend([z, self.pipeline.latent(other)], [1 - self.interp.t, self.interp.t])
+        return z
+
+    def _apply_material(self) -> None:
+        """The edited material's GPU resources (one latent and one latent share per edit)."""
+        t0 = time.perf_counter()
+        m = self.material
+        mode = self.pipeline.resolve(m, self.brdf_mode)
+        note = fallback_note(m, self.brdf_mode)
+        if note or self.notice == self.brdf_note:
+            self.notice = note
+        self.brdf_note = note
+        if m.is_textured and mode == BrdfMode.NEURAL:
+            if self.interp.active:
+                raise NbrdfError("interpolation takes uniform materials; turn it off for a texture-mapped one")
+            tex = self.textures.texture(m)
+            if tex is None:  # still building: keep showing the previous material
+                self.notice = "building the latent texture..."
+                return
+            tex.set_mipmapped(self.mipmapping)
+            z = tex.mean_latent
+            brdf = gpu_brdf(self.ctx, m, self.pipeline.decoder, z, self.pipeline.proxy(z), tex,
+                            self.pipeline.normal_maps)
+            self.idle_refine.edited(None, None)
+        elif mode == BrdfMode.NEURAL:
+            z = self.latent()
+            refined = self.idle_refine.edited(None if self.interp.active else m, z)  # a cached refined code
+            brdf = self.pipeline.build(m, BrdfMode.NEURAL, latent=z if refined is None else refined)
+        else:
+            self.idle_refine.edited(None, None)
+            brdf = self.pipeline.build(m, mode)
+        other = self.interp.other_material() if self.interp.brdf_blend else None
+        self.other_brdf = None if other is None else self.pipeline.build(other, BrdfMode.NEURAL)
+        self.ref_brdf = self.pipeline.build(m, BrdfMode.ANALYTIC) if analytic_capable(m) else None
+        self.renderer.set_part_brdfs(self.material_parts.brdfs(m, len(self.renderer.mesh.draw_ranges)))
+        self.brdf = brdf
+        self.pipeline.retain([m, *(p.material for p in self.material_parts.parts)])  # earlier edits' textures
+        self.timings.latent_ms = (time.perf_counter() - t0) * 1000.0
+        self._edit_t0 = t0
+        self.invalidate()
+
+    def set_brdf_mode(self, mode: BrdfMode | str) -> bool:
+        """How the materials are shaded (the panel's BRDF: neural or belcour on the same
+        material); a view choice, not an undo step. A material the mode cannot shade
+        is shown with the neural BRDF and ``brdf_note`` says so."""
+        def go():
+            try:
+                parsed = BrdfMode.parse(mode, "BRDF")
+            except ValueError as e:
+                raise NbrdfError(str(e)) from None
+            old, self.brdf_mode = self.brdf_mode, parsed
+            try:
+                self._apply_material()
+            except Exception:
+                self.brdf_mode = old
+                raise
+        return self.guarded(go)
+
+    def poll(self) -> None:
+        """Picks up finished background work (latent textures) and renders the
+        next frame of a turntable capture."""
+        if self.textures.finished:
+            if not self.guarded(self._apply_material):
+                self._keep_shown_material()
+            self.notice = ""
+        refined = self.idle_refine.poll()
+        if refined is not None:  # a code that beats the network's on the material's own simulation
+            self.brdf = self.pipeline.build(self.material, BrdfMode.NEURAL, latent=refined)
+            self.frames.handover()  # the image so far fades into the refined code's, no restart from noise
+            self.shots.restart()
+        if self.turntables.capture is not None and self.brdf is not None:
+            self.guarded(self.turntables.step)
+
+    def _keep_shown_material(self) -> None:
+        """After a material whose latent texture could not be made (``error`` says why):
+        the editor goes back to the material still shown, and the failed edit leaves no undo step."""
+        if self.brdf is None or material_key(self.brdf.material) == material_key(self.material):
+            return
+        self.editor = StackEditor.from_material(self.brdf.material)
+        snap, h = self.snapshot(), self.history
+        if h.undo_stack and h.undo_stack[-1] == snap:
+            h.current = h.undo_stack.pop()
+        else:
+            h.commit(snap)
+
+    def wait_svbrdf(self, timeout: float = 60.0) -> None:
+        """Waits for the latent texture being built (tests, scripts)."""
+        self.textures.wait(self.poll, timeout)
+
+    # --- frames ------------------------------------------------------------------------------
+    def compare_active(self) -> bool:
+        """Whether the view shows the reference (a BRDF blend replaces the comparison)."""
+        return self.compare != CompareMode.OFF and not self.interp.brdf_blend
+
+    @property
+    def side_by_side(self) -> bool:
+        """Whether the view shows two images side by side (each half the view's width)."""
+        return self.compare_active() and self.compare == CompareMode.SIDE
+
+    def main_state(self) -> ViewState:
+        """The view state of the neural image (and of its reference: both sides of a
+        comparison are lit by what the view shows)."""
+        return self.state
+
+    def render(self, target: moderngl.Framebuffer, size: tuple[int, int], passes: int = 1,
+               scale: float = 1.0, interactive: bool = False, quick: bool | None = None) -> None:
+        """Adds ``passes`` to the accumulation (up to MAX_PASSES) and draws the
+        view -- or the compare / BRDF-blend composite -- into ``target``; ``scale``
+        < 1 renders fewer pixels while the user drags; ``interactive`` frames may
+        shade with a quicker body (``bodies``; a change of body restarts the accumulation);
+        ``quick``: the quick estimator (None: when ``interactive``). Any change of the
+        rendered size (window, panels shown or hidden, scale) or of the view starts the
+        accumulation over."""
+        self.frames.render(target, size, passes, scale, interactive, quick)
+
+    def frame_done(self) -> None:
+        """Call once the frame is on screen: closes the edit-to-frame measurement."""
+        if self._edit_t0 is not None:
+            self.timings.edit_to_frame_ms = (time.perf_counter() - self._edit_t0) * 1000.0
+            self._edit_t0 = None
+
+    def render_linear(self, size: tuple[int, int], spp: int) -> np.ndarray:
+        """The linear image of the view (H, W, 3): the object over its backdrop, or
+        the lobe / slice view (the lobe: SPEC section 9's array, row 0 at y = -1)."""
+        if self.brdf is None:
+            raise NbrdfError("the latent texture is still building")
+        state = self.main_state()
+        if View.parse(state.view) == View.OBJECT:
+            return self.backdrop_part.render_linear(state, size, spp, self.brdf, self.backdrop)
+        return self.renderer.render_linear(state, size, spp, self.brdf)
+
+    # --- ground truth -----------------------------------------------------
+    def reference_status(self) -> str:
+        return self.compare_part.status(self.material, self.state.view)
+
+    def reference_linear(self, size: tuple[int, int], spp: int, timeout: float = 300.0) -> np.ndarray:
+        """The reference image of the current view (tests, batch): closed form, or Monte Carlo
+        with at least ``spp`` paths (waits for the worker)."""
+        return self.compare_part.reference_linear(self.material, self.ref_brdf, self.brdf, self.main_state(),
+                                                  self.mesh, size, spp, timeout)
+
+    def restore(self, doc: SessionDoc) -> None:
+        """Makes ``doc`` the session (a failure puts the previous one back)."""
+        old = (self.editor, self.state, self.interp, self.compare_settings, self.mipmapping, self.backdrop)
+        try:
+            if doc.mesh != self.mesh and not self.set_mesh(doc.mesh):
+                raise NbrdfError(self.error or "mesh")
+            if doc.environment != self.env_path and not self.set_environment(doc.environment):
+                raise NbrdfError(self.error or "environment")
+            self.editor = StackEditor.from_material(doc.material)
+            self.state, self.interp, self.compare_settings = doc.state, doc.interpolation, doc.compare
+            self.mipmapping, self.backdrop = doc.mipmapping, doc.backdrop
+            self._apply_material()
+        except NbrdfError:
+            self.editor, self.state, self.interp, self.compare_settings, self.mipmapping, self.backdrop = old
+            self._apply_material()
+            raise
+        self.invalidate()
+
+    def close(self) -> None:
+        self.compare_part.close()
+        self.bodies.release()
+        self.backdrop_part.release()
+        self.shots.release()

@@ -1,0 +1,109 @@
+"""The window's progressive refinement: what resolution and which body a frame uses.
+
+While the view changes (a slider drag, an orbit, any edit that restarts the
+accumulation) frames are *interactive*: rendered at a reduced scale that keeps
+a frame within ``budget_ms`` (adapted from the measured times of the
+interactive frames, never below ``min_scale``), with the quick body (the
+baked table on software OpenGL, viewer/gpu/body_source.py) and the quick
+estimator (``LitSampling.quick``). As soon as the view is still it *always*
+refines, whatever the frame time: the scale doubles each frame up to full
+resolution, then passes accumulate at full resolution until the session's cap.
+A frame at a new scale is a *preview* (the quick estimator: the sharper image
+sooner); the frame after the first full-resolution preview restarts the
+accumulation with the full estimator, so the preview's noisier pass is not
+averaged into the converging image. A scale change restarts the accumulation,
+so passes of two resolutions are never mixed.
+
+The policy sees no clock: the window tells it whether the view changed and how
+long each frame took, so tests drive it with made-up frame times.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class RefinementSettings:
+    """The refinement policy's knobs."""
+
+    adaptive: bool = True
+    """False: every frame at full resolution with the still view's body (tests that compare pixels)."""
+    budget_ms: float = 100.0
+    """An interactive frame's target duration (edit to frame on screen)."""
+    scales: tuple[float, ...] = (0.25, 0.375, 0.5, 0.625, 0.75, 0.875, 1.0)
+    """The scales an interactive frame may use (fractions of the view's width and height), ascending."""
+    start_scale: float = 0.5
+    """The interactive scale before any frame time is known."""
+    min_scale: float = 0.5
+    """Interactive frames never go below this scale: half the view's width is the least
+    that reads as the material (a useful image beats the budget on slow machines)."""
+    raise_below: float = 0.5
+    """An interactive frame shorter than this fraction of the budget raises the interactive scale a step."""
+
+
+@dataclass(frozen=True)
+class FramePlan:
+    """What the next frame renders."""
+
+    scale: float
+    """The render scale (fraction of the view's width and height)."""
+    interactive: bool
+    """True: the view is changing (quick body, reduced scale); False: refining a still view."""
+    quick: bool = False
+    """The quick estimator: interactive frames and previews at a new scale."""
+    restart: bool = False
+    """Restart the accumulation before this frame (a new scale, or the end of a preview)."""
+
+
+@dataclass
+class Refinement:
+    """Decides each frame's scale and kind (module docstring). Call ``plan``
+    before a frame and ``done`` with its duration after it."""
+
+    settings: RefinementSettings = field(default_factory=RefinementSettings)
+    interactive_scale: float = -1.0
+    """The scale of interactive frames, adapted to the budget (-1: ``settings.start_scale``)."""
+    scale: float = 1.0
+    """The scale of the frame planned last."""
+    interactive: bool = False
+    """Whether the frame planned last was interactive."""
+    quick: bool = False
+    """Whether the frame planned last used the quick estimator."""
+
+    def __post_init__(self) -> None:
+        if self.interactive_scale < 0:
+            self.interactive_scale = self.settings.start_scale
+
+    def plan(self, changed: bool) -> FramePlan:
+        """The next frame: ``changed`` says the view changed since the last frame
+        (its accumulation was restarted by an edit, a camera move, ...)."""
+        s = self.settings
+        restart = False
+        if not s.adaptive:
+            scale, self.interactive, quick = 1.0, False, False
+        elif changed:  # the accumulation was restarted by the change itself
+            scale, self.interactive, quick = self.interactive_scale, True, True
+        elif self.scale < 1.0:  # still: resolution first, doubling; a preview at each new scale
+            scale, self.interactive, quick = min(1.0, self.scale * 2.0), False, True
+        else:  # then samples at full resolution, after the preview is dropped
+            scale, self.interactive, quick, restart = 1.0, False, False, self.quick
+        restart = restart or scale != self.scale
+        self.scale, self.quick = scale, quick
+        return FramePlan(scale, self.interactive, quick, restart)
+
+    def done(self, frame_ms: float) -> None:
+        """The duration of the frame planned last; interactive frames adapt the
+        interactive scale one step toward the budget (down past it, up well
+        under it). Still frames change nothing: refinement never waits on time."""
+        s = self.settings
+        if not (self.interactive and s.adaptive) or not frame_ms >= 0:
+            return
+        ladder = [x for x in s.scales if x >= s.min_scale] or [s.min_scale]
+        i = min(range(len(ladder)), key=lambda k: abs(ladder[k] - self.interactive_scale))
+        if frame_ms > s.budget_ms and i > 0:
+            self.interactive_scale = ladder[i - 1]
+        elif frame_ms < s.raise_below * s.budget_ms and i + 1 < len(ladder):
+            self.interactive_scale = ladder[i + 1]
+
+
+__all__ = ["FramePlan", "Refinement", "RefinementSettings"]
