@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 from dataclasses import dataclass, field
+from pathlib import Path
 
+import nbrdf.viewer
 from nbrdf.cli.common import at_least, model_or_default
 from nbrdf.cli.config import Parser, add_arguments, build
 from nbrdf.neural.errors import NbrdfError
@@ -67,7 +69,7 @@ class MitsubaBench:
 
 
 def cmd_bench_reference(a: argparse.Namespace) -> int:
-    from nbrdf.training.bench import bench_reference
+    from nbrdf.training.bench import bench_reference  # late: torch and the compiled walk, --help needs neither
 
     c: ReferenceBench = build(ReferenceBench, a)
     print(json.dumps(bench_reference(quick=c.quick), indent=2))
@@ -75,7 +77,7 @@ def cmd_bench_reference(a: argparse.Namespace) -> int:
 
 
 def cmd_bench_render(a: argparse.Namespace) -> int:
-    from nbrdf.viewer.bench import bench_render
+    from nbrdf.viewer.bench import bench_render  # late: moderngl and torch, --help needs neither
 
     c: RenderBench = build(RenderBench, a)
     at_least("--repeats", c.repeats)
@@ -85,19 +87,18 @@ def cmd_bench_render(a: argparse.Namespace) -> int:
 
 
 def cmd_bench_app(a: argparse.Namespace) -> int:
-    from nbrdf.viewer.bench import bench_app
-    from nbrdf.viewer.offscreen import has_display
+    from nbrdf.viewer import bench, offscreen  # late: the previewer (GL, torch), --help needs none
 
-    if not has_display():
+    if not offscreen.has_display():
         raise NbrdfError("bench app: no display (run it under xvfb-run on a headless machine)")
     c: AppBench = build(AppBench, a)
     at_least("--edits", c.edits)
-    print(json.dumps(bench_app(c.size, c.edits), indent=2))
+    print(json.dumps(bench.bench_app(c.size, c.edits), indent=2))
     return 0
 
 
 def cmd_bench_operations(a: argparse.Namespace) -> int:
-    from nbrdf.neural.bench import bench_operations
+    from nbrdf.neural.bench import bench_operations  # late: torch costs ~1 s, --help needs none
 
     c: OperationsBench = build(OperationsBench, a)
     at_least("--repeats", c.repeats)
@@ -110,20 +111,16 @@ def cmd_bench_mitsuba(a: argparse.Namespace) -> int:
     at_least("--pairs", c.pairs)
     at_least("--repeats", c.repeats)
     try:
-        from nbrdf.mitsuba.bench import bench_mitsuba
+        from nbrdf.mitsuba import bench, bsdf  # optional: mitsuba
     except ModuleNotFoundError as e:
         raise NbrdfError(f"bench mitsuba: {e.name} is not installed (pip install -e '.[mitsuba]')") from None
     except ImportError as e:
         raise NbrdfError(f"bench mitsuba: {e}") from None
-    from pathlib import Path
-
-    import nbrdf.viewer
-    from nbrdf.mitsuba.bsdf import PluginError
-
     material = c.material or str(Path(nbrdf.viewer.__file__).parent / "assets" / "materials" / "car_paint.json")
     try:
-        print(json.dumps(bench_mitsuba(material, c.pairs, c.repeats, torch_n=min(c.pairs, 1 << 16)), indent=2))
-    except (PluginError, RuntimeError) as e:
+        print(json.dumps(bench.bench_mitsuba(material, c.pairs, c.repeats, torch_n=min(c.pairs, 1 << 16)),
+                         indent=2))
+    except (bsdf.PluginError, RuntimeError) as e:
         raise NbrdfError(str(e).strip().splitlines()[-1].removeprefix("PluginError: ").removeprefix("nbrdf: ")) from None
     return 0
 

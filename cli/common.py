@@ -70,22 +70,22 @@ def in_range(flag: str, value: float, low: float, high: float = math.inf, *, low
         raise NbrdfError(f"{flag}: {value} is outside {lo}{low:g}, {high:g}{hi}")
 
 
-def progress(total: int, desc: str):
-    """A tqdm bar on stderr (silent when stderr is not a terminal)."""
-    from tqdm import tqdm
+def progress(total: int, desc: str, unit: str = "pair", disable: bool | None = None):
+    """A tqdm bar on stderr (``disable=None``: silent when stderr is not a terminal)."""
+    from tqdm import tqdm  # late: tqdm costs ~50 ms (importlib.metadata), --help needs none
 
-    return tqdm(total=total, desc=desc, unit="pair", disable=None, leave=False, file=sys.stderr)
+    return tqdm(total=total, desc=desc, unit=unit, disable=disable, leave=False, file=sys.stderr)
 
 
 def model_or_default(path: str | None):
     """The bundle at ``path``, or the shipped one."""
-    from nbrdf.neural.model import default_model, load_model
+    from nbrdf.neural.model import default_model, load_model  # late: torch costs ~1 s, --help needs none
 
     return load_model(path) if path else default_model()
 
 
 def decoder_or_default(path: str | None):
     """The decoder at ``path``, or the shipped one."""
-    from nbrdf.neural.decoder import default_decoder, load_decoder
+    from nbrdf.neural.decoder import default_decoder, load_decoder  # late: torch costs ~1 s, --help needs none
 
     return load_decoder(path) if path else default_decoder()

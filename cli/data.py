@@ -33,7 +33,7 @@ class DataArgs:
 
 
 def cmd_data(a: argparse.Namespace) -> int:
-    from nbrdf.training.dataset import PRESETS, generate
+    from nbrdf.training.dataset import PRESETS, generate  # late: torch and the walk, --help needs neither
 
     c: DataArgs = build(DataArgs, a)
     if c.preset not in PRESETS:

@@ -15,6 +15,7 @@ from nbrdf.cli.config import add_arguments, build
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
 from nbrdf.neural.methods import Method
+from nbrdf.training.plots import save_lobe_png
 
 if TYPE_CHECKING:
     import torch
@@ -90,9 +91,9 @@ def make_evaluator(material, method: Method, spp: int, seed: int, budget: float 
     at_least("--spp", spp)
     if budget is not None and not budget > 0:
         raise NbrdfError(f"--budget: {budget} seconds must be positive")
-    from nbrdf.training.brdfs import ReferenceBRDF, brdf_for
+    from nbrdf.training.brdfs import ReferenceBRDF, brdf_for  # late: torch costs ~1 s, --help needs none
 
-    brdf = brdf_for(material, Method.parse(method, "--method").value, spp=spp, seed=seed, budget=budget)
+    brdf = brdf_for(material, method, spp=spp, seed=seed, budget=budget)
     if not isinstance(brdf, ReferenceBRDF):  # the Monte Carlo reference alone reports its progress
         return brdf.eval_with_error
 
@@ -110,7 +111,7 @@ def check_theta_i(theta_i: float) -> None:
 
 # --- commands --------------------------------------------------------------------------------
 def cmd_eval(a: argparse.Namespace) -> int:
-    import torch
+    import torch  # late: torch costs ~1 s, --help needs none
 
     c: EvalConfig = build(EvalConfig, a)
     material = load_material(c.material)
@@ -125,8 +126,7 @@ def cmd_eval(a: argparse.Namespace) -> int:
 
 
 def cmd_lobe(a: argparse.Namespace) -> int:
-
-    from nbrdf.neural.metrics import lobe_image
+    from nbrdf.neural.metrics import lobe_image  # late: torch costs ~1 s, --help needs none
 
     c: LobeConfig = build(LobeConfig, a)
     material = load_material(c.material)
@@ -147,18 +147,12 @@ def cmd_lobe(a: argparse.Namespace) -> int:
         se_img = lobe_image(lambda wi, wo: errs[0] / wo[:, 2:3].clamp_min(1e-12), c.theta_i)
         np.save(stderr_path(npy), se_img)
     if out.suffix.lower() == ".png":
-        from nbrdf.training.plots import save_lobe_png
-
         save_lobe_png(img, out, title=f"{material.name}  theta_i={c.theta_i:g}  ({c.method.value})")
     return 0
 
 
 def cmd_sample(a: argparse.Namespace) -> int:
-    import torch
-
-    from nbrdf.neural.coat import code_coat
-    from nbrdf.neural.geometry import incidence
-    from nbrdf.neural.neural_brdf import latent_brdf
+    from nbrdf.neural import coat, neural_brdf  # late: torch costs ~1 s, --help needs none
 
     c: SampleConfig = build(SampleConfig, a)
     at_least("--n", c.n)
@@ -167,12 +161,10 @@ def cmd_sample(a: argparse.Namespace) -> int:
     model = model_or_default(c.model)
     material = load_material(c.material)
     z = model.material_latent(material)
-    brdf = latent_brdf(model.decoder, z, material, model.require("sampler"))
-    wi = incidence(c.theta_i).expand(c.n, 3).contiguous()
-    u = torch.rand(c.n, 3, generator=torch.Generator().manual_seed(c.seed))
-    s = brdf.sample(wi, u)  # the coat's visible normals mixed with the body's proxy; pdf 0 below the horizon
-    np.save(out_path(c.out, (".npy",)), torch.cat([s.w, s.pdf[:, None]], 1).numpy().astype(np.float32))
-    print(json.dumps({"sigma": brdf.sigma, "w": brdf.w, "coat": list(code_coat(model.decoder.spec, z)),
+    brdf = neural_brdf.latent_brdf(model.decoder, z, material, model.require("sampler"))
+    s = brdf.sample_at(c.theta_i, c.n, c.seed)  # the coat's lobe mixed with the body's proxy; pdf 0 below the horizon
+    np.save(out_path(c.out, (".npy",)), np.concatenate([s.w.numpy(), s.pdf.numpy()[:, None]], 1).astype(np.float32))
+    print(json.dumps({"sigma": brdf.sigma, "w": brdf.w, "coat": list(coat.code_coat(model.decoder.spec, z)),
                       "failed": int((s.pdf == 0).sum())}))
     return 0
 

@@ -24,8 +24,8 @@ class ExportConfig:
 
 
 def cmd_export(a: argparse.Namespace) -> int:
-    from nbrdf.neural.material_code import load_code
-    from nbrdf.viewer.glsl_export import export_glsl
+    from nbrdf.neural.material_code import load_code  # late: torch costs ~1 s, --help needs none
+    from nbrdf.viewer.glsl_export import export_glsl  # late: the previewer's shaders and torch, as above
 
     c: ExportConfig = build(ExportConfig, a)
     if not c.material:

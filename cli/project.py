@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from nbrdf.cli.common import at_least, decoder_or_default, out_path
 from nbrdf.cli.config import add_arguments, build
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import load_material
+from nbrdf.neural.material import RANGES, load_material
 
 
 @dataclass
@@ -44,10 +44,8 @@ class ProjectConfig:
 
 
 def cmd_project(a: argparse.Namespace) -> int:
-    from nbrdf.neural.decoder import save_decoder
-    from nbrdf.neural.latent import save_latent
-    from nbrdf.neural.projection import ProjectionConfig
-    from nbrdf.training import project as pj
+    from nbrdf.neural import decoder, latent, projection  # late: torch costs ~1 s, --help needs none
+    from nbrdf.training import project as pj  # late: torch and the walk, as above
 
     c: ProjectConfig = build(ProjectConfig, a)
     out = out_path(c.out, (".safetensors",))
@@ -60,10 +58,9 @@ def cmd_project(a: argparse.Namespace) -> int:
         s = pj.material_samples(load_material(c.material), n=c.pairs, spp=c.spp, seed=c.seed)
         source = {"material": str(c.material), "spp": c.spp, "pairs": c.pairs}
     elif c.samples:
-        s = pj.npy_samples(c.samples)
+        s = pj.npy_samples(c.samples, coat=_coat_arg(c.coat) if c.coat else None)
         source = {"samples": str(c.samples)}
-        if c.coat:
-            s.coat = _coat_arg(c.coat)
+        if s.coat is not None:
             source["coat"] = s.coat.tolist()
     elif c.merl:
         s = pj.merl_samples(c.merl, n=c.pairs, seed=c.seed)
@@ -72,29 +69,26 @@ def cmd_project(a: argparse.Namespace) -> int:
         raise NbrdfError("--coat: only with --samples (a material's coat is its top layer; a MERL table has none)")
     if c.finetune and not c.merl:
         raise NbrdfError("--finetune: only for measured (--merl) files")
-    lat, secs = pj.project_to_latent(dec, s, source, ProjectionConfig(steps=c.steps))
+    lat, secs = pj.project_to_latent(dec, s, source, projection.ProjectionConfig(steps=c.steps))
     report = {"out": str(out), "decoder_id": lat.decoder_id, "sample_seconds": round(s.seconds, 3),
               "projection_seconds": round(secs, 3)}
     if c.finetune:
         t0 = time.perf_counter()
         tuned, z = pj.finetune(dec, s, lat.z)
         dec_path = out.with_name(out.stem + ".decoder.safetensors")
-        lat.decoder_id = save_decoder(tuned, dec_path, trained_on={"finetuned_from": dec.weights_id(),
-                                                                   "merl": str(c.merl)})
+        lat.decoder_id = decoder.save_decoder(tuned, dec_path, trained_on={"finetuned_from": dec.weights_id(),
+                                                                           "merl": str(c.merl)})
         lat.z = z
         lat.source["finetuned_decoder"] = dec_path.name
         report.update(finetune_seconds=round(time.perf_counter() - t0, 3), decoder=str(dec_path),
                       decoder_id=lat.decoder_id)
-    save_latent(out, lat)
+    latent.save_latent(out, lat)
     print(json.dumps(report))
     return 0
 
 
-def _coat_arg(text: str):
-    import torch
-
-    from nbrdf.neural.material import RANGES
-
+def _coat_arg(text: str) -> tuple[float, float]:
+    """``--coat ROUGHNESS,IOR``, checked against the material ranges."""
     try:
         r, ior = (float(x) for x in text.split(","))
     except ValueError:
@@ -102,7 +96,7 @@ def _coat_arg(text: str):
     (rlo, rhi), (ilo, ihi) = RANGES["roughness"], RANGES["ior"]
     if not (rlo <= r <= rhi and ilo <= ior <= ihi):
         raise NbrdfError(f"--coat: roughness must lie in [{rlo:g}, {rhi:g}] and ior in [{ilo:g}, {ihi:g}]")
-    return torch.tensor([r, ior])
+    return r, ior
 
 
 def register(sub: argparse._SubParsersAction) -> None:

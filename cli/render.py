@@ -6,7 +6,9 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field
 
+from nbrdf.cli.common import progress
 from nbrdf.cli.config import add_arguments, build
+from nbrdf.imaging.image_io import check_output, write_image
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.options import parse_size
 
@@ -38,8 +40,6 @@ class RenderConfig:
 
 
 def cmd_render(a: argparse.Namespace) -> int:
-    from nbrdf.imaging.image_io import check_output, write_image
-
     c: RenderConfig = build(RenderConfig, a)
     if not c.scene:
         raise NbrdfError("render: give a SCENE (a scene JSON or a preset: still_life, teapot, globe, torus)")
@@ -49,22 +49,17 @@ def cmd_render(a: argparse.Namespace) -> int:
     if c.spp < 1 or c.chunk < 1:
         raise NbrdfError(f"--spp and --chunk must be at least 1 (got {c.spp}, {c.chunk})")
     try:
-        import mitsuba  # noqa: F401
-    except ImportError:
+        from nbrdf.mitsuba import render, scenes  # optional: mitsuba
+    except ModuleNotFoundError as e:
+        if e.name not in ("mitsuba", "drjit"):
+            raise
         raise NbrdfError("render: Mitsuba 3 is not installed (pip install -e '.[mitsuba]')") from None
-    from tqdm import tqdm
-
-    from nbrdf.mitsuba.render import render
-    from nbrdf.mitsuba.scenes import load_scene, with_body
-
-    scene = with_body(load_scene(c.scene), c.neural_body)
-    try:
-        import nbrdf.mitsuba  # noqa: F401
-    except ImportError as e:
+    except ImportError as e:  # installed but unusable (no LLVM for its variant)
         raise NbrdfError(str(e)) from None
-    with tqdm(total=c.spp, unit="spp", desc=f"render {scene.name}", leave=False) as bar:
-        res = render(scene, c.size, c.spp, seed=c.seed, chunk_spp=c.chunk,
-                     progress=lambda n: bar.update(min(n, c.spp) - bar.n))
+    scene = scenes.with_body(scenes.load_scene(c.scene), c.neural_body)
+    with progress(c.spp, f"render {scene.name}", unit="spp", disable=False) as bar:
+        res = render.render(scene, c.size, c.spp, seed=c.seed, chunk_spp=c.chunk,
+                            progress=lambda n: bar.update(min(n, c.spp) - bar.n))
     write_image(out, res.image, exposure=c.exposure, mode=c.tonemap)
     print(f"{out}: {c.size[0]}x{c.size[1]}, {res.spp} spp in {res.seconds:.1f} s")
     return 0

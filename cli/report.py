@@ -7,6 +7,7 @@ import json
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterable
 
 import numpy as np
 
@@ -14,6 +15,7 @@ from nbrdf.cli.common import decoder_or_default, model_or_default
 from nbrdf.cli.config import Parser, add_arguments, build
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
+from nbrdf.neural.methods import Method
 from nbrdf.viewer.options import parse_size
 
 
@@ -110,23 +112,33 @@ class RenderReport:
     """seed of the references and projections"""
 
 
+def method_words(text: str, allowed: Iterable[Method]) -> tuple[Method, ...]:
+    """The ``--methods`` words as ``Method`` members, in the order given: the one place a report reads them
+    (one-line error for a word outside ``allowed``)."""
+    allowed = tuple(allowed)
+    words = tuple(w.strip() for w in text.split(",") if w.strip())
+    if any(w not in allowed for w in words):
+        raise NbrdfError(f"--methods: {text!r} is not a comma-separated list of {', '.join(allowed)}")
+    return tuple(Method(w) for w in words)
+
+
 def cmd_report_render(ns: argparse.Namespace) -> int:
-    from nbrdf.training.render_report import RenderReportConfig, run_render_report
+    from nbrdf.training import render_report  # late: torch costs ~1 s, --help needs none
 
     c: RenderReport = build(RenderReport, ns)
-    words = lambda s: tuple(w.strip() for w in s.split(",") if w.strip())
-    cfg = RenderReportConfig(sets=words(c.set), out=Path(c.out), size=c.size, spp=c.spp, max_spp=c.max_spp,
-                             noise_target=c.noise_target, cache=Path(c.cache) if c.cache else None,
-                             model=c.model, methods=words(c.methods), heldout_per_class=c.heldout_per_class,
-                             seed=c.seed, refine_budget=c.budget)
-    from nbrdf.training.render_report import markdown_tables
-
-    print(markdown_tables(run_render_report(cfg)))
+    methods = method_words(c.methods, render_report.METHODS)
+    sets = tuple(w.strip() for w in c.set.split(",") if w.strip())
+    cfg = render_report.RenderReportConfig(sets=sets, out=Path(c.out), size=c.size, spp=c.spp, max_spp=c.max_spp,
+                                           noise_target=c.noise_target,
+                                           cache=Path(c.cache) if c.cache else None, model=c.model,
+                                           methods=methods, heldout_per_class=c.heldout_per_class, seed=c.seed,
+                                           refine_budget=c.budget)
+    print(render_report.markdown_tables(render_report.run_render_report(cfg)))
     return 0
 
 
 def cmd_report_representation(ns: argparse.Namespace) -> int:
-    from nbrdf.training.evaluate import build_references, projected_method, report_figures, score
+    from nbrdf.training.evaluate import build_references, projected_method, report_figures, score  # late: torch
 
     c: RepresentationReport = build(RepresentationReport, ns)
     dec = decoder_or_default(c.decoder)
@@ -138,7 +150,7 @@ def cmd_report_representation(ns: argparse.Namespace) -> int:
     (out / "representation.json").write_text(json.dumps(result, indent=1))
     report_figures(refs, projected_method(dec), result, out)
     if c.record:
-        from nbrdf.neural.decoder import DEFAULT_WEIGHTS, record_accuracy
+        from nbrdf.neural.decoder import DEFAULT_WEIGHTS, record_accuracy  # late: torch, --help needs none
 
         record_accuracy(c.decoder or DEFAULT_WEIGHTS, {"heldout_projected": result["summary"]})
     print(json.dumps(result["summary"], indent=1))
@@ -146,9 +158,7 @@ def cmd_report_representation(ns: argparse.Namespace) -> int:
 
 
 def cmd_report_operations(ns: argparse.Namespace) -> int:
-    from nbrdf.neural.metrics import lobe_image
-    from nbrdf.training import evaluate as ev
-    from nbrdf.training.plots import save_lobe_grid
+    from nbrdf.training import evaluate, render_report  # late: torch and the walk, --help needs neither
 
     c: OperationsReport = build(OperationsReport, ns)
     model = model_or_default(c.model)
@@ -156,48 +166,44 @@ def cmd_report_operations(ns: argparse.Namespace) -> int:
         raise NbrdfError(f"--set: {c.set!r} is not heldout, lookdev or depth")
     if c.per_depth < 1 or c.max_spp < 1 or not c.noise_target > 0:
         raise NbrdfError("--per-depth, --max-spp and --noise-target must be positive")
-    makers = {"neural": lambda: ev.neural_method(model), "projected": lambda: ev.projected_method(model.decoder),
-              "analytic": ev.analytic_method}
-    names = tuple(dict.fromkeys(w.strip() for w in c.methods.split(",") if w.strip()))
-    if not names or any(n not in makers for n in names):
+    makers = {Method.NEURAL: lambda: evaluate.neural_method(model),
+              Method.PROJECTED: lambda: evaluate.projected_method(model.decoder),
+              Method.ANALYTIC: evaluate.analytic_method}
+    names = tuple(dict.fromkeys(method_words(c.methods, makers)))
+    if not names:
         raise NbrdfError(f"--methods: {c.methods!r} is not a comma-separated list of {', '.join(makers)}")
     items = None
     if c.set == "lookdev":
-        from nbrdf.training.render_report import load_set
-
-        items = load_set("lookdev")
+        items = render_report.load_set("lookdev")
     elif c.set == "depth":
-        items = ev.depth_set(c.per_depth)
-    refs = ev.build_references(c.refs, limit=c.limit, items=items, noise_target=c.noise_target, max_spp=c.max_spp)
+        items = evaluate.depth_set(c.per_depth)
+    refs = evaluate.build_references(c.refs, limit=c.limit, items=items, noise_target=c.noise_target,
+                                     max_spp=c.max_spp)
     out = Path(c.out)
     out.mkdir(parents=True, exist_ok=True)
     methods = {n: makers[n]() for n in names}
     stacks = [x for x in refs if x[1].interfaces]  # single layers: the analytic model is the reference itself
-    results = {name: ev.score(stacks if name == "analytic" else refs, m) for name, m in methods.items()}
-    glossy = ev.glossy_stacks(refs)
-    variances = [dict(name=m.name, **ev.sampling_variance(model, m, seed=i)) for i, (_, m, _) in enumerate(glossy)]
+    results = {name: evaluate.score(stacks if name is Method.ANALYTIC else refs, m) for name, m in methods.items()}
+    glossy = evaluate.glossy_stacks(refs)
+    variances = [dict(name=m.name, **evaluate.sampling_variance(model, m, seed=i))
+                 for i, (_, m, _) in enumerate(glossy)]
     ratio = lambda k: float(np.median([v[k] / max(v["proxy"], 1e-30) for v in variances])) if variances else None
     sampling = {"glossy_stacks": len(variances), "median_variance_reduction_vs_cosine": ratio("cosine"),
                 "median_variance_reduction_vs_top_ggx": ratio("top_ggx"), "per_material": variances}
     report = {"summary": {k: r["summary"] for k, r in results.items()}, "sampling": sampling,
               "rows": {k: r["rows"] for k, r in results.items()}}
     (out / "operations.json").write_text(json.dumps(report, indent=1))
-    (out / "operations.md").write_text(ev.comparison_table(results) + "\n")
+    (out / "operations.md").write_text(evaluate.comparison_table(results) + "\n")
     shown = [(k, m, r) for k, m, r in refs if k in ("two_layer", "three_layer") or c.set != "heldout"]
     shown = shown[:: max(1, c.every)][:6]
-    rows = []
-    for _k, m, r in shown:
-        imgs = [r.lobes[1]] + [lobe_image(fn(m, r), ev.THETAS[1]) for fn in methods.values()]
-        rows.append((m.name, imgs))
-    if rows:
-        save_lobe_grid(rows, ["reference"] + list(methods), out / "operations_lobes.png")
-    print(ev.comparison_table(results))
+    evaluate.comparison_figure(shown, methods, out / "operations_lobes.png")
+    print(evaluate.comparison_table(results))
     print(json.dumps({k: v for k, v in sampling.items() if k != "per_material"}))
     return 0
 
 
 def cmd_report_interpolation(ns: argparse.Namespace) -> int:
-    from nbrdf.training.evaluate import interpolation_figure
+    from nbrdf.training.evaluate import interpolation_figure  # late: torch costs ~1 s, --help needs none
 
     c: InterpolationReport = build(InterpolationReport, ns)
     model = model_or_default(c.model)
@@ -224,7 +230,7 @@ class GalleryReport:
 
 
 def cmd_report_gallery(ns: argparse.Namespace) -> int:
-    from nbrdf.viewer.gallery import GalleryConfig, render_gallery
+    from nbrdf.viewer.gallery import GalleryConfig, render_gallery  # late: the previewer (GL, torch)
 
     c: GalleryReport = build(GalleryReport, ns)
     print(render_gallery(GalleryConfig(Path(c.out), c.tile, c.spp, c.columns)))
@@ -270,21 +276,20 @@ def cmd_report_scenes(ns: argparse.Namespace) -> int:
                          f"and --max-chunk at least --chunk (got {c.time_budget}, {c.ref_spp}, {c.chunk}, "
                          f"{c.max_chunk})")
     try:
-        import nbrdf.mitsuba  # noqa: F401
+        from nbrdf.mitsuba import scene_report, scenes  # optional: mitsuba
     except ImportError as e:
         raise NbrdfError(f"report scenes: Mitsuba 3 is unusable ({e}); pip install -e '.[mitsuba]'") from None
-    from nbrdf.mitsuba.scene_report import SceneReportConfig, markdown, run_scene_report
-    from nbrdf.mitsuba.scenes import load_scene
 
     names = tuple(w.strip() for w in c.scenes.split(",") if w.strip())
     if not names:
         raise NbrdfError("report scenes: --scenes is empty")
     for n in names:
-        load_scene(n)  # bad scenes fail before minutes of rendering
-    cfg = SceneReportConfig(out=Path(c.out), scenes=names, size=c.size, time_budget=c.time_budget,
-                            ref_spp=c.ref_spp, chunk=c.chunk, max_chunk=c.max_chunk, cache=Path(c.cache) if c.cache else None,
-                            seed=c.seed, figure=Path(c.figure) if c.figure else None, neural_body=c.neural_body)
-    print(markdown(run_scene_report(cfg, log=lambda s: print(s, file=sys.stderr))))
+        scenes.load_scene(n)  # bad scenes fail before minutes of rendering
+    cfg = scene_report.SceneReportConfig(out=Path(c.out), scenes=names, size=c.size, time_budget=c.time_budget,
+                                         ref_spp=c.ref_spp, chunk=c.chunk, max_chunk=c.max_chunk,
+                                         cache=Path(c.cache) if c.cache else None, seed=c.seed,
+                                         figure=Path(c.figure) if c.figure else None, neural_body=c.neural_body)
+    print(scene_report.markdown(scene_report.run_scene_report(cfg, log=lambda s: print(s, file=sys.stderr))))
     return 0
 
 
@@ -311,10 +316,9 @@ def cmd_report_mis(ns: argparse.Namespace) -> int:
         raise NbrdfError(f"report mis: --spp must be at least 1, --ref-factor at least 2 and the output a .png "
                          f"(got {c.spp}, {c.ref_factor}, {c.out})")
     try:
-        import nbrdf.mitsuba  # noqa: F401
+        from nbrdf.mitsuba.mis_figure import MisFigureConfig, mis_figure  # optional: mitsuba
     except ImportError as e:
         raise NbrdfError(f"report mis: Mitsuba 3 is unusable ({e}); pip install -e '.[mitsuba]'") from None
-    from nbrdf.mitsuba.mis_figure import MisFigureConfig, mis_figure
 
     res = mis_figure(MisFigureConfig(out=Path(c.out), size=c.size, spp=c.spp, ref_factor=c.ref_factor, seed=c.seed),
                      log=lambda s: print(s, file=sys.stderr))

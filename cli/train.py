@@ -31,25 +31,31 @@ class RunArgs:
     """end this run after N epochs (resume later)"""
 
 
-def cmd_train_representation(a: argparse.Namespace) -> int:
-    from nbrdf.neural.decoder import DecoderSpec
-    from nbrdf.training.train_representation import TrainConfig, train
+def _representation():
+    """The decoder and representation-training modules, imported on first use."""
+    from nbrdf.neural import decoder  # late: torch costs ~1 s, --help needs none
+    from nbrdf.training import train_representation  # late: torch, as above
 
+    return decoder, train_representation
+
+
+def cmd_train_representation(a: argparse.Namespace) -> int:
+    decoder, tr = _representation()
     for name in ("epochs", "batch", "val_every"):
         at_least("--" + name.replace("_", "-"), getattr(a, name))
     for name in ("lr", "latent_lr", "loss_scale"):
         in_range("--" + name.replace("_", "-"), getattr(a, name), 0.0, low_open=True)
     in_range("--latent-reg", a.latent_reg, 0.0)
-    spec = build(DecoderSpec, a, SPEC_HELP)
-    cfg = build(TrainConfig, a, spec=spec)
+    spec = build(decoder.DecoderSpec, a, SPEC_HELP)
+    cfg = build(tr.TrainConfig, a, spec=spec)
     run: RunArgs = build(RunArgs, a)
-    bundle = train(cfg, stop_after=run.stop_after)
+    bundle = tr.train(cfg, stop_after=run.stop_after)
     print(f"decoder written: {bundle}" if bundle else f"stopped after {run.stop_after} epochs; run the same command to resume")
     return 0
 
 
 def cmd_train_operation(a: argparse.Namespace) -> int:
-    from nbrdf.training import train_operations as to
+    from nbrdf.training import train_operations as to  # late: torch costs ~1 s, --help needs none
 
     cls, train = {"leaf": (to.LeafConfig, to.train_leaf), "layering": (to.LayeringConfig, to.train_layering),
                   "sampler": (to.SamplerConfig, to.train_sampler)}[a.what]
@@ -68,27 +74,21 @@ def cmd_train_operation(a: argparse.Namespace) -> int:
 
 
 def _representation_flags(p: Parser) -> None:
-    from nbrdf.neural.decoder import ACTIVATIONS, ENCODINGS, DecoderSpec
-    from nbrdf.training.train_representation import TrainConfig
-
-    p.description = TrainConfig.__doc__
-    add_arguments(p, TrainConfig, exclude=("spec",), choices={"device": ("auto", "cpu", "cuda")})
-    add_arguments(p, DecoderSpec, only=SPEC_HELP, help=SPEC_HELP, choices={"activation": tuple(ACTIVATIONS),
-                                                                            "encoding": tuple(ENCODINGS)})
+    decoder, tr = _representation()
+    p.description = tr.TrainConfig.__doc__
+    add_arguments(p, tr.TrainConfig, exclude=("spec",))
+    add_arguments(p, decoder.DecoderSpec, only=SPEC_HELP, help=SPEC_HELP)
     add_arguments(p, RunArgs)
 
 
 def _operation_flags(what: str) -> Callable[[Parser], None]:
     def populate(p: Parser) -> None:
-        from nbrdf.training import train_operations as to
+        from nbrdf.training import train_operations as to  # late: flags added on first use (torch)
 
         cls = {"leaf": to.LeafConfig, "layering": to.LayeringConfig, "sampler": to.SamplerConfig}[what]
         p.description = cls.__doc__
-        from nbrdf.neural.layering import MEDIUM_SETS
-
         add_arguments(p, cls, exclude=() if what == "layering" else LAYERING_ONLY,
-                      required=("data",) if what == "layering" else (), defaults={"decoder": None},
-                      choices={"medium": tuple(MEDIUM_SETS)} if what == "layering" else {})
+                      required=("data",) if what == "layering" else (), defaults={"decoder": None})
 
     return populate
 

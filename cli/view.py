@@ -32,7 +32,7 @@ def parse_args(argv: Sequence[str] | None) -> ViewOptions:
 def main(argv: Sequence[str] | None = None) -> int:
     """The ``nbrdf-view`` console script."""
     def go() -> int:
-        from nbrdf.viewer.offscreen import has_display, render_offscreen
+        from nbrdf.viewer.offscreen import has_display, render_offscreen  # late: EGL, torch; --help needs neither
 
         opts = parse_args(argv)
         if opts.offscreen:
@@ -41,7 +41,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not has_display():
             render_offscreen(opts, fallback="no display found")
             return 0
-        from nbrdf.viewer.window.app import App, WindowUnavailable
+        from nbrdf.viewer.window.app import App, WindowUnavailable  # late: glfw and imgui, only with a display
 
         try:
             app = App(opts)

@@ -42,6 +42,7 @@ import numpy as np
 from tqdm import tqdm
 
 from nbrdf.imaging.environment import LUMA
+from nbrdf.imaging.image_io import read_environment
 from nbrdf.neural.errors import NbrdfError
 
 #: The preset names, in the order a menu lists them (the first is the default).
@@ -392,6 +393,4 @@ def resolve_environment(spec: str, width: int = DEFAULT_SIZE[0], height: int = D
         return make_environment(spec, width, height)
     if Path(spec).suffix.lower() not in (".hdr", ".exr"):
         raise NbrdfError(f"--env {spec}: not a preset ({', '.join(ENV_PRESETS)}) nor an .hdr/.exr file")
-    from nbrdf.imaging.image_io import read_environment
-
     return read_environment(spec)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 
+import moderngl
 import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
@@ -129,8 +130,6 @@ class GpuEnvironment:
     """The map and its CDF tables as float textures for ``environment.glsl``."""
 
     def __init__(self, ctx, env: EnvironmentMap):
-        import moderngl
-
         w, h = env.size
         self.env = env
         self.radiance = ctx.texture((w, h), 3, env.radiance.tobytes(), dtype="f4")

@@ -7,7 +7,10 @@ import os
 from pathlib import Path
 
 import numpy as np
+import OpenEXR
+from PIL import Image, PngImagePlugin
 
+from nbrdf.imaging.tonemap import to_display8
 from nbrdf.neural.errors import NbrdfError
 
 OUTPUT_SUFFIXES = (".png", ".exr", ".npy")
@@ -25,9 +28,7 @@ def check_output(path: str | Path) -> Path:
 
 
 def tonemap(img: np.ndarray, exposure: float = 0.0, mode: str = "aces") -> np.ndarray:
-    """Linear (H, W, 3) -> sRGB uint8, matching shaders/tonemap.frag (``viewer.tonemap``)."""
-    from nbrdf.imaging.tonemap import to_display8
-
+    """Linear (H, W, 3) -> sRGB uint8, matching shaders/tonemap_common.glsl (``nbrdf.imaging.tonemap``)."""
     return to_display8(np.maximum(np.asarray(img, np.float64), 0.0), mode, exposure)
 
 
@@ -35,8 +36,6 @@ def write_png8(path: str | Path, rgb8: np.ndarray) -> None:
     """Writes display-referred uint8 (H, W, 3), row 0 at the top, as a PNG tagged
     sRGB (its sRGB chunk, perceptual intent), so colour-managed viewers and
     compositors show it as the window did instead of guessing."""
-    from PIL import Image, PngImagePlugin
-
     info = PngImagePlugin.PngInfo()
     info.add(b"sRGB", b"\x00")
     Image.fromarray(np.ascontiguousarray(rgb8, dtype=np.uint8)).save(path, format="PNG", pnginfo=info)
@@ -58,8 +57,6 @@ def write_image(path: str | Path, img: np.ndarray, exposure: float = 0.0, mode: 
         elif suffix == ".png":
             write_png8(tmp, tonemap(img, exposure, mode))
         else:
-            import OpenEXR
-
             channels = {"R": img[..., 0].copy(), "G": img[..., 1].copy(), "B": img[..., 2].copy()}
             header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
             with OpenEXR.File(header, channels) as f:
@@ -74,7 +71,7 @@ def write_image(path: str | Path, img: np.ndarray, exposure: float = 0.0, mode: 
 def read_normal_map(path: str | Path) -> np.ndarray:
     """A tangent-space normal map (OpenGL convention: +y green up) as float32
     (H, W, 3) in [0, 1], row 0 = v 0."""
-    from nbrdf.neural.svbrdf import read_texels
+    from nbrdf.neural.svbrdf import read_texels  # late: nbrdf.neural.svbrdf loads torch (2 s); only normal maps need it
 
     x = read_texels(path)
     if x.shape[2] < 3:
@@ -88,8 +85,6 @@ MAX_ENV_PIXELS = 16384 * 8192
 
 
 def read_exr(path: str | Path) -> np.ndarray:
-    import OpenEXR
-
     side = int(np.sqrt(MAX_ENV_PIXELS * 2))
     OpenEXR.setMaxImageSize(side, side)  # the library's own guard against huge declared sizes
     OpenEXR.setMaxTileSize(side, side)

@@ -10,6 +10,10 @@ in force (``llvm_ad_rgb`` when none is set):
 
 After ``mi.set_variant`` to another variant, call ``register()`` again.
 Dr.Jit is pointed at LLVM 19 (``llvm.point_drjit_at_llvm``) before it loads.
+
+This module is the package's one entry point to Mitsuba: importing any
+``nbrdf.mitsuba.*`` module runs it first, so the variant is set before the
+other modules run, and they import mitsuba and drjit at their top.
 """
 from __future__ import annotations
 
@@ -34,19 +38,24 @@ def _ensure_variant() -> str:
     return mi.variant()
 
 
+# every plugin module may import mitsuba and drjit at its top: they run after this line
+_ensure_variant()
+
+from nbrdf.mitsuba import bsdf  # noqa: E402
+from nbrdf.mitsuba.bsdf import NbrdfBSDF, NbrdfReferenceBSDF  # noqa: E402
+from nbrdf.mitsuba.errors import PluginError  # noqa: E402
+from nbrdf.mitsuba.modes import wavefront_mode  # noqa: E402
+
+
 def register() -> str:
     """Registers ``nbrdf`` and ``nbrdf_reference`` for the current variant
     (``llvm_ad_rgb`` when none is set); returns the variant."""
     variant = _ensure_variant()
-    from nbrdf.mitsuba import bsdf
-
     mi.register_bsdf("nbrdf", lambda props: bsdf.NbrdfBSDF(props))
     mi.register_bsdf("nbrdf_reference", lambda props: bsdf.NbrdfReferenceBSDF(props))
     return variant
 
 
 register()
-
-from nbrdf.mitsuba.bsdf import NbrdfBSDF, NbrdfReferenceBSDF, PluginError, wavefront_mode  # noqa: E402
 
 __all__ = ["register", "NbrdfBSDF", "NbrdfReferenceBSDF", "PluginError", "wavefront_mode", "VARIANTS"]

@@ -7,7 +7,13 @@ from __future__ import annotations
 import os
 import time
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
+import torch
+
+from nbrdf.neural.material_code import load_code
+from nbrdf.neural.neural_brdf import latent_brdf
 
 
 def _pairs(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -21,15 +27,8 @@ def _pairs(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
 
 
 def bench_mitsuba(material: str, n: int = 1 << 20, repeats: int = 5, torch_n: int = 1 << 16) -> dict:
-    """Median throughputs of ``repeats`` timed runs (after one that compiles)."""
-    import drjit as dr
-    import mitsuba as mi
-    import torch
-
-    import nbrdf.mitsuba  # noqa: F401 - registers the plugin
-    from nbrdf.neural.material_code import load_code
-    from nbrdf.neural.neural_brdf import latent_brdf
-
+    """Median throughputs of ``repeats`` timed runs (after one that compiles;
+    the package's import registered the plugin)."""
     bsdf = mi.load_dict({"type": "nbrdf", "material": material})
     light, view = _pairs(n)
     si = dr.zeros(mi.SurfaceInteraction3f, n)

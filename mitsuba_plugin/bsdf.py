@@ -9,18 +9,20 @@ through numpy, so it needs Dr.Jit's evaluated mode (``wavefront_mode``).
 Mitsuba's conventions: ``si.wi`` is the project's ``wo`` (toward the
 viewer), the queried direction is the project's ``wi`` (toward the light);
 ``eval`` returns f(wi, wo) cos(theta_i). Both are one-sided reflection BSDFs.
+
+What a material file builds (the kernel, the normal map, the walk) comes
+from ``materials``, which needs torch: it loads with the first material.
 """
 from __future__ import annotations
-
-import contextlib
-import itertools
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from nbrdf.mitsuba.kernel import Coat, CodeKernel, DecoderKernel, Proxy, TableBody, TexturedCodeKernel
-from nbrdf.mitsuba.normal_map import BentDirections, material_normal_map
+from nbrdf.mitsuba.errors import PluginError
+from nbrdf.mitsuba.kernel import Body, TexturedCodeKernel
+from nbrdf.mitsuba.modes import SLOW_WARNING
+from nbrdf.mitsuba.normal_map import BentDirections
 
 FLAGS_GLOSSY = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
 #: A material without a coat whose proxy gives the cosine lobe more than this share is reported
@@ -28,107 +30,8 @@ FLAGS_GLOSSY = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
 DIFFUSE_W = 0.9
 
 
-class PluginError(RuntimeError):
-    """Bad input to a plugin (one line: what is wrong and where)."""
-
-
 def _prop(props, key: str, default=None):
     return props[key] if key in props else default
-
-
-#: How the ``nbrdf`` plugin gets a material's body: the shipped decoder per query, or its baked table.
-BODIES = ("decoder", "table")
-
-
-def _body_table_size():
-    """The grid of ``body: "table"``: 128 x 64 x 32 nodes (3 MB). Against the decoder on
-    random directions (coated copper, car paint, rough gold, varnished gold): mean relative
-    error 0.08-0.15 %, 99th percentile 0.8-1.5 %; the previewer's 64 x 32 x 16 is 4x that."""
-    from nbrdf.neural.body_table import TableSize
-
-    return TableSize(128, 64, 32)
-
-
-def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 0.0,
-                body: str = "decoder") -> CodeKernel:
-    """The Dr.Jit kernel of a material JSON or code file (``neural.material_code``);
-    a texture-mapped material JSON gives a ``TexturedCodeKernel`` over its
-    latent texture (mip-mapped by the ray cone of ``pixel_angle`` radians).
-    ``body``: ``"decoder"`` (the decoder per query) or ``"table"`` (the body
-    baked once into a table: ``TableBody`` for a uniform material, a
-    parametric table over its (at most two) mapped albedos for a
-    texture-mapped one, ``param_table``)."""
-    from nbrdf.neural.errors import NbrdfError
-    from nbrdf.neural.material_code import code_parts, load_code
-
-    if body not in BODIES:
-        raise PluginError(f'nbrdf: body {body!r} is not one of {", ".join(map(repr, BODIES))}')
-    try:
-        if str(material).lower().endswith(".json"):
-            from nbrdf.neural.material import load_material
-
-            m = load_material(material)
-            if m.is_textured:
-                if body == "table":
-                    return _param_table_kernel(m, weights, pixel_angle)
-                return _textured_kernel(m, weights, pixel_angle)
-        model, code = load_code(material, weights)
-        (r, ior), (sigma, w) = code_parts(model, code)
-        if body == "table":
-            decoder = TableBody.from_torch(model.decoder, code, _body_table_size())
-        else:
-            decoder = DecoderKernel.from_torch(model.decoder, code)
-    except (NbrdfError, ValueError) as e:
-        raise PluginError(f"nbrdf: {e}") from None
-    return CodeKernel(decoder, Coat(float(r), float(ior)), Proxy(float(sigma), float(w)))
-
-
-SLOW_SYMBOLIC = ("nbrdf: traced symbolically on the LLVM backend, where Dr.Jit loads every decoder weight inside a "
-                 "symbolic call with a gather (about 10x slower); render inside nbrdf.mitsuba.wavefront_mode()")
-_warned_symbolic = False
-
-
-def wants_wavefront(body: str = "decoder") -> bool:
-    """Whether ``nbrdf`` renders faster in ``wavefront_mode()`` under the
-    variant in force: on the LLVM backend, Dr.Jit's cooperative vectors
-    turn each weight load inside a symbolic call into a per-lane gather,
-    while an evaluated call runs the decoder at the top level of its kernel
-    (broadcast loads). CUDA's cooperative vectors have no such cost. A body
-    read from a table (``body="table"``) has no weights: symbolic is faster."""
-    return body == "decoder" and mi.variant() is not None and mi.variant().startswith("llvm")
-
-
-def _warn_if_slow(body: str) -> None:
-    """One warning per process when the decoder is traced where it runs slowly."""
-    global _warned_symbolic
-    if not _warned_symbolic and body == "decoder" and dr.flag(dr.JitFlag.SymbolicScope) and dr.flag(dr.JitFlag.SymbolicCalls) \
-            and wants_wavefront():
-        _warned_symbolic = True
-        mi.Log(mi.LogLevel.Warn, SLOW_SYMBOLIC)
-
-
-def _textured_kernel(material, weights: str | None, pixel_angle: float) -> TexturedCodeKernel:
-    """The latent texture of a texture-mapped material (``neural.svbrdf``) as a kernel."""
-    from nbrdf.mitsuba.textures import LatentTextureKernel
-    from nbrdf.neural.coat import NO_COAT
-    from nbrdf.neural.model import default_model, load_model
-    from nbrdf.neural.svbrdf import latent_texture
-
-    model = load_model(weights) if weights else default_model()
-    tex = latent_texture(model, material)
-    mean = tex.levels[-1][0, 0]  # (3, 34): the 1 x 1 mip level
-    spec = model.decoder.spec
-    kernel = LatentTextureKernel(model.decoder, tex, spec.coat and tex.levels[0].shape[-1] == spec.code, NO_COAT)
-    sigma, w = model.proxy(mean)
-    return TexturedCodeKernel(DecoderKernel.from_torch(model.decoder, mean), kernel, Proxy(sigma, w), pixel_angle)
-
-
-def _param_table_kernel(material, weights: str | None, pixel_angle: float):
-    """A texture-mapped material's body from a parametric table (``param_table``)."""
-    from nbrdf.mitsuba.param_table import param_table_kernel
-    from nbrdf.neural.model import default_model, load_model
-
-    return param_table_kernel(material, load_model(weights) if weights else default_model(), pixel_angle)
 
 
 class NbrdfBSDF(mi.BSDF):
@@ -143,6 +46,8 @@ class NbrdfBSDF(mi.BSDF):
     frame per hit (``normal_map.py``)."""
 
     def __init__(self, props):
+        from nbrdf.mitsuba.materials import code_kernel, material_normal_map  # start-up: torch loads with a material
+
         mi.BSDF.__init__(self, props)
         if not dr.is_jit_v(mi.Float):
             raise PluginError(f"nbrdf: the variant {mi.variant()} is not a JIT variant; use llvm_ad_rgb "
@@ -152,13 +57,10 @@ class NbrdfBSDF(mi.BSDF):
             raise PluginError('nbrdf: the property "material" (a material JSON or a code file) is missing')
         self.path = str(path)
         self.pixel_angle = float(_prop(props, "pixel_angle", 0.0))
-        self.body = str(_prop(props, "body", "decoder"))
+        self.body = str(_prop(props, "body", Body.DECODER.value))
         self.kernel = code_kernel(self.path, _prop(props, "weights"), self.pixel_angle, self.body)
         self.normal_map = material_normal_map(self.path, "nbrdf")
-        from nbrdf.mitsuba.param_table import ParamTableCodeKernel
-
-        textured = isinstance(self.kernel, (TexturedCodeKernel, ParamTableCodeKernel))
-        diffuse = not textured and not self.kernel.coat.present and self.kernel.proxy.w > DIFFUSE_W
+        diffuse = not self.kernel.textured and not self.kernel.coat.present and self.kernel.proxy.w > DIFFUSE_W
         self._lobe = mi.BSDFFlags.DiffuseReflection if diffuse else mi.BSDFFlags.GlossyReflection
         self.m_components = [self._lobe | mi.BSDFFlags.FrontSide]
         self.m_flags = self.m_components[0]
@@ -172,7 +74,7 @@ class NbrdfBSDF(mi.BSDF):
         return None if self.normal_map is None else self.normal_map.frame(si, self.pixel_angle)
 
     def eval(self, ctx, si, wo, active=True):
-        _warn_if_slow(self.body)
+        SLOW_WARNING.check(self.body)
         d = BentDirections(self._frame(si), si.wi, wo)
         f = self.kernel.eval(d.wo, d.wi, si)
         return dr.select(self._enabled(ctx, active) & d.ok, f * mi.Frame3f.cos_theta(d.wo), 0.0)
@@ -185,7 +87,7 @@ class NbrdfBSDF(mi.BSDF):
         return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
-        _warn_if_slow(self.body)
+        SLOW_WARNING.check(self.body)
         frame = self._frame(si)
         wi = si.wi if frame is None else frame.to_local(si.wi)
         wo_bent, pdf = self.kernel.sample(wi, sample1, sample2.x, sample2.y, si)
@@ -201,7 +103,7 @@ class NbrdfBSDF(mi.BSDF):
         f = self.kernel.eval(wo_bent, wi, si) * mi.Frame3f.cos_theta(wo_bent)
         return bs, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0)
 
-    def traverse(self, cb):
+    def traverse(self, _cb):
         pass
 
     def to_string(self):
@@ -219,21 +121,6 @@ class NbrdfBSDF(mi.BSDF):
 
 
 # --- the Monte Carlo reference ------------------------------------------------------------
-@contextlib.contextmanager
-def wavefront_mode():
-    """Dr.Jit's evaluated (wavefront) loops and calls, which ``nbrdf_reference``
-    needs to hand each wavefront to the walk; restores the flags after."""
-    flags = (dr.JitFlag.SymbolicLoops, dr.JitFlag.SymbolicCalls)
-    old = [dr.flag(f) for f in flags]
-    try:
-        for f in flags:
-            dr.set_flag(f, False)
-        yield
-    finally:
-        for f, v in zip(flags, old):
-            dr.set_flag(f, v)
-
-
 def _np3(v) -> np.ndarray:
     return np.stack([np.asarray(v.x, np.float32), np.asarray(v.y, np.float32), np.asarray(v.z, np.float32)], 1)
 
@@ -261,21 +148,6 @@ def _to_np(v):
     return _np3(v)
 
 
-def _texture_reference(material):
-    """(parameter maps, sampler) of a texture-mapped material's reference: a
-    layer stack per hit needs interfaces over a parametric base; the sampler
-    is the walk's defensive one at the sharpest top roughness any texel has."""
-    from nbrdf.mitsuba.textures import ParamMaps, sharpest_top_roughness
-    from nbrdf.neural.errors import NbrdfError
-    from nbrdf.neural.material import LatentBase, Measured
-    from nbrdf.training.brdfs import DefensiveSampler
-
-    if not material.interfaces or isinstance(material.base, (LatentBase, Measured)):
-        raise NbrdfError(f"{material.textures()[0][0]}: a texture-mapped reference needs a layer stack (interfaces "
-                         "over a conductor, diffuse or dielectric base)")
-    return ParamMaps(material), DefensiveSampler(sharpest_top_roughness(material))
-
-
 class NbrdfReferenceBSDF(mi.BSDF):
     """``{"type": "nbrdf_reference", "material": PATH[, "spp": N, "seed": S]}``:
     every query draws ``spp`` new walk paths per lane (an unbiased, noisy f).
@@ -285,11 +157,9 @@ class NbrdfReferenceBSDF(mi.BSDF):
     filtered)."""
 
     def __init__(self, props):
-        mi.BSDF.__init__(self, props)
-        from nbrdf.neural.errors import NbrdfError
-        from nbrdf.neural.material import load_material
-        from nbrdf.training.brdfs import ReferenceBRDF
+        from nbrdf.mitsuba.materials import ReferenceWalk, material_normal_map  # start-up: torch loads with a material
 
+        mi.BSDF.__init__(self, props)
         path = _prop(props, "material")
         if path is None:
             raise PluginError('nbrdf_reference: the property "material" (a material JSON) is missing')
@@ -297,53 +167,14 @@ class NbrdfReferenceBSDF(mi.BSDF):
         self.spp = int(_prop(props, "spp", 1))
         if self.spp < 1:
             raise PluginError(f"nbrdf_reference: spp {self.spp} must be at least 1")
-        try:
-            self.material = load_material(self.path)
-            if self.material.is_textured:
-                self.maps, self.sampler = _texture_reference(self.material)
-            else:
-                self.maps, self.sampler = None, ReferenceBRDF(self.material, spp=self.spp).sampler
-        except NbrdfError as e:
-            raise PluginError(f"nbrdf_reference: {e}") from None
+        self.walk = ReferenceWalk(self.path, self.spp, int(_prop(props, "seed", 0)))
         self.normal_map = material_normal_map(self.path, "nbrdf_reference")
-        self._seeds = itertools.count(int(_prop(props, "seed", 0)) * 1_000_003 + 1)
         self.m_components = [FLAGS_GLOSSY]
         self.m_flags = FLAGS_GLOSSY
 
-    def _f(self, wi: np.ndarray, wo: np.ndarray, uv: np.ndarray | None = None) -> np.ndarray:
-        """A fresh estimate of f (N, 3) at the project's (wi, wo) (and the hits' uv
-        for a texture-mapped material)."""
-        import torch
-
-        from nbrdf.training.reference import reference_eval
-
-        if self.maps is not None:
-            return self._f_textured(wi, wo, uv)
-        f, _ = reference_eval(self.material, torch.from_numpy(wi), torch.from_numpy(wo), spp=self.spp,
-                              seed=next(self._seeds))
-        return f.numpy().astype(np.float32)
-
-    def _f_textured(self, wi: np.ndarray, wo: np.ndarray, uv: np.ndarray) -> np.ndarray:
-        """The walk over one layer stack per hit, its parameters read at ``uv``."""
-        import torch
-
-        from nbrdf.neural.stack import material_stack
-        from nbrdf.training.layered import simulate
-        from nbrdf.training.reference import simulator_params
-
-        f = np.zeros((wi.shape[0], 3), np.float32)
-        idx = np.nonzero((wi[:, 2] > 0) & (wo[:, 2] > 0))[0]
-        if idx.size:
-            stack = material_stack(self.material, self.maps.at(uv[idx]), dtype=torch.float32)
-            m, _ = simulate(simulator_params(stack.expand(idx.size) if stack.n == 1 else stack),
-                            torch.from_numpy(wi[idx]), torch.from_numpy(wo[idx]), spp=self.spp,
-                            seed=next(self._seeds))
-            f[idx] = m.numpy()
-        return f
-
     def _uv(self, si) -> np.ndarray | None:
         """The hits' uv (N, 2) for a texture-mapped material, else None."""
-        if self.maps is None:
+        if not self.walk.textured:
             return None
         dr.eval(si.uv)
         return np.stack([np.asarray(si.uv.x, np.float32), np.asarray(si.uv.y, np.float32)], 1)
@@ -360,26 +191,21 @@ class NbrdfReferenceBSDF(mi.BSDF):
         if _symbolic(self):
             return dr.zeros(mi.Color3f, dr.width(wo))
         d = BentDirections(self._frame(si), si.wi, wo)
-        f = self._color(self._f(_to_np(d.wo), _to_np(d.wi), self._uv(si)))
+        f = self._color(self.walk.f(_to_np(d.wo), _to_np(d.wi), self._uv(si)))
         return dr.select(active & d.ok, f * mi.Frame3f.cos_theta(d.wo), 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
-        import torch
-
         if _symbolic(self):
             return dr.zeros(mi.Float, dr.width(wo))
         frame = self._frame(si)
         d = BentDirections(frame, si.wi, wo)
-        p = mi.Float(self.sampler.pdf(torch.from_numpy(_to_np(d.wi)), torch.from_numpy(_to_np(d.wo))).numpy()
-                     .astype(np.float32))
+        p = mi.Float(self.walk.pdf(_to_np(d.wi), _to_np(d.wo)))
         return dr.select(active & (d.ok if frame is not None else True), p, 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
         return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
-        import torch
-
         if _symbolic(self):
             return dr.zeros(mi.BSDFSample3f, dr.width(si.wi)), dr.zeros(mi.Color3f, dr.width(si.wi))
         frame = self._frame(si)
@@ -387,11 +213,8 @@ class NbrdfReferenceBSDF(mi.BSDF):
         s1, s2 = np.asarray(sample1, np.float32), np.stack([np.asarray(sample2.x, np.float32),
                                                            np.asarray(sample2.y, np.float32)], 1)
         s1 = np.broadcast_to(s1, (view.shape[0],))
-        u = torch.from_numpy(np.ascontiguousarray(np.concatenate([s2, s1[:, None]], 1)))  # u[:, 2] picks the lobe
-        w, pdf = self.sampler.sample(torch.from_numpy(view), u)
-        light = w.numpy().astype(np.float32)
-        pdf = pdf.numpy().astype(np.float32)
-        f = self._f(light, view, self._uv(si))
+        light, pdf = self.walk.sample(view, np.concatenate([s2, s1[:, None]], 1))  # u[:, 2] picks the lobe
+        f = self.walk.f(light, view, self._uv(si))
         ok_np = pdf > 0
         weight = np.where(ok_np[:, None], f * light[:, 2:3] / np.where(ok_np, pdf, 1.0)[:, None], 0.0)
         bs = dr.zeros(mi.BSDFSample3f)
@@ -406,7 +229,7 @@ class NbrdfReferenceBSDF(mi.BSDF):
         bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
         return bs, dr.select(ok, self._color(weight.astype(np.float32)), 0.0)
 
-    def traverse(self, cb):
+    def traverse(self, _cb):
         pass
 
     def to_string(self):

@@ -26,6 +26,7 @@ import os
 import tempfile
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
 
 from nbrdf.mitsuba.teapot import cache_dir
@@ -47,8 +48,6 @@ def _write_atomic(path: Path, data: bytes) -> None:
 
 def _png(path: Path, rgb: np.ndarray) -> None:
     """An (H, W, 3) float image in [0, 1] as an 8-bit PNG, row 0 at the top."""
-    import imageio.v3 as iio
-
     _write_atomic(path, iio.imwrite("<bytes>", (np.clip(rgb, 0, 1) * 255 + 0.5).astype(np.uint8), extension=".png"))
 
 

@@ -7,6 +7,7 @@ CPU, tensor cores on NVIDIA GPUs); the latent's share of the first layer is a
 per-channel bias computed once per material. Directions are in the local
 frame (z the normal); ``wi`` and ``wo`` are the project's (light, viewer).
 Every function reads the array types of the Mitsuba variant in force.
+No torch here: ``materials`` builds these kernels from the torch network.
 """
 from __future__ import annotations
 
@@ -14,12 +15,25 @@ import math
 from dataclasses import dataclass
 
 import drjit as dr
+import drjit.nn as nn
 import mitsuba as mi
 import numpy as np
+
+from nbrdf.mitsuba.mip import level_of_detail
+from nbrdf.neural.methods import WordEnum
 
 #: The lobes11 features' GGX-like widths and the ior of their refracted half vector (``neural.decoder``).
 LOBE_ALPHAS = (0.03, 0.1, 0.3)
 LOBE_IOR = 1.5
+
+
+class Body(WordEnum):
+    """How the ``nbrdf`` plugin evaluates a material's body (its ``body``
+    parameter): a choice inside ``neural.methods.Method.NEURAL``, not a
+    method of its own. Both are the neural path; they differ only in where
+    the body's values come from (the coat and the sampler are the same)."""
+    DECODER = "decoder"  #: the shipped decoder per query (``DecoderKernel``)
+    TABLE = "table"      #: the decoder baked once into a table (``TableBody``, ``param_table.ParamTableBody``)
 
 
 # --- small vector helpers -----------------------------------------------------------------
@@ -219,8 +233,6 @@ class DecoderKernel:
 
     def __init__(self, encoding: str, activation: str, w_dir: np.ndarray, shares: np.ndarray,
                  hidden: list[tuple[np.ndarray, np.ndarray]], out: tuple[np.ndarray, np.ndarray]):
-        import drjit.nn as nn
-
         if activation != "relu":
             raise ValueError(f"the decoder's activation {activation!r} is not supported in Mitsuba (relu only)")
         if encoding not in ENCODERS:
@@ -231,32 +243,17 @@ class DecoderKernel:
         for w, b in hidden + [out]:
             mats += [T(np.ascontiguousarray(w, np.float32)), T(np.ascontiguousarray(b, np.float32))]
         packed = nn.pack(*mats, layout="inference")
-        self._nn = nn
         self.w_dir = packed[0]
         # exact float32 values as Python floats: Dr.Jit literals
         self.shares = np.asarray(shares, np.float32).astype(np.float64).tolist()
         rest = packed[1:]
         self.layers = [(rest[2 * k], rest[2 * k + 1]) for k in range(len(rest) // 2)]
 
-    @staticmethod
-    def from_torch(decoder, code) -> "DecoderKernel":
-        """The kernel of a ``neural.decoder.Decoder`` at a code (3, 34) or latent (3, 32)."""
-        import torch
-
-        spec = decoder.spec
-        with torch.no_grad():
-            shares = decoder.latent_share(code.float()).numpy()  # (3, W)
-            w_dir = decoder.hidden[0].weight[:, spec.latent:].numpy()
-            hidden = [(layer.weight.numpy(), layer.bias.numpy()) for layer in decoder.hidden[1:]]
-            out = (decoder.out.weight.numpy(), decoder.out.bias.numpy())
-        return DecoderKernel(spec.encoding, spec.activation, w_dir, shares, hidden, out)
-
     def body(self, wi, wo, shares: list | None = None) -> list:
         """Decoded body values [f_r, f_g, f_b] (1/sr), zero below the horizon;
         ``shares``: per-lane latent shares [3][width] (a latent texture's)
         instead of the material's own. The first layer's direction part is
         the same for the three channels and computed once."""
-        nn = self._nn
         x = nn.CoopVec(*ENCODERS[self.encoding](wi, wo))
         up = (wi.z > 0) & (wo.z > 0)
         d = nn.matvec(self.w_dir, x)
@@ -292,13 +289,6 @@ class TableBody:
         self.texture = mi.Texture3f(mi.TensorXf(values), use_accel=False, filter_mode=dr.FilterMode.Linear,
                                     wrap_mode=dr.WrapMode.Clamp)
 
-    @staticmethod
-    def from_torch(decoder, code, size) -> "TableBody":
-        """The table of a ``neural.decoder.Decoder`` at a code (3, 34) or latent (3, 32), ``size`` a ``TableSize``."""
-        from nbrdf.neural.body_table import bake_body
-
-        return TableBody(bake_body(decoder, code, size).numpy())
-
     def body(self, wi, wo, shares: list | None = None) -> list:
         """Body values [f_r, f_g, f_b] (1/sr), zero below the horizon (``DecoderKernel.body``);
         a table holds one material, so per-lane ``shares`` are refused."""
@@ -327,6 +317,9 @@ class CodeKernel:
     """A whole material code: decoded body plus closed-form coat, and its
     sampler. ``si`` (the hit) is what a textured material looks up; a
     uniform one ignores it."""
+
+    #: Whether the body varies over the surface (looked up per hit by uv).
+    textured = False
 
     def __init__(self, decoder: "DecoderKernel | TableBody", coat: Coat, proxy: Proxy):
         """``decoder``: what gives the body (``DecoderKernel`` or ``TableBody``)."""
@@ -361,16 +354,16 @@ class TexturedCodeKernel(CodeKernel):
     ``pixel_angle`` > 0); one proxy for all texels (the texture's mean code),
     which keeps sample and pdf consistent wherever it is looked up."""
 
-    def __init__(self, decoder: DecoderKernel, texture, proxy: Proxy, pixel_angle: float = 0.0):
-        from nbrdf.neural.coat import IOR_RANGE, ROUGHNESS_RANGE
+    textured = True
 
+    def __init__(self, decoder: DecoderKernel, texture, proxy: Proxy, coat_ranges: tuple, pixel_angle: float = 0.0):
+        """``texture``: a ``textures.LatentTextureKernel``; ``coat_ranges``: the legal (lo, hi) of the
+        coat's roughness and ior (``neural.coat``), which each texel's coat is clamped to."""
         super().__init__(decoder, Coat(0.0, 1.0), proxy)
         self.texture, self.pixel_angle = texture, float(pixel_angle)
-        self._ranges = (ROUGHNESS_RANGE, IOR_RANGE)
+        self._ranges = tuple(coat_ranges)
 
     def at(self, si):
-        from nbrdf.mitsuba.textures import level_of_detail
-
         if si is None:
             raise ValueError("a textured nbrdf material is evaluated at a hit (si)")
         shares, r, ior = self.texture.lookup(si.uv, level_of_detail(si, self.pixel_angle, self.texture.size))

@@ -13,12 +13,19 @@ everywhere. Each image is scored by MSE against the MIS render at
 """
 from __future__ import annotations
 
+import json
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
+from nbrdf.imaging.image_io import tonemap
+from nbrdf.mitsuba.modes import wants_wavefront, wavefront_mode
 from nbrdf.mitsuba.scenes import ASSETS
+from nbrdf.training.plots import _plt
 
 #: (emitter samples, BSDF samples) per spp of each strategy.
 STRATEGIES = {"light sampling": (1, 0), "BSDF sampling": (0, 1), "MIS": (1, 1)}
@@ -46,8 +53,6 @@ class MisFigureConfig:
 
 def scene_dict(cfg: MisFigureConfig, emitter_samples: int, bsdf_samples: int) -> dict:
     """The Mitsuba scene of the figure with one sampling strategy."""
-    import mitsuba as mi
-
     T = mi.ScalarTransform4f
     w, h = cfg.size
 
@@ -78,15 +83,6 @@ def scene_dict(cfg: MisFigureConfig, emitter_samples: int, bsdf_samples: int) ->
 
 def render_strategy(cfg: MisFigureConfig, strategy: str, spp: int, seed: int) -> tuple[np.ndarray, float]:
     """(image (H, W, 3), seconds) of one strategy at ``spp``."""
-    import time
-
-    import drjit as dr
-    import mitsuba as mi
-
-    import nbrdf.mitsuba  # noqa: F401 - the plugins
-    from nbrdf.mitsuba import wavefront_mode
-    from nbrdf.mitsuba.bsdf import wants_wavefront
-
     es, bs = STRATEGIES[strategy]
     scene = mi.load_dict(scene_dict(cfg, es, bs))
     t0 = time.perf_counter()
@@ -103,11 +99,6 @@ def render_strategy(cfg: MisFigureConfig, strategy: str, spp: int, seed: int) ->
 def mis_figure(cfg: MisFigureConfig, log=print) -> dict:
     """Renders the three strategies and the reference; writes the figure and
     mis.json; returns {strategy: {"mse", "seconds"}} and the reference's spp."""
-    import json
-
-    from nbrdf.imaging.image_io import tonemap
-    from nbrdf.training.plots import _plt
-
     log(f"MIS reference ({cfg.spp * cfg.ref_factor} spp)")
     ref, _ = render_strategy(cfg, "MIS", cfg.spp * cfg.ref_factor, cfg.seed + 1000)
     images, result = {}, {"spp": cfg.spp, "reference_spp": cfg.spp * cfg.ref_factor, "strategies": {}}

@@ -12,7 +12,7 @@ t = n x s) is that tangent frame, so directions in it (``si.wi``, a queried
 ``wo``) map into the bent frame by one rotation.
 
 The map is read like the material's other textures: row 0 = v 0 at the
-image's bottom, Mitsuba's v 0 at its top (``textures.texture_rows_uv``),
+image's bottom, Mitsuba's v 0 at its top (``mip.texture_rows_uv``),
 repeat wrapping, bilinear, mip-mapped by the ray cone when the plugin has a
 ``pixel_angle`` (the previewer's map is mip-mapped too).
 
@@ -27,6 +27,9 @@ from pathlib import Path
 import drjit as dr
 import mitsuba as mi
 
+from nbrdf.imaging.image_io import read_normal_map
+from nbrdf.mitsuba.mip import MipBuffer, level_of_detail, mip_chain
+
 #: The smallest z of a map's normal (the previewer's clamp) and of its cosine with the viewer.
 MIN_COS = 1e-3
 
@@ -36,9 +39,6 @@ class NormalMapKernel:
 
     def __init__(self, path: str | Path):
         """Reads ``path`` (``NbrdfError``: unreadable, or not RGB)."""
-        from nbrdf.imaging.image_io import read_normal_map
-        from nbrdf.mitsuba.textures import MipBuffer, mip_chain
-
         self.path = str(path)
         self.texels = MipBuffer(mip_chain(read_normal_map(path)))
         self.size = self.texels.size
@@ -46,9 +46,7 @@ class NormalMapKernel:
     def normal(self, si, pixel_angle: float = 0.0):
         """The bent normal in ``si``'s shading frame (local coordinates), the
         previewer's rules (module docstring); ``pixel_angle`` > 0 picks the mip
-        level by the hit's ray cone (``textures.level_of_detail``)."""
-        from nbrdf.mitsuba.textures import level_of_detail
-
+        level by the hit's ray cone (``mip.level_of_detail``)."""
         r, g, b = self.texels.lookup(si.uv, level_of_detail(si, pixel_angle, self.size))
         n = dr.normalize(mi.Vector3f(2.0 * r - 1.0, 2.0 * g - 1.0, dr.maximum(2.0 * b - 1.0, MIN_COS)))
         wi = si.wi
@@ -64,24 +62,6 @@ class NormalMapKernel:
         n = self.normal(si, pixel_angle)
         s = dr.normalize(mi.Vector3f(1.0 - n.x * n.x, -n.x * n.y, -n.x * n.z))
         return mi.Frame3f(s, dr.cross(n, s), n)
-
-
-def material_normal_map(material: str, owner: str) -> NormalMapKernel | None:
-    """The normal map of a material JSON (None: a code file, or no map);
-    ``owner`` names the plugin in the one-line error (``PluginError``)."""
-    from nbrdf.mitsuba.bsdf import PluginError
-    from nbrdf.neural.errors import NbrdfError
-    from nbrdf.neural.material import load_material
-
-    if not str(material).lower().endswith(".json"):
-        return None
-    try:
-        m = load_material(material)
-        if m.normal_map is None:
-            return None
-        return NormalMapKernel(Path(m.base_dir) / m.normal_map)
-    except NbrdfError as e:
-        raise PluginError(f"{owner}: normal_map {e}") from None
 
 
 class BentDirections:

@@ -1,7 +1,7 @@
 """A texture-mapped material's body from a parametric table (``neural.param_table``).
 
 Per hit, the varying parameters (at most two per-channel albedos) are read
-from the material's maps at the hit's uv (``textures.MipBuffer``: bilinear,
+from the material's maps at the hit's uv (``mip.MipBuffer``: bilinear,
 trilinear between mip levels by the hit's ray cone, as the latent texture is
 read), then per colour channel c the body is bilinear in (a_c, b_c) over four
 trilinear angular fetches of one ``Texture3f``. No weights and no per-texel
@@ -16,8 +16,14 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+import torch
 
 from nbrdf.mitsuba.kernel import Coat, CodeKernel, Proxy, table_coordinates
+from nbrdf.mitsuba.mip import MipBuffer, level_of_detail, mip_chain
+from nbrdf.neural.body_table import TableSize
+from nbrdf.neural.coat import code_coat
+from nbrdf.neural.param_table import ParamGrid, bake_param_body, node_codes, param_value, table_params
+from nbrdf.neural.svbrdf import TextureValues, latent_texture
 
 #: Nodes per varying parameter and angle: over the globe's map ranges (medium albedo 0.30-0.97, base albedo
 #: 0.05-0.75) against the neural path at random (a, b) and directions, 13 x 13 nodes at 64 x 32 x 16 gives
@@ -86,14 +92,14 @@ class ParamTableCodeKernel(CodeKernel):
     a uniform coat, and the latent texture's mean-code proxy (the decoder
     path's sampler, so both draw the same directions)."""
 
+    textured = True
+
     def __init__(self, body: ParamTableBody, maps, coat: Coat, proxy: Proxy, pixel_angle: float = 0.0):
-        """``maps``: a ``textures.MipBuffer`` of the parameters' texels, (x_0 rgb, x_1 rgb)."""
+        """``maps``: a ``mip.MipBuffer`` of the parameters' texels, (x_0 rgb, x_1 rgb)."""
         super().__init__(body, coat, proxy)
         self.maps, self.pixel_angle = maps, float(pixel_angle)
 
     def at(self, si):
-        from nbrdf.mitsuba.textures import level_of_detail
-
         if si is None:
             raise ValueError("a textured nbrdf material is evaluated at a hit (si)")
         x = self.maps.lookup(si.uv, level_of_detail(si, self.pixel_angle, self.maps.size))
@@ -104,14 +110,6 @@ class ParamTableCodeKernel(CodeKernel):
 def param_table_kernel(material, model, pixel_angle: float) -> ParamTableCodeKernel:
     """The kernel of a texture-mapped material whose maps vary at most two
     per-channel albedos (else a one-line ``NbrdfError``, ``neural.param_table.table_params``)."""
-    import torch
-
-    from nbrdf.mitsuba.textures import MipBuffer, mip_chain
-    from nbrdf.neural.body_table import TableSize
-    from nbrdf.neural.coat import code_coat
-    from nbrdf.neural.param_table import ParamGrid, bake_param_body, node_codes, param_value, table_params
-    from nbrdf.neural.svbrdf import TextureValues, latent_texture
-
     texels = TextureValues(material)
     params = table_params(material, texels)
     grid = ParamGrid(*GRID)

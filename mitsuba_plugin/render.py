@@ -4,7 +4,7 @@ time budget. Each chunk is an independent render with its own seed; the image
 is their average (equal weights: every chunk has the same spp).
 
 Scenes with nbrdf materials render in Dr.Jit's wavefront mode on the LLVM
-backend (``bsdf.wants_wavefront``): the reference needs it, and the neural
+backend (``modes.wants_wavefront``): the reference needs it, and the neural
 decoder runs about ten times faster there than inside a symbolic call. A scene
 whose neural materials all read their body from a table (``body: "table"``)
 and that has no reference renders in symbolic mode, its fastest."""
@@ -12,10 +12,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, ContextManager
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 
+from nbrdf.mitsuba.modes import wants_wavefront, wavefront_mode
 from nbrdf.mitsuba.scenes import Scene, mitsuba_dict, neural_bodies, uses_reference
 
 #: Samples per pixel per ``mi.render`` call unless asked otherwise.
@@ -41,36 +44,28 @@ class RenderResult:
 
 
 def load(scene: Scene, size: tuple[int, int], chunk_spp: int = CHUNK_SPP):
-    """The Mitsuba scene object (registers the plugins on first use)."""
-    import mitsuba as mi
-
-    import nbrdf.mitsuba  # noqa: F401 - the plugins and the variant
-
+    """The Mitsuba scene object (the package's import registered the plugins)."""
     return mi.load_dict(mitsuba_dict(scene, size, chunk_spp))
 
 
 def is_wavefront(scene: Scene) -> bool:
     """Whether ``render`` renders ``scene`` in Dr.Jit's wavefront mode (module docstring)."""
-    from nbrdf.mitsuba.bsdf import wants_wavefront
-
     return uses_reference(scene) or any(wants_wavefront(b) for b in neural_bodies(scene))
 
 
 def render(scene: Scene, size: tuple[int, int], spp: int, seed: int = 0, chunk_spp: int = CHUNK_SPP,
            progress: Callable[[int], None] | None = None, keep_chunks: bool = False, loaded=None,
-           max_seconds: float | None = None, exclude_compile: bool = False) -> RenderResult:
+           max_seconds: float | None = None, exclude_compile: bool = False,
+           enter_wavefront: Callable[[], ContextManager] = wavefront_mode) -> RenderResult:
     """Renders ``spp`` samples per pixel (rounded up to whole chunks) in chunks
     of ``chunk_spp``, seeds ``seed * 100003 + k``; ``progress(spp_done)`` after
     each chunk. With ``max_seconds`` it stops after the chunk that crosses it.
     ``exclude_compile``: the time spent compiling kernels that Dr.Jit had not
     cached (its kernel history) is taken out of the time, so that a timing
     measures sampling: in wavefront mode a wavefront that happens to hold one
-    lane gets kernels of its own, compiled the first time they occur."""
-    import drjit as dr
-    import mitsuba as mi
-
-    from nbrdf.mitsuba import wavefront_mode
-
+    lane gets kernels of its own, compiled the first time they occur.
+    ``enter_wavefront``: what enters the wavefront mode (``modes.wavefront_mode``;
+    a test passes one that records its use)."""
     chunk_spp = max(1, min(chunk_spp, spp))
     n_chunks = -(-spp // chunk_spp)
     mscene = loaded if loaded is not None else load(scene, size, chunk_spp)
@@ -86,7 +81,7 @@ def render(scene: Scene, size: tuple[int, int], spp: int, seed: int = 0, chunk_s
         dr.kernel_history()  # drop what came before
     for k in range(n_chunks):
         if wavefront:
-            with wavefront_mode():
+            with enter_wavefront():
                 img = mi.render(mscene, seed=seed * 100003 + k, spp=chunk_spp)
         else:
             img = mi.render(mscene, seed=seed * 100003 + k, spp=chunk_spp)

@@ -29,14 +29,18 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import platform
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from nbrdf.imaging.image_io import tonemap
 from nbrdf.mitsuba.render import RenderResult, is_wavefront, load, render
 from nbrdf.mitsuba.scenes import Scene, load_scene, neural_bodies, with_method
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.training.plots import _plt
+from nbrdf.training.render_report import flip
 
 #: The paper's Table 3: equal-time MSE, (neural, Guo et al. Monte Carlo), at 1024 x 1024.
 #: Samples per pixel per pass of the converged reference (its cache does not depend on ``--chunk``).
@@ -73,7 +77,7 @@ class SceneReportConfig:
     figure: Path | None = field(default=None)
     """the figure's path (default: OUT/scenes.png)"""
     neural_body: str = "decoder"
-    """the ``nbrdf`` plugin's ``body``: "decoder" (per query) or "table" (baked once, ``bsdf.TableBody``, or
+    """the ``nbrdf`` plugin's ``body``: "decoder" (per query) or "table" (baked once, ``kernel.TableBody``, or
     ``param_table`` for a texture-mapped material that fits one: noise-free, its interpolation error a bias;
     renders in symbolic mode)"""
 
@@ -191,8 +195,6 @@ def own_noise_mse(chunks: list[np.ndarray]) -> float:
 
 def score_scene(name: str, cfg: SceneReportConfig, log=print) -> tuple[dict, dict]:
     """One scene's row of the table and its images."""
-    from nbrdf.training.render_report import flip
-
     scene = load_scene(name)
     log(f"[{scene.name}] converged reference ({cfg.ref_spp} spp)")
     ref = converged_reference(scene, cfg)
@@ -279,9 +281,6 @@ def markdown(result: dict) -> str:
 def save_figure(rows: list[dict], images: list[dict], path: Path) -> None:
     """Per scene: converged reference, neural, MC at equal time, a 2x crop of
     each, and their per-pixel squared-error maps (shared scale per scene)."""
-    from nbrdf.imaging.image_io import tonemap
-    from nbrdf.training.plots import _plt
-
     plt = _plt()
     cols = ["reference", "neural", "mc", "crop reference", "crop neural", "crop mc", "err_neural", "err_mc"]
     fig, axes = plt.subplots(len(rows), len(cols), figsize=(1.7 * len(cols), 1.6 * len(rows) + 0.3), dpi=80,
@@ -325,8 +324,6 @@ def save_figure(rows: list[dict], images: list[dict], path: Path) -> None:
 
 def run_scene_report(cfg: SceneReportConfig, log=print) -> dict:
     """All scenes: scenes.json, scenes.md, the figure, and the images (.npy)."""
-    import platform
-
     cfg.out.mkdir(parents=True, exist_ok=True)
     rows, images = [], []
     for name in cfg.scenes:

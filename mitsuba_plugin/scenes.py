@@ -32,9 +32,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import mitsuba as mi
 import numpy as np
 
+from nbrdf.imaging.env_presets import ENV_PRESETS, make_environment
+from nbrdf.mitsuba.generated import NORMAL_MAPS, globe_material, normal_map, torus_ply
+from nbrdf.mitsuba.kernel import Body
+from nbrdf.mitsuba.teapot import teapot_ply
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import load_material
+from nbrdf.neural.methods import Method
 
 ASSETS = Path(__file__).resolve().parents[1] / "viewer" / "assets" / "materials"
 #: Size of the environment map handed to Mitsuba (texels ~0.7 degrees).
@@ -124,8 +131,6 @@ def _material(m: Any, base: Path, what: str) -> dict[str, Any]:
         if p.startswith("generated:"):
             if p != "generated:globe":
                 raise NbrdfError(f"{what}: unknown generated material {p!r} (expected generated:globe)")
-            from nbrdf.mitsuba.generated import globe_material
-
             return str(globe_material())
         q = ASSETS / p[1:] if p.startswith("@") else (base / p)
         if not q.is_file():
@@ -151,8 +156,6 @@ SHAPES = ("sphere", "rectangle", "teapot", "torus")
 
 def _normal_map(nm: Any, what: str) -> dict[str, Any]:
     """A shape's generated normal map entry -> {"name", "tiles", "strength"}."""
-    from nbrdf.mitsuba.generated import NORMAL_MAPS
-
     if not isinstance(nm, dict) or nm.get("name") not in NORMAL_MAPS or set(nm) - {"name", "tiles", "strength"}:
         raise NbrdfError(f"{what}: expected {{\"name\": {' | '.join(NORMAL_MAPS)}, \"tiles\": [nu, nv], "
                          f"\"strength\": s}}, got {nm!r}")
@@ -181,8 +184,6 @@ def parse_scene(spec: Any, base: Path, name: str) -> Scene:
         raise NbrdfError(f"camera.fov: expected below 170 degrees, got {out['camera']['fov']}")
     env = spec.get("environment")
     if env is not None:
-        from nbrdf.imaging.env_presets import ENV_PRESETS
-
         env = {"preset": env} if isinstance(env, str) else env
         if not isinstance(env, dict) or env.get("preset") not in ENV_PRESETS:
             raise NbrdfError(f"environment: expected one of {', '.join(ENV_PRESETS)} (or {{\"preset\": ..., "
@@ -249,10 +250,10 @@ def load_scene(spec: str) -> Scene:
     return parse_scene(data, p.parent, p.stem)
 
 
-def with_method(scene: Scene, method: str, body: str = "decoder") -> Scene:
-    """The scene with every nbrdf material rendered as ``neural`` or ``reference``;
-    ``body`` (neural): the plugin's ``body`` for every uniform material
-    ("table": a baked table, ``bsdf.TableBody``; a parametric one for a
+def with_method(scene: Scene, method: str, body: str = Body.DECODER.value) -> Scene:
+    """The scene with every nbrdf material rendered as ``neural`` or ``reference``
+    (the words of ``Method.NEURAL`` and ``Method.REFERENCE``); ``body`` (neural): the plugin's ``body`` for every uniform material
+    ("table": a baked table, ``kernel.TableBody``; a parametric one for a
     texture-mapped material whose maps vary at most two albedos); other
     texture-mapped materials keep the decoder."""
     shapes = []
@@ -260,7 +261,7 @@ def with_method(scene: Scene, method: str, body: str = "decoder") -> Scene:
         m = s["material"]
         if "diffuse" not in m:
             path = m.get("neural", m.get("reference"))
-            m = _neural_entry(path, body) if method == "neural" else {method: path}
+            m = _neural_entry(path, body) if method == Method.NEURAL else {str(method): path}
         shapes.append({**s, "material": m})
     return Scene({**scene.spec, "shapes": shapes}, scene.name)
 
@@ -276,7 +277,7 @@ def with_body(scene: Scene, body: str) -> Scene:
 def _neural_entry(path: str, body: str) -> dict[str, Any]:
     """A neural material entry with ``body`` where the material can take it."""
     m: dict[str, Any] = {"neural": path}
-    if body != "decoder" and (not is_textured(path) or table_fits(path)):
+    if body != Body.DECODER and (not is_textured(path) or table_fits(path)):
         m["body"] = body
     return m
 
@@ -285,17 +286,13 @@ def is_textured(path: str) -> bool:
     """Whether the material at ``path`` is texture-mapped (a code file never is)."""
     if not str(path).lower().endswith(".json"):
         return False
-    from nbrdf.neural.material import load_material
-
     return load_material(path).is_textured
 
 
 def table_fits(path: str) -> bool:
     """Whether a texture-mapped material can read its body from a parametric table
     (``neural.param_table.table_params``)."""
-    from nbrdf.neural.errors import NbrdfError
-    from nbrdf.neural.material import load_material
-    from nbrdf.neural.param_table import table_params
+    from nbrdf.neural.param_table import table_params  # start-up: torch; parsing a scene needs none
 
     try:
         table_params(load_material(path))
@@ -305,13 +302,8 @@ def table_fits(path: str) -> bool:
 
 
 def neural_bodies(scene: Scene) -> set[str]:
-    """The ``body`` options of the scene's ``nbrdf`` materials ("decoder" unless set)."""
-    return {s["material"].get("body", "decoder") for s in scene.spec["shapes"] if "neural" in s["material"]}
-
-
-def uses_neural(scene: Scene) -> bool:
-    """Whether any shape uses the neural ``nbrdf`` plugin."""
-    return any("neural" in s["material"] for s in scene.spec["shapes"])
+    """The ``body`` options (``kernel.Body`` words) of the scene's ``nbrdf`` materials ("decoder" unless set)."""
+    return {s["material"].get("body", Body.DECODER.value) for s in scene.spec["shapes"] if "neural" in s["material"]}
 
 
 def uses_reference(scene: Scene) -> bool:
@@ -327,10 +319,6 @@ ENV_TO_WORLD = [[0.0, 0.0, -1.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0
 
 def environment_bitmap(preset: str, scale: float = 1.0, size: tuple[int, int] = ENV_SIZE):
     """The preset at ``size`` (w, h) as a Mitsuba RGB bitmap (linear radiance)."""
-    import mitsuba as mi
-
-    from nbrdf.imaging.env_presets import make_environment
-
     img = make_environment(preset, *size) * np.float32(scale)
     return mi.Bitmap(np.ascontiguousarray(img, np.float32), mi.Bitmap.PixelFormat.RGB)
 
@@ -349,10 +337,6 @@ def _bsdf(m: dict[str, Any], pixel_angle: float) -> dict[str, Any]:
 
 def _with_normal_map(bsdf: dict[str, Any], nm: dict[str, Any]) -> dict[str, Any]:
     """``bsdf`` under Mitsuba's ``normalmap`` with a generated map tiled ``tiles`` times."""
-    import mitsuba as mi
-
-    from nbrdf.mitsuba.generated import normal_map
-
     tex = normal_map(nm["name"], strength=nm["strength"])
     su, sv = nm["tiles"]
     return {"type": "normalmap", "bsdf": bsdf,
@@ -364,11 +348,6 @@ def _with_normal_map(bsdf: dict[str, Any], nm: dict[str, Any]) -> dict[str, Any]
 def mitsuba_dict(scene: Scene, size: tuple[int, int], spp: int) -> dict[str, Any]:
     """The ``mi.load_dict`` description of ``scene`` at ``size`` (w, h) with
     ``spp`` samples per pixel per ``mi.render`` call."""
-    import mitsuba as mi
-
-    from nbrdf.mitsuba.generated import torus_ply
-    from nbrdf.mitsuba.teapot import teapot_ply
-
     s = scene.spec
     T = mi.ScalarTransform4f
     cam = s["camera"]

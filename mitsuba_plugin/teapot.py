@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections import defaultdict, deque
 from pathlib import Path
 
 import numpy as np
@@ -82,8 +83,6 @@ def _orient_outward(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
     convention a ray tracer's one-sided BSDF needs. Orientation is propagated
     over shared edges from a seed face whose normal is checked against the
     direction from the mesh's centre."""
-    from collections import defaultdict, deque
-
     tris = tris.copy()
     edge_faces: dict[tuple[int, int], list[int]] = defaultdict(list)
     for f, (i, j, k) in enumerate(tris):

@@ -8,6 +8,7 @@ import time
 import numpy as np
 import torch
 
+from nbrdf.neural.coat import with_coat
 from nbrdf.neural.material import parse_material
 
 THREE_LAYER = {"format": "nbrdf-material/1", "name": "bench three-layer", "layers": [
@@ -30,7 +31,6 @@ def _timed(fn, repeats: int) -> dict:
 def bench_operations(model, repeats: int = 1000) -> dict:
     leaf, net = model.require("leaf"), model.require("layering")
     r3 = torch.tensor([0.9, 0.6, 0.3])
-    from nbrdf.neural.coat import with_coat
 
     top = torch.tensor([[0.1, 1.5]]).expand(3, 2)  # the interface's (roughness, ior): the code's coat
     z_bot = with_coat(leaf.conductor(0.3, r3), None)

@@ -16,11 +16,13 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import cast
 
 import torch
+from safetensors import safe_open
+from safetensors.torch import save_file
 from torch import nn
 
 from nbrdf.neural.coat import coat_eval, coat_of, code_size
@@ -47,8 +49,8 @@ class DecoderSpec:
     latent: int = LATENT
     width: int = 64
     depth: int = 3
-    encoding: str = "rusink5"
-    activation: str = "relu"
+    encoding: str = field(default="rusink5", metadata={"choices": tuple(ENCODINGS)})
+    activation: str = field(default="relu", metadata={"choices": ACTIVATIONS})
     loss_scale: float = 0.01  # s in the loss log(1 + f cos / s): below s errors count as relative
     coat: bool = True  # the latent is a body under an analytic clear coat (neural.coat): codes carry 2 more floats
 
@@ -258,8 +260,6 @@ def save_decoder(dec: Decoder, path: str | Path, trained_on: dict | None = None,
                  extra: dict[str, Tensor] | None = None, extra_meta: dict | None = None) -> str:
     """Writes safetensors + JSON metadata; returns the weights id.
     ``extra`` tensors (other networks of the bundle) travel in the same file."""
-    from safetensors.torch import save_file
-
     tensors = {f"decoder.{k}": v.detach().float().contiguous() for k, v in dec.state_dict().items()}
     for k, v in (extra or {}).items():
         tensors[k] = v.detach().float().contiguous()
@@ -273,8 +273,6 @@ def save_decoder(dec: Decoder, path: str | Path, trained_on: dict | None = None,
 
 def read_bundle(path: str | Path) -> tuple[dict[str, Tensor], dict[str, str]]:
     """Tensors and metadata of a weight file, checked for format; never unpickles."""
-    from safetensors import safe_open
-
     p = Path(path)
     if not p.is_file():
         raise NbrdfError(f"{path}: no such weight file")
@@ -291,8 +289,6 @@ def read_bundle(path: str | Path) -> tuple[dict[str, Tensor], dict[str, str]]:
 
 def record_accuracy(path: str | Path, accuracy: dict) -> None:
     """Merges measured accuracy into a weight file's metadata (weights unchanged)."""
-    from safetensors.torch import save_file
-
     tensors, meta = read_bundle(path)
     acc = json.loads(meta.get("accuracy") or "{}")
     acc.update(accuracy)

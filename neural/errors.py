@@ -6,7 +6,5 @@ class NbrdfError(Exception):
     """Bad input (file, parameter, shape, version). The message is one line that
     names the place and the reason; the command line prints it and exits 2."""
 
-    exit_code = 2
-
     def __init__(self, message: str):
         super().__init__(" ".join(str(message).split()))

@@ -1,16 +1,10 @@
-"""Direction geometry shared by every part: spherical coordinates, the
-half/difference parameterisation, and the standard lobe grid (SPEC section 9)."""
+"""Direction geometry shared by every part: the standard incidence, cosine
+sampling, the half/difference parameterisation, and the standard lobe grid (SPEC section 9)."""
 from __future__ import annotations
 
 import math
 
 import torch
-
-
-def spherical(theta: torch.Tensor, phi: torch.Tensor) -> torch.Tensor:
-    """Unit vectors (..., 3) from polar angle theta and azimuth phi (radians)."""
-    st = torch.sin(theta)
-    return torch.stack([st * torch.cos(phi), st * torch.sin(phi), torch.cos(theta)], dim=-1)
 
 
 def incidence(theta_i_deg: float, dtype: torch.dtype = torch.float32) -> torch.Tensor:

@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
+from safetensors import safe_open
+from safetensors.torch import save_file
 
 from nbrdf.neural.errors import NbrdfError
 
@@ -28,8 +30,6 @@ class MaterialLatent:
 
 
 def save_latent(path: str | Path, lat: MaterialLatent) -> None:
-    from safetensors.torch import save_file
-
     if tuple(lat.z.shape) not in SHAPES or not torch.isfinite(lat.z).all():
         raise NbrdfError(f"{path}: a material code must be a finite (3, 34) array, got {tuple(lat.z.shape)}")
     save_file({"latent": lat.z.detach().float().contiguous()}, str(path),
@@ -38,8 +38,6 @@ def save_latent(path: str | Path, lat: MaterialLatent) -> None:
 
 def load_latent(path: str | Path, decoder_id: str | None = None) -> MaterialLatent:
     """Reads a latent; with ``decoder_id``, also checks it belongs to that decoder."""
-    from safetensors import safe_open
-
     p = Path(path)
     if not p.is_file():
         raise NbrdfError(f"{path}: no such latent file")

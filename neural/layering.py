@@ -36,7 +36,6 @@ COAT_FEATURES = 3
 #: feature counts; each set starts with the one before it, so a network is
 #: widened to a larger set by appending input columns.
 MEDIUM_SETS = {"basic": 5, "slab": 8}
-MEDIUM_FEATURES = MEDIUM_SETS["basic"]
 
 # Abramowitz & Stegun 5.1.53 (0 < x <= 1, |error| < 2e-7) and 5.1.56 (x >= 1, relative error < 5e-8) for E1.
 _E1_SMALL = (-0.57721566, 0.99999193, -0.24991055, 0.05519968, -0.00976004, 0.00107857)

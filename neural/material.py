@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, Union
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.files import save_text
 from nbrdf.neural.layer_kinds import BASE_KINDS, CONDUCTOR, DIELECTRIC, DIFFUSE, KINDS, LATENT, MEASURED, MEDIUM, RANGES
 
 FORMAT = "nbrdf-material/1"
@@ -142,10 +143,6 @@ class Material:
 
 
 # --- parsing ---------------------------------------------------------------------------
-def _fmt(x: Any) -> str:
-    return json.dumps(x) if not isinstance(x, float) else repr(x)
-
-
 def _number(v: Any, place: str, lo: float, hi: float) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise NbrdfError(f"{place}: expected a number, got {_kind(v)}")
@@ -357,8 +354,6 @@ def material_to_dict(m: Material, new_dir: Path | None = None) -> dict:
 
 def save_material(m: Material, path: str | Path) -> None:
     """Writes pretty JSON; relative paths still point at the same files."""
-    from nbrdf.neural.files import save_text
-
     p = Path(path)
     if not p.parent.is_dir():
         raise NbrdfError(f"{path}: the folder {p.parent} does not exist")

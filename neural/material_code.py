@@ -7,16 +7,16 @@ from pathlib import Path
 
 import torch
 
+from nbrdf.neural.coat import code_coat
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.latent import load_latent
+from nbrdf.neural.material import load_material
+from nbrdf.neural.model import default_model, load_model
 
 
 def load_code(path: str | Path, weights: str | Path | None = None):
     """(model, code (3, 34)) of ``path`` under the bundle ``weights`` (default:
     the shipped one). Texture-mapped materials have no single code: refused."""
-    from nbrdf.neural.latent import load_latent
-    from nbrdf.neural.material import load_material
-    from nbrdf.neural.model import default_model, load_model
-
     model = load_model(weights) if weights else default_model()
     p = Path(path)
     if p.suffix.lower() == ".safetensors":
@@ -31,8 +31,6 @@ def load_code(path: str | Path, weights: str | Path | None = None):
 def code_parts(model, code: torch.Tensor) -> tuple[tuple[float, float], tuple[float, float]]:
     """((coat roughness, coat ior), (proxy sigma, proxy w)) of a code (3, 34):
     what a renderer needs besides the decoder."""
-    from nbrdf.neural.coat import code_coat
-
     spec = model.decoder.spec
     if tuple(code.shape) != (3, spec.code):
         raise NbrdfError(f"a material code must be (3, {spec.code}), got {tuple(code.shape)}")

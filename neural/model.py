@@ -18,6 +18,7 @@ import torch
 from nbrdf.neural.coat import with_coat
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bundle, save_decoder
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.latent import load_latent
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, LATENT
 from nbrdf.neural.layering import CODE, LayeringNet, LayeringSpec
 from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
@@ -54,10 +55,6 @@ class NeuralModel:
         return self.decoder.weights_id()
 
     # -- the full path ---------------------------------------------------------------------
-    def leaf_latent(self, layer) -> Tensor:
-        """(3, 34) code of a single uniform layer, one per colour channel."""
-        return self.stack_latents(Material(name="layer", layers=(layer,)))[0]
-
     def material_latent(self, material: Material) -> Tensor:
         """(3, 34) code of a uniform material of any number of layers (``neural.coat``)."""
         return self.stack_latents(material)[0]
@@ -75,8 +72,6 @@ class NeuralModel:
         stack = material_stack(material, values or uniform_values, dtype=torch.float32)
         z_base = None
         if stack.base == LATENT and stack.base_path is not None:
-            from nbrdf.neural.latent import load_latent
-
             z_base = load_latent(stack.base_path, self.decoder_id).z[None]
         leaf = self.require("leaf") if z_base is None or stack.layers else None
         layering = self.require("layering") if stack.layers else None

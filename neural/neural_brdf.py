@@ -13,7 +13,9 @@ import torch
 from nbrdf.neural.brdf import ExactRGB, Sample
 from nbrdf.neural.coat import coat_of
 from nbrdf.neural.decoder import Decoder
+from nbrdf.neural.geometry import incidence
 from nbrdf.neural.material import Diffuse, Material
+from nbrdf.neural.model import default_model
 from nbrdf.neural.sampling import coated_pdf, coated_sample
 
 Tensor = torch.Tensor
@@ -80,6 +82,13 @@ class LatentBRDF(_CodeSampler, ExactRGB):
         f = torch.where(ok[:, None], self.eval(w, wo).to(pdf.dtype), torch.zeros(1, dtype=pdf.dtype))
         return Sample(wo, f, pdf)
 
+    def sample_at(self, theta_i: float, n: int, seed: int = 0) -> Sample:
+        """``n`` directions drawn at the standard incidence ``theta_i`` (degrees,
+        phi_i = 0) from uniforms of ``seed``: what ``nbrdf sample`` writes."""
+        wi = incidence(theta_i).expand(n, 3).contiguous()
+        u = torch.rand(n, 3, generator=torch.Generator().manual_seed(seed))
+        return self.sample(wi, u)
+
 
 def proxy_hint(m: Material) -> tuple[float, float]:
     """A proxy pdf (sigma, w) guessed from the top layer when no sampler
@@ -106,16 +115,12 @@ def latent_brdf(decoder: Decoder, z: Tensor, material: Material, sampler=None) -
 def neural_brdf(material: Material, model=None) -> LatentBRDF:
     """A uniform material through the full neural path (leaf encoders,
     layering, decoder) of ``model`` (default: the shipped bundle)."""
-    from nbrdf.neural.model import default_model
-
     model = model or default_model()
     return latent_brdf(model.decoder, model.material_latent(material), material, model.sampler)
 
 
 def material_brdfs(material, model=None) -> list[NeuralBRDF]:
     """The three channel BRDFs of a material through the full neural path."""
-    from nbrdf.neural.model import default_model
-
     model = model or default_model()
     z = model.material_latent(material)
     sigma, w = model.proxy(z)

@@ -27,9 +27,10 @@ from dataclasses import dataclass
 
 import torch
 
-from nbrdf.neural.body_table import TableSize, bake_body
+from nbrdf.neural.body_table import TableSize, bake_body, table_lookup
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
+from nbrdf.neural.stack import uniform_values
 
 #: Parameters a parametric table may vary: per-channel albedos that enter the body only.
 VARIABLE = {("medium", "albedo"), ("diffuse", "albedo")}
@@ -115,7 +116,7 @@ def node_values(params: TableParams, grid: ParamGrid) -> list[torch.Tensor]:
 def node_codes(model, material: Material, params: TableParams, grid: ParamGrid) -> torch.Tensor:
     """Material codes (A, B, 34) at the grid's nodes: the material with its varying
     parameters set to each node (all channels equal), through ``model.stack_latents``
-    (what ``brdf_for(uniform material, "neural")`` computes); channel 0's code."""
+    (what ``brdf_for(uniform material, Method.NEURAL)`` computes); channel 0's code."""
     nodes = node_values(params, grid)
     while len(nodes) < 2:
         nodes.append(torch.zeros(1, dtype=torch.float64))
@@ -123,7 +124,6 @@ def node_codes(model, material: Material, params: TableParams, grid: ParamGrid) 
     cols = {params.places[0]: ga.reshape(-1)}
     if len(params.places) > 1:
         cols[params.places[1]] = gb.reshape(-1)
-    from nbrdf.neural.stack import uniform_values
 
     def values(v, place: str) -> torch.Tensor:
         if place in cols:
@@ -159,8 +159,6 @@ def param_table_lookup(values: torch.Tensor, params: TableParams, x: torch.Tenso
     """f (P,) at pairs (P, 3) and parameters ``x`` (P, n_params): bilinear in the
     parameters over trilinear log-f angular lookups (``body_table.table_lookup``),
     as the Mitsuba kernel reads it (a CPU twin for tests and error measurements)."""
-    from nbrdf.neural.body_table import table_lookup
-
     A, B = values.shape[:2]
     coords = []
     for d, ((lo, hi), n) in enumerate(zip(params.ranges, (A, B))):

@@ -19,6 +19,7 @@ import math
 import torch
 from torch import nn
 
+from nbrdf.neural.coat import coat_pdf, coat_probability, coat_sample
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.nets import MLP, MLPSpec
 
@@ -102,7 +103,6 @@ def coated_pdf(wi: Tensor, wo: Tensor, coat: Tensor | None, sigma: Tensor, w: Te
     p = proxy_pdf(wi, wo, sigma, w)
     if coat is None:
         return p
-    from nbrdf.neural.coat import coat_pdf, coat_probability
 
     pc = coat_probability(coat, wi)
     return pc * coat_pdf(coat, wi, wo) + (1 - pc) * p
@@ -114,7 +114,6 @@ def coated_sample(wi: Tensor, u: Tensor, coat: Tensor | None, sigma: Tensor, w: 
     uniform for the proxy's own choice; u[:, 1:] draw the direction."""
     if coat is None:
         return proxy_sample(wi, u, sigma, w)
-    from nbrdf.neural.coat import coat_probability, coat_sample
 
     pc = coat_probability(coat, wi)
     on_coat = u[:, 0] < pc

@@ -19,6 +19,7 @@ from typing import Any, Callable
 
 import torch
 
+from nbrdf.neural.coat import NO_COAT
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, MEDIUM
 from nbrdf.neural.material import FORMAT as FORMAT_MATERIAL
@@ -87,7 +88,6 @@ class Stack:
             return torch.stack([self.roughness[:, 0], self.ior[:, 0]], -1)
         if self.base == DIELECTRIC:
             return torch.stack([self.base_param("base_roughness"), self.base_param("base_ior")], -1)
-        from nbrdf.neural.coat import NO_COAT
 
         return torch.tensor(NO_COAT, dtype=self.roughness.dtype).expand(self.n, 2)
 
@@ -204,8 +204,6 @@ def params_coats(params: Tensor) -> Tensor:
     classes at once: the top interface's (roughness, ior), ``NO_COAT`` for a
     conductor (every other class stores its top interface, or the bare
     dielectric itself, in the top columns)."""
-    from nbrdf.neural.coat import NO_COAT
-
     params = torch.as_tensor(params)
     c = torch.stack([params[:, P["top_roughness"]], params[:, P["top_ior"]]], -1)
     bare = params[:, P["class"]].round().long() == CLASSES.index(CONDUCTOR)

@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -29,8 +30,6 @@ _LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)
 def read_texels(path: str | Path) -> np.ndarray:
     """An 8/16-bit or float image as float32 (H, W, k), row 0 = v 0 (the file's
     bottom row); integer texels scale to [0, 1]."""
-    import imageio.v3 as iio
-
     try:
         img = np.asarray(iio.imread(path))
     except Exception as e:  # noqa: BLE001 - any reader failure is a bad file

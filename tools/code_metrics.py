@@ -2,12 +2,13 @@
 
 Prints every function over ``--function`` lines, class over ``--class`` lines
 and module over ``--module`` lines (defaults: the project's targets, 100, 400
-and 600), then every import cycle between the package's modules, function-level
-imports included (imports under ``if TYPE_CHECKING:`` are not run, so they do
-not count). Exit status 1 when anything is over a limit or a cycle exists, so
-a check can call it; ``--report`` always exits 0.
+and 600), then every import cycle between the package's modules (function-level
+and ``if TYPE_CHECKING:`` imports included), then the import statements inside
+function bodies: at most ``--late-imports``, each with a comment saying why it
+is late. Exit status 1 when anything is over a limit, a cycle exists or a late
+import has no comment, so a check can call it; ``--report`` always exits 0.
 
-    python tools/code_metrics.py [--function 100] [--class 400] [--module 600] [--report]
+    python tools/code_metrics.py [--function 100] [--class 400] [--module 600] [--late-imports 150] [--report]
 """
 from __future__ import annotations
 
@@ -62,12 +63,13 @@ def _type_checking_nodes(tree: ast.AST) -> set[int]:
     return skip
 
 
-def imports(mods: dict[str, Path]) -> dict[str, set[str]]:
-    """Module -> the package modules it imports anywhere in its source."""
+def imports(mods: dict[str, Path], type_checking: bool = True) -> dict[str, set[str]]:
+    """Module -> the package modules it imports anywhere in its source; with ``type_checking`` the imports under
+    ``if TYPE_CHECKING:`` count too (a circle they hold is still a circle a reader must follow)."""
     graph: dict[str, set[str]] = {}
     for name, path in mods.items():
         tree = ast.parse(path.read_text(encoding="utf-8"))
-        skip = _type_checking_nodes(tree)
+        skip = set() if type_checking else _type_checking_nodes(tree)
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
         found = set()
         for node in ast.walk(tree):
@@ -84,6 +86,25 @@ def imports(mods: dict[str, Path]) -> dict[str, set[str]]:
                 found.update(f"{base}.{a.name}" for a in node.names)
         graph[name] = {m for m in found if m in mods and m != name}
     return graph
+
+
+def function_imports(mods: dict[str, Path]) -> list[tuple[str, int, str]]:
+    """(module, line, the line's comment or "") of every import statement inside a function body."""
+    out = []
+    for name, path in mods.items():
+        text = path.read_text(encoding="utf-8")
+        lines = text.splitlines()
+        seen: set[int] = set()
+        for fn in ast.walk(ast.parse(text)):
+            if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            for node in ast.walk(fn):
+                if isinstance(node, (ast.Import, ast.ImportFrom)) and id(node) not in seen:
+                    seen.add(id(node))
+                    span = lines[node.lineno - 1: node.end_lineno]  # type: ignore[misc]
+                    comment = next((s.split("#", 1)[1].strip() for s in span if "#" in s), "")
+                    out.append((name, node.lineno, comment))
+    return out
 
 
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -127,6 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--function", type=int, default=100, help="largest function, lines")
     ap.add_argument("--class", dest="klass", type=int, default=400, help="largest class, lines")
     ap.add_argument("--module", type=int, default=600, help="largest module, lines")
+    ap.add_argument("--late-imports", type=int, default=150, help="most import statements inside function bodies")
     ap.add_argument("--report", action="store_true", help="print only; exit 0 whatever is found")
     args = ap.parse_args(argv)
     mods = modules()
@@ -141,10 +163,16 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {n:5d}  {name}")
         over += len(big)
     found = cycles(imports(mods))
-    print(f"import cycles (function-level imports included): {len(found)}")
+    print(f"import cycles (function-level and TYPE_CHECKING imports included): {len(found)}")
     for comp in found:
         print("  " + " <-> ".join(comp))
-    return 0 if args.report or not (over or found) else 1
+    late = function_imports(mods)
+    bare = [(m, line) for m, line, comment in late if not comment]
+    print(f"imports inside function bodies: {len(late)} (limit {args.late_imports}), without a comment: {len(bare)}")
+    for m, line in bare:
+        print(f"  {m}:{line}")
+    bad = over or found or bare or len(late) > args.late_imports
+    return 0 if args.report or not bad else 1
 
 
 if __name__ == "__main__":

@@ -196,10 +196,6 @@ class BelcourTables:
         """Directional albedo of a Schlick GGX conductor; ``r0`` broadcasts (e.g. (N, 3) against (N, 1))."""
         return r0 * self._lookup2("A", mu, alpha) + (1 - r0) * self._lookup2("B", mu, alpha)
 
-    def ggx_albedo(self, mu: Tensor, alpha: Tensor) -> Tensor:
-        """Directional albedo of the GGX reflection lobe without Fresnel."""
-        return self._lookup2("A", mu, alpha)
-
 
 _TABLES: BelcourTables | None = None
 

@@ -12,6 +12,7 @@ from nbrdf.neural.material import parse_material
 from nbrdf.neural.metrics import noise_psnr
 from nbrdf.training.layered import SimStats, simulate
 from nbrdf.training.reference import converged_lobe, stack_params
+from nbrdf.training.walk_dispatch import threads, walk_device
 
 #: The standard stack of the benchmark (issue: ground truth).
 STANDARD_STACK = {
@@ -31,8 +32,6 @@ V2_NOISE_PSNR = 60.0
 
 
 def machine() -> dict:
-    from nbrdf.training.walk_dispatch import threads, walk_device
-
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     return {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
             "torch_threads": torch.get_num_threads(), "torch": torch.__version__, "walk": f"numba-{walk_device()}",

@@ -27,11 +27,20 @@ from typing import Callable
 import torch
 
 from nbrdf.neural.brdf import RGBBRDF, ExactRGB, Sample
+from nbrdf.neural.decoder import default_decoder
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured
-from nbrdf.neural.methods import METHODS
+from nbrdf.neural.methods import METHODS, Method
+from nbrdf.neural.neural_brdf import latent_brdf, neural_brdf
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
+from nbrdf.training.analytic_layering import analytic_layered_eval, check_analytic
+from nbrdf.training.belcour import atoms_of, belcour_eval_atoms
+from nbrdf.training.belcour_tables import default_tables
+from nbrdf.training.merl import MerlBRDF
+from nbrdf.training.project import fit, material_samples
+from nbrdf.training.reference import check_uniform, reference_eval, single_layer_eval
+from nbrdf.training.refine import refined_brdf
 
 Tensor = torch.Tensor
 
@@ -50,8 +59,6 @@ class ClosedFormBRDF(ExactRGB):
                      else Lambertian(1.0))
 
     def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
-        from nbrdf.training.reference import single_layer_eval
-
         return single_layer_eval(self.layer, wi, wo)
 
     def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
@@ -109,8 +116,6 @@ class ReferenceBRDF(_DefensivelySampled):
     ``spp`` paths per pair with ``seed``; every call draws the same paths."""
 
     def __init__(self, material: Material, spp: int = 256, seed: int = 0, dtype: torch.dtype = torch.float32):
-        from nbrdf.training.reference import check_uniform  # imports the compiled walk: only when needed
-
         check_uniform(material)
         if isinstance(material.base, LatentBase) and not material.interfaces:
             raise NbrdfError("layers[0]: a latent base has no reference; use --method neural")
@@ -120,8 +125,6 @@ class ReferenceBRDF(_DefensivelySampled):
     def eval_with_error(self, wi: Tensor, wo: Tensor,
                         progress: Callable[[int], None] | None = None) -> tuple[Tensor, Tensor]:
         """(f, standard error), both (N, 3); ``progress`` is told of finished pairs."""
-        from nbrdf.training.reference import reference_eval
-
         return reference_eval(self.material, wi, wo, spp=self.spp, seed=self.seed, dtype=self.dtype,
                               progress=progress)
 
@@ -133,8 +136,6 @@ class MeasuredBRDF(ExactRGB, _DefensivelySampled):
     """A MERL table (nearest cell), cosine and broad-GGX sampled."""
 
     def __init__(self, path):
-        from nbrdf.training.merl import MerlBRDF
-
         self.table = MerlBRDF.load(path)
         self.sampler = DefensiveSampler(1.0)
 
@@ -146,15 +147,11 @@ class AnalyticLayeredBRDF(ExactRGB, _DefensivelySampled):
     """The analytic layering baseline of a stack (float64 inside, float32 out)."""
 
     def __init__(self, material: Material):
-        from nbrdf.training.analytic_layering import check_analytic
-
         check_analytic(material)
         self.material = material
         self.sampler = DefensiveSampler(_top_roughness(material))
 
     def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
-        from nbrdf.training.analytic_layering import analytic_layered_eval
-
         return analytic_layered_eval(self.material, wi.double(), wo.double()).float()
 
 
@@ -162,23 +159,19 @@ class BelcourBRDF(ExactRGB, _DefensivelySampled):
     """Belcour 2018's layered model of a uniform stack (float64 inside, the input's dtype out)."""
 
     def __init__(self, material: Material):
-        from nbrdf.training.belcour import atoms_of
-        from nbrdf.training.belcour_tables import default_tables
-
         self.atoms = atoms_of(material)
         self.tables = default_tables()
         self.sampler = DefensiveSampler(_top_roughness(material))
 
     def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
-        from nbrdf.training.belcour import belcour_eval_atoms
-
         return belcour_eval_atoms(self.atoms, wi.double(), wo.double(), self.tables).to(wi.dtype)
 
 
-def brdf_for(material: Material, method: str, spp: int = 256, seed: int = 0, model=None,
+def brdf_for(material: Material, method: Method, spp: int = 256, seed: int = 0, model=None,
              projection_pairs: int = 2048, projection_spp: int = 64, budget: float | None = None) -> RGBBRDF:
-    """The material's BRDF by ``method`` (one of METHODS). ``spp`` and ``seed``
-    drive the Monte Carlo reference; ``seed`` also the projection's samples
+    """The material's BRDF by ``method`` (a ``Method`` member; the command
+    line parses its words into one). ``spp`` and ``seed`` drive the Monte
+    Carlo reference; ``seed`` also the projection's samples
     (``projection_pairs`` reference values of ``projection_spp`` paths each)
     and the refinement's; ``budget``: the refinement's seconds (None: its
     default); ``model`` is the neural bundle (default: the shipped one)."""
@@ -186,30 +179,22 @@ def brdf_for(material: Material, method: str, spp: int = 256, seed: int = 0, mod
         raise NbrdfError(f"unknown method {method!r} (one of {', '.join(METHODS)})")
     if spp < 1:
         raise NbrdfError(f"spp: {spp} must be at least 1")
-    if method == "reference":
-        return ReferenceBRDF(material, spp=spp, seed=seed)
-    if method == "neural":
-        from nbrdf.neural.neural_brdf import neural_brdf
-
-        return neural_brdf(material, model)
-    if method == "projected":
-        from nbrdf.neural.neural_brdf import latent_brdf
-        from nbrdf.training.project import fit, material_samples
-
-        dec = model.decoder if model is not None else None
-        if dec is None:
-            from nbrdf.neural.decoder import default_decoder
-
-            dec = default_decoder()
-        samples = material_samples(material, n=projection_pairs, spp=projection_spp, seed=seed)
-        return latent_brdf(dec, fit(dec, samples), material)
-    if method == "refined":
-        from nbrdf.training.refine import refined_brdf
-
-        return refined_brdf(material, model, budget=budget, seed=seed)
-    if method == "belcour":
-        return BelcourBRDF(material)
-    # analytic
+    match method:
+        case Method.REFERENCE:
+            return ReferenceBRDF(material, spp=spp, seed=seed)
+        case Method.NEURAL:
+            return neural_brdf(material, model)
+        case Method.PROJECTED:
+            dec = model.decoder if model is not None else None
+            if dec is None:
+                dec = default_decoder()
+            samples = material_samples(material, n=projection_pairs, spp=projection_spp, seed=seed)
+            return latent_brdf(dec, fit(dec, samples), material)
+        case Method.REFINED:
+            return refined_brdf(material, model, budget=budget, seed=seed)
+        case Method.BELCOUR:
+            return BelcourBRDF(material)
+    # Method.ANALYTIC
     if material.is_textured:
         raise NbrdfError(f"{material.textures()[0][0]}: texture-mapped; the analytic model needs uniform layers")
     if not material.interfaces:

@@ -19,13 +19,15 @@ import json
 import math
 import os
 import sys
-from dataclasses import asdict, dataclass, field
+from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 import torch
+from safetensors.numpy import load_file, save_file
+from tqdm import tqdm
 
+from nbrdf.neural.coat import coat_eval
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
 
@@ -41,6 +43,8 @@ from nbrdf.neural.stack import (  # noqa: F401
     params_to_material,
     params_to_stack,
 )
+from nbrdf.training.analytic import GGXConductor, GGXDielectric
+from nbrdf.training.distributed import run_shards
 from nbrdf.training.distributions import (  # noqa: F401
     clear_top_slabs,
     darken_top_slabs,
@@ -48,6 +52,8 @@ from nbrdf.training.distributions import (  # noqa: F401
     sample_params,
     sharpen_coats,
 )
+from nbrdf.training.layered import simulate
+from nbrdf.training.reference import MAX_LANES, simulator_params
 
 Tensor = torch.Tensor
 
@@ -166,16 +172,11 @@ def sample_pairs(n: int, g: torch.Generator, peak_fraction: float = 0.5) -> tupl
 def _stack_params(params: Tensor, pairs: int):
     """Simulator parameters for K single-channel stacks of one class, each
     repeated over its pairs (K * pairs rows)."""
-    from nbrdf.training.reference import simulator_params
-
     return simulator_params(params_to_stack(params).repeat_interleave(pairs))
 
 
 def tabulate(params: Tensor, wi: Tensor, wo: Tensor, spp: int, seed: int) -> tuple[Tensor, Tensor]:
     """Values and standard errors (K, n) of K BRDFs of one class at their pairs (K, n, 3)."""
-    from nbrdf.training.analytic import GGXConductor, GGXDielectric
-    from nbrdf.training.layered import simulate
-
     K, n = wi.shape[:2]
     cls = CLASSES[int(params[0, 0])]
     fi, fo = wi.reshape(-1, 3), wo.reshape(-1, 3)
@@ -184,8 +185,6 @@ def tabulate(params: Tensor, wi: Tensor, wo: Tensor, spp: int, seed: int) -> tup
         f = (GGXConductor(st.base_roughness, st.base_r0[:, 0]) if cls == "conductor"
              else GGXDielectric(st.base_roughness, st.base_ior)).eval(fi, fo)
         return f.reshape(K, n), torch.zeros(K, n, dtype=f.dtype)
-    from nbrdf.training.reference import MAX_LANES
-
     per_call = max(1, MAX_LANES // (n * spp))
     means, errs = [], []
     for s in range(0, K, per_call):
@@ -251,8 +250,6 @@ def _same_config(old: dict | None, new: dict) -> bool:
     """Whether a manifest's config equals ``new``; fields added to
     ``DataConfig`` since the manifest was written count at their defaults
     (they reproduce the old draws), so older data sets still resume."""
-    from dataclasses import MISSING, fields
-
     defaults = {f.name: f.default for f in fields(DataConfig) if f.default is not MISSING}
     return old is not None and json.loads(json.dumps({**defaults, **old})) == new
 
@@ -262,9 +259,6 @@ def generate(out: str | Path, cfg: DataConfig, preset: str = "custom", overwrite
     """Creates (or resumes) a data set in ``out``; returns the manifest path.
     ``ray``: None computes the shards here; "auto", "local" or a cluster
     address runs them as Ray tasks (``training.distributed``), same shards."""
-    from safetensors.numpy import save_file
-    from tqdm import tqdm
-
     out = Path(out)
     man_path = out / "manifest.json"
     shards = plan(cfg)
@@ -293,8 +287,6 @@ def generate(out: str | Path, cfg: DataConfig, preset: str = "custom", overwrite
             bar.update(s.count)
 
         if ray is not None:
-            from nbrdf.training.distributed import run_shards
-
             run_shards(make_shard, cfg, todo, ray, write)
         else:
             for s in todo:
@@ -322,8 +314,6 @@ def body_values(data: "BRDFSet") -> Tensor:
     """The values (K, n) without the top interface's closed-form reflection:
     what a coat-split decoder represents (the simulator adds that reflection
     analytically, so the difference carries no extra noise)."""
-    from nbrdf.neural.coat import coat_eval
-
     c = params_coats(data.params).to(data.f.dtype)[:, None, :]
     return (data.f - coat_eval(c, data.wi.to(data.f.dtype), data.wo.to(data.f.dtype))).clamp_min(0.0)
 
@@ -351,8 +341,6 @@ def load_manifest(folder: str | Path) -> dict:
 
 def load_split(folder: str | Path, split: str = "train") -> BRDFSet:
     """Reads every finished shard of a split (an unfinished data set is an error)."""
-    from safetensors.numpy import load_file
-
     folder = Path(folder)
     m = load_manifest(folder)
     parts: dict[str, list] = {k: [] for k in ("params", "wi", "wo", "f", "stderr")}
@@ -376,9 +364,3 @@ def load_split(folder: str | Path, split: str = "train") -> BRDFSet:
     classes = [CLASSES[int(c)] for c in cat["params"][:, 0]]
     return BRDFSet(classes=classes, **cat)
 
-
-def iter_classes(data: BRDFSet) -> Iterator[tuple[str, Tensor]]:
-    for cls in CLASSES:
-        idx = torch.tensor([i for i, c in enumerate(data.classes) if c == cls], dtype=torch.long)
-        if idx.numel():
-            yield cls, idx

@@ -47,7 +47,7 @@ def _reachable(address: str) -> None:
 def connect(address: str):
     """Initialises Ray for ``address`` (see the module doc) and returns the module."""
     try:
-        import ray
+        import ray  # optional: ray (the cluster extra)
     except ImportError:
         raise NbrdfError("--ray needs Ray: pip install 'nbrdf[cluster]'") from None
     if ray.is_initialized():
@@ -100,7 +100,7 @@ def run_shards(make_shard: Callable[[object, object], dict], cfg, shards: list, 
 def _make_shard_task(make_shard, cfg, shard):
     """One shard in a Ray worker: the walk on the one CPU Ray granted (the
     result does not depend on it)."""
-    import numba
+    import numba  # late: numba costs ~0.4 s; only a Ray worker sets its threads
 
     numba.set_num_threads(1)
     return make_shard(cfg, shard)

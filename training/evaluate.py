@@ -17,12 +17,23 @@ from typing import Callable
 
 import numpy as np
 import torch
+from safetensors.numpy import load_file, save_file
+from tqdm import tqdm
 
+from nbrdf.neural.geometry import cosine_hemisphere, incidence
+from nbrdf.neural.latent_texture import blend
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, MEDIUM
 from nbrdf.neural.material import FORMAT as MATERIAL_FORMAT
 from nbrdf.neural.material import Material, parse_material
-from nbrdf.neural.metrics import THETAS, albedo_error, directional_albedo, is_converged, lobe_psnr
+from nbrdf.neural.methods import Method
+from nbrdf.neural.metrics import THETAS, albedo_error, directional_albedo, is_converged, lobe_image, lobe_psnr
+from nbrdf.neural.neural_brdf import latent_brdf
 from nbrdf.training import distributions as D
+from nbrdf.training.analytic import GGXConductor
+from nbrdf.training.brdfs import brdf_for
+from nbrdf.training.plots import _plt, save_lobe_comparison, save_lobe_grid
+from nbrdf.training.project import Samples, fit, material_coat, material_samples
+from nbrdf.training.reference import converged_lobe, reference_eval
 
 Tensor = torch.Tensor
 HELDOUT_SEED = 20_221_122  # never a training seed
@@ -103,9 +114,6 @@ class Reference:
 def make_reference(material: Material, noise_target: float = 48.0, max_spp: int = 256, seed: int = 0) -> Reference:
     """Lobes are refined until their noise PSNR reaches ``noise_target`` (10 dB
     above the strictest target, 38 dB) or ``max_spp`` paths per pixel."""
-    from nbrdf.training.project import material_samples
-    from nbrdf.training.reference import converged_lobe, reference_eval
-
     lobes, ses, albs = [], [], []
     for k, th in enumerate(THETAS):
         img, se, _ = converged_lobe(material, th, target_noise_psnr=noise_target, start_spp=64, max_spp=max_spp,
@@ -126,9 +134,6 @@ def build_references(folder: str | Path, progress: bool = True, limit: int = 0, 
     ``items``, (class, material) pairs) in ``folder`` (the first ``limit``
     materials only, when given); ``noise_target`` and ``max_spp`` go to
     ``make_reference`` (60 dB needs a larger ``max_spp``)."""
-    from safetensors.numpy import load_file, save_file
-    from tqdm import tqdm
-
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     out = []
@@ -148,19 +153,15 @@ def build_references(folder: str | Path, progress: bool = True, limit: int = 0, 
 
 #: A method makes a material's value function from the material and its cached
 #: reference: the ``eval`` of an ``RGBBRDF`` (``training.brdfs.brdf_for``).
-Method = Callable[[Material, Reference], Callable[[Tensor, Tensor], Tensor]]
+MethodFn = Callable[[Material, Reference], Callable[[Tensor, Tensor], Tensor]]
 
 
-def score(refs: list[tuple[str, Material, Reference]], method: Method, progress: bool = True) -> dict:
+def score(refs: list[tuple[str, Material, Reference]], method: MethodFn, progress: bool = True) -> dict:
     """Per-material lobe PSNR (mean over the 4 incidences) and albedo error,
     summarised per class."""
-    from tqdm import tqdm
-
     rows = []
     for cls, m, r in tqdm(refs, desc="scoring", unit="material", file=sys.stderr, disable=not progress or None):
         fn = method(m, r)
-        from nbrdf.neural.metrics import lobe_image
-
         psnrs, errs, conv = [], [], []
         for k, th in enumerate(THETAS):
             img = lobe_image(fn, th)
@@ -192,10 +193,8 @@ def summarise(rows: list[dict]) -> dict:
     return out
 
 
-def projected_method(dec) -> Method:
+def projected_method(dec) -> MethodFn:
     """The decoder at latents fitted to the cached projection samples."""
-    from nbrdf.neural.neural_brdf import latent_brdf
-    from nbrdf.training.project import Samples, fit, material_coat
 
     def make(m: Material, r: Reference):
         z = fit(dec, Samples(torch.from_numpy(r.wi), torch.from_numpy(r.wo), torch.from_numpy(r.f),
@@ -205,13 +204,10 @@ def projected_method(dec) -> Method:
     return make
 
 
-def report_figures(refs: list[tuple[str, Material, Reference]], method: Method, result: dict, out: Path,
+def report_figures(refs: list[tuple[str, Material, Reference]], method: MethodFn, result: dict, out: Path,
                    per_class: int = 2) -> None:
     """Reference vs neural lobes (theta_i 30) with difference maps, a few per
     class, and PSNR histograms per class."""
-    from nbrdf.neural.metrics import lobe_image
-    from nbrdf.training.plots import _plt, save_lobe_comparison
-
     rows = []
     for cls in CLASS_COUNTS:
         picked = [(c, m, r) for c, m, r in refs if c == cls][:per_class]
@@ -236,21 +232,17 @@ def report_figures(refs: list[tuple[str, Material, Reference]], method: Method, 
 
 
 # --- the operations: the full neural path against its baselines ---------------------------
-def neural_method(model) -> Method:
+def neural_method(model) -> MethodFn:
     """Leaf encoders -> recursive layering -> decoder (nothing fitted)."""
-    from nbrdf.training.brdfs import brdf_for
-
-    return lambda m, r: brdf_for(m, "neural", model=model).eval
+    return lambda m, r: brdf_for(m, Method.NEURAL, model=model).eval
 
 
-def analytic_method() -> Method:
+def analytic_method() -> MethodFn:
     """The analytic layering baseline (``training.analytic_layering``)."""
-    from nbrdf.training.brdfs import brdf_for
-
-    return lambda m, r: brdf_for(m, "analytic").eval
+    return lambda m, r: brdf_for(m, Method.ANALYTIC).eval
 
 
-def comparison_table(results: dict[str, dict]) -> str:
+def comparison_table(results: dict[Method, dict]) -> str:
     """Markdown: one row per class, median / p10 PSNR and median albedo error per method."""
     methods = list(results)
     classes = list(dict.fromkeys(c for r in results.values() for c in r["summary"]))
@@ -267,6 +259,15 @@ def comparison_table(results: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
+def comparison_figure(refs: list[tuple[str, Material, Reference]], methods: dict[Method, MethodFn],
+                      path: Path) -> None:
+    """One row per material: its reference lobe (theta_i 30) and each method's; no rows, no figure."""
+    rows = [(m.name, [r.lobes[1]] + [lobe_image(fn(m, r), THETAS[1]) for fn in methods.values()])
+            for _c, m, r in refs]
+    if rows:
+        save_lobe_grid(rows, ["reference"] + list(methods), path)
+
+
 def glossy_stacks(refs: list[tuple[str, Material, Reference]], max_roughness: float = 0.1):
     """Held-out stacks whose top interface is glossy (roughness below ``max_roughness``)."""
     return [(c, m, r) for c, m, r in refs
@@ -278,10 +279,6 @@ def sampling_variance(model, material: Material, n: int = 8192, seed: int = 0) -
     BRDF (channel mean), averaged over the standard incidences, for its own
     sampler (the coat's visible normals mixed with the learned proxy, key
     "proxy"), cosine sampling, and sampling the top interface's GGX lobe."""
-    from nbrdf.neural.geometry import cosine_hemisphere, incidence
-    from nbrdf.neural.neural_brdf import latent_brdf
-    from nbrdf.training.analytic import GGXConductor
-
     z = model.material_latent(material)
     brdf = latent_brdf(model.decoder, z, material, model.sampler)
     top = float(material.interfaces[0][0].roughness) if material.interfaces else 0.3
@@ -310,10 +307,6 @@ def interpolation_figure(model, smooth: Material, rough: Material, path: Path, s
     + t z_b against the linear blend of the two BRDFs' values, for t from 0 to 1.
     Returns the lobe peak values per row (a latent blend moves the highlight's
     width; a value blend stacks two highlights)."""
-    from nbrdf.neural.latent_texture import blend
-    from nbrdf.neural.metrics import lobe_image
-    from nbrdf.training.plots import save_lobe_grid
-
     za, zb = model.material_latent(smooth), model.material_latent(rough)
     dec = model.decoder
     ts = [k / (steps - 1) for k in range(steps)]

@@ -27,11 +27,16 @@ statistics.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
+import numpy as np
 import torch
 
+from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import DIFFUSE, PARAMETRIC_BASES
+from nbrdf.training.analytic import GGXDielectric
+from nbrdf.training.walk import BLOCK
 
 Tensor = torch.Tensor
 
@@ -100,8 +105,6 @@ class SimStats:
 
 def _check(p: StackParams, wi: Tensor, wo: Tensor, spp: int) -> None:
     """One clear line (``NbrdfError``) for a stack or pair set that cannot be simulated."""
-    from nbrdf.neural.errors import NbrdfError
-
     if int(spp) < 1:
         raise NbrdfError(f"spp must be at least 1 (got {spp})")
     n = p.roughness.shape[0]
@@ -127,9 +130,8 @@ def _check(p: StackParams, wi: Tensor, wo: Tensor, spp: int) -> None:
 
 def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: int = 0, *,
              dtype: torch.dtype = torch.float32, rr_depth: int = 4, max_depth: int = 100_000,
-             include_top_reflection: bool = True, compile: bool | None = None,
-             stats: SimStats | None = None, error: str = "paths", forced_top_reflection: bool = True,
-             device: str | None = None) -> tuple[Tensor, Tensor]:
+             include_top_reflection: bool = True, stats: SimStats | None = None, error: str = "paths",
+             forced_top_reflection: bool = True, device: str | None = None) -> tuple[Tensor, Tensor]:
     """Mean and standard error of the stack's BRDF f(wi, wo) per pair.
 
     ``wi``, ``wo``: (N, 3) upper-hemisphere unit vectors; ``spp`` paths per
@@ -140,21 +142,15 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     paths (at least 8 blocks, else the per-path spread). Paths are
     independent, so both estimate the same quantity; neither can see a tail
     the paths missed (docs/RESULTS.md, "Ground truth v2"). ``forced_top_reflection=False`` restores v1's sampled exit at the
-    top (kept for the analysis and its test only). ``compile`` is accepted for
-    compatibility and ignored (the walk is compiled by Numba). ``device``:
+    top (kept for the analysis and its test only). ``device``:
     "cpu" or "cuda" (the same paths, up to rounding: ``training.walk_cuda``);
     None follows ``NBRDF_WALK_DEVICE`` (default auto: CUDA when present). Returns
     tensors (N, C) (or (N,) for single-channel input without a channel dim)
     in ``dtype``, computed in float64. Deterministic for a given seed and
     batch, whatever the number of threads. Raises ``NbrdfError`` (one line)
     on input that cannot be simulated."""
-    import time
+    from nbrdf.training.walk_dispatch import run_walk  # late: numba costs ~0.4 s; most importers never walk
 
-    import numpy as np
-
-    from nbrdf.training.walk_dispatch import run_walk
-
-    del compile
     t0 = time.perf_counter()
     p, squeeze = stack.normalized(torch.float64)
     wi = torch.as_tensor(wi).to(torch.float64)
@@ -184,8 +180,6 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     else:
         se = np.full_like(mean, np.inf)
     if include_top_reflection:
-        from nbrdf.training.analytic import GGXDielectric
-
         mean = mean + GGXDielectric(p.roughness[:, 0], p.ior[:, 0]).eval(wi, wo).numpy()[:, None]
     if stats is not None:
         stats.paths += N * spp
@@ -202,10 +196,6 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
 def _batch_error(blocks, spp: int, se_paths):
     """Standard error from the batch means of the full path blocks; the
     per-path error where there are fewer than 8 of them."""
-    import numpy as np
-
-    from nbrdf.training.walk import BLOCK
-
     nb = spp // BLOCK
     if nb < 8:
         return se_paths

@@ -9,10 +9,10 @@ import numpy as np
 
 
 def _plt():
-    import matplotlib
+    import matplotlib  # late: matplotlib costs ~0.5 s; only figures need it
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # late: after the Agg backend is chosen
 
     return plt
 

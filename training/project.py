@@ -16,11 +16,16 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from nbrdf.neural.coat import coat_eval
 from nbrdf.neural.decoder import Decoder, loss_target, predicted_target
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent import MaterialLatent
 from nbrdf.neural.material import Material, Measured
 from nbrdf.neural.projection import ProjectionConfig, project
+from nbrdf.neural.stack import material_stack, uniform_values
+from nbrdf.training.dataset import sample_pairs
+from nbrdf.training.merl import MerlBRDF
+from nbrdf.training.reference import reference_eval
 
 Tensor = torch.Tensor
 
@@ -44,8 +49,6 @@ class Samples:
 def material_coat(material: Material) -> Tensor | None:
     """The clear coat (2,) of a uniform material: its top interface, or
     None (a bare conductor, diffuse or measured base)."""
-    from nbrdf.neural.stack import material_stack, uniform_values
-
     if not material.interfaces:
         return None
     return material_stack(material, uniform_values, dtype=torch.float32).coat()[0]
@@ -53,9 +56,6 @@ def material_coat(material: Material) -> Tensor | None:
 
 def material_samples(material: Material, n: int = 2048, spp: int = 64, seed: int = 0) -> Samples:
     """Reference values of a material at n pairs drawn like the training data."""
-    from nbrdf.training.dataset import sample_pairs
-    from nbrdf.training.reference import reference_eval
-
     t0 = time.perf_counter()
     if isinstance(material.base, Measured) and not material.interfaces:
         return merl_samples(material.base.resolved, n, seed)
@@ -66,15 +66,14 @@ def material_samples(material: Material, n: int = 2048, spp: int = 64, seed: int
 
 
 def merl_samples(path: str | Path, n: int = 8192, seed: int = 0) -> Samples:
-    from nbrdf.training.merl import MerlBRDF
-
     t0 = time.perf_counter()
     wi, wo, f = MerlBRDF.load(path).samples(n, seed)
     return Samples(wi.float(), wo.float(), f.float(), time.perf_counter() - t0)
 
 
-def npy_samples(path: str | Path) -> Samples:
-    """An (N, 9) float .npy of wi.xyz, wo.xyz, f.rgb, or (N, 7) with one f for all channels."""
+def npy_samples(path: str | Path, coat: tuple[float, float] | None = None) -> Samples:
+    """An (N, 9) float .npy of wi.xyz, wo.xyz, f.rgb, or (N, 7) with one f for all channels; ``coat``: the
+    (roughness, ior) of a clear coat on top of the sampled BRDF, kept exact in the code (``neural.coat``)."""
     p = Path(path)
     if not p.is_file():
         raise NbrdfError(f"{path}: no such file")
@@ -95,7 +94,7 @@ def npy_samples(path: str | Path) -> Samples:
     f = t[:, 6:] if a.shape[1] == 9 else t[:, 6:7].expand(-1, 3)
     if (f < 0).any():
         raise NbrdfError(f"{path}: row {int((f < 0).any(1).nonzero()[0])} holds a negative BRDF value")
-    return Samples(t[:, :3], t[:, 3:6], f.contiguous())
+    return Samples(t[:, :3], t[:, 3:6], f.contiguous(), coat=None if coat is None else torch.tensor(coat))
 
 
 def fit(dec: Decoder, s: Samples, cfg: ProjectionConfig = ProjectionConfig()) -> Tensor:
@@ -109,8 +108,6 @@ def finetune(dec: Decoder, s: Samples, z: Tensor, steps: int = 300, lr: float = 
     measured BRDF (the shared decoder is left untouched)."""
     wi, wo, f = s.per_channel()
     if s.coat is not None and dec.spec.coat:  # the decoder holds the body alone
-        from nbrdf.neural.coat import coat_eval
-
         f = (f - coat_eval(s.coat, wi, wo)).clamp_min(0.0)
     feats, cos_o = dec.encode(wi, wo), wo[..., 2]
     target = loss_target(f, cos_o, dec.spec.loss_scale)

@@ -7,14 +7,18 @@ from __future__ import annotations
 
 from typing import Callable
 
+import numpy as np
 import torch
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.geometry import incidence, lobe_grid
 from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured, Medium
+from nbrdf.neural.metrics import noise_psnr
 from nbrdf.neural.stack import Stack, material_stack
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
 from nbrdf.training.layered import SimStats, StackParams, simulate
+from nbrdf.training.merl import MerlBRDF
 
 Tensor = torch.Tensor
 
@@ -91,8 +95,6 @@ def reference_eval(material: Material, wi: Tensor, wo: Tensor, spp: int = 256, s
         raise NbrdfError("a medium cannot be the base")
     if not material.interfaces:
         if isinstance(base, Measured):
-            from nbrdf.training.merl import MerlBRDF
-
             f = MerlBRDF.load(base.resolved).eval(wi, wo)
         elif isinstance(base, LatentBase):
             raise NbrdfError("layers[0]: a latent base has no reference; use --method neural")
@@ -121,11 +123,6 @@ def converged_lobe(material: Material, theta_i_deg: float, target_noise_psnr: fl
     """A reference lobe image refined until its own noise PSNR reaches the
     target. Returns (image, stderr image, total spp). Rounds double the paths
     and are pooled by their path counts."""
-    import numpy as np
-
-    from nbrdf.neural.geometry import incidence, lobe_grid
-    from nbrdf.neural.metrics import noise_psnr
-
     wo, mask = lobe_grid()
     d = wo[mask]
     wi = incidence(theta_i_deg).expand(d.shape[0], 3)

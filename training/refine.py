@@ -44,8 +44,15 @@ import torch
 from nbrdf.neural.coat import coat_eval, with_coat
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.files import write_atomic
+from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.material import Conductor, Dielectric, LatentBase, Material, Measured, material_to_dict
+from nbrdf.neural.microfacet import reflect, sample_vndf
+from nbrdf.neural.model import default_model
+from nbrdf.neural.neural_brdf import latent_brdf
 from nbrdf.neural.projection import ProjectionConfig, project
+from nbrdf.training.dataset import sample_pairs
+from nbrdf.training.reference import check_uniform, reference_eval
 
 Tensor = torch.Tensor
 
@@ -152,10 +159,6 @@ def placed_pairs(n: int, g: torch.Generator, roughness: float | None) -> tuple[T
     view), wi a third each from the body's GGX lobe around wo's mirror (half
     at ``roughness``, half at twice it), the cosine lobe and the training
     distribution (all of the lobe's share cosine for a diffuse body)."""
-    from nbrdf.neural.geometry import cosine_hemisphere
-    from nbrdf.neural.microfacet import reflect, sample_vndf
-    from nbrdf.training.dataset import sample_pairs
-
     out_i, out_o, have = [], [], 0
     while have < n:
         m = 2 * (n - have) + 16
@@ -182,8 +185,6 @@ def body_values(material: Material, wi: Tensor, wo: Tensor, spp: int, seed: int)
     """The reference (N, 3) of the light that entered the stack: the walk
     without the top interface's closed-form reflection (a single layer: its
     whole closed form, which the code decodes with no coat)."""
-    from nbrdf.training.reference import reference_eval
-
     return reference_eval(material, wi, wo, spp=spp, seed=seed, top_reflection=False)[0].float()
 
 
@@ -462,8 +463,6 @@ class Refiner:
 
 def check_refinable(material: Material) -> None:
     """One line for a material refinement cannot take (it needs a reference)."""
-    from nbrdf.training.reference import check_uniform
-
     check_uniform(material)
     if isinstance(material.base, LatentBase) and not material.interfaces:
         raise NbrdfError("layers[0]: a latent base has no reference to refine against; use --method neural")
@@ -521,8 +520,6 @@ def load_cached(material: Material, decoder_id: str) -> CachedCode | None:
 
 def save_cached(material: Material, decoder_id: str, st: RefineState, budget: float) -> None:
     """Writes a finished refinement (atomic; a failure to write only loses the cache entry)."""
-    from nbrdf.neural.files import write_atomic
-
     p = cache_path(material, decoder_id)
     doc = {"format": CACHE_FORMAT, "decoder": decoder_id, "material": material.name, "budget": budget,
            "converged": st.converged, "seconds": round(st.seconds, 3), "rounds": st.rounds,
@@ -557,12 +554,9 @@ def refined_code(dec: Decoder, material: Material, network_code: Tensor, cfg: Re
 
 
 def refined_brdf(material: Material, model=None, budget: float | None = None, seed: int = 0, cache: bool = True):
-    """``brdf_for(material, "refined")``: the decoder at the refined code plus
+    """``brdf_for(material, Method.REFINED)``: the decoder at the refined code plus
     its coat, sampled like the full neural path; ``.refinement`` tells how the
     code was made (a ``RefineState``, or the ``CachedCode`` it came from)."""
-    from nbrdf.neural.model import default_model
-    from nbrdf.neural.neural_brdf import latent_brdf
-
     cfg = RefineConfig(budget=DEFAULT_BUDGET if budget is None else float(budget), seed=seed)
     cfg.check()
     check_refinable(material)

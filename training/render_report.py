@@ -37,12 +37,20 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable
 
+import flip_evaluator
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Conductor, Material, load_material, material_to_dict
+from nbrdf.neural.methods import Method
 from nbrdf.neural.metrics import compressed_psnr, noise_psnr
+from nbrdf.neural.model import default_model, load_model
+from nbrdf.training.brdfs import brdf_for
+from nbrdf.training.evaluate import heldout_set
+from nbrdf.training.plots import _plt
+from nbrdf.training.reference import reference_eval
 
 Tensor = torch.Tensor
 EvalFn = Callable[[Tensor, Tensor], Tensor]  # (wi (N, 3), wo (N, 3)) local -> f (N, 3)
@@ -53,7 +61,8 @@ LIGHT = (-0.45, 0.55, 0.70)
 SETS_DIR = Path(__file__).resolve().parent / "sets"
 #: Bumped when a change makes cached reference renders stale.
 CACHE_VERSION = 1
-METHODS = ("neural", "projected", "refined", "belcour")
+#: The methods a render report scores (the reference is what they are scored against).
+METHODS = (Method.NEURAL, Method.PROJECTED, Method.REFINED, Method.BELCOUR)
 
 
 @dataclass
@@ -74,7 +83,7 @@ class RenderReportConfig:
     """Folder of cached reference renders (default: ``out / "references"``)."""
     model: str | None = None
     """Neural bundle (.safetensors); None = the shipped weights."""
-    methods: tuple[str, ...] = ("neural", "projected")
+    methods: tuple[Method, ...] = (Method.NEURAL, Method.PROJECTED)
     """Methods scored, from ``METHODS``."""
     heldout_per_class: int = 3
     """Held-out materials per class in the ``heldout`` set."""
@@ -161,8 +170,6 @@ def shade(fn: EvalFn, geo: SphereGeometry) -> np.ndarray:
 # --- scores -----------------------------------------------------------------------------
 def flip(reference: np.ndarray, test: np.ndarray) -> tuple[float, np.ndarray]:
     """HDR-FLIP with default settings on linear images: (mean over the image, error map (H, W))."""
-    import flip_evaluator
-
     ref = np.ascontiguousarray(np.maximum(reference, 0.0), dtype=np.float32)
     tst = np.ascontiguousarray(np.maximum(test, 0.0), dtype=np.float32)
     if not np.isfinite(tst).all():
@@ -188,8 +195,6 @@ def material_class(m: Material) -> str:
 def load_set(spec: str, heldout_per_class: int = 3) -> list[tuple[str, Material]]:
     """(class, material) pairs of a set name or a path (file or folder of JSONs)."""
     if spec == "heldout":
-        from nbrdf.training.evaluate import heldout_set
-
         out, seen = [], {}
         for cls, m in heldout_set():
             if seen.get(cls, 0) < heldout_per_class:
@@ -257,8 +262,6 @@ def reference_render(m: Material, geo: SphereGeometry, spp: int, seed: int = 0, 
 
 
 def _closed_round(m: Material, geo: SphereGeometry) -> tuple[ReferenceRender, dict]:
-    from nbrdf.training.reference import reference_eval
-
     t0 = time.perf_counter()
     f, _ = reference_eval(m, geo.wi.float(), geo.wo.float())
     img = to_image(f.double() * geo.wi[:, 2:3].clamp_min(0), geo)
@@ -268,10 +271,6 @@ def _closed_round(m: Material, geo: SphereGeometry) -> tuple[ReferenceRender, di
 def _mc_round(m: Material, geo: SphereGeometry, n: int, seed: int, prev: dict | None,
               progress: bool) -> tuple[ReferenceRender, dict]:
     """Adds n paths per pixel to each half (pooled with ``prev``'s halves by path count)."""
-    from tqdm import tqdm
-
-    from nbrdf.training.reference import reference_eval
-
     t0 = time.perf_counter()
     wi, wo = geo.wi.float(), geo.wo.float()
     cos_i = geo.wi[:, 2:3].clamp_min(0)
@@ -324,21 +323,19 @@ def _slug(name: str) -> str:
 
 
 # --- methods ------------------------------------------------------------------------------
-def method_evaluators(m: Material, model, methods: tuple[str, ...], pairs: int, spp: int,
+def method_evaluators(m: Material, model, methods: tuple[Method, ...], pairs: int, spp: int,
                       seed: int, budget: float | None = None) -> dict:
     """The BRDF of every method for one material, from the one BRDF factory
     (``training.brdfs.brdf_for``); the projection fits ``pairs`` reference
     values of ``spp`` paths under the material's own coat (``neural.coat``);
     the refinement spends ``budget`` seconds (or reads the per-user cache of refined codes)."""
-    from nbrdf.training.brdfs import brdf_for
-
     return {name: brdf_for(m, name, seed=seed + 1, model=model, projection_pairs=pairs, projection_spp=spp,
                            budget=budget)
             for name in METHODS if name in methods}
 
 
 # --- the report ---------------------------------------------------------------------------
-def summarise(rows: list[dict], methods: tuple[str, ...]) -> dict:
+def summarise(rows: list[dict], methods: tuple[Method, ...]) -> dict:
     """Median and worst FLIP / PSNR per class and over the whole set, per method."""
     classes = list(dict.fromkeys(r["class"] for r in rows)) + ["all"]
     out = {}
@@ -361,19 +358,15 @@ def summarise(rows: list[dict], methods: tuple[str, ...]) -> dict:
 def run_render_report(config: RenderReportConfig) -> dict:
     """Renders and scores every set; writes render.json and one figure per set
     into ``config.out``. Returns the JSON's content."""
-    from tqdm import tqdm
-
-    from nbrdf.neural.model import default_model, load_model
-
     unknown = [x for x in config.methods if x not in METHODS]
     if unknown:
         raise NbrdfError(f"methods: {unknown[0]!r} is not one of {', '.join(METHODS)}")
-    if "refined" in config.methods and not (math.isfinite(config.refine_budget) and config.refine_budget > 0):
+    if Method.REFINED in config.methods and not (math.isfinite(config.refine_budget) and config.refine_budget > 0):
         raise NbrdfError(f"budget: {config.refine_budget} seconds must be positive")
     if config.spp < 2:
         raise NbrdfError(f"spp: {config.spp} is too few (at least 2: two independent halves)")
     model = load_model(config.model) if config.model else default_model()
-    if "neural" in config.methods:
+    if Method.NEURAL in config.methods:
         model.require("leaf")
         model.require("layering")
     out = Path(config.out)
@@ -463,12 +456,10 @@ def display(img: np.ndarray) -> np.ndarray:
     return np.clip(x / (1.0 + x), 0, 1) ** (1 / 2.2)
 
 
-def save_render_figure(rows: list[dict], images: list[dict], methods: tuple[str, ...], path: Path,
+def save_render_figure(rows: list[dict], images: list[dict], methods: tuple[Method, ...], path: Path,
                        dpi: int = 60) -> None:
     """Rows: materials; columns: reference, each method, then each method's
     FLIP error map (magma, 0..1, with a colour bar)."""
-    from nbrdf.training.plots import _plt
-
     plt = _plt()
     meths = [m for m in methods if any(m in im for im in images)]
     cols = ["reference"] + meths + [f"flip_{m}" for m in meths]

@@ -22,11 +22,12 @@ import json
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
 import torch
+from tqdm import tqdm
 
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, encode, loss_target, predicted_target, unbiased_error
 from nbrdf.neural.errors import NbrdfError
@@ -40,6 +41,7 @@ from nbrdf.neural.stack import CLASSES, THREE_LAYERED, P, params_to_stack
 from nbrdf.training.analytic import GGXConductor, Lambertian
 from nbrdf.training.dataset import body_values, data_folders, load_manifest, load_split, sample_pairs
 from nbrdf.training.distributions import mixed_params, random_leaf_params  # noqa: F401 (random_leaf_params re-exported)
+from nbrdf.training.plots import save_curves
 
 Tensor = torch.Tensor
 
@@ -71,7 +73,7 @@ class OpsConfig:
     """layering: hidden units per layer of the layering network (0: the default, 256)"""
     depth: int = 0
     """layering: hidden layers of the layering network (0: the default, 3)"""
-    medium: str = "basic"
+    medium: str = field(default="basic", metadata={"choices": tuple(MEDIUM_SETS)})
     """layering: the slab features the network takes (``neural.layering.MEDIUM_SETS``): basic, or slab (adds the
     slab's closed-form diffuse transmittance 2 E3(sigma_t) and Kubelka-Munk reflectance and transmittance); a
     bundle network with fewer features is fine-tuned from its weights, the added inputs' weights starting at zero"""
@@ -137,8 +139,6 @@ def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], to
     average of their weights. ``scaled``: (parameter, index, k) entries whose
     Adam step is k times the others' (Adam's step is elementwise, so this is a
     learning rate of k lr on those entries alone)."""
-    from tqdm import tqdm
-
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
     params = [p for m in modules.values() for p in m.parameters()]
@@ -223,8 +223,6 @@ def _swap(params: list[Tensor], ema: list[Tensor]) -> None:
 
 
 def _finish(name: str, cfg: OpsConfig, model: NeuralModel, history: dict, extra: dict) -> Path:
-    from nbrdf.training.plots import save_curves
-
     out = Path(cfg.out)
     save_curves({"train": history["train"]}, out / f"{name}_curves.png", xlabel="step / 50")
     model.trained_on[name] = {"config": asdict(cfg), **extra}

@@ -20,11 +20,14 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import torch
+from safetensors.torch import save_file
+from tqdm import tqdm
 
 from nbrdf.neural.decoder import Decoder, DecoderSpec, encode, loss_target, predicted_target, save_decoder
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.projection import ProjectionConfig, project
 from nbrdf.training.dataset import CLASSES, BRDFSet, body_values, data_folders, load_manifest, load_split
+from nbrdf.training.plots import _plt
 
 Tensor = torch.Tensor
 
@@ -56,7 +59,7 @@ class TrainConfig:
     """epochs between validations (validation BRDFs projected with the decoder frozen)"""
     seed: int = 0
     """random seed of initialisation and batches"""
-    device: str = "auto"
+    device: str = field(default="auto", metadata={"choices": ("auto", "cpu", "cuda")})
     """auto (CUDA when available), cpu or cuda"""
 
 
@@ -117,8 +120,6 @@ def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None
     """Trains (or resumes) into ``cfg.out``; returns the decoder bundle path.
     ``stop_after`` ends this run after that many epochs (a time-boxed
     session); the next call resumes, and returns None until training ends."""
-    from tqdm import tqdm
-
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
     folders = data_folders(cfg.data)
@@ -216,8 +217,6 @@ def train(cfg: TrainConfig, progress: bool = True, stop_after: int | None = None
 
 
 def _save_val_curves(history: dict, path: Path) -> None:
-    from nbrdf.training.plots import _plt
-
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
     ep = range(1, len(history["train"]) + 1)
@@ -239,7 +238,5 @@ def _save_val_curves(history: dict, path: Path) -> None:
 
 
 def _save_latents(path: Path, latents: Tensor, params: Tensor, decoder_id: str) -> None:
-    from safetensors.torch import save_file
-
     save_file({"latents": latents.contiguous(), "params": params.contiguous()}, str(path),
               metadata={"format": "nbrdf-latent-table/1", "decoder_id": decoder_id})

@@ -6,14 +6,29 @@ from __future__ import annotations
 
 import math
 import os
+import statistics
 import time
 from dataclasses import replace
 from pathlib import Path
 
+import moderngl
 import numpy as np
 import torch
 
+from nbrdf.neural.body_table import TableSize
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, DecoderSpec, load_decoder
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import load_material
+from nbrdf.training.render_report import flip
+from nbrdf.viewer.gpu import shaders
+from nbrdf.viewer.gpu.body_table_gpu import BodyTables
+from nbrdf.viewer.gpu.gl import COMPUTE_VERSION, describe, half_float_extensions, offscreen_context
+from nbrdf.viewer.gpu.neural_gpu import ComputeDecoderPass, GpuDecoder, WeightStorage
+from nbrdf.viewer.gpu.noise import per_pixel_noise, render_seeds
+from nbrdf.viewer.gpu.pipeline import MaterialPipeline, gpu_brdf
+from nbrdf.viewer.gpu.renderer import Renderer
+from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
+from nbrdf.viewer.view_settings import ViewState
 
 
 def _time(fn, repeats: int) -> float:
@@ -107,10 +122,6 @@ def bench_render(size: tuple[int, int] = (1920, 1080), repeats: int = 3, torch_p
     extensions the context offers. The decoder paths and torch are timed in
     interleaved rounds (fair ratios on a shared machine). Never needs a display; the GPU's name picks
     its peak (``GPU_PEAK_GFMA``), software OpenGL the CPU's."""
-    from nbrdf.neural.errors import NbrdfError
-    from nbrdf.viewer.gpu.gl import COMPUTE_VERSION, describe, half_float_extensions, offscreen_context
-    from nbrdf.viewer.gpu.neural_gpu import GpuDecoder, WeightStorage
-
     try:
         chosen = [WeightStorage(x) for x in storages]
     except ValueError:
@@ -168,11 +179,6 @@ def _decoder_paths(ctx, gdec, dec, z, size: tuple[int, int], storages: list, rep
     path (the fragment shader, the compute shader per weight ``storages``, one
     and two pairs per invocation), and of the torch CPU decoder on its share of
     the pairs, timed in interleaved rounds: (path times, torch time, torch pairs)."""
-    import moderngl
-
-    from nbrdf.viewer.gpu import shaders
-    from nbrdf.viewer.gpu.neural_gpu import ComputeDecoderPass
-
     w, h = size
     n = w * h
     g = np.random.default_rng(0)
@@ -228,16 +234,11 @@ def _lit_frames(ctx, gdec, z, size: tuple[int, int], repeats: int, compute: bool
     ms per frame with one directional light and per environment pass (the default
     resampled estimator, the balance heuristic over three strategies and over
     two), the first frame's seconds, and the same per 1080p frame."""
-    from nbrdf.neural.material import load_material
-    from nbrdf.viewer.gpu.renderer import Renderer
-    from nbrdf.viewer.options import DEFAULT_MATERIAL
-    from nbrdf.viewer.view_settings import ViewState
-
     w, h = size
     mat = load_material(DEFAULT_MATERIAL)
     frame_ms: dict[str, dict] = {}
     for name, comp in (("compute", True), ("fragment", False)) if compute else (("fragment", False),):
-        r = Renderer(ctx, mat, neural=gdec, latent=z, compute=comp)
+        r = Renderer(ctx, gpu_brdf(ctx, mat, gdec, z), compute=comp)
         out: dict[str, object] = {}
         for key, state in (("one_light_ms", ViewState(env_on=False)),
                            ("env_pass_ms", ViewState(env_on=True, background=False))):
@@ -291,11 +292,7 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
       frame and of a full-resolution frame, all
       threads (llvmpipe's included): what a pass needs of the machine, whatever else runs on it;
     - the machine's load average (1 minute) before and after: other work on the machine slows every figure."""
-    import statistics
-
-    from nbrdf.viewer.gpu.noise import per_pixel_noise
-    from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
-    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.window.app import App  # late: the window (glfw, imgui: 0.3 s) only for bench app
 
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
@@ -325,7 +322,7 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
         _, _, vw, vh = app.viewport()
         r = ld.renderer
         body = ld.bodies.for_frame(ld.brdf, interactive=False)
-        state = replace(ld.main_state(), background=False)
+        state = replace(ld.state, background=False)
         r.quick = False
         noise = lambda spp: float(per_pixel_noise(*_seeds(r, state, vw, vh, spp, noise_renders, body)[:2]).mean())
         rel = noise(noise_spp)
@@ -414,8 +411,6 @@ def passes_to_target(noise, spp0: int, target: float, rounds: int = 4) -> tuple[
 def _seeds(renderer, state, vw: int, vh: int, spp: int, renders: int, brdf) -> tuple:
     """``noise.render_seeds`` with ``brdf`` as the renderer's default BRDF (the still view's
     table) and the sampling the window uses for it (render_seeds varies ``sampling``'s seed)."""
-    from nbrdf.viewer.gpu.noise import render_seeds
-
     old = renderer.brdf, renderer.sampling, renderer.table_sampling
     renderer.brdf = brdf
     if renderer.table_sampling is not None:
@@ -434,15 +429,6 @@ def bench_body_table(sizes: tuple[str, ...] = ("32x16x8", "48x24x12"), size: int
     rendered ``size`` x ``size`` with ``spp`` passes both ways, with the same random
     numbers (the difference is the table's alone), scored with HDR-FLIP; per table
     size the mean and worst FLIP and the median bake time (decoder pass and upload)."""
-    from nbrdf.neural.body_table import TableSize
-    from nbrdf.neural.material import load_material
-    from nbrdf.training.render_report import flip
-    from nbrdf.viewer.gpu.body_table_gpu import BodyTables
-    from nbrdf.viewer.gpu.gl import offscreen_context
-    from nbrdf.viewer.gpu.pipeline import MaterialPipeline
-    from nbrdf.viewer.gpu.renderer import Renderer
-    from nbrdf.viewer.view_settings import ViewState
-
     root = Path(materials) if materials else Path(__file__).resolve().parents[1] / "training" / "sets" / "lookdev"
     tables = [TableSize(*(int(x) for x in s.split("x"))) for s in sizes]
     ctx = offscreen_context()

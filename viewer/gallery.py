@@ -9,8 +9,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from PIL import Image, ImageDraw, ImageFont
+from tqdm import tqdm
 
+from nbrdf.imaging.env_presets import resolve_environment
+from nbrdf.imaging.image_io import check_output, tonemap, write_png8
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import load_material
+from nbrdf.viewer.gpu.backdrop import Backdrop
+from nbrdf.viewer.gpu.gl import offscreen_context
+from nbrdf.viewer.gpu.pipeline import MaterialPipeline
+from nbrdf.viewer.gpu.renderer import Renderer
+from nbrdf.viewer.modes import BrdfMode
+from nbrdf.viewer.options import ViewOptions
+from nbrdf.viewer.session.edits import presets
+from nbrdf.viewer.view_settings import ViewState
 
 
 @dataclass
@@ -31,8 +44,6 @@ class GalleryConfig:
 
 def _label(tile: np.ndarray, text: str) -> np.ndarray:
     """``text`` on a dark strip along the tile's bottom edge (Pillow's built-in font)."""
-    from PIL import Image, ImageDraw, ImageFont
-
     img = Image.fromarray(tile)
     draw = ImageDraw.Draw(img)
     try:
@@ -52,14 +63,6 @@ class TileRenderer:
     preset browser's thumbnails (viewer/thumbnails.py). Owns an EGL context's resources."""
 
     def __init__(self, ctx=None):
-        from nbrdf.imaging.env_presets import resolve_environment
-        from nbrdf.viewer.gpu.backdrop import Backdrop
-        from nbrdf.viewer.gpu.gl import offscreen_context
-        from nbrdf.viewer.gpu.pipeline import MaterialPipeline
-        from nbrdf.viewer.gpu.renderer import Renderer
-        from nbrdf.viewer.options import ViewOptions
-        from nbrdf.viewer.view_settings import ViewState
-
         self.opts = ViewOptions()
         self.ctx = ctx or offscreen_context()
         self.pipeline = MaterialPipeline(self.ctx)
@@ -69,9 +72,6 @@ class TileRenderer:
 
     def render(self, material, size: int, spp: int) -> np.ndarray:
         """The tone-mapped tile, uint8 (size, size, 3), row 0 on top."""
-        from nbrdf.imaging.image_io import tonemap
-        from nbrdf.viewer.modes import BrdfMode
-
         brdf = self.pipeline.build(material, BrdfMode.AUTO)
         img = self.backdrop.render_linear(self.state, (size, size), spp, brdf, self.opts.backdrop())
         return tonemap(img, self.opts.state.exposure, self.opts.state.tonemap.value)
@@ -83,12 +83,6 @@ class TileRenderer:
 
 def render_gallery(cfg: GalleryConfig) -> Path:
     """Renders the tiles (a progress bar per material) and writes the grid; returns its path."""
-    from tqdm import tqdm
-
-    from nbrdf.imaging.image_io import check_output
-    from nbrdf.neural.material import load_material
-    from nbrdf.viewer.session.lookdev import presets
-
     if cfg.tile < 16 or cfg.spp < 1 or cfg.columns < 1:
         raise NbrdfError("gallery: --tile >= 16, --spp >= 1 and --columns >= 1")
     out = Path(cfg.out)
@@ -106,8 +100,6 @@ def render_gallery(cfg: GalleryConfig) -> Path:
     for k, t in enumerate(tiles):
         r, c = divmod(k, cfg.columns)
         grid[r * cfg.tile:(r + 1) * cfg.tile, c * cfg.tile:(c + 1) * cfg.tile] = t
-    from nbrdf.imaging.image_io import write_png8
-
     out.parent.mkdir(parents=True, exist_ok=True)
     write_png8(out, grid)
     tiler.release()

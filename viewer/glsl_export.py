@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 from nbrdf.neural.gpu_pack import STORE_CONST, _glsl_float, latent_share, pack
+from nbrdf.neural.material_code import code_parts
 from nbrdf.viewer.gpu.shaders import MODE_DEFINES, source
 
 TEMPLATE = "export.glsl"
@@ -22,8 +23,6 @@ def _f(v: float) -> str:
 
 def export_glsl(model, code: torch.Tensor, name: str = "material") -> str:
     """GLSL text defining nbrdf_eval / nbrdf_sample / nbrdf_pdf for the code (3, 34)."""
-    from nbrdf.neural.material_code import code_parts
-
     (rough, ior), (sigma, w) = code_parts(model, code)
     packed = pack(model.decoder)
     share = latent_share(model.decoder, code)  # (width, 3)

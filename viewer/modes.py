@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.methods import CodedWordEnum as _Mode
+from nbrdf.neural.methods import Method, WordEnum
 
 
 class View(_Mode):
@@ -27,13 +28,21 @@ class CompareMode(_Mode):
     FLIP = "flip"       #: HDR-FLIP error map (magma) with its mean
 
 
-class BrdfMode(_Mode):
-    """Which BRDF the previewer shades with."""
-    AUTO = "auto"           #: neural for stacks, closed form for single interfaces
-    ANALYTIC = "analytic"   #: closed form (single interfaces; analytic layering for stacks)
-    NEURAL = "neural"       #: leaf encoders -> layering -> decoder
-    PROJECTED = "projected" #: a latent fitted to the reference
-    BELCOUR = "belcour"     #: Belcour 2018's analytic layered model (statistical operators)
+class BrdfMode(WordEnum):
+    """Which BRDF the previewer shades with (``--brdf``): the members of ``Method``
+    (neural/methods.py, the one list of methods) the GPU can draw, with their words,
+    plus ``AUTO``. ``method`` maps back; how each is shaded on the GPU is
+    ``BrdfKind`` (viewer/gpu/pipeline.py ``brdf_kind``)."""
+    AUTO = "auto"                       #: neural for stacks, closed form for single interfaces
+    ANALYTIC = Method.ANALYTIC.value    #: closed form (single interfaces; analytic layering for stacks)
+    NEURAL = Method.NEURAL.value        #: leaf encoders -> layering -> decoder
+    PROJECTED = Method.PROJECTED.value  #: a latent fitted to the reference
+    BELCOUR = Method.BELCOUR.value      #: Belcour 2018's analytic layered model (statistical operators)
+
+    @property
+    def method(self) -> Method | None:
+        """The ``Method`` this mode draws (None: ``AUTO``, which picks one per material)."""
+        return None if self is BrdfMode.AUTO else Method(self.value)
 
 
 #: The base layers the closed-form shader (shaders/analytic_brdf.glsl) evaluates: conductor (GGX, Schlick
@@ -47,7 +56,7 @@ def glsl_defines(*enums: type[_Mode]) -> str:
     lines = []
     for enum in enums:
         prefix = {"View": "VIEW", "CompareMode": "COMPARE", "ToneMap": "TONEMAP",
-                  "BrdfMode": "BRDF", "BaseKind": "BASE"}.get(enum.__name__, enum.__name__.upper())
+                  "BaseKind": "BASE"}.get(enum.__name__, enum.__name__.upper())
         lines += [f"#define {prefix}_{m.name} {m.code}" for m in enum]
     return "\n".join(lines) + "\n"
 

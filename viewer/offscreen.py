@@ -7,9 +7,13 @@ import os
 import sys
 from pathlib import Path
 
+from nbrdf.imaging.image_io import check_output, write_image
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.gpu.gl import check_target_size, offscreen_context
+from nbrdf.viewer.jobs.turntable import turntable_kind
 from nbrdf.viewer.modes import View
 from nbrdf.viewer.options import HEADLESS_OUT, ViewOptions
+from nbrdf.viewer.session.lookdev import LookDev
 
 PROG = "nbrdf-view"
 
@@ -26,11 +30,6 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
     preview: on software OpenGL at most 256 x 256 and 32 passes (the default
     32 take about 20 s on two cores with the compute lit pass and leave 0.93 %
     relative noise; full size costs minutes)."""
-    from nbrdf.imaging.image_io import check_output, write_image
-    from nbrdf.viewer.gpu.gl import check_target_size, offscreen_context
-    from nbrdf.viewer.jobs.turntable import turntable_kind
-    from nbrdf.viewer.session.lookdev import LookDev
-
     out = Path(opts.out or HEADLESS_OUT)
     if opts.turntable:
         turntable_kind(out)  # before minutes of rendering, not after
@@ -45,10 +44,10 @@ def render_offscreen(opts: ViewOptions, fallback: str | None = None) -> Path:
         for note in ld.notes + ([ld.brdf_note] if ld.brdf_note else []):
             print(f"{PROG}: {note}", file=sys.stderr)
         if opts.session:
-            if not ld.shots.write(out, opts.size, opts.spp):
+            if not ld.write_screenshot(out, opts.size, opts.spp):
                 raise NbrdfError(ld.error or f"{opts.session}: cannot render the session")
         elif opts.turntable:
-            ld.turntables.write(out, opts.turntable, opts.size, opts.spp)
+            ld.write_turntable(out, opts.turntable, opts.size, opts.spp)
         else:
             img = ld.render_linear(opts.size, opts.spp)
             if ld.state.view == View.LOBE and out.suffix.lower() == ".png":

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import Material
+from nbrdf.neural.material import load_material as read_material
 from nbrdf.viewer.modes import Background, BrdfMode, View
+from nbrdf.viewer.scene.gltf_import import MaterialGroup, imported_scene, material_groups
 from nbrdf.viewer.view_settings import ViewState, check_flags
 
 #: The material shown when none is given (varnished copper).
@@ -28,11 +30,6 @@ def parse_size(text: str) -> tuple[int, int]:
     if not (1 <= w <= 16384 and 1 <= h <= 16384):
         raise NbrdfError(f"--size: {w}x{h} is outside 1..16384 per side")
     return w, h
-
-
-if TYPE_CHECKING:
-    from nbrdf.neural.material import Material
-    from nbrdf.viewer.scene.gltf_import import MaterialGroup
 
 
 @dataclass
@@ -97,32 +94,28 @@ class ViewOptions:
 
     def backdrop(self):
         """The backdrop settings of these options (viewer/gpu/backdrop.py)."""
-        from nbrdf.viewer.gpu.backdrop import BackdropSettings
+        from nbrdf.viewer.gpu.backdrop import BackdropSettings  # late: moderngl is no part of the CLI's start-up
 
         return BackdropSettings(self.background, ground=self.ground)
 
-    def file_materials(self) -> "list[MaterialGroup] | None":
+    def file_materials(self) -> list[MaterialGroup] | None:
         """When no MATERIAL is given and --mesh is a glTF file: the file's materials
         (with their notes), one per draw range of the mesh, in its order; else None."""
         if self.material == DEFAULT_MATERIAL and Path(self.mesh).suffix.lower() in (".gltf", ".glb"):
-            from nbrdf.viewer.scene.gltf_import import imported_scene, material_groups
-
             return material_groups(imported_scene(self.mesh))
         return None
 
-    def load_material(self) -> "tuple[Material, list[str]]":
+    def load_material(self) -> tuple[Material, list[str]]:
         """The material to show first and one-line notes: the MATERIAL argument, or,
         when none was given and --mesh is a glTF file, the file's first material
         (the notes of all its materials, each named when there are several)."""
-        from nbrdf.neural.material import load_material
-
         groups = self.file_materials()
         if groups is not None:
             named = len(groups) > 1  # several materials: each note names its material
             notes = [f"{self.mesh}: {g.material.name + ': ' if named else ''}{note}"
                      for g in groups for note in g.notes]
             return groups[0].material, notes
-        return load_material(self.material), []
+        return read_material(self.material), []
 
     def check(self) -> "ViewOptions":
         """Raises ``NbrdfError`` (one line naming the flag) for values out of range."""

@@ -18,9 +18,12 @@ import tempfile
 from pathlib import Path
 from typing import Callable
 
+import imageio.v3 as iio
 import numpy as np
 
+from nbrdf.imaging.image_io import write_png8
 from nbrdf.neural.material import Material, material_to_dict
+from nbrdf.viewer.gallery import TileRenderer
 
 #: Bump when the look of the offscreen sphere changes (shading, environment,
 #: backdrop, tone mapping defaults): every cached thumbnail is then re-rendered.
@@ -73,8 +76,6 @@ class ThumbnailCache:
 
     def _draw(self, material: Material) -> np.ndarray:
         if self._render is None:
-            from nbrdf.viewer.gallery import TileRenderer
-
             self._tiler = TileRenderer()
             self._render = self._tiler.render
         self.rendered += 1
@@ -82,10 +83,6 @@ class ThumbnailCache:
 
     def get(self, material: Material) -> np.ndarray:
         """``material``'s thumbnail, uint8 (size, size, 3): read from the cache, or rendered once and stored."""
-        import imageio.v3 as iio
-
-        from nbrdf.imaging.image_io import write_png8
-
         p = self.path(material)
         if p.is_file():
             try:

@@ -14,6 +14,7 @@ from nbrdf.cli.view import build_parser, main, parse_args
 from nbrdf.imaging.image_io import read_exr
 from nbrdf.imaging.tonemap import ToneMap
 from nbrdf.neural.material import load_material
+from nbrdf.neural.methods import Method
 from nbrdf.viewer.modes import BrdfMode, View
 from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
 
@@ -81,7 +82,7 @@ def test_cli_brdf_belcour_lobe_is_the_python_model(tmp_path, capsys):
     assert main([str(car_paint), "--offscreen", "--view", "lobe", "--theta-i", "40", "--brdf", "belcour",
                  "--out", str(out)]) == 0
     assert capsys.readouterr().err == ""
-    f = brdf_for(load_material(car_paint), "belcour")
+    f = brdf_for(load_material(car_paint), Method.BELCOUR)
     ref = lobe_image(lambda wi, wo: f.eval(wi.float().double(), wo.float().double()).to(torch.float64), 40.0)
     img = np.load(out)
     assert ref.max() > 1.0
@@ -139,7 +140,7 @@ def test_cli_renders_a_session_file(gl_ctx, tmp_path, capsys):
         ld.state.view = "slice"
         ld.set_param(2, "roughness", 0.6)
         assert ld.save_session(tmp_path / "s.json")
-        assert ld.shots.write(tmp_path / "direct.png", (24, 16), 1)
+        assert ld.write_screenshot(tmp_path / "direct.png", (24, 16), 1)
     finally:
         ld.close()
     assert main(["--offscreen", "--session", str(tmp_path / "s.json"), "--size", "24x16", "--spp", "1",

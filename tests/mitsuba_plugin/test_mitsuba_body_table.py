@@ -22,15 +22,15 @@ def _eval(mi, bsdf, view, light) -> np.ndarray:
 def test_table_body_is_the_baked_table_lookup(mi, materials, role):
     """The Dr.Jit texture fetch reads the same nodes as ``neural.body_table.table_lookup``
     (node i at i / (n - 1); a half-texel offset would be off by percents at the lobe)."""
-    from nbrdf.mitsuba.bsdf import _body_table_size
     from nbrdf.mitsuba.kernel import TableBody
+    from nbrdf.mitsuba.materials import BODY_TABLE_SIZE
     from nbrdf.neural.body_table import bake_body, table_lookup
     from nbrdf.neural.material_code import load_code
 
     rng = np.random.default_rng(3)
     light, view = directions(rng, N), directions(rng, N)
     model, code = load_code(materials[role], None)
-    values = bake_body(model.decoder, code, _body_table_size())
+    values = bake_body(model.decoder, code, BODY_TABLE_SIZE)
     body = TableBody(values.numpy())
     got = np.stack([np.array(c) for c in body.body(mi.Vector3f(light.T), mi.Vector3f(view.T))], 1)
     want = table_lookup(values, torch.from_numpy(light), torch.from_numpy(view)).numpy()
@@ -39,7 +39,7 @@ def test_table_body_is_the_baked_table_lookup(mi, materials, role):
 
 @pytest.mark.parametrize("role", ["coated", "car_paint", "uncoated"])
 def test_table_eval_is_the_decoder_within_the_tables_error(mi, materials, role):
-    """Stated (``bsdf._body_table_size``): mean relative error 0.08-0.15 % over random pairs,
+    """Stated (``materials.BODY_TABLE_SIZE``): mean relative error 0.08-0.15 % over random pairs,
     99th percentile 0.8-1.5 %; bounds at 2x those. Below the horizon both are 0."""
     rng = np.random.default_rng(7)
     light, view = directions(rng, N), directions(rng, N)
@@ -83,7 +83,7 @@ def test_bad_body_option_is_one_line(mi, materials):
     last = str(e.value).strip().splitlines()[-1]
     assert last == "PluginError: nbrdf: body 'mlp' is not one of 'decoder', 'table'"
     # the plugin's own error class when built directly
-    from nbrdf.mitsuba.bsdf import code_kernel
+    from nbrdf.mitsuba.materials import code_kernel
 
     with pytest.raises(PluginError, match="body 'mlp'"):
         code_kernel(materials["coated"], body="mlp")
@@ -95,7 +95,7 @@ def test_a_texture_mapped_roughness_refuses_a_table(mi, tmp_path):
     import imageio.v3 as iio
 
     from nbrdf.mitsuba import PluginError
-    from nbrdf.mitsuba.bsdf import code_kernel
+    from nbrdf.mitsuba.materials import code_kernel
 
     iio.imwrite(tmp_path / "r.png", np.full((4, 4), 128, np.uint8))
     p = tmp_path / "m.json"

@@ -66,7 +66,7 @@ def _compare(mi, kernel, path, a: float, b: float, rng) -> np.ndarray:
 
 
 def test_param_table_at_nodes_is_the_neural_path(mi, globe):
-    """At grid nodes only the angular table's error is left (``bsdf._body_table_size``'s
+    """At grid nodes only the angular table's error is left (``materials.BODY_TABLE_SIZE``'s
     64 x 32 x 16 grade): measured with the shipped bundle (v8) mean 0.22-0.46 %, 99th percentile
     1.7-4.1 % (three nodes); bounds about twice that, mean 0.9 %, 99th percentile 8 %."""
     from nbrdf.mitsuba.param_table import GRID
@@ -135,7 +135,7 @@ def _png(path, rng, shape):
 ])
 def test_what_a_param_table_cannot_hold_is_one_line(mi, tmp_path, case, expect):
     from nbrdf.mitsuba import PluginError
-    from nbrdf.mitsuba.bsdf import code_kernel
+    from nbrdf.mitsuba.materials import code_kernel
 
     rng = np.random.default_rng(1)
     _png(tmp_path / "a.png", rng, (4, 6, 3))
@@ -162,23 +162,20 @@ def test_what_a_param_table_cannot_hold_is_one_line(mi, tmp_path, case, expect):
 def test_globe_scene_renders_symbolically_with_the_table(mi, tmp_path, monkeypatch):
     """``with_method(..., "table")`` gives the globe the parametric table; it renders
     without entering the wavefront mode, finite and lit."""
-    import nbrdf.mitsuba
-    import nbrdf.mitsuba.bsdf
     from nbrdf.mitsuba import render as render_mod
+    from nbrdf.mitsuba import wavefront_mode
     from nbrdf.mitsuba.scenes import load_scene, neural_bodies, with_method
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     entered = []
-    real = nbrdf.mitsuba.wavefront_mode
 
     def recording():
         entered.append(True)
-        return real()
+        return wavefront_mode()
 
-    monkeypatch.setattr(nbrdf.mitsuba, "wavefront_mode", recording)
     globe = with_method(load_scene("globe"), "neural", "table")
     assert neural_bodies(globe) == {"table"} and not render_mod.is_wavefront(globe)
-    res = render_mod.render(globe, (16, 12), 2, chunk_spp=1)
+    res = render_mod.render(globe, (16, 12), 2, chunk_spp=1, enter_wavefront=recording)
     assert entered == [] and np.isfinite(res.image).all() and res.image[4:10, 5:11].mean() > 0.02
 
 

@@ -113,9 +113,9 @@ def test_symbolic_render_of_the_neural_plugin_warns_once(mi, materials, capfd, m
     """On LLVM the decoder inside a symbolic call loads every weight with a
     gather (record 071): a plain ``mi.render`` still works, and Mitsuba's log
     says once to render in wavefront mode."""
-    from nbrdf.mitsuba import bsdf
+    from nbrdf.mitsuba.modes import SLOW_WARNING
 
-    monkeypatch.setattr(bsdf, "_warned_symbolic", False)
+    monkeypatch.setattr(SLOW_WARNING, "warned", False)
     scene = mi.load_dict({"type": "scene", "integrator": {"type": "path", "max_depth": 2},
                           "light": {"type": "constant", "radiance": 1.0},
                           "sphere": {"type": "sphere", "bsdf": {"type": "nbrdf", "material": materials["white_coat"]}},

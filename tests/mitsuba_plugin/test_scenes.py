@@ -2,6 +2,7 @@
 Utah teapot tessellated from its Bezier patches; bad scenes exit 2 with one line."""
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 
@@ -213,24 +214,26 @@ def test_scene_report_on_a_tiny_scene(tmp_path, body, mode):
     json.loads((tmp_path / "rep" / "scenes.json").read_text())
 
 
-@pytest.fixture
-def wavefront_entries(monkeypatch):
-    """A list that grows by one each time ``render`` enters Dr.Jit's wavefront mode."""
-    import contextlib
+class WavefrontRecorder:
+    """What ``render`` enters Dr.Jit's wavefront mode with (its ``enter_wavefront``):
+    the real mode, and ``entered`` grows by one each time."""
 
-    pytest.importorskip("mitsuba")
-    import nbrdf.mitsuba
-
-    entered = []
+    def __init__(self):
+        self.entered = []
 
     @contextlib.contextmanager
-    def recording():
-        entered.append(True)
-        with nbrdf.mitsuba.bsdf.wavefront_mode():
+    def __call__(self):
+        from nbrdf.mitsuba import wavefront_mode
+
+        self.entered.append(True)
+        with wavefront_mode():
             yield
 
-    monkeypatch.setattr(nbrdf.mitsuba, "wavefront_mode", recording)
-    return entered
+
+@pytest.fixture
+def wavefront_entries():
+    pytest.importorskip("mitsuba")
+    return WavefrontRecorder()
 
 
 def test_neural_scenes_render_in_wavefront_mode_on_llvm(tmp_path, wavefront_entries):
@@ -241,9 +244,9 @@ def test_neural_scenes_render_in_wavefront_mode_on_llvm(tmp_path, wavefront_entr
     from nbrdf.mitsuba.scenes import load_scene
 
     scene = load_scene(_tiny_scene(tmp_path / "s.json", GOLD))
-    res = render_mod.render(scene, (8, 6), 2, chunk_spp=1)
+    res = render_mod.render(scene, (8, 6), 2, chunk_spp=1, enter_wavefront=wavefront_entries)
     assert res.spp == 2 and np.isfinite(res.image).all()
-    assert len(wavefront_entries) == 2  # one per chunk
+    assert len(wavefront_entries.entered) == 2  # one per chunk
 
 
 def test_table_body_scenes_render_in_symbolic_mode(tmp_path, monkeypatch, wavefront_entries):
@@ -256,9 +259,9 @@ def test_table_body_scenes_render_in_symbolic_mode(tmp_path, monkeypatch, wavefr
     scene = load_scene(_tiny_scene(tmp_path / "s.json", GOLD))
     table = with_method(scene, "neural", "table")
     assert neural_bodies(table) == {"table"} and neural_bodies(with_method(scene, "neural")) == {"decoder"}
-    res = render_mod.render(table, (8, 6), 2, chunk_spp=1)
+    res = render_mod.render(table, (8, 6), 2, chunk_spp=1, enter_wavefront=wavefront_entries)
     assert res.spp == 2 and np.isfinite(res.image).all() and res.image.max() > 0
-    assert wavefront_entries == []
+    assert wavefront_entries.entered == []
     assert render_mod.is_wavefront(with_method(scene, "neural")) and render_mod.is_wavefront(with_method(scene, "reference"))
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     globe = with_method(load_scene("globe"), "neural", "table")  # a parametric table over its two albedo maps

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from nbrdf.neural.methods import Method
+
 HERE = Path(__file__).parent
 REFERENCES = HERE / "data" / "lookdev_lobes.npz"
 LOOKDEV = HERE.parent.parent / "training" / "sets" / "lookdev"
@@ -57,7 +59,7 @@ def neural_lobe(stack: str, theta: float, model=None) -> np.ndarray:
     """The lobe of ``model`` (default: the shipped bundle) for the stack."""
     from nbrdf.training.brdfs import brdf_for
 
-    return lobe(brdf_for(material(stack), "neural", model=model), theta)[0]
+    return lobe(brdf_for(material(stack), Method.NEURAL, model=model), theta)[0]
 
 
 #: The ways ``worse_bundle`` makes the shipped bundle worse.
@@ -100,7 +102,7 @@ def write() -> None:
 
     out = {}
     for k, (stack, theta) in enumerate((s, t) for s in STACKS for t in THETAS):
-        img, se = lobe(brdf_for(material(stack), "reference", spp=SPP, seed=1 + k), theta)
+        img, se = lobe(brdf_for(material(stack), Method.REFERENCE, spp=SPP, seed=1 + k), theta)
         out[key(stack, theta)] = img
         print(f"{key(stack, theta)}: noise PSNR {noise_psnr(img, se, disk_mask(SIZE)):.1f} dB")
     REFERENCES.parent.mkdir(exist_ok=True)

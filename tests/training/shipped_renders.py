@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from nbrdf.neural.methods import Method
+
 HERE = Path(__file__).parent
 REFERENCES = HERE / "data" / "shipped_renders.npz"
 LOOKDEV = HERE.parent.parent / "training" / "sets" / "lookdev"
@@ -63,7 +65,7 @@ def neural_render(m, geo, model=None) -> np.ndarray:
     from nbrdf.training.brdfs import brdf_for
     from nbrdf.training.render_report import shade
 
-    return shade(brdf_for(m, "neural", model=model).eval, geo)
+    return shade(brdf_for(m, Method.NEURAL, model=model).eval, geo)
 
 
 def flip(reference: np.ndarray, test: np.ndarray) -> float:

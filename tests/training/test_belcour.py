@@ -13,6 +13,7 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Dielectric, LatentBase, Material, Measured, parse_material
+from nbrdf.neural.methods import Method
 from nbrdf.neural.metrics import directional_albedo, lobe_image, lobe_psnr
 from nbrdf.training.analytic import GGXConductor
 from nbrdf.training.belcour import (
@@ -49,7 +50,7 @@ SINGLES = [
 def test_a_single_layer_is_its_closed_form(layer):
     m = material(layer)
     wi, wo = pairs()
-    got = brdf_for(m, "belcour").eval(wi, wo)
+    got = brdf_for(m, Method.BELCOUR).eval(wi, wo)
     want = ClosedFormBRDF(m.base).eval(wi, wo)
     assert torch.allclose(got, want.to(got.dtype), rtol=1e-6, atol=1e-9)
 
@@ -76,7 +77,7 @@ BRIGHT = {
 
 @pytest.mark.parametrize("name", BRIGHT)
 def test_directional_albedo_never_exceeds_one(name):
-    b = brdf_for(material(*BRIGHT[name]), "belcour")
+    b = brdf_for(material(*BRIGHT[name]), Method.BELCOUR)
     for th in (0.0, 30.0, 60.0, 75.0):
         a = directional_albedo(b.eval, th, n_theta=128, n_phi=128)
         assert bool((a <= 1.0 + 2e-3).all()), (th, a)  # 2e-3: the quadrature's own error on sharp lobes
@@ -92,7 +93,7 @@ def test_white_furnace_matches_the_stacks_own_losses():
     (measured: 0.932 / 0.930, 0.699 / 0.677)."""
     for rough, ref in ((0.1, (0.925, 0.923)), (0.3, (0.699, 0.678))):
         m = material({"type": "dielectric", "roughness": rough, "ior": 1.5}, {"type": "diffuse", "albedo": 1.0})
-        atoms_fn = brdf_for(m, "belcour").eval
+        atoms_fn = brdf_for(m, Method.BELCOUR).eval
         for th, want in zip((0.0, 60.0), ref):
             got = float(directional_albedo(atoms_fn, th, n_theta=256, n_phi=128)[0])
             assert abs(got - want) < 0.01, (rough, th, got, want)
@@ -157,8 +158,8 @@ STACKS = {
 @pytest.mark.parametrize("name", STACKS)
 def test_lobes_agree_with_the_monte_carlo_reference(name):
     m = material(*STACKS[name])
-    ref = brdf_for(m, "reference", spp=64, seed=1)
-    bel = brdf_for(m, "belcour")
+    ref = brdf_for(m, Method.REFERENCE, spp=64, seed=1)
+    bel = brdf_for(m, Method.BELCOUR)
     for th in (0.0, 60.0):
         p = lobe_psnr(lobe_image(bel.eval, th), lobe_image(ref.eval, th))
         assert p > PSNR_FLOOR, (name, th, p)
@@ -169,7 +170,7 @@ def test_uncovered_layers_are_one_clear_error(tmp_path):
     for base in (Measured("x.binary", Path("x.binary")), LatentBase("z.safetensors", Path("z.safetensors"))):
         m = Material("t", (coat, base))
         with pytest.raises(NbrdfError, match=f"layers\\[1\\]: a {base.type} base has no belcour model"):
-            brdf_for(m, "belcour")
+            brdf_for(m, Method.BELCOUR)
     import imageio.v3 as iio
 
     iio.imwrite(tmp_path / "r.png", np.full((2, 2), 128, dtype=np.uint8))
@@ -177,12 +178,12 @@ def test_uncovered_layers_are_one_clear_error(tmp_path):
         {"type": "dielectric", "roughness": {"texture": "r.png", "channel": "r", "range": [0.1, 0.5]}, "ior": 1.5},
         {"type": "diffuse", "albedo": 0.5}]}, tmp_path)
     with pytest.raises(NbrdfError, match="texture-mapped"):
-        brdf_for(textured, "belcour")
+        brdf_for(textured, Method.BELCOUR)
 
 
 def test_the_factory_gives_a_sampled_rgb_brdf():
     m = material(*STACKS["varnished copper"])
-    b = brdf_for(m, "belcour")
+    b = brdf_for(m, Method.BELCOUR)
     assert isinstance(b, BelcourBRDF)
     wi, wo = pairs(500)
     f, err = b.eval_with_error(wi.float(), wo.float())

@@ -13,6 +13,7 @@ from brdf_adapter import check_sampler
 from nbrdf.neural.brdf import RGBBRDF
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import parse_material
+from nbrdf.neural.methods import Method
 from nbrdf.training.brdfs import METHODS, ClosedFormBRDF, MeasuredBRDF, brdf_for
 from nbrdf.training.dataset import sample_pairs
 
@@ -36,35 +37,35 @@ SINGLES = {
 @pytest.mark.parametrize("name", SINGLES)
 @pytest.mark.parametrize("theta", [20.0, 70.0])
 def test_closed_form_samplers(name, theta):
-    b = brdf_for(SINGLES[name], "analytic")
+    b = brdf_for(SINGLES[name], Method.ANALYTIC)
     assert isinstance(b, ClosedFormBRDF) and isinstance(b, RGBBRDF)
     check_sampler(f"{name} closed form", b, theta, alpha=ALPHA)
 
 
 def test_analytic_layering_sampler():
-    check_sampler("analytic layering", brdf_for(STACK, "analytic"), 40.0, alpha=ALPHA)
+    check_sampler("analytic layering", brdf_for(STACK, Method.ANALYTIC), 40.0, alpha=ALPHA)
 
 
 def test_reference_sampler():
     """The Monte Carlo reference samples defensively (its values are estimates:
     the sample's f is one more estimate, so only the pdfs are compared)."""
-    b = brdf_for(STACK, "reference", spp=1, seed=3)
+    b = brdf_for(STACK, Method.REFERENCE, spp=1, seed=3)
     check_sampler("reference", b, 50.0, alpha=ALPHA, n_samples=100_000, dtype=torch.float32, check_values=False)
 
 
 def test_measured_sampler(tmp_path):
     from nbrdf.training.merl import MerlBRDF
 
-    MerlBRDF.tabulate(brdf_for(SINGLES["conductor"], "analytic").eval).save(tmp_path / "t.binary")
+    MerlBRDF.tabulate(brdf_for(SINGLES["conductor"], Method.ANALYTIC).eval).save(tmp_path / "t.binary")
     m = material({"type": "measured", "path": str(tmp_path / "t.binary")})
-    b = brdf_for(m, "analytic")
+    b = brdf_for(m, Method.ANALYTIC)
     assert isinstance(b, MeasuredBRDF)
     check_sampler("measured", b, 30.0, alpha=ALPHA)
-    assert torch.equal(brdf_for(m, "reference").eval(*_pairs(64)), b.eval(*_pairs(64)))
+    assert torch.equal(brdf_for(m, Method.REFERENCE).eval(*_pairs(64)), b.eval(*_pairs(64)))
 
 
 def test_neural_sampler():
-    check_sampler("neural", brdf_for(STACK, "neural"), 35.0, alpha=ALPHA, n_samples=200_000, dtype=torch.float32)
+    check_sampler("neural", brdf_for(STACK, Method.NEURAL), 35.0, alpha=ALPHA, n_samples=200_000, dtype=torch.float32)
 
 
 def test_single_channel_neural_sampler():
@@ -83,10 +84,10 @@ def test_reference_is_the_reference_eval_with_its_errors():
     from nbrdf.training.reference import reference_eval
 
     wi, wo = _pairs()
-    f, se = brdf_for(STACK, "reference", spp=32, seed=7).eval_with_error(wi, wo)
+    f, se = brdf_for(STACK, Method.REFERENCE, spp=32, seed=7).eval_with_error(wi, wo)
     f0, se0 = reference_eval(STACK, wi, wo, spp=32, seed=7)
     assert torch.equal(f, f0) and torch.equal(se, se0) and bool((se > 0).any())
-    f, se = brdf_for(SINGLES["conductor"], "reference", spp=4).eval_with_error(wi, wo)
+    f, se = brdf_for(SINGLES["conductor"], Method.REFERENCE, spp=4).eval_with_error(wi, wo)
     assert torch.equal(se, torch.zeros_like(f)) and bool((f > 0).any())  # exact: error 0, as nbrdf eval writes
 
 
@@ -97,12 +98,12 @@ def test_neural_and_projected_are_the_old_evaluators():
     wi, wo = _pairs()
     model = default_model()
     z = model.material_latent(STACK)
-    f, se = brdf_for(STACK, "neural").eval_with_error(wi, wo)
+    f, se = brdf_for(STACK, Method.NEURAL).eval_with_error(wi, wo)
     assert se is None
     assert torch.equal(f, model.decoder.eval_rgb(z, wi, wo).detach())
     single = SINGLES["conductor"]
     z1 = fit(model.decoder, material_samples(single, spp=64, seed=2))
-    assert torch.equal(brdf_for(single, "projected", seed=2).eval(wi, wo),
+    assert torch.equal(brdf_for(single, Method.PROJECTED, seed=2).eval(wi, wo),
                        model.decoder.eval_rgb(z1, wi.float(), wo.float()).detach())
 
 
@@ -111,17 +112,17 @@ def test_analytic_is_the_baseline():
     from nbrdf.training.reference import single_layer_eval
 
     wi, wo = _pairs()
-    assert torch.equal(brdf_for(STACK, "analytic").eval(wi, wo),
+    assert torch.equal(brdf_for(STACK, Method.ANALYTIC).eval(wi, wo),
                        analytic_layered_eval(STACK, wi.double(), wo.double()).float())
     for m in SINGLES.values():
-        assert torch.equal(brdf_for(m, "analytic").eval(wi, wo), single_layer_eval(m.base, wi, wo))
+        assert torch.equal(brdf_for(m, Method.ANALYTIC).eval(wi, wo), single_layer_eval(m.base, wi, wo))
 
 
 def test_bad_requests_are_one_line_errors(tmp_path):
     with pytest.raises(NbrdfError, match="unknown method 'magic'"):
         brdf_for(STACK, "magic")
     with pytest.raises(NbrdfError, match="spp: 0 must be at least 1"):
-        brdf_for(STACK, "reference", spp=0)
+        brdf_for(STACK, Method.REFERENCE, spp=0)
     import imageio.v3 as iio
     import numpy as np
 
@@ -129,7 +130,7 @@ def test_bad_requests_are_one_line_errors(tmp_path):
     textured = parse_material({"format": "nbrdf-material/1", "name": "t", "layers": [
         {"type": "conductor", "roughness": {"texture": "r.png", "channel": "r", "range": [0.1, 0.5]}, "r0": 0.9}]},
         tmp_path)
-    for method in ("reference", "analytic"):
+    for method in (Method.REFERENCE, Method.ANALYTIC):
         with pytest.raises(NbrdfError, match="texture-mapped"):
             brdf_for(textured, method)
     assert set(METHODS) == {"reference", "analytic", "neural", "projected", "refined", "belcour"}

@@ -10,6 +10,8 @@ from __future__ import annotations
 import pytest
 import shipped_renders as sr
 
+from nbrdf.neural.methods import Method
+
 #: HDR-FLIP ceilings: the largest FLIP measured over sample seeds 0-3 plus 0.01, rounded up to 1e-3 (measured
 #: seed 0 / largest: 0.0430 / 0.0458, 0.0402 / 0.0426, 0.0271 / 0.0294, 0.0311 / 0.0376, 0.0389 / 0.0403,
 #: 0.0357 / 0.0411, 0.0429 / 0.0429, 0.0388 / 0.0406, 0.0249 / 0.0249 in the order below; seed 0 on two torch
@@ -42,7 +44,7 @@ def projected(sphere_geometry, sphere_materials):
     from nbrdf.training.brdfs import brdf_for
     from nbrdf.training.render_report import shade
 
-    return {n: shade(brdf_for(sphere_materials[n], "projected", seed=0).eval, sphere_geometry) for n in sr.NAMES}
+    return {n: shade(brdf_for(sphere_materials[n], Method.PROJECTED, seed=0).eval, sphere_geometry) for n in sr.NAMES}
 
 
 def test_every_shipped_reference_has_a_ceiling():

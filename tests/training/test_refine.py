@@ -9,6 +9,7 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material, parse_material
+from nbrdf.neural.methods import Method
 from nbrdf.neural.model import default_model
 from nbrdf.training import refine as R
 from nbrdf.training.brdfs import brdf_for
@@ -47,15 +48,15 @@ def test_a_cached_code_is_used_at_once(cache, model, monkeypatch):
         raise AssertionError("refined again despite a cached code")
 
     monkeypatch.setattr(R.Refiner, "run", no_refinement)
-    b = brdf_for(m, "refined", model=model)  # default budget 10 s: served by the 10 s entry
+    b = brdf_for(m, Method.REFINED, model=model)  # default budget 10 s: served by the 10 s entry
     assert torch.equal(b.z, marked)
     assert isinstance(b.refinement, R.CachedCode)
     # The name is not content: a renamed copy hits the same entry.
     renamed = parse_material({**_doc(m), "name": "another name"}, m.base_dir)
-    assert torch.equal(brdf_for(renamed, "refined", model=model).z, marked)
+    assert torch.equal(brdf_for(renamed, Method.REFINED, model=model).z, marked)
     # A longer budget than the entry had (and it did not converge) refines again.
     with pytest.raises(AssertionError, match="refined again"):
-        brdf_for(m, "refined", model=model, budget=20.0)
+        brdf_for(m, Method.REFINED, model=model, budget=20.0)
 
 
 def test_a_damaged_cache_file_is_ignored(cache, model, monkeypatch):
@@ -95,8 +96,8 @@ def test_a_lone_dielectric_is_its_coat_and_is_kept_exact(cache, model, monkeypat
     assert torch.equal(code, z) and st.done and st.rounds == 0 and not st.improved
     wi = torch.nn.functional.normalize(torch.tensor([[0.3, 0.1, 0.9], [0.5, -0.2, 0.6]]), dim=-1)
     wo = torch.nn.functional.normalize(torch.tensor([[-0.3, -0.1, 0.9], [0.1, 0.4, 0.8]]), dim=-1)
-    refined = brdf_for(m, "refined", model=model, budget=5.0).eval(wi, wo)
-    assert torch.allclose(refined, brdf_for(m, "neural", model=model).eval(wi, wo))
+    refined = brdf_for(m, Method.REFINED, model=model, budget=5.0).eval(wi, wo)
+    assert torch.allclose(refined, brdf_for(m, Method.NEURAL, model=model).eval(wi, wo))
     # a conductor alone has no coat: it is refined as a body
     au = parse_material({"format": "nbrdf-material/1", "name": "au",
                          "layers": [{"type": "conductor", "roughness": 0.3, "r0": [1.0, 0.8, 0.3]}]})
@@ -117,7 +118,7 @@ def test_bad_requests_are_one_line_errors(model):
     with pytest.raises(NbrdfError, match="--budget"):
         R.RefineConfig(budget=float("nan")).check()
     with pytest.raises(NbrdfError, match="--budget"):
-        brdf_for(gold(), "refined", model=model, budget=-1.0)
+        brdf_for(gold(), Method.REFINED, model=model, budget=-1.0)
     with pytest.raises(NbrdfError, match="floats per channel"):
         R.Refiner(model.decoder, gold(), torch.zeros(3, 5), TINY)
 

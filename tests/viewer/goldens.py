@@ -109,7 +109,7 @@ def render_session(ctx) -> np.ndarray:
     try:
         if not ld.open_session(SESSION_V1):
             raise RuntimeError(ld.error)
-        return ld.renderer.render_linear(ld.main_state(), SESSION_SIZE, SESSION_SPP, ld.brdf).astype(np.float32)
+        return ld.renderer.render_linear(ld.state, SESSION_SIZE, SESSION_SPP, ld.brdf).astype(np.float32)
     finally:
         ld.close()
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from gpu_brdfs import closed_form
 
 from nbrdf.neural.material import parse_material
 from nbrdf.neural.metrics import lobe_image
@@ -29,7 +30,7 @@ STACKS = {
 @pytest.mark.parametrize("theta", [0.0, 45.0, 75.0])
 def test_glsl_layering_equals_the_python_baseline(gl_ctx, name, theta):
     m = parse_material({"format": "nbrdf-material/1", "name": name, "layers": STACKS[name]})
-    img = Renderer(gl_ctx, m).render_linear(ViewState(view="lobe", theta_i=theta))
+    img = Renderer(gl_ctx, closed_form(gl_ctx, m)).render_linear(ViewState(view="lobe", theta_i=theta))
     ref = lobe_image(lambda wi, wo: analytic_layered_eval(m, wi.double(), wo.double()), theta)
     assert img.shape == (64, 64, 3) and ref.max() > 0
     # float32 GLSL against float64 torch; a different model (e.g. a medium

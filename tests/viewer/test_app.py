@@ -18,6 +18,7 @@ import torch
 from nbrdf.imaging.image_io import tonemap
 from nbrdf.neural.material import parse_material
 from nbrdf.neural.model import default_model
+from nbrdf.viewer.gpu.pipeline import gpu_brdf
 from nbrdf.viewer.options import DEFAULT_MATERIAL
 
 pytestmark = pytest.mark.gl
@@ -65,8 +66,9 @@ SCRIPT = textwrap.dedent("""
         out["doc_after_bad"] = ld.editor.doc
         app.step()
         # Screenshots.
-        out["shots"] = [ld.shots.write(tmp / "shot.png", (64, 48), 2), ld.shots.write(tmp / "shot.exr", (32, 24), 2),
-                        ld.shots.write(tmp / "shot.bmp", (8, 8), 1), ld.error]
+        out["shots"] = [ld.write_screenshot(tmp / "shot.png", (64, 48), 2),
+                        ld.write_screenshot(tmp / "shot.exr", (32, 24), 2),
+                        ld.write_screenshot(tmp / "shot.bmp", (8, 8), 1), ld.error]
         # Every panel and mode draws: compare modes, views, interpolation, a textured preset.
         app.panels.visible = app.panels.expand_all = True
         for view, mode in (("lobe", "side"), ("slice", "error"), ("object", "wipe"), ("lobe", "flip")):
@@ -121,7 +123,7 @@ def test_slider_changes_latents_and_pixels_as_offscreen(session_run, gl_ctx):
     z = model.material_latent(m)
     np.testing.assert_allclose(f["zb"], z.numpy(), atol=1e-5)
     opts = ViewOptions()  # the window's defaults: studio environment, backdrop, tone mapper
-    r = Renderer(gl_ctx, m, neural=GpuDecoder(gl_ctx, model.decoder), latent=z, proxy=model.proxy(z),
+    r = Renderer(gl_ctx, gpu_brdf(gl_ctx, m, GpuDecoder(gl_ctx, model.decoder), z, model.proxy(z)),
                  environment=resolve_environment(opts.env))
     img = Backdrop(gl_ctx, r).render_linear(ViewState(), (64, 48), 2, r.brdf, opts.backdrop())
     expected = tonemap(img, opts.state.exposure, opts.state.tonemap.value).astype(int)

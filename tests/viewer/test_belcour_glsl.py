@@ -141,7 +141,7 @@ def test_lit_sphere_is_the_python_model_at_its_pixels(gl_ctx):
         assert ld.brdf.kind == BrdfKind.BELCOUR and ld.brdf_note == ""
         assert ld.update_state(env_on=False)
         img = ld.render_linear((40, 32), 1)
-        state = ld.main_state()
+        state = ld.state
         wi, wo, mask = ld.renderer.gbuffer(state, (40, 32))
     finally:
         ld.close()

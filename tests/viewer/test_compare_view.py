@@ -99,7 +99,7 @@ def test_flip_view_shows_the_hdr_flip_of_neural_against_reference(gl_ctx):
         fbo = gl_ctx.simple_framebuffer(size, components=4)
         ld.render(fbo, size, passes)
         shown = np.frombuffer(fbo.read(components=3), np.uint8).reshape(size[1], size[0], 3)[::-1]
-        state = replace(ld.main_state(), background=False)  # the error views score the object alone
+        state = replace(ld.state, background=False)  # the error views score the object alone
         neural = ld.renderer.render_linear(state, size, passes, ld.brdf)
         reference = ld.renderer.render_linear(state, size, passes, ld.ref_brdf)
         mean, fmap = flip(reference, neural)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from gpu_brdfs import closed_form
 from stattools import chi2_sphere
 
 from nbrdf.imaging.environment import EnvironmentMap, GpuEnvironment, default_environment
@@ -66,7 +67,7 @@ def test_white_furnace(gl_ctx):
     from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 
     m = parse_material({"format": "nbrdf-material/1", "name": "white", "layers": [{"type": "diffuse", "albedo": 1.0}]})
-    r = Renderer(gl_ctx, m, environment=np.ones((16, 32, 3), np.float32))
+    r = Renderer(gl_ctx, closed_form(gl_ctx, m), environment=np.ones((16, 32, 3), np.float32))
     state = ViewState(light_radiance=0.0, env_intensity=1.0)
     img = r.render_linear(state, (48, 48), spp=32)
     inside = img.sum(-1) > 0

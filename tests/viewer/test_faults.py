@@ -14,6 +14,7 @@ import time
 import numpy as np
 import pytest
 import torch
+from gpu_brdfs import closed_form
 
 from nbrdf.neural.material import load_material
 from nbrdf.viewer.options import DEFAULT_MATERIAL
@@ -86,7 +87,7 @@ def test_the_compare_status_line_reports_the_restart(gl_ctx):
     from nbrdf.viewer.reference.compare import Compare
 
     m = load_material(DEFAULT_MATERIAL)
-    c = Compare(gl_ctx, Renderer(gl_ctx, m))
+    c = Compare(gl_ctx, Renderer(gl_ctx, closed_form(gl_ctx, m)))
     try:
         c.worker.request(small_job("k", 10**6))
         c._job = "k"
@@ -118,12 +119,12 @@ WINDOW = textwrap.dedent("""
     try:
         app.step()
         out["saved"] = [ld.save_material(good / "m.json"), ld.save_session(good / "s.json"),
-                        ld.shots.write(good / "shot.png", (16, 16), 1)]
+                        ld.write_screenshot(good / "shot.png", (16, 16), 1)]
         ld.set_param(len(ld.material.layers) - 1, "roughness", 0.61)
         out["bad"] = []
         for call in (lambda: ld.save_material(bad / "m.json"), lambda: ld.save_session(bad / "s.json"),
-                     lambda: ld.shots.write(bad / "shot.png", (16, 16), 1),
-                     lambda: ld.shots.write(bad / "shot.exr", (16, 16), 1)):
+                     lambda: ld.write_screenshot(bad / "shot.png", (16, 16), 1),
+                     lambda: ld.write_screenshot(bad / "shot.exr", (16, 16), 1)):
             out["bad"].append([call(), ld.error])
         out["roughness_after"] = ld.material.layers[-1].roughness
         # the Monte Carlo worker killed while the window runs a compare view of a stack

@@ -175,12 +175,12 @@ TURNTABLE_SCRIPT = textwrap.dedent("""
     out = {}
     try:
         out["materials"] = [p.material.name for p in ld.parts]
-        out["started"] = ld.turntables.start(tmp / "turn_%02d.npy", 3, (24, 24), 2)
-        out["bad"] = [ld.turntables.start(tmp / "turn.bmp", 3, (24, 24), 2), ld.error]
+        out["started"] = ld.start_turntable(tmp / "turn_%02d.npy", 3, (24, 24), 2)
+        out["bad"] = [ld.start_turntable(tmp / "turn.bmp", 3, (24, 24), 2), ld.error]
         progress, end = [], time.monotonic() + 400
         while time.monotonic() < end:  # the window's frame loop renders one turntable frame per displayed frame
             app.step()
-            progress.append(ld.turntables.progress)
+            progress.append(ld.turntable_progress)
             if progress[-1] is None:
                 break
             time.sleep(0.02)  # (the first frames wait for the car paint's latent texture)

@@ -6,6 +6,9 @@ exactly the new code's own accumulation. Edits, compare views and view changes
 still start over."""
 from __future__ import annotations
 
+import ast
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -48,8 +51,7 @@ def diff(a: np.ndarray, b: np.ndarray) -> float:
 
 def swap_in(ld, spec: dict) -> None:
     """What the idle refinement does with a better code: a new BRDF for the same material, handed over."""
-    ld.brdf = ld.pipeline.build(parse_material(spec), BrdfMode.NEURAL)
-    ld.frames.handover()
+    ld.swap_brdf(ld.pipeline.build(parse_material(spec), BrdfMode.NEURAL))
 
 
 def test_the_still_image_fades_into_the_new_codes_and_ends_as_its_own_accumulation(session):
@@ -108,3 +110,47 @@ def test_compare_and_lobe_views_start_over(session, view):
     shown(ld, fbo, 4)
     swap_in(ld, GOLD)
     assert not ld.frames.fading and ld.passes == 0
+
+
+# ------------------------------------------------------------ a frame updates first, then renders
+def test_a_refined_code_is_collected_by_update_never_by_a_render(session):
+    """The idle refinement's code reaches the view in ``LookDev.update`` (the window's frame calls it
+    before rendering); a render draws the session as it is and never calls back into it."""
+    ld, fbo = session
+    gold = ld.pipeline.build(parse_material(GOLD), BrdfMode.NEURAL).latent
+    ld.idle_refine.poll = lambda: gold  # a round that beat the network's (the refiner's one seam the session asks)
+    before = ld.brdf
+    shown(ld, fbo, 4)
+    assert ld.brdf is before and ld.passes == 4 and not ld.frames.fading
+    ld.update()
+    assert ld.brdf is not before and ld.frames.fading and ld.passes == 0  # handed over, not restarted
+
+
+def test_renders_screenshots_and_turntables_never_update_the_session(session, tmp_path):
+    ld, fbo = session
+
+    def no_update():
+        raise AssertionError("a render called back into the session")
+
+    ld.update = no_update
+    shown(ld, fbo, 2)
+    assert ld.write_screenshot(tmp_path / "a.png", SIZE, 1), ld.error
+    assert ld.start_screenshot(tmp_path / "b.png", SIZE, 2), ld.error
+    while ld.screenshot_progress is not None:
+        ld.step_screenshot()
+    assert ld.error is None and (tmp_path / "b.png").is_file()
+    ld.write_turntable(tmp_path / "t_%02d.npy", 2, (8, 8), 1)
+    assert sorted(p.name for p in tmp_path.glob("t_*.npy")) == ["t_00.npy", "t_01.npy"]
+
+
+def test_the_jobs_never_import_the_session():
+    """viewer/jobs/ take the frame's description, the renderer and the targets (viewer/jobs/frame.py), not
+    the session: no module there imports viewer/session/, not even for type checking."""
+    jobs = Path(__file__).resolve().parents[2] / "viewer" / "jobs"
+    wrong = []
+    for path in sorted(jobs.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            wrong += [f"{path.name}: {n}" for n in names if n.startswith("nbrdf.viewer.session")]
+    assert not wrong, wrong

@@ -25,7 +25,7 @@ def ld(gl_ctx):
 
 def test_every_kind_of_edit_undoes_and_redoes(ld):
     base = ld.snapshot()
-    edits = [lambda: ld.set_param(2, "roughness", 0.6), lambda: ld.edit("add_coat"),
+    edits = [lambda: ld.set_param(2, "roughness", 0.6), lambda: ld.add_coat(),
              lambda: ld.update_state(exposure=1.5), lambda: ld.set_backdrop(ground=False),
              lambda: ld.set_environment("sky"), lambda: ld.set_compare("wipe"), lambda: ld.set_wipe(0.3),
              lambda: ld.set_fov(50.0), lambda: ld.set_view("lobe"), lambda: ld.load_preset("rough_gold"),
@@ -100,22 +100,22 @@ def test_dropped_files_open_by_kind(ld, tmp_path):
 def test_a_tiled_screenshot_is_the_one_shot_image_up_to_noise(ld, tmp_path):
     import imageio.v3 as iio
 
-    assert ld.shots.write(tmp_path / "sync.png", (150, 100), 8)
-    assert ld.shots.start(tmp_path / "job.png", (150, 100), 8)
+    assert ld.write_screenshot(tmp_path / "sync.png", (150, 100), 8)
+    assert ld.start_screenshot(tmp_path / "job.png", (150, 100), 8)
     ld.shots.job = type(ld.shots.job)(ld.shots.job.path, ld.shots.job.size, ld.shots.job.passes, tiled=True)  # the tiled path
     steps = 0
-    while ld.shots.progress is not None:
-        ld.shots.step(budget_ms=1.0)
+    while ld.screenshot_progress is not None:
+        ld.step_screenshot(budget_ms=1.0)
         steps += 1
     assert steps >= 6 and ld.error is None  # 6 tiles of 64 pixels, several steps each
     a, b = (iio.imread(tmp_path / n).astype(int) for n in ("sync.png", "job.png"))
     assert a.shape == b.shape == (100, 150, 3)
     assert np.abs(a - b).mean() < 2.0 and np.abs(a.mean((0, 1)) - b.mean((0, 1))).max() < 1.0
-    assert ld.shots.start(tmp_path / "job.exr", (40, 30), 2)
-    while ld.shots.progress is not None:
-        ld.shots.step()
+    assert ld.start_screenshot(tmp_path / "job.exr", (40, 30), 2)
+    while ld.screenshot_progress is not None:
+        ld.step_screenshot()
     assert (tmp_path / "job.exr").is_file() and ld.error is None
-    assert not ld.shots.start(tmp_path / "x.bmp", (8, 8)) and ".png" in ld.error
+    assert not ld.start_screenshot(tmp_path / "x.bmp", (8, 8)) and ".png" in ld.error
 
 
 def test_frame_clock_counts_presented_frames():

@@ -10,6 +10,7 @@ from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, DecoderSpec, load_dec
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.gpu_pack import latent_share, pack
 from nbrdf.viewer.gpu.neural_gpu import COMPUTE_STORAGE, GpuDecoder, WeightStorage, probe_compute, probe_fragment
+from nbrdf.viewer.gpu.pipeline import gpu_brdf
 
 
 def pairs(n: int, seed: int):
@@ -144,7 +145,7 @@ def test_lobe_view_matches_the_torch_lobe_image(gl_ctx):
     torch.manual_seed(6)
     dec = Decoder(DecoderSpec()).eval()
     z = torch.randn(3, 32) * 0.5
-    r = Renderer(gl_ctx, load_material(DEFAULT_MATERIAL), neural=GpuDecoder(gl_ctx, dec), latent=z)
+    r = Renderer(gl_ctx, gpu_brdf(gl_ctx, load_material(DEFAULT_MATERIAL), GpuDecoder(gl_ctx, dec), z))
     for theta in (0.0, 60.0):
         img = r.render_linear(ViewState(view="lobe", theta_i=theta))
         with torch.no_grad():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from gpu_brdfs import closed_form
 
 from nbrdf.imaging.image_io import read_exr, write_image
 from nbrdf.neural.material import load_material, parse_material
@@ -26,14 +27,14 @@ def one_layer(layer):
 @pytest.mark.parametrize("theta", [0.0, 60.0])
 def test_glsl_lobe_equals_closed_form(gl_ctx, layer, theta):
     m = one_layer(layer)
-    img = Renderer(gl_ctx, m).render_linear(ViewState(view="lobe", theta_i=theta))
+    img = Renderer(gl_ctx, closed_form(gl_ctx, m)).render_linear(ViewState(view="lobe", theta_i=theta))
     ref = lobe_image(lambda wi, wo: single_layer_eval(m.base, wi.double(), wo.double()), theta)
     assert img.shape == (64, 64, 3)
     np.testing.assert_allclose(img, ref, rtol=1e-4, atol=1e-6)
 
 
 def test_default_material_views(gl_ctx):
-    r = Renderer(gl_ctx, load_material(DEFAULT_MATERIAL))
+    r = Renderer(gl_ctx, closed_form(gl_ctx, load_material(DEFAULT_MATERIAL)))
     obj = r.render_linear(ViewState(view="object", background=False), (64, 48), spp=4)
     assert obj.shape == (48, 64, 3) and np.isfinite(obj).all()
     centre, corner = obj[24, 32], obj[1, 1]
@@ -60,7 +61,7 @@ class Passes:
     the object's pixels (the background is an exact environment lookup, no noise)."""
 
     def __init__(self, ctx):
-        self.r = Renderer(ctx, load_material(DEFAULT_MATERIAL))
+        self.r = Renderer(ctx, closed_form(ctx, load_material(DEFAULT_MATERIAL)))
         self.state, n = ViewState(), CONV_SIZE
         prev, out = np.zeros((n, n, 3)), []
         for i in range(CONV_PASSES):
@@ -145,7 +146,7 @@ def test_error_that_stops_falling_is_rejected(passes):
 
 @pytest.mark.parametrize("mesh", ["testmesh"])
 def test_test_mesh_renders(gl_ctx, mesh):
-    r = Renderer(gl_ctx, load_material(DEFAULT_MATERIAL), mesh)
+    r = Renderer(gl_ctx, closed_form(gl_ctx, load_material(DEFAULT_MATERIAL)), mesh=mesh)
     img = r.render_linear(ViewState(background=False), (48, 48), spp=1)
     cover = (img.sum(-1) > 0).mean()
     assert 0.05 < cover < 0.9
@@ -153,7 +154,7 @@ def test_test_mesh_renders(gl_ctx, mesh):
 
 def test_obj_mesh_through_trimesh(gl_ctx, tmp_path):
     (tmp_path / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n")
-    r = Renderer(gl_ctx, load_material(DEFAULT_MATERIAL), str(tmp_path / "tri.obj"))
+    r = Renderer(gl_ctx, closed_form(gl_ctx, load_material(DEFAULT_MATERIAL)), mesh=str(tmp_path / "tri.obj"))
     assert (r.render_linear(ViewState(background=False), (32, 32), spp=1).sum(-1) > 0).any()
 
 
@@ -176,7 +177,7 @@ def test_a_distant_point_light_equals_the_directional_light(gl_ctx):
 
     m = parse_material({"format": "nbrdf-material/1", "name": "g",
                         "layers": [{"type": "conductor", "roughness": 0.3, "r0": [1.0, 0.78, 0.34]}]})
-    r = Renderer(gl_ctx, m)
+    r = Renderer(gl_ctx, closed_form(gl_ctx, m))
     sun = ViewState(env_on=False, background=False)
     d = np.asarray(sun.light_dir) / np.linalg.norm(sun.light_dir)
     far = 1.0e3

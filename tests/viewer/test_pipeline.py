@@ -11,8 +11,9 @@ import pytest
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material, parse_material
+from nbrdf.neural.methods import Method
 from nbrdf.neural.model import default_model
-from nbrdf.viewer.gpu.pipeline import BrdfKind, MaterialPipeline
+from nbrdf.viewer.gpu.pipeline import BrdfKind, MaterialPipeline, brdf_kind, gpu_brdf
 from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 from nbrdf.viewer.modes import BrdfMode
 from nbrdf.viewer.options import DEFAULT_MATERIAL
@@ -30,9 +31,24 @@ def test_modes_resolve_like_the_command_line():
         MaterialPipeline.resolve(gold, "spectral")
 
 
+def test_brdf_modes_are_methods_plus_auto():
+    """``--brdf``'s words are unchanged; each but auto is the ``Method`` of that word, and
+    ``brdf_kind`` says how each is shaded."""
+    assert BrdfMode.words() == ("auto", "analytic", "neural", "projected", "belcour")
+    assert BrdfMode.AUTO.method is None
+    for mode in BrdfMode:
+        if mode is not BrdfMode.AUTO:
+            assert mode.method is Method(mode.value)
+    stack, gold = load_material(DEFAULT_MATERIAL), parse_material(ROUGH_GOLD)
+    assert brdf_kind(BrdfMode.ANALYTIC, stack) is BrdfKind.ANALYTIC
+    assert brdf_kind(BrdfMode.BELCOUR, stack) is BrdfKind.BELCOUR
+    assert brdf_kind(BrdfMode.NEURAL, gold) is brdf_kind(BrdfMode.PROJECTED, gold) is BrdfKind.NEURAL
+    with pytest.raises(ValueError, match="resolved"):
+        brdf_kind(BrdfMode.AUTO, gold)
+
+
 def test_an_edit_computes_one_latent_share_and_reads_no_file(gl_ctx, tmp_path, monkeypatch):
-    from nbrdf.imaging import image_io
-    from nbrdf.neural import gpu_pack
+    from nbrdf.viewer.gpu import pipeline
     from nbrdf.viewer.session.lookdev import LookDev
 
     iio.imwrite(tmp_path / "n.png", np.tile(np.array([150, 128, 240], np.uint8), (4, 4, 1)))
@@ -41,7 +57,7 @@ def test_an_edit_computes_one_latent_share_and_reads_no_file(gl_ctx, tmp_path, m
                                                                "r0": [1.0, 0.78, 0.34]}]}
     (tmp_path / "m.json").write_text(json.dumps(doc))
     calls = {"share": 0, "normal": 0}
-    share, read = gpu_pack.latent_share, image_io.read_normal_map
+    share, read = pipeline.latent_share, pipeline.read_normal_map
 
     def count_share(*a):
         calls["share"] += 1
@@ -51,8 +67,8 @@ def test_an_edit_computes_one_latent_share_and_reads_no_file(gl_ctx, tmp_path, m
         calls["normal"] += 1
         return read(*a)
 
-    monkeypatch.setattr(gpu_pack, "latent_share", count_share)
-    monkeypatch.setattr(image_io, "read_normal_map", count_read)
+    monkeypatch.setattr(pipeline, "latent_share", count_share)  # the names the pipeline calls
+    monkeypatch.setattr(pipeline, "read_normal_map", count_read)
     ld = LookDev(gl_ctx, load_material(tmp_path / "m.json"))
     try:
         assert calls == {"share": 1, "normal": 1}
@@ -81,8 +97,9 @@ def test_one_renderer_draws_any_material(gl_ctx):
     for m, mode in ((gold, "analytic"), (stack, "neural"), (gold, "neural")):
         brdf = pipe.build(m, mode)
         assert brdf.kind == (BrdfKind.ANALYTIC if mode == "analytic" else BrdfKind.NEURAL)
-        own = Renderer(gl_ctx, m, "testmesh", neural=pipe.decoder if brdf.neural else None, latent=brdf.latent,
-                       proxy=(brdf.uniforms["u_proxy_sigma"], brdf.uniforms["u_proxy_w"]) if brdf.neural else None)
+        alone = gpu_brdf(gl_ctx, m, pipe.decoder if brdf.neural else None, brdf.latent,
+                         (brdf.uniforms["u_proxy_sigma"], brdf.uniforms["u_proxy_w"]) if brdf.neural else None)
+        own = Renderer(gl_ctx, alone, mesh="testmesh")
         for view in ("object", "lobe"):
             s = ViewState(view=view, theta_i=state.theta_i)
             np.testing.assert_array_equal(shared.render_linear(s, (20, 16), 2, brdf), own.render_linear(s, (20, 16), 2))

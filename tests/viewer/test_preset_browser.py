@@ -19,21 +19,19 @@ SCRIPT = textwrap.dedent("""
     import numpy as np
     from nbrdf.viewer.window.app import App
     from nbrdf.viewer.options import ViewOptions
-    from nbrdf.viewer.ui import preset_browser as pb
-    pb.DEFAULT_OPEN = True
-    pb.THUMB_SPP = 2
     size = (900, 700)
     app = App(ViewOptions(size=size), size=size)
     app._adapt_scale = lambda w, h: 0.125
+    browser = app.panels.presets
+    browser.default_open = True
+    browser.cache.spp = 2
     out = {}
     try:
         for _ in range(40):
             app.step()
-            browser = pb._browsers.get(app.lookdev)
-            if browser is not None and browser.pending() == 0:
+            if browser.pending() == 0:  # every thumbnail made (the header opened at once)
                 break
         app.step()
-        browser = pb._browsers[app.lookdev]
         out = {"pending": browser.pending(), "failed": browser.failed, "rendered": browser.cache.rendered,
                "shown": len(browser._textures)}
         np.save(sys.argv[1] + ".npy", app.read_pixels())

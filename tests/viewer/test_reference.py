@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from gpu_brdfs import closed_form
 
 from nbrdf.neural.material import load_material, parse_material
 from nbrdf.neural.model import default_model
 from nbrdf.training.reference import reference_eval, single_layer_eval
+from nbrdf.viewer.gpu.pipeline import gpu_brdf
 from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 from nbrdf.viewer.options import DEFAULT_MATERIAL
 from nbrdf.viewer.reference.worker import ReferenceWorker, lobe_job, slice_job
@@ -95,7 +97,7 @@ def test_worker_reports_errors_and_keeps_working():
 
 def test_slice_job_matches_the_glsl_slice(gl_ctx):
     m = parse_material(GOLD)
-    gpu = Renderer(gl_ctx, m).render_linear(ViewState(view="slice"), (24, 16))
+    gpu = Renderer(gl_ctx, closed_form(gl_ctx, m)).render_linear(ViewState(view="slice"), (24, 16))
     job = slice_job(m, "s", (24, 16))
     ref = single_layer_eval(m.base, job.wi, job.wo).numpy().reshape(16, 24, 3)
     np.testing.assert_allclose(gpu, ref, rtol=2e-3, atol=2e-4)
@@ -109,7 +111,7 @@ def test_gbuffer_directions_reproduce_the_light_only_render(gl_ctx):
     model = default_model()
     m = parse_material(GOLD)
     z = model.material_latent(m)
-    r = Renderer(gl_ctx, m, "testmesh", neural=GpuDecoder(gl_ctx, model.decoder), latent=z)
+    r = Renderer(gl_ctx, gpu_brdf(gl_ctx, m, GpuDecoder(gl_ctx, model.decoder), z), mesh="testmesh")
     state = ViewState(env_on=False, background=False)
     img = r.render_linear(state, (40, 32), spp=1)
     wi, wo, mask = r.gbuffer(state, (40, 32))

@@ -165,7 +165,7 @@ def _lookdev(gl_ctx, monkeypatch, tmp_path, config=TINY):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))  # before the worker process starts
     ld = LookDev(gl_ctx, load_material(BLACK))
     ld.idle_refine.settings = IdleRefineSettings(enabled=True, still_seconds=0.0, config=config)
-    ld.edit("set_name", "car paint black")  # an edit under these settings (the first was made before them)
+    ld.set_name("car paint black")  # an edit under these settings (the first was made before them)
     return ld
 
 
@@ -174,7 +174,7 @@ def _poll_until(ld, cond, timeout=600.0):
 
     end = time.monotonic() + timeout  # a guard against a hang, not a timing assertion
     while time.monotonic() < end and not cond():
-        ld.poll()
+        ld.update()
         time.sleep(0.05)
     return cond()
 
@@ -197,7 +197,7 @@ def test_lookdev_swaps_the_refined_code_in_and_reopening_shows_it_at_once(gl_ctx
         assert r.done and r.heldout < r.network_error
         assert list((tmp_path / "cache" / "nbrdf" / "refined").glob("*.json"))
         # Reopening the material: the cached code at once, no job.
-        ld.edit("set_name", "a renamed copy")
+        ld.set_name("a renamed copy")
         assert torch.equal(ld.brdf.latent, shown) and ld.idle_refine.status.startswith("refined, ")
         assert ld.worker.current is None
     finally:
@@ -213,7 +213,7 @@ def test_an_edit_cancels_the_refinement_in_the_worker(gl_ctx, monkeypatch, tmp_p
                         patience=24)
     ld = _lookdev(gl_ctx, monkeypatch, tmp_path, long)
     try:
-        ld.poll()
+        ld.update()
         key = ld.worker.current
         assert key is not None and key.startswith("refine:")
         network = ld.latent().clone()

@@ -47,9 +47,9 @@ def test_a_generated_environment_is_kept_by_name(gl_ctx, tmp_path):
 
     ld = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
     try:
-        sky = ld.renderer.render_linear(ld.main_state(), (16, 16), 1, ld.brdf)
+        sky = ld.renderer.render_linear(ld.state, (16, 16), 1, ld.brdf)
         assert ld.set_environment("softbox"), ld.error
-        box = ld.renderer.render_linear(ld.main_state(), (16, 16), 1, ld.brdf)
+        box = ld.renderer.render_linear(ld.state, (16, 16), 1, ld.brdf)
         assert np.isfinite(box).all() and np.abs(box - sky).mean() > 1e-3
         assert ld.save_session(tmp_path / "s.json"), ld.error
         assert not ld.set_environment("no-such-preset") and "no-such-preset" in ld.error

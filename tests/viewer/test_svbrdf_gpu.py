@@ -8,11 +8,13 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 import torch
+from gpu_brdfs import closed_form
 
 from nbrdf.neural.latent_texture import LatentTexture
 from nbrdf.neural.material import load_material, parse_material
 from nbrdf.neural.model import default_model
 from nbrdf.viewer.gpu.neural_gpu import GpuDecoder, GpuLatentTexture, probe_fragment
+from nbrdf.viewer.gpu.pipeline import gpu_brdf
 from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 
 ROUGH_GOLD = {"format": "nbrdf-material/1", "name": "rough gold",
@@ -74,11 +76,11 @@ def test_uniform_latent_texture_renders_as_the_uniform_material(gl_ctx, gdec, mo
     m = parse_material(material)
     z = model.material_latent(m)
     state = ViewState(background=False)
-    r = Renderer(gl_ctx, m, neural=gdec, latent=z)
+    r = Renderer(gl_ctx, gpu_brdf(gl_ctx, m, gdec, z))
     r.sampling = replace(r.sampling, table_target=False)  # a latent texture's estimator: the same random numbers
     uniform = r.render_linear(state, (32, 32), spp=2)
     flat = LatentTexture(z.expand(4, 4, 3, z.shape[-1]).clone())
-    textured = Renderer(gl_ctx, m, neural=gdec, latent=z, latent_texture=flat).render_linear(state, (32, 32), spp=2)
+    textured = Renderer(gl_ctx, gpu_brdf(gl_ctx, m, gdec, z, latent_texture=flat)).render_linear(state, (32, 32), spp=2)
     np.testing.assert_allclose(textured, uniform, rtol=1e-4, atol=1e-5)
 
 
@@ -88,12 +90,12 @@ def test_mip_mapping_removes_aliasing(gl_ctx, gdec, model):
     that average), the finest level alone flickers between them."""
     m = parse_material(ROUGH_GOLD)
     tex = checker(model, 128)
-    r = Renderer(gl_ctx, m, neural=gdec, latent_texture=tex)
+    r = Renderer(gl_ctx, gpu_brdf(gl_ctx, m, gdec, latent_texture=tex))
     state = ViewState(background=False, env_on=False)
     smooth = r.render_linear(state, (24, 24), spp=1)
-    r.set_mipmapping(False)
+    r.brdf.latent_texture.set_mipmapped(False)
     aliased = r.render_linear(state, (24, 24), spp=1)
-    average = Renderer(gl_ctx, m, neural=gdec, latent=tex.levels[-1][0, 0]).render_linear(state, (24, 24), spp=1)
+    average = Renderer(gl_ctx, gpu_brdf(gl_ctx, m, gdec, tex.levels[-1][0, 0])).render_linear(state, (24, 24), spp=1)
     inside = average.sum(-1) > 0
     err = lambda img: np.abs(img - average)[inside].mean()
     assert err(aliased) > 5 * err(smooth)
@@ -107,14 +109,15 @@ def write_normal_map(path, normal) -> None:
 
 def test_normal_maps(gl_ctx, tmp_path):
     state = ViewState(background=False, env_on=False)  # the light alone: no sampling noise
-    plain = Renderer(gl_ctx, parse_material(ROUGH_GOLD)).render_linear(state, (32, 32), spp=2)
+    plain = Renderer(gl_ctx, closed_form(gl_ctx, parse_material(ROUGH_GOLD))).render_linear(state, (32, 32), spp=2)
     write_normal_map(tmp_path / "flat.png", [0, 0, 1])
     write_normal_map(tmp_path / "tilt.png", [0.6, 0, 0.8])
     images = {}
     for name in ("flat", "tilt"):
         doc = dict(ROUGH_GOLD, normal_map=f"{name}.png")
         (tmp_path / f"{name}.json").write_text(json.dumps(doc))
-        images[name] = Renderer(gl_ctx, load_material(tmp_path / f"{name}.json")).render_linear(state, (32, 32), spp=2)
+        m = load_material(tmp_path / f"{name}.json")
+        images[name] = Renderer(gl_ctx, closed_form(gl_ctx, m)).render_linear(state, (32, 32), spp=2)
     # 8-bit (128, 128, 255) is (0.0039, 0.0039, 1) unnormalised: nearly the mesh normal.
     np.testing.assert_allclose(images["flat"], plain, rtol=0.03, atol=5e-3)
     assert np.abs(images["tilt"] - plain).mean() > 10 * np.abs(images["flat"] - plain).mean()
@@ -125,7 +128,7 @@ def test_lit_sphere_matches_torch(gl_ctx, gdec, model):
     decoder at the same pixels (ray-sphere intersections), f cos(theta_l) L."""
     m = parse_material(ROUGH_GOLD)
     z = model.material_latent(m)
-    r = Renderer(gl_ctx, m, neural=gdec, latent=z)
+    r = Renderer(gl_ctx, gpu_brdf(gl_ctx, m, gdec, z))
     state = ViewState(env_on=False, background=False)
     w = h = 48
     img = r.render_linear(state, (w, h), spp=1)

@@ -133,22 +133,22 @@ SCRIPT = textwrap.dedent("""
             app.step()
         with section("6"):
             # 6. The screenshot renders a step per frame; the window handles input meanwhile.
-            out["shot_start"] = ld.shots.start(tmp / "job.png", (160, 120), 4, budget_ms=1.0)
+            out["shot_start"] = ld.start_screenshot(tmp / "job.png", (160, 120), 4, budget_ms=1.0)
             progress, visible = [], []
             ld.shots.job.tiled = True  # software OpenGL or not: the tiled path
             ld.shots.job.rects = __import__("nbrdf.viewer.jobs.screenshot", fromlist=["tiles"]).tiles((160, 120))
             ld.shots.job.ms_per_pixel_pass = 1.0
             for k in range(200):
-                if ld.shots.progress is None:
+                if ld.screenshot_progress is None:
                     break
                 if k == 2:
                     key("h")
                 app.step()
-                progress.append(ld.shots.progress)
+                progress.append(ld.screenshot_progress)
                 visible.append(app.panels.visible)
             out["shot_progress"] = progress
             out["shot_visible"] = visible
-            out["shot_sync"] = ld.shots.write(tmp / "sync.png", (160, 120), 4)
+            out["shot_sync"] = ld.write_screenshot(tmp / "sync.png", (160, 120), 4)
             if not app.panels.visible:
                 key("h")
             for _ in range(2):

@@ -27,6 +27,7 @@ import struct
 from pathlib import Path
 from typing import NamedTuple
 
+import imageio.v3 as iio
 import numpy as np
 
 HERE = Path(__file__).parent / "meshes"
@@ -82,8 +83,6 @@ def orm_texture(size: int = TEX_SIZE, seed: int = 7) -> np.ndarray:
 
 
 def png_bytes(img: np.ndarray) -> bytes:
-    import imageio.v3 as iio
-
     buf = io.BytesIO()
     iio.imwrite(buf, img, extension=".png")
     return buf.getvalue()

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
 
 HERE = Path(__file__).parent / "materials"
@@ -91,8 +92,6 @@ def material_json(prefix: str = "maps/worn_tiles") -> dict:
 
 
 def write(out: Path = HERE) -> Path:
-    import imageio.v3 as iio
-
     (out / "maps").mkdir(parents=True, exist_ok=True)
     for name, img in make_maps().items():
         iio.imwrite(out / "maps" / f"worn_tiles_{name}.png", img)

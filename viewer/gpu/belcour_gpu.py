@@ -10,20 +10,17 @@ directions.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import moderngl
 import numpy as np
 import torch
 
+from nbrdf.neural.body_table import TableSize, table_directions
+from nbrdf.neural.coat import coat_eval
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
 from nbrdf.training.belcour import ALPHA_MAX, Atom, atoms_of, belcour_eval_atoms, decompose
 from nbrdf.training.belcour_tables import ALPHA_MIN, BelcourTables, default_tables
 from nbrdf.viewer.gpu import shaders
-
-if TYPE_CHECKING:
-    from nbrdf.neural.body_table import TableSize
 
 #: Atoms the shader holds: four interfaces, each over a medium, and the base.
 MAX_ATOMS = 9
@@ -118,16 +115,13 @@ def coat_of(material: Material, uniforms: dict | None = None) -> tuple[float, fl
 
 
 @torch.no_grad()
-def bake_body(material: Material, size: "TableSize", tables: BelcourTables | None = None,
+def bake_body(material: Material, size: TableSize, tables: BelcourTables | None = None,
               uniforms: dict | None = None) -> torch.Tensor:
     """log f (K, M, N, 3) float32 of the model's body -- the whole model less the coat the
     lit pass splits off (``coat_of``) -- at the nodes of a body table of ``size``
     (neural/body_table.py; an ``ordered`` one: the model is not reciprocal): what the
     window's table program shades where the per-pixel model is too slow (viewer/gpu/body_source.py).
     ``uniforms`` as ``coat_of``."""
-    from nbrdf.neural.body_table import table_directions
-    from nbrdf.neural.coat import coat_eval
-
     if not size.ordered:
         raise NbrdfError("belcour body table: the model is not reciprocal, its table must be ordered")
     wi, wo = (d.reshape(-1, 3).double() for d in table_directions(size))

@@ -14,19 +14,18 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 import moderngl
 import numpy as np
 import torch
 
 from nbrdf.neural.body_table import TableSize
+from nbrdf.viewer.gpu import shaders
 from nbrdf.viewer.gpu.body_table_gpu import INTERACTIVE, STILL, BodyTables
 from nbrdf.viewer.gpu.lit_sampling import LitSampling
+from nbrdf.viewer.gpu.neural_gpu import GpuDecoder, probe_fragment
 from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf
-
-if TYPE_CHECKING:
-    from nbrdf.viewer.gpu.neural_gpu import GpuDecoder
 
 #: Directions per pass of a table-shaded body from the environment's CDF (a power of two:
 #: a pass's directions are then a stratum-complete run of the pixel's Sobol sequence).
@@ -71,15 +70,11 @@ class BodySource:
     def calibrate(self, brdf: GpuBrdf) -> str:
         """Times the decoder on this GL (a probe pass of ``probe_pairs`` evaluations at
         the material's latent, after one warm-up) and decides; returns the notice."""
-        from nbrdf.viewer.gpu.neural_gpu import probe_fragment
-
         gdec = brdf.decoder if brdf.decoder is not None else self.decoder() if self.decoder is not None else None
         if gdec is None or brdf.kind not in (BrdfKind.NEURAL, BrdfKind.BELCOUR):
             return self.notice
         # The probe's cost does not depend on the latent's values: a Belcour material times a zero code.
         latent = brdf.latent if brdf.latent is not None else torch.zeros(3, gdec.dec.spec.code)
-        from nbrdf.viewer.gpu import shaders
-
         def pairs(n: int) -> np.ndarray:
             v = np.random.default_rng(0).normal(size=(2, n, 3)).astype(np.float32)
             v /= np.linalg.norm(v, axis=-1, keepdims=True)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 import moderngl
 import torch
@@ -22,10 +21,9 @@ import torch
 from nbrdf.neural.body_table import TableSize, table_directions
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.gpu.belcour_gpu import bake_body, table_uniforms
+from nbrdf.viewer.gpu.neural_gpu import GpuDecoder
 from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf
-
-if TYPE_CHECKING:
-    from nbrdf.viewer.gpu.neural_gpu import GpuDecoder
 
 #: The texture unit a baked body table is bound to (the table body and the decoder's resampling guide).
 TABLE_UNIT = 13
@@ -94,13 +92,11 @@ class BodyTables:
         return replace(base, kind=BrdfKind.TABLE, body_table=tex, share=None,
                        uniforms={**base.uniforms, "u_body_table_ordered": 0})
 
-    def belcour(self, base: GpuBrdf, size: TableSize, decoder: "GpuDecoder") -> GpuBrdf:
+    def belcour(self, base: GpuBrdf, size: TableSize, decoder: GpuDecoder) -> GpuBrdf:
         """``base`` (a BELCOUR ``GpuBrdf``) as a TABLE one: the model's body baked at the
         nodes of ``size`` (viewer/gpu/belcour_gpu.py ``bake_body``), its coat in closed form, its
         lobe strategy as the proxy pdf. ``decoder`` only assembles the table program's source
         (the table program is the neural one with the decoder left out)."""
-        from nbrdf.viewer.gpu.belcour_gpu import bake_body, table_uniforms
-
         if base.kind != BrdfKind.BELCOUR:
             raise NbrdfError(f"body table: a belcour material only (got {base.kind.value})")
         t0 = time.perf_counter()

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import moderngl
 import numpy as np
+from PIL import Image, ImageDraw, ImageFont
 
 from nbrdf.viewer.gpu import shaders
 
@@ -28,8 +29,6 @@ def font_px(view_height: int) -> int:
 
 def rasterise(text: str, px: int) -> np.ndarray:
     """(H, W) uint8 coverage of ``text`` at ``px`` pixels, with ``PADDING`` around it, top row first."""
-    from PIL import Image, ImageDraw, ImageFont
-
     font = ImageFont.load_default(size=px)
     x0, y0, x1, y1 = ImageDraw.Draw(Image.new("L", (1, 1))).textbbox((0, 0), text, font=font)
     img = Image.new("L", (x1 - x0 + 2 * PADDING, y1 - y0 + 2 * PADDING), 0)

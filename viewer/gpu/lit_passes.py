@@ -6,19 +6,22 @@ level) and a compute pass (lit.comp) shades every pixel with the BRDF into the
 float accumulation image. On OpenGL 3.3-4.2 object.frag shades each draw range
 instead (after a depth pre-pass), blended into the accumulation target. Both
 call lit_shade.glsl with the same random numbers and the uniforms of
-``lit_uniforms``. ``LitPasses`` works on its ``Renderer``'s programs, mesh,
-targets and sampling settings.
+``lit_uniforms``. ``LitPasses`` draws with the renderer's ``DrawKit`` (programs,
+mesh, binders) and ``LitSettings`` (sampling); each call names its draws, its
+target and the environment.
 """
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
 
 import moderngl
 import numpy as np
 
+from nbrdf.imaging.environment import GpuEnvironment
 from nbrdf.viewer.gpu.body_guide import BodyGuides
 from nbrdf.viewer.gpu.body_table_gpu import TABLE_UNIT
+from nbrdf.viewer.gpu.draw_kit import DrawKit
 from nbrdf.viewer.gpu.gl_state import accumulating, depth_tested, masked
 from nbrdf.viewer.gpu.lit_sampling import LitSampling
 from nbrdf.viewer.gpu.neural_gpu import SHARE_UNIT
@@ -27,9 +30,6 @@ from nbrdf.viewer.gpu.programs import GLSL_430, ProgramKey
 from nbrdf.viewer.gpu.size_cache import SizeCache, release_all
 from nbrdf.viewer.modes import View
 from nbrdf.viewer.view_settings import ViewState, bind_uniforms
-
-if TYPE_CHECKING:
-    from nbrdf.viewer.gpu.renderer import Renderer
 
 GBUFFER_UNITS = (10, 11, 12)  # texture units of the G-buffer in the compute lit pass
 LIT_GROUP = 8     # lit.comp's work group is LIT_GROUP x LIT_GROUP pixels
@@ -42,69 +42,93 @@ def incidence(theta_deg: float) -> tuple[float, float, float]:
     return (math.sin(t), 0.0, math.cos(t))
 
 
+#: (first index, index count, BRDF) of each draw of the mesh (``Renderer.draws``).
+Draws = list[tuple[int, int, GpuBrdf]]
+
+
+@dataclass
+class LitSettings:
+    """How the lit passes sample: the renderer's ``sampling``, ``table_sampling`` and ``quick``."""
+
+    sampling: LitSampling = field(default_factory=LitSampling)
+    """Resampling, strategies, coat samples per pass, firefly clamp, seed (viewer/gpu/lit_sampling.py)."""
+    table_sampling: LitSampling | None = None
+    """The sampling of draws whose body is a baked table (None: ``sampling``; the window's
+    choice, viewer/gpu/body_source.py ``BodySource.sampling``)."""
+    quick: bool = False
+    """True: passes use ``sampling.quick()`` (the window's interactive frames, viewer/window/refinement.py)."""
+
+    def for_brdf(self, brdf: GpuBrdf | None) -> LitSampling:
+        """The sampling of a draw shaded with ``brdf``."""
+        table = brdf is not None and brdf.kind == BrdfKind.TABLE and self.table_sampling is not None
+        sampling = self.table_sampling if table else self.sampling
+        return sampling.quick() if self.quick else sampling
+
+
 class LitPasses:
     """The lit passes of one renderer; keeps the G-buffer of each accumulation slot."""
 
-    def __init__(self, renderer: "Renderer"):
-        self.r = renderer
+    def __init__(self, kit: DrawKit, settings: LitSettings):
+        self.kit, self.ctx, self.settings = kit, kit.ctx, settings
         self.gbuffers: SizeCache[tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = SizeCache(release_all)
         """The G-buffer of each (slot, w, h), a few sizes per slot (viewer/gpu/size_cache.py)."""
-        self.guides = BodyGuides(renderer.ctx)
+        self.guides = BodyGuides(kit.ctx)
         """The decoder's resampling-target tables, one per uniform latent drawn (viewer/gpu/body_guide.py)."""
 
     def view_compute(self, view: View, state: ViewState, w: int, h: int, brdf: GpuBrdf,
-                      tex: moderngl.Texture) -> None:
+                     tex: moderngl.Texture) -> None:
         """The lobe or slice view in view.comp (the compute decoder, one pixel per invocation) into ``tex``."""
-        c = self.r.compute_program(brdf, "view.comp", {"VIEW_IS_LOBE": 1} if view == View.LOBE else None)
-        self.r.bind_brdf(c, brdf, compute=True)
+        c = self.kit.compute_program(brdf, "view.comp", {"VIEW_IS_LOBE": 1} if view == View.LOBE else None)
+        self.kit.bind_brdf(c, brdf, compute=True)
         if view == View.LOBE:
             c["u_wi"].value = incidence(state.theta_i)
         c["u_size"].value = (float(w), float(h))
         tex.bind_to_image(0, read=False, write=True)
         c.run(-(-w // LIT_GROUP), -(-h // LIT_GROUP))
-        self.r.ctx.memory_barrier()
+        self.ctx.memory_barrier()
 
-    def gbuffer_target(self, w: int, h: int, slot: str) -> tuple[moderngl.Framebuffer, list[moderngl.Texture]]:
+    def gbuffer_target(self, w: int, h: int, slot: str,
+                       depth: moderngl.Renderbuffer) -> tuple[moderngl.Framebuffer, list[moderngl.Texture]]:
         """The G-buffer of ``slot`` at (w, h): three RGBA32F targets sharing the
-        accumulation target's depth buffer (the background pass then fills the rest)."""
+        accumulation target's ``depth`` buffer (the background pass then fills the rest)."""
         def make():
-            depth = self.r.target(w, h, slot)[0].depth_attachment
-            texs = [self.r.ctx.texture((w, h), 4, dtype="f4") for _ in GBUFFER_UNITS]
+            texs = [self.ctx.texture((w, h), 4, dtype="f4") for _ in GBUFFER_UNITS]
             for t in texs:
                 t.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            return self.r.ctx.framebuffer(texs, depth), texs
+            return self.ctx.framebuffer(texs, depth), texs
         return self.gbuffers.get((slot, w, h), make)
 
-    def deferred(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
-                         slot: str) -> np.ndarray:
+    def deferred(self, state: ViewState, w: int, h: int, first: int, passes: int, draws: Draws,
+                 target: tuple[moderngl.Framebuffer, moderngl.Texture], env: GpuEnvironment,
+                 slot: str) -> np.ndarray:
         """The deferred lit path: on a slot's first pass, rasterise its G-buffer
         (gbuffer_lit.frag); then ``passes`` passes of lit.comp over it into the
-        slot's accumulation image. Returns the view-projection matrix."""
-        gfbo, gtex = self.gbuffer_target(w, h, slot)
-        g = self.r.programs.get(ProgramKey("gbuffer_lit.frag", "object.vert", version=GLSL_430))
-        draws = self.r.draws(brdf)
-        vp = self.r.surface_uniforms(g, state, w, h, draws[0][2].normal_map)
+        slot's accumulation image ``target``. Returns the view-projection matrix."""
+        kit = self.kit
+        gfbo, gtex = self.gbuffer_target(w, h, slot, target[0].depth_attachment)
+        g = kit.programs.get(ProgramKey("gbuffer_lit.frag", "object.vert", version=GLSL_430))
+        vp = kit.surface_uniforms(g, state, w, h, draws[0][2].normal_map)
         if first == 0:
             gfbo.use()
             gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             # A sampler array on unit 0 beside the normal map's 2D sampler would void the draw.
             g["u_nb_share_tex"].value = SHARE_UNIT
-            with depth_tested(self.r.ctx):
+            with depth_tested(self.ctx):
                 for part, (start, count, b) in enumerate(draws):
                     if part:
-                        self.r.surface_uniforms(g, state, w, h, b.normal_map)
+                        kit.surface_uniforms(g, state, w, h, b.normal_map)
                     textured = b.latent_texture is not None
                     if textured:
                         b.latent_texture.bind(g)
                     g["u_textured"].value = int(textured)
                     if "u_material_id" in g:
                         g["u_material_id"].value = part
-                    self.r.mesh_vao(g).render(moderngl.TRIANGLES, vertices=count, first=start)
-        tex = self.r.target(w, h, slot)[1]
+                    kit.mesh_vao(g).render(moderngl.TRIANGLES, vertices=count, first=start)
+        tex = target[1]
         for part, (_, _, b) in enumerate(draws):
-            c = self.r.compute_program(b)
-            self.r.bind_brdf(c, b, compute=True)
-            self.lit_uniforms(c, state, b)
+            c = kit.compute_program(b)
+            kit.bind_brdf(c, b, compute=True)
+            self.lit_uniforms(c, state, env, b)
             c["u_eye"].value = tuple(state.camera.eye())
             if "u_material_id" in c:  # -1: every covered pixel (one material)
                 c["u_material_id"].value = part if len(draws) > 1 else -1
@@ -113,53 +137,51 @@ class LitPasses:
                 if name in c:
                     c[name].value = unit
             tex.bind_to_image(0, read=True, write=True)
-            self.r.ctx.memory_barrier()
+            self.ctx.memory_barrier()
             for k in range(first, first + passes, LIT_CHUNK):
                 c["u_first_pass"].value = k
                 c["u_passes"].value = min(LIT_CHUNK, first + passes - k)
                 c.run(-(-w // LIT_GROUP), -(-h // LIT_GROUP))
-                self.r.ctx.memory_barrier()
-        self.r.unbind_textures(*GBUFFER_UNITS)
+                self.ctx.memory_barrier()
+        kit.unbind_textures(*GBUFFER_UNITS)
         return vp
 
-    def fragment(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
-                         fbo: moderngl.Framebuffer) -> np.ndarray:
+    def fragment(self, state: ViewState, w: int, h: int, first: int, passes: int, draws: Draws,
+                 fbo: moderngl.Framebuffer, env: GpuEnvironment) -> np.ndarray:
         """The fallback lit path: ``passes`` passes of object.frag added into
         ``fbo`` (per draw range its BRDF's program); returns the view-projection matrix."""
-        draws = [(self.r.program("object.frag", b, "object.vert"), start, count, b)
-                 for start, count, b in self.r.draws(brdf)]
+        kit = self.kit
+        progs = [(kit.program("object.frag", b, "object.vert"), start, count, b) for start, count, b in draws]
         vp = None
-        for p, _, _, b in draws:
-            self.r.bind_brdf(p, b)
-            vp = self.r.surface_uniforms(p, state, w, h, b.normal_map)
+        for p, _, _, b in progs:
+            kit.bind_brdf(p, b)
+            vp = kit.surface_uniforms(p, state, w, h, b.normal_map)
         if first == 0:
             # Depth pre-pass of every range: the shading passes then add exactly the visible surface.
-            with depth_tested(self.r.ctx), masked(fbo, color=False):
-                for p, start, count, _ in draws:
-                    self.r.mesh_vao(p).render(moderngl.TRIANGLES, vertices=count, first=start)
-        with accumulating(self.r.ctx, fbo):
-            for p, start, count, b in draws:
-                if len(draws) > 1:  # programs may be shared by two ranges: this range's BRDF
-                    self.r.bind_brdf(p, b)
-                    self.r.surface_uniforms(p, state, w, h, b.normal_map)
-                self.lit_uniforms(p, state, b)
-                vao = self.r.mesh_vao(p)
+            with depth_tested(self.ctx), masked(fbo, color=False):
+                for p, start, count, _ in progs:
+                    kit.mesh_vao(p).render(moderngl.TRIANGLES, vertices=count, first=start)
+        with accumulating(self.ctx, fbo):
+            for p, start, count, b in progs:
+                if len(progs) > 1:  # programs may be shared by two ranges: this range's BRDF
+                    kit.bind_brdf(p, b)
+                    kit.surface_uniforms(p, state, w, h, b.normal_map)
+                self.lit_uniforms(p, state, env, b)
+                vao = kit.mesh_vao(p)
                 for k in range(first, first + passes):
                     p["u_pass"].value = k
                     vao.render(moderngl.TRIANGLES, vertices=count, first=start)
         return vp
 
-    def lit_uniforms(self, p: moderngl.Program | moderngl.ComputeShader, state: ViewState,
-                      brdf: GpuBrdf | None = None) -> None:
+    def lit_uniforms(self, p: moderngl.Program | moderngl.ComputeShader, state: ViewState, env: GpuEnvironment,
+                     brdf: GpuBrdf | None = None) -> None:
         """The lights and the environment of lit_shade.glsl (the view settings' uniforms,
         viewer/view_settings.py), and the sampling of ``brdf``'s draw."""
         bind_uniforms(p, state)
-        table = brdf is not None and brdf.kind == BrdfKind.TABLE and self.r.table_sampling is not None
-        sampling = self.r.table_sampling if table else self.r.sampling
-        sampling = sampling.quick() if self.r.quick else sampling
+        sampling = self.settings.for_brdf(brdf)
         sampling.bind(p)
         self.bind_target(p, brdf, sampling)
-        self.r.env.bind(p, math.radians(state.env_rotation))
+        env.bind(p, math.radians(state.env_rotation))
 
     def bind_target(self, p: moderngl.Program | moderngl.ComputeShader, brdf: GpuBrdf | None,
                     sampling: LitSampling) -> None:

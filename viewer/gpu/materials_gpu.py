@@ -6,7 +6,6 @@ from __future__ import annotations
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIFFUSE
 from nbrdf.neural.material import Material
-from nbrdf.neural.neural_brdf import proxy_hint  # noqa: F401 (the renderer's import)
 from nbrdf.neural.stack import material_stack
 from nbrdf.viewer.modes import BaseKind
 

@@ -192,7 +192,6 @@ class GpuLatentTexture:
 
     def set_mipmapped(self, on: bool) -> None:
         """Trilinear lookup by pixel footprint (on) or the finest level only (off: aliases)."""
-        self.mipmapped = on
         self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR if on else moderngl.LINEAR, moderngl.LINEAR)
 
     def bind(self, prog: moderngl.Program) -> None:

@@ -24,7 +24,11 @@ import numpy as np
 from tqdm import tqdm
 
 from nbrdf.imaging.environment import LUMA
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.gpu.gl import offscreen_context
 from nbrdf.viewer.gpu.lit_sampling import Term
+from nbrdf.viewer.gpu.renderer import make_renderer
+from nbrdf.viewer.options import ViewOptions
 
 
 @dataclass
@@ -73,9 +77,6 @@ def default_setup(ctx, material: Path | None = None, brdf: str = "auto"):
     """The default offscreen preview's renderer and state (``nbrdf-view --offscreen``:
     ``material``, default the default material, shaded by ``brdf`` (``--brdf``),
     studio environment, the framed three-quarter camera), object only."""
-    from nbrdf.viewer.gpu.renderer import make_renderer
-    from nbrdf.viewer.options import ViewOptions
-
     opts = ViewOptions(brdf=brdf) if material is None else ViewOptions(material=material, brdf=brdf)
     r = make_renderer(ctx, opts.load_material()[0], opts)
     state = replace(opts.state, background=False)
@@ -187,9 +188,6 @@ def main(argv: list[str] | None = None) -> int:
                     help="the decoder's resampling target: the body's baked table or the proxy pdf "
                          "(default: the renderer's)")
     args = ap.parse_args(argv)
-    from nbrdf.neural.errors import NbrdfError
-    from nbrdf.viewer.gpu.gl import offscreen_context
-
     try:
         r, state = default_setup(offscreen_context(), args.material, args.brdf)
     except (NbrdfError, OSError) as e:

@@ -15,32 +15,53 @@ import json
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Iterable
+from typing import Callable, Iterable
 
 import moderngl
 import torch
 
+from nbrdf.imaging.image_io import read_normal_map
 from nbrdf.neural.coat import code_coat
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.gpu_pack import latent_share
+from nbrdf.neural.latent_texture import LatentTexture
 from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.material import Material, material_to_dict
-from nbrdf.viewer.gpu.materials_gpu import analytic_uniforms, proxy_hint
+from nbrdf.neural.model import NeuralModel, default_model
+from nbrdf.neural.neural_brdf import proxy_hint
+from nbrdf.neural.svbrdf import latent_texture as build_latent_texture
+from nbrdf.training.project import fit, material_samples
+from nbrdf.viewer.gpu.belcour_gpu import BelcourTextures, belcour_uniforms
+from nbrdf.viewer.gpu.belcour_gpu import unsupported as belcour_unsupported
+from nbrdf.viewer.gpu.materials_gpu import analytic_uniforms
+from nbrdf.viewer.gpu.neural_gpu import GpuDecoder, GpuLatentTexture
 from nbrdf.viewer.modes import BrdfMode
-
-if TYPE_CHECKING:
-    from nbrdf.neural.latent_texture import LatentTexture
-    from nbrdf.neural.model import NeuralModel
-    from nbrdf.viewer.gpu.belcour_gpu import BelcourTextures
-    from nbrdf.viewer.gpu.neural_gpu import GpuDecoder, GpuLatentTexture
 
 
 class BrdfKind(str, Enum):
-    """Which BRDF program family a ``GpuBrdf`` is drawn with."""
-    ANALYTIC = "analytic"   #: closed form (analytic_brdf.glsl)
-    NEURAL = "neural"       #: the decoder at one latent (neural_brdf.glsl)
-    TEXTURED = "textured"   #: the decoder at a latent texture (latent_texture.glsl)
+    """How a ``GpuBrdf`` is shaded: which GLSL program family draws it.
+
+    Not a method of evaluating a material (that is ``Method``, neural/methods.py, of
+    which ``BrdfMode`` is the previewer's subset) but the GPU form a method takes:
+    ``brdf_kind`` is the one mapping from a resolved ``BrdfMode`` to a kind. TABLE is
+    no mode's: it is a NEURAL or BELCOUR BRDF whose body was baked into a table
+    (viewer/gpu/body_table_gpu.py, where viewer/gpu/body_source.py measured the decoder slow)."""
+    ANALYTIC = "analytic"   #: closed form (analytic_brdf.glsl): Method.ANALYTIC
+    NEURAL = "neural"       #: the decoder at one latent (neural_brdf.glsl): Method.NEURAL, Method.PROJECTED
+    TEXTURED = "textured"   #: the decoder at a latent texture (latent_texture.glsl): Method.NEURAL, texture-mapped
     TABLE = "table"         #: a uniform latent's body baked into a table (body_table.glsl), the coat exact
-    BELCOUR = "belcour"     #: Belcour 2018's layered model (belcour_brdf.glsl, tables as textures)
+    BELCOUR = "belcour"     #: Belcour 2018's layered model (belcour_brdf.glsl, tables as textures): Method.BELCOUR
+
+
+def brdf_kind(mode: BrdfMode, material: Material) -> BrdfKind:
+    """The kind a material resolved to ``mode`` (``MaterialPipeline.resolve``: never AUTO) is shaded as."""
+    if mode == BrdfMode.AUTO:
+        raise ValueError("brdf_kind takes a resolved mode (MaterialPipeline.resolve), not auto")
+    if mode == BrdfMode.ANALYTIC:
+        return BrdfKind.ANALYTIC
+    if mode == BrdfMode.BELCOUR:
+        return BrdfKind.BELCOUR
+    return BrdfKind.TEXTURED if material.is_textured else BrdfKind.NEURAL
 
 
 def analytic_capable(m: Material) -> bool:
@@ -65,13 +86,13 @@ class GpuBrdf:
     """A ``BrdfKind``: which program family draws it."""
     uniforms: dict = field(default_factory=dict)
     """Closed-form uniforms, or the proxy pdf's ``u_proxy_sigma`` / ``u_proxy_w`` and the code's ``u_coat``."""
-    decoder: "GpuDecoder | None" = None
+    decoder: GpuDecoder | None = None
     """The decoder's weights on the GPU (neural kinds)."""
     latent: torch.Tensor | None = None
     """The (3, 34) code shown (a latent texture's mean for the lobe and slice views)."""
     share: bytes | None = None
     """The latent's share of decoder layer 1, float32 (width, 3), ready to upload."""
-    latent_texture: "GpuLatentTexture | None" = None
+    latent_texture: GpuLatentTexture | None = None
     """A texture-mapped material's per-texel share (TEXTURED)."""
     normal_map: moderngl.Texture | None = None
     """The material's tangent-space normal map, mip-mapped (None: the mesh normal)."""
@@ -95,8 +116,6 @@ class NormalMaps:
     def get(self, material: Material) -> moderngl.Texture | None:
         if material.normal_map is None:
             return None
-        from nbrdf.imaging.image_io import read_normal_map
-
         path = Path(material.base_dir) / material.normal_map
         try:
             key = (str(path.resolve()), path.stat().st_mtime)
@@ -117,9 +136,9 @@ class NormalMaps:
         self._cache.clear()
 
 
-def gpu_brdf(ctx: moderngl.Context, material: Material, decoder: "GpuDecoder | None" = None,
+def gpu_brdf(ctx: moderngl.Context, material: Material, decoder: GpuDecoder | None = None,
              latent: torch.Tensor | None = None, proxy: tuple[float, float] | None = None,
-             latent_texture: "LatentTexture | GpuLatentTexture | None" = None,
+             latent_texture: LatentTexture | GpuLatentTexture | None = None,
              normal_maps: NormalMaps | None = None) -> GpuBrdf:
     """The GPU resources of a material whose latent (or latent texture) is known.
 
@@ -132,8 +151,6 @@ def gpu_brdf(ctx: moderngl.Context, material: Material, decoder: "GpuDecoder | N
         return GpuBrdf(material, BrdfKind.ANALYTIC, analytic_uniforms(material), normal_map=nmap)
     gtex = None
     if latent_texture is not None:
-        from nbrdf.viewer.gpu.neural_gpu import GpuLatentTexture
-
         gtex = (latent_texture if isinstance(latent_texture, GpuLatentTexture)
                 else GpuLatentTexture(ctx, decoder, latent_texture))
         latent = gtex.mean_latent if latent is None else latent
@@ -142,8 +159,6 @@ def gpu_brdf(ctx: moderngl.Context, material: Material, decoder: "GpuDecoder | N
                          "(nbrdf.neural.svbrdf.latent_texture)")
     if latent is None:
         raise NbrdfError("the neural renderer needs the material's latent")
-    from nbrdf.neural.gpu_pack import latent_share
-
     sigma, w = proxy if proxy is not None else proxy_hint(material)
     uniforms = {"u_proxy_sigma": float(sigma), "u_proxy_w": float(w), "u_coat": code_coat(decoder.dec.spec, latent)}
     return GpuBrdf(material, BrdfKind.TEXTURED if gtex is not None else BrdfKind.NEURAL, uniforms, decoder, latent,
@@ -159,27 +174,23 @@ class MaterialPipeline:
     """Material -> latents -> ``GpuBrdf``, with the model, the decoder on the
     GPU, normal maps and latent textures loaded once per context."""
 
-    def __init__(self, ctx: moderngl.Context, model: "NeuralModel | None" = None):
+    def __init__(self, ctx: moderngl.Context, model: NeuralModel | None = None):
         self.ctx = ctx
         self._model = model
-        self._decoder: "GpuDecoder | None" = None
+        self._decoder: GpuDecoder | None = None
         self.normal_maps = NormalMaps(ctx)
-        self._textures: dict[str, "GpuLatentTexture"] = {}
-        self._belcour: "BelcourTextures | None" = None
+        self._textures: dict[str, GpuLatentTexture] = {}
+        self._belcour: BelcourTextures | None = None
 
     @property
-    def model(self) -> "NeuralModel":
+    def model(self) -> NeuralModel:
         if self._model is None:
-            from nbrdf.neural.model import default_model
-
             self._model = default_model()
         return self._model
 
     @property
-    def decoder(self) -> "GpuDecoder":
+    def decoder(self) -> GpuDecoder:
         if self._decoder is None:
-            from nbrdf.viewer.gpu.neural_gpu import GpuDecoder
-
             self._decoder = GpuDecoder(self.ctx, self.model.decoder)
         return self._decoder
 
@@ -189,7 +200,7 @@ class MaterialPipeline:
         return self._belcour is not None
 
     @property
-    def loaded_decoder(self) -> "GpuDecoder | None":
+    def loaded_decoder(self) -> GpuDecoder | None:
         """The decoder if it is on the GPU already (None: no neural material drawn yet)."""
         return self._decoder
 
@@ -211,8 +222,6 @@ class MaterialPipeline:
         """The (3, 32) latent of a uniform material: leaf encoders and layering
         (neural), or fitted to the material's reference (projected)."""
         if BrdfMode.parse(mode) == BrdfMode.PROJECTED:
-            from nbrdf.training.project import fit, material_samples
-
             return fit(self.model.decoder, material_samples(material))
         return self.model.material_latent(material)
 
@@ -221,28 +230,25 @@ class MaterialPipeline:
         return self.model.proxy(z) if self.model.sampler is not None else None
 
     def latent_texture(self, material: Material,
-                       progress: Callable[[int, int], None] | None = None) -> "GpuLatentTexture":
+                       progress: Callable[[int, int], None] | None = None) -> GpuLatentTexture:
         """A texture-mapped material's latent texture on the GPU (built once per material document)."""
         key = material_key(material)
         if key not in self._textures:
-            from nbrdf.neural.svbrdf import latent_texture
-
-            self._textures[key] = self.upload_texture(key, latent_texture(self.model, material, progress=progress))
+            self._textures[key] = self.upload_texture(
+                key, build_latent_texture(self.model, material, progress=progress))
         return self._used(key)
 
-    def upload_texture(self, key: str, tex: "LatentTexture") -> "GpuLatentTexture":
+    def upload_texture(self, key: str, tex: LatentTexture) -> GpuLatentTexture:
         """Keeps a latent texture built elsewhere (the session's worker thread) under ``key``."""
-        from nbrdf.viewer.gpu.neural_gpu import GpuLatentTexture
-
         if key not in self._textures:
             self._textures[key] = GpuLatentTexture(self.ctx, self.decoder, tex)
         return self._used(key)
 
-    def cached_texture(self, material: Material) -> "GpuLatentTexture | None":
+    def cached_texture(self, material: Material) -> GpuLatentTexture | None:
         key = material_key(material)
         return self._used(key) if key in self._textures else None
 
-    def _used(self, key: str) -> "GpuLatentTexture":
+    def _used(self, key: str) -> GpuLatentTexture:
         """The texture of ``key``, now the most recently used (the cache's order is its use)."""
         self._textures[key] = self._textures.pop(key)
         return self._textures[key]
@@ -259,11 +265,9 @@ class MaterialPipeline:
         return drop
 
     @property
-    def belcour(self) -> "BelcourTextures":
+    def belcour(self) -> BelcourTextures:
         """Belcour's tables on the GPU (loaded, or generated and cached, on first use)."""
         if self._belcour is None:
-            from nbrdf.viewer.gpu.belcour_gpu import BelcourTextures
-
             self._belcour = BelcourTextures(self.ctx)
         return self._belcour
 
@@ -272,14 +276,13 @@ class MaterialPipeline:
         """The GPU resources of ``material`` under ``mode``; ``latent`` overrides
         the material's own (an interpolated latent)."""
         mode = self.resolve(material, mode)
-        if mode == BrdfMode.ANALYTIC:
+        kind = brdf_kind(mode, material)
+        if kind == BrdfKind.ANALYTIC:
             return gpu_brdf(self.ctx, material, normal_maps=self.normal_maps)
-        if mode == BrdfMode.BELCOUR:
-            from nbrdf.viewer.gpu.belcour_gpu import belcour_uniforms
-
+        if kind == BrdfKind.BELCOUR:
             return GpuBrdf(material, BrdfKind.BELCOUR, belcour_uniforms(material),
                            normal_map=self.normal_maps.get(material), textures=self.belcour.bindings())
-        if material.is_textured:
+        if kind == BrdfKind.TEXTURED:
             tex = self.latent_texture(material)
             z = tex.mean_latent
             return gpu_brdf(self.ctx, material, self.decoder, latent=z, proxy=self.proxy(z), latent_texture=tex,
@@ -298,25 +301,9 @@ class MaterialPipeline:
             self._belcour = None
 
 
-def belcour_unsupported(material: Material) -> str | None:
-    """Why Belcour's model cannot shade ``material`` (one line), or None."""
-    from nbrdf.viewer.gpu.belcour_gpu import unsupported
-
-    return unsupported(material)
-
-
 def fallback_note(material: Material, mode: BrdfMode | str) -> str:
     """The one line that says a material is shown other than ``mode`` asks, and how ("" when it is not)."""
     if BrdfMode.parse(mode, "--brdf") != BrdfMode.BELCOUR:
         return ""
     why = belcour_unsupported(material)
     return "" if why is None else f"--brdf belcour: {why}; shown with the neural BRDF instead"
-
-
-def offscreen_brdf(ctx: moderngl.Context, material: Material, mode: BrdfMode | str) -> GpuBrdf:
-    """The BRDF of an offscreen render (``nbrdf-view --offscreen``)."""
-    return MaterialPipeline(ctx).build(material, mode)
-
-
-__all__ = ["BrdfKind", "GpuBrdf", "MaterialPipeline", "NormalMaps", "analytic_capable", "belcour_unsupported",
-           "fallback_note", "gpu_brdf", "material_key", "offscreen_brdf"]

@@ -10,6 +10,7 @@ import moderngl
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.gpu import shaders
+from nbrdf.viewer.gpu.belcour_gpu import brdf_snippet, kinds_snippet
 from nbrdf.viewer.gpu.neural_gpu import WeightStorage
 from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf
 
@@ -77,8 +78,6 @@ def assemble(key: ProgramKey, brdf: GpuBrdf | None) -> str:
         return shaders.source(key.shader, {"brdf": shaders.read("analytic_brdf.glsl")}, version=version,
                               defines=defines)
     if brdf.kind == BrdfKind.BELCOUR:
-        from nbrdf.viewer.gpu.belcour_gpu import brdf_snippet, kinds_snippet
-
         return shaders.source(key.shader, {"brdf": brdf_snippet(), "belcour_kinds": kinds_snippet()},
                               version=version, defines=defines)
     snippets, extra = neural_snippets(brdf)

@@ -16,8 +16,8 @@ One ``Renderer`` owns the scene's GPU resources -- programs (viewer/gpu/programs
 built once per ``ProgramKey``), the mesh buffers, the environment's sampling tables and the
 accumulation targets -- and draws with the BRDF it is handed per draw (a
 ``GpuBrdf`` from viewer/gpu/pipeline.py), so the neural image, its reference and
-a second material share them. A renderer made with a material keeps that
-material's BRDF as its default (the offscreen and test path).
+a second material share them. The one way to give it a material is a
+``GpuBrdf`` (``MaterialPipeline.build``): per draw, or as its default ``brdf``.
 
 Several materials per mesh (a glTF file's, viewer/scene/gltf_import.py): the mesh's
 draw ranges (``Mesh.parts``, one per material) each get a BRDF
@@ -27,43 +27,35 @@ G-buffer with the range's index in the uv target's z, then runs lit.comp once
 per range over the pixels of that index; the fragment path writes the depth
 of all ranges first, then shades each range with its own program. One range
 (every mesh but a multi-material glTF) is one draw and one dispatch. GL state
-is set through the scopes of viewer/gpu/gl_state.py.
+is set through the scopes of viewer/gpu/gl_state.py; the programs, mesh buffers and
+binders the passes share are a ``DrawKit`` (viewer/gpu/draw_kit.py).
 """
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import moderngl
 import numpy as np
 
 from nbrdf.imaging.env_presets import resolve_environment
 from nbrdf.imaging.environment import EnvironmentMap, GpuEnvironment, default_environment
-from nbrdf.imaging.tonemap import ToneMap
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
-from nbrdf.viewer.gpu.body_table_gpu import TABLE_UNIT
+from nbrdf.viewer.gpu.draw_kit import DrawKit
 from nbrdf.viewer.gpu.gl import use_compute
 from nbrdf.viewer.gpu.gl_state import accumulating, depth_tested, flat, masked
-from nbrdf.viewer.gpu.lit_passes import LitPasses, incidence
+from nbrdf.viewer.gpu.lit_passes import LitPasses, LitSettings, incidence
 from nbrdf.viewer.gpu.lit_sampling import LitSampling
-from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf, MaterialPipeline, NormalMaps, gpu_brdf
-from nbrdf.viewer.gpu.programs import ProgramCache, ProgramKey
+from nbrdf.viewer.gpu.pipeline import GpuBrdf, MaterialPipeline
+from nbrdf.viewer.gpu.programs import ProgramKey
 from nbrdf.viewer.gpu.size_cache import SizeCache, release_all
 from nbrdf.viewer.modes import View
+from nbrdf.viewer.options import ViewOptions
 from nbrdf.viewer.scene.mesh import Mesh, named_mesh
 from nbrdf.viewer.view_settings import ViewState
 
-if TYPE_CHECKING:
-    import torch
-
-    from nbrdf.neural.latent_texture import LatentTexture
-    from nbrdf.viewer.gpu.neural_gpu import GpuDecoder, GpuLatentTexture
-    from nbrdf.viewer.options import ViewOptions
-
-VIEWS = View.words()
 LOBE_SIZE = 64
-NORMAL_UNIT = 9  # texture unit of a material's normal map
 MAIN = "main"    # the default accumulation slot
 
 
@@ -71,99 +63,81 @@ class Renderer:
     """Owns the programs, the mesh buffers, the environment and the framebuffers;
     draws with the ``GpuBrdf`` of each call (default: its own ``brdf``)."""
 
-    def __init__(self, ctx: moderngl.Context, material: Material | None = None, mesh: str | Mesh = "sphere",
-                 neural: "GpuDecoder | None" = None, latent: "torch.Tensor | None" = None,
-                 proxy: tuple[float, float] | None = None, environment: np.ndarray | None = None,
-                 latent_texture: "LatentTexture | None" = None, brdf: GpuBrdf | None = None,
-                 compute: bool | None = None):
-        """``brdf`` (from viewer/gpu/pipeline.py) or ``material`` (optional) becomes the default BRDF: with ``neural``
-        (with the material's ``latent``, a (3, 34) code, and its proxy pdf's (sigma, w))
-        the decoder in GLSL, without it the closed form. A texture-mapped
-        material comes as its ``latent_texture`` instead of a latent.
-        ``environment`` is an equirectangular float32 (H, W, 3) radiance map
-        (default: the project's own sky). ``compute``: the deferred compute lit
-        path (None: wherever OpenGL 4.3 exists, see gl.use_compute)."""
+    def __init__(self, ctx: moderngl.Context, brdf: GpuBrdf | None = None, *, mesh: str | Mesh = "sphere",
+                 environment: np.ndarray | None = None, compute: bool | None = None):
+        """``brdf`` (``MaterialPipeline.build``, viewer/gpu/pipeline.py) is the default BRDF of
+        draws that name none. ``environment`` is an equirectangular float32 (H, W, 3) radiance
+        map (default: the project's own sky). ``compute``: the deferred compute lit path (None:
+        wherever OpenGL 4.3 exists, see gl.use_compute)."""
         self.ctx = ctx
         self.deferred = use_compute(ctx, compute)
-        self.sampling = LitSampling()
-        """The lit pass's sampling: resampling, strategies, coat samples per pass, firefly
-        clamp, seed (viewer/gpu/lit_sampling.py)."""
-        self.quick = False
-        """True: passes use ``sampling.quick()`` (the window's interactive frames, viewer/window/refinement.py)."""
-        self.table_sampling: LitSampling | None = None
-        """The sampling of draws whose body is a baked table (None: ``sampling``; the window's
-        choice, viewer/gpu/body_source.py ``BodySource.sampling``)."""
-        self.neural = neural
-        self.programs = ProgramCache(ctx)
-        self.lit = LitPasses(self)
+        self.kit = DrawKit(ctx)
+        """Programs, mesh buffers and binders (viewer/gpu/draw_kit.py)."""
+        self.programs = self.kit.programs
+        self.settings = LitSettings()
+        """The lit passes' sampling (``sampling``, ``table_sampling``, ``quick`` below)."""
+        self.lit = LitPasses(self.kit, self.settings)
         """The lit passes of the object view (deferred compute or fragment) and the compute lobe / slice."""
-        self._mesh_vaos: dict[tuple, moderngl.VertexArray] = {}
         self._fbo: SizeCache[tuple[moderngl.Framebuffer, moderngl.Texture]] = SizeCache(
             lambda t: release_all(t[0], t[0].depth_attachment, t[1]), on_evict=self.lit.gbuffers.evict)
-        self.tone = self.programs.get(ProgramKey("tonemap.frag"))
         self.background_prog = self.programs.get(ProgramKey("background.frag"))
-        self.empty_tone = ctx.vertex_array(self.tone, [])
-        self.empty_background = ctx.vertex_array(self.background_prog, [])
-        self._empty: dict[tuple, moderngl.VertexArray] = {}
-        self._dummy = ctx.texture((1, 1), 4, dtype="f4")
-        self.normal_maps = NormalMaps(ctx)
         self.brdf: GpuBrdf | None = brdf
-        self._owned_tex: "GpuLatentTexture | None" = None
-        self._mesh_buffers: tuple[moderngl.Buffer, moderngl.Buffer] | None = None
         self.part_brdfs: list[GpuBrdf | None] = [None]
         """The BRDF of each of the mesh's draw ranges (None: the BRDF of the draw call)."""
         self.set_mesh(mesh)
         self.env: GpuEnvironment | None = None
         self.set_environment(environment)
-        if material is not None:
-            self.set_material(material, latent, proxy, latent_texture)
 
-    # --- programs -------------------------------------------------------------------------
-    def compute_program(self, brdf: GpuBrdf, name: str = "lit.comp",
-                        defines: dict | None = None) -> moderngl.ComputeShader:
-        """Compute shader ``name`` (lit.comp; view.comp: lobe and slice) for ``brdf``'s
-        kind (neural: weights in the decoder's ``compute_storage``), kept."""
-        return self.programs.get(ProgramKey.of(name, brdf, vertex=None, defines=defines), brdf)
+    # --- sampling (LitSettings) ------------------------------------------------------------
+    @property
+    def sampling(self) -> LitSampling:
+        """The lit pass's sampling: resampling, strategies, coat samples per pass, firefly
+        clamp, seed (viewer/gpu/lit_sampling.py)."""
+        return self.settings.sampling
 
+    @sampling.setter
+    def sampling(self, value: LitSampling) -> None:
+        self.settings.sampling = value
+
+    @property
+    def table_sampling(self) -> LitSampling | None:
+        """The sampling of draws whose body is a baked table (None: ``sampling``)."""
+        return self.settings.table_sampling
+
+    @table_sampling.setter
+    def table_sampling(self, value: LitSampling | None) -> None:
+        self.settings.table_sampling = value
+
+    @property
+    def quick(self) -> bool:
+        """True: passes use ``sampling.quick()`` (the window's interactive frames)."""
+        return self.settings.quick
+
+    @quick.setter
+    def quick(self, value: bool) -> None:
+        self.settings.quick = value
+
+    # --- programs (DrawKit) ---------------------------------------------------------------
     def program(self, frag: str, brdf: GpuBrdf, vert: str = "fullscreen.vert") -> moderngl.Program:
         """The program of ``frag`` for ``brdf``'s kind, built on first use and kept."""
-        return self.programs.get(ProgramKey.of(frag, brdf, vertex=vert), brdf)
-
-    def _fullscreen(self, prog: moderngl.Program) -> moderngl.VertexArray:
-        key = (id(prog),)
-        if key not in self._empty:
-            self._empty[key] = self.ctx.vertex_array(prog, [])
-        return self._empty[key]
+        return self.kit.program(frag, brdf, vert)
 
     def mesh_vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
         """The mesh as drawn by ``prog`` (rebuilt after a mesh change)."""
-        key = (id(prog),)
-        if key not in self._mesh_vaos:
-            vbo, ibo = self._mesh_buffers
-            self._mesh_vaos[key] = self.ctx.vertex_array(
-                prog, [(vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")], ibo,
-                skip_errors=True)
-        return self._mesh_vaos[key]
+        return self.kit.mesh_vao(prog)
 
     def bind_brdf(self, prog: moderngl.Program, brdf: GpuBrdf, compute: bool = False) -> None:
         """Makes ``brdf`` the program's BRDF: weights, latent share (or latent texture), uniforms."""
-        if "u_body_table" in prog:  # also the decoder's resampling target: never on unit 0 beside 2D samplers
-            prog["u_body_table"].value = TABLE_UNIT
-        if brdf.kind == BrdfKind.TABLE:
-            brdf.body_table.use(TABLE_UNIT)
-        elif brdf.neural:
-            brdf.decoder.bind(prog, brdf.decoder.compute_storage if compute else None)
-            if brdf.share is not None and "u_nb_share" in prog:
-                prog["u_nb_share"].write(brdf.share)
-            if brdf.latent_texture is not None:
-                brdf.latent_texture.bind(prog)
-        for name, unit, tex in brdf.textures:
-            tex.use(unit)
-            if name in prog:
-                prog[name].value = unit
-        for k, v in brdf.uniforms.items():
-            if k in prog:
-                prog[k].value = v
+        self.kit.bind_brdf(prog, brdf, compute)
+
+    def surface_uniforms(self, p: moderngl.Program, state: ViewState, w: float, h: int,
+                         normal_map: moderngl.Texture | None) -> np.ndarray:
+        """Camera, light direction and normal map of a program over the mesh; the view-projection matrix."""
+        return self.kit.surface_uniforms(p, state, w, h, normal_map)
+
+    def unbind_textures(self, *units: int) -> None:
+        """Binds a dummy texture to ``units`` (ends sampling from accumulation targets)."""
+        self.kit.unbind_textures(*units)
 
     def _brdf(self, brdf: GpuBrdf | None) -> GpuBrdf:
         if brdf is None:
@@ -178,14 +152,7 @@ class Renderer:
         m = named_mesh(mesh) if isinstance(mesh, str) else mesh
         self.mesh = m
         self.part_brdfs = [None] * len(m.draw_ranges)
-        old = self._mesh_buffers
-        self._mesh_buffers = (self.ctx.buffer(m.interleaved().tobytes()), self.ctx.buffer(m.indices.astype("u4").tobytes()))
-        # Vertex arrays hold the old buffers: drop them, they are rebuilt on first use.
-        for vao in self._mesh_vaos.values():
-            vao.release()
-        self._mesh_vaos.clear()
-        for b in old or ():
-            b.release()
+        self.kit.set_mesh(m)
 
     def set_part_brdfs(self, brdfs: Sequence[GpuBrdf | None]) -> None:
         """The BRDF of each of the mesh's draw ranges (``Mesh.draw_ranges``, one per
@@ -214,52 +181,6 @@ class Renderer:
         if self.env is not None:
             self.env.release()
         self.env = new
-
-    def set_material(self, material: Material, latent: "torch.Tensor | None" = None,
-                     proxy: tuple[float, float] | None = None,
-                     latent_texture: "LatentTexture | GpuLatentTexture | None" = None) -> None:
-        """A new default BRDF: closed-form uniforms, or (neural) its latent's share
-        of layer 1 -- per texel from ``latent_texture`` for a texture-mapped
-        material -- and the (sigma, w) of its proxy pdf (without one, a proxy
-        guessed from the top layer's roughness: slower to converge, never biased)."""
-        brdf = gpu_brdf(self.ctx, material, self.neural, latent, proxy, latent_texture, self.normal_maps)
-        if self._owned_tex is not None and self._owned_tex is not brdf.latent_texture:
-            self._owned_tex.release()
-        self._owned_tex = brdf.latent_texture if brdf.latent_texture is not latent_texture else None
-        self.brdf = brdf
-
-    @property
-    def material(self) -> Material | None:
-        return None if self.brdf is None else self.brdf.material
-
-    @property
-    def latent_tex(self) -> "GpuLatentTexture | None":
-        """The default BRDF's latent texture (texture-mapped materials)."""
-        return None if self.brdf is None else self.brdf.latent_texture
-
-    def set_mipmapping(self, on: bool) -> None:
-        """Trilinear latent-texture lookup (on) or the finest level (off, to show the aliasing)."""
-        if self.latent_tex is not None:
-            self.latent_tex.set_mipmapped(on)
-
-    def surface_uniforms(self, p: moderngl.Program, state: ViewState, w: int, h: int,
-                          normal_map: moderngl.Texture | None) -> np.ndarray:
-        """Camera, light direction and normal map of a program over the mesh
-        (shading_frame.glsl); returns the view-projection matrix."""
-        cam = state.camera
-        vp = cam.projection(w / h) @ cam.view()
-        p["u_view_proj"].write(vp.T.astype("f4").tobytes())
-        p["u_model"].write(np.eye(4, dtype="f4").tobytes())
-        p["u_eye"].value = tuple(cam.eye())
-        ld = np.asarray(state.light_dir, dtype=np.float64)
-        if "u_light_dir" in p:
-            p["u_light_dir"].value = tuple(ld / np.linalg.norm(ld))
-        if "u_has_normal_map" in p:
-            p["u_has_normal_map"].value = int(normal_map is not None)
-        if normal_map is not None:
-            normal_map.use(NORMAL_UNIT)
-            p["u_normal_map"].value = NORMAL_UNIT
-        return vp
 
     # --- frames -------------------------------------------------------------------
     def target(self, w: int, h: int, slot: str = MAIN):
@@ -299,16 +220,17 @@ class Renderer:
                 p["u_wi"].value = incidence(state.theta_i)
             p["u_size"].value = (float(w), float(h))
             with flat(self.ctx):
-                self._fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
+                self.kit.fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
         return tex
 
     def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
                        slot: str = MAIN) -> None:
-        fbo = self.target(w, h, slot)[0]
+        target = self.target(w, h, slot)
+        fbo = target[0]
         if self.deferred:
-            vp = self.lit.deferred(state, w, h, first, passes, brdf, slot)
+            vp = self.lit.deferred(state, w, h, first, passes, self.draws(brdf), target, self.env, slot)
         else:
-            vp = self.lit.fragment(state, w, h, first, passes, brdf, fbo)
+            vp = self.lit.fragment(state, w, h, first, passes, self.draws(brdf), fbo, self.env)
         if state.background and state.env_on:
             bg = self.background_prog
             self.env.bind(bg, math.radians(state.env_rotation))
@@ -316,7 +238,7 @@ class Renderer:
             bg["u_eye"].value = tuple(state.camera.eye())
             bg["u_env_intensity"].value = state.env_intensity * passes  # as many passes as the object
             with accumulating(self.ctx, fbo):
-                self.empty_background.render(moderngl.TRIANGLES, vertices=3)
+                self.kit.fullscreen(bg).render(moderngl.TRIANGLES, vertices=3)
         fbo.use()  # the target stays bound (a first deferred pass bound the G-buffer)
 
     def render_linear(self, state: ViewState, size: tuple[int, int] = (256, 256), spp: int = 1,
@@ -388,27 +310,8 @@ class Renderer:
             for r in (fbo, depth, target, spare):
                 r.release()
 
-    def tonemap_to(self, target: moderngl.Framebuffer, tex: moderngl.Texture, passes: int, state: ViewState) -> None:
-        """Draws the accumulation ``tex`` (sum of ``passes``) to ``target`` as sRGB."""
-        target.use()
-        tex.use(0)
-        self.tone["u_hdr"].value = 0
-        self.tone["u_passes"].value = float(passes)
-        self.tone["u_exposure"].value = state.exposure
-        self.tone["u_tonemap"].value = ToneMap.parse(state.tonemap).code
-        with flat(self.ctx):
-            self.empty_tone.render(moderngl.TRIANGLES, vertices=3)
-        # Unbind the accumulation texture: rendering into a texture that is still
-        # bound for sampling is a feedback loop (llvmpipe then drops the blending).
-        self.unbind_textures(0)
 
-    def unbind_textures(self, *units: int) -> None:
-        """Binds a dummy texture to ``units`` (ends sampling from accumulation targets)."""
-        for u in units:
-            self._dummy.use(u)
-
-
-def make_renderer(ctx: moderngl.Context, material: Material, opts: "ViewOptions", others=()) -> "Renderer":
+def make_renderer(ctx: moderngl.Context, material: Material, opts: ViewOptions, others=()) -> Renderer:
     """A renderer of ``material`` alone in ``opts.brdf``, on ``opts``' mesh and
     environment (noise measurements, benchmarks and tests that draw one material
     without a session). ``others``: the materials of the mesh's further draw

@@ -9,11 +9,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from nbrdf.imaging.tonemap import ToneMap
-from nbrdf.viewer.modes import BaseKind, BrdfMode, CompareMode, View, glsl_defines
+from nbrdf.viewer.modes import BaseKind, CompareMode, View, glsl_defines
 
 SHADER_DIR = Path(__file__).parent.parent / "shaders"
 VERSION = "#version 330 core"
-MODE_DEFINES = glsl_defines(View, CompareMode, ToneMap, BrdfMode, BaseKind).rstrip("\n")
+MODE_DEFINES = glsl_defines(View, CompareMode, ToneMap, BaseKind).rstrip("\n")
 
 
 def source(name: str, snippets: dict[str, str] | None = None, version: str = VERSION, defines: dict | None = None) -> str:

@@ -8,8 +8,8 @@ the fit's steps). Refined codes are cached per user by material content, so
 a material opened again shows its refined look at once.
 
 ``IdleRefiner`` is the window's side and sees no GL: ``edited`` on every
-material change, ``poll`` every frame; the session (viewer/session/lookdev.py)
-rebuilds the BRDF with the code either returns.
+material change, ``poll`` every frame (from ``LookDev.update``); the session
+(viewer/session/lookdev.py) rebuilds the BRDF with the code either returns.
 """
 from __future__ import annotations
 
@@ -21,8 +21,18 @@ from typing import Callable
 import numpy as np
 import torch
 
-from nbrdf.neural.material import Material, material_to_dict
-from nbrdf.training.refine import RefineConfig, load_cached, material_hash, serves
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import Material, material_to_dict, parse_material
+from nbrdf.neural.model import default_model
+from nbrdf.training.refine import (
+    RefineConfig,
+    Refiner,
+    check_refinable,
+    load_cached,
+    material_hash,
+    save_cached,
+    serves,
+)
 
 
 @dataclass
@@ -91,11 +101,6 @@ class _RefineRun:
     """The worker's side: one ``training.refine.Refiner`` round per ``step``."""
 
     def __init__(self, spec: RefineSpec, interrupted: Callable[[], bool]):
-        from nbrdf.neural.errors import NbrdfError
-        from nbrdf.neural.material import parse_material
-        from nbrdf.neural.model import default_model
-        from nbrdf.training.refine import Refiner
-
         self.spec, self.interrupted = spec, interrupted
         self.material = parse_material(spec.material, spec.material_dir)
         self.dec = default_model().decoder
@@ -104,8 +109,6 @@ class _RefineRun:
         self.refiner = Refiner(self.dec, self.material, torch.from_numpy(spec.code), spec.config)
 
     def step(self) -> tuple[RefineResult, int, bool, None]:
-        from nbrdf.training.refine import save_cached
-
         st = self.refiner.step(self.interrupted)
         if st.done:
             save_cached(self.material, self.spec.decoder_id, st, self.spec.config.budget)
@@ -155,9 +158,6 @@ class IdleRefiner:
         self._material, self._key, self._shown, self.status = None, None, float("inf"), ""
         if material is None or code is None or not self.settings.enabled or material.is_textured:
             return None
-        from nbrdf.neural.errors import NbrdfError
-        from nbrdf.training.refine import check_refinable
-
         try:
             check_refinable(material)
         except NbrdfError:

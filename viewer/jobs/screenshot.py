@@ -6,25 +6,26 @@ stays responsive.
 ``ScreenshotJob`` is what is being rendered and how far it is; the passes are
 drawn by the session's ``ViewFrames`` into accumulation slots of their own
 (``SHOT_SLOTS``), so the result is the image a one-shot render of the same
-passes gives.
+passes gives. Each call takes the frame's description (``Frame``); results go
+back as return values (the notice) and exceptions (the error), which the
+session reports: a screenshot never calls back into the session.
 """
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
 
+from nbrdf.imaging.image_io import check_output, tonemap, write_image, write_png8
 from nbrdf.imaging.tonemap import ToneMap
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.jobs.frame import Frame, Stage, render_linear
+from nbrdf.viewer.jobs.view_frames import ViewFrames
 from nbrdf.viewer.modes import View
 from nbrdf.viewer.scene.camera import OrbitCamera
-
-if TYPE_CHECKING:
-    from nbrdf.viewer.session.lookdev import LookDev
 
 #: Screenshot files: .png is the displayed composite, .exr / .npy the linear neural image.
 SHOT_SUFFIXES = (".png", ".exr", ".npy")
@@ -135,108 +136,77 @@ class ScreenshotJob:
 
 def write_display_png(path: Path, rgb8: np.ndarray) -> None:
     """Writes the displayed (tone-mapped) image, uint8 (H, W, 3) with row 0 at the top."""
-    from nbrdf.imaging.image_io import write_png8
-
     path.parent.mkdir(parents=True, exist_ok=True)
     write_png8(path, rgb8)
 
 
 def _write_linear(path: Path, img: np.ndarray, state) -> None:
-    from nbrdf.imaging.image_io import write_image
-
     write_image(path, img, state.exposure, ToneMap.parse(state.tonemap).value)
 
 
-class Screenshots:
-    """The screenshots of a session: one-shot, or one being rendered in steps
-    (``job``; its image so far in ``texture`` for the window to show)."""
+#: What a failed screenshot step raises (the session reports it in one line).
+SHOT_ERRORS = (NbrdfError, OSError, ValueError, moderngl.Error)
 
-    def __init__(self, session: "LookDev"):
-        self.session = session
+
+class Screenshots:
+    """A session's screenshots: one-shot (``write``), or one rendered in steps
+    (``start``, then ``step`` per frame; ``job``, its image so far in ``texture``
+    for the window to show). Drawn with the session's ``stage`` and ``frames``."""
+
+    def __init__(self, stage: Stage, frames: ViewFrames):
+        self.stage, self.frames = stage, frames
         self.job: ScreenshotJob | None = None
         self.texture: moderngl.Texture | None = None
         """The screenshot being rendered as far as it is (RGBA8, row 0 at the bottom)."""
         self._fbos: dict[tuple[int, int], moderngl.Framebuffer] = {}
 
-    def write(self, path: str | Path, size: tuple[int, int], passes: int = 16) -> bool:
-        """Renders and writes a screenshot at once (a guarded edit of the session:
-        False with its ``error`` on bad input). .png: the displayed composite
-        (tone-mapped, compare included); .exr/.npy: the linear neural image of the view."""
-        ld = self.session
-        return ld.guarded(lambda: setattr(ld, "notice", self._write(path, size, passes)))
-
-    def start(self, path: str | Path, size: tuple[int, int], passes: int = 16,
-              budget_ms: float = SHOT_STEP_MS) -> bool:
-        """Starts a screenshot that ``step`` renders a step per frame (a guarded edit)."""
-        ld = self.session
-        return ld.guarded(lambda: setattr(ld, "notice", self._start(path, size, passes, budget_ms)))
-
-    def cancel(self) -> None:
-        self.job = None
-        self.session.notice = "screenshot cancelled"
-
-    def step(self, budget_ms: float = SHOT_STEP_MS) -> None:
-        """Renders the next step of the screenshot being rendered and writes the file
-        after the last; an error ends it and becomes the session's ``error``."""
-        ld = self.session
-        if self.job is None:
-            return
-        ld.poll()
-        if ld.brdf is None or self.job is None:
-            return
-        try:
-            notice = self._step_file(budget_ms)
-        except (NbrdfError, OSError, ValueError, moderngl.Error) as e:
-            ld.error = f"screenshot: {str(e).splitlines()[0] if str(e) else type(e).__name__}"
-            return
-        if notice:
-            ld.notice = notice
-
-    def _write(self, path: str | Path, size: tuple[int, int], passes: int) -> str:
-        ld = self.session
+    def write(self, frame: Frame, path: str | Path, size: tuple[int, int], passes: int = 16) -> str:
+        """Renders and writes a screenshot of ``frame`` at once; returns the notice
+        (a bad request raises ``NbrdfError``). .png: the displayed composite
+        (tone-mapped, compare included); .exr/.npy: the linear neural image of the view.
+        The view's accumulation starts over after it (its slots were used)."""
         p = Path(path)
         suffix = p.suffix.lower()
         if suffix not in SHOT_SUFFIXES:
             raise NbrdfError(f"{p}: a screenshot is .png, .exr or .npy")
-        if ld.brdf is None:
+        if frame.brdf is None:
             raise NbrdfError("the latent texture is still building")
         if suffix == ".png":
-            fbo = ld.ctx.simple_framebuffer(size, components=4)
+            fbo = self.stage.ctx.simple_framebuffer(size, components=4)
             try:
-                ld.invalidate()
-                ld.render(fbo, size, passes)
+                self.frames.restart()
+                self.frames.render(frame, fbo, size, passes)
                 data = np.frombuffer(fbo.read(components=3), np.uint8).reshape(size[1], size[0], 3)[::-1]
                 write_display_png(p, data)
             finally:
                 fbo.release()
-                ld.invalidate()
+                self.frames.restart()
         else:
-            _write_linear(p, ld.render_linear(size, passes), ld.state)
-            ld.invalidate()
+            _write_linear(p, render_linear(self.stage, frame, size, passes), frame.state)
         return f"wrote {p}"
 
-    def _start(self, path: str | Path, size: tuple[int, int], passes: int, budget_ms: float) -> str:
-        """A screenshot that ``step`` renders a step per frame: the same file
-        ``write`` writes at once. Where a whole pass would not fit ``budget_ms``
-        (software OpenGL), the object view is rendered tile by tile."""
-        from nbrdf.imaging.image_io import check_output
-
-        ld = self.session
-        if ld.brdf is None:
+    def start(self, frame: Frame, path: str | Path, size: tuple[int, int], passes: int = 16,
+              budget_ms: float = SHOT_STEP_MS) -> str:
+        """Starts a screenshot that ``step`` renders a step per frame: the same file
+        ``write`` writes at once; returns the notice. Where a whole pass would not fit
+        ``budget_ms`` (software OpenGL), the object view is rendered tile by tile."""
+        if frame.brdf is None:
             raise NbrdfError("the latent texture is still building")
         job = ScreenshotJob(Path(path), size, passes)
         check_output(job.path)
-        rate = ld.frames.ms_per_pixel_pass
+        rate = self.frames.ms_per_pixel_pass
         whole_ms = None if rate is None else rate * job.size[0] * job.size[1]
-        if (View.parse(ld.state.view) == View.OBJECT and not ld.compare_active()
-                and (whole_ms is None or whole_ms > budget_ms)):
+        if frame.view == View.OBJECT and not frame.comparing and (whole_ms is None or whole_ms > budget_ms):
             job = ScreenshotJob(job.path, job.size, job.passes, tiled=True)
         job.ms_per_pixel_pass = rate
         if self.texture is not None:
             self.texture.release()
-        self.texture = ld.ctx.texture(job.size, 4)
+        self.texture = self.stage.ctx.texture(job.size, 4)
         self.job = job
         return f"rendering {job.path.name}..."
+
+    def cancel(self) -> None:
+        self.job = None
 
     @property
     def progress(self) -> float | None:
@@ -248,13 +218,16 @@ class Screenshots:
         if self.job is not None:
             self.job.restart()
 
-    def _step_file(self, budget_ms: float) -> str | None:
+    def step(self, frame: Frame, budget_ms: float = SHOT_STEP_MS) -> str | None:
         """Renders the next step of the screenshot (passes of one tile within
         ``budget_ms``, or one whole pass) and writes the file after the last;
-        returns the notice then. An error ends the screenshot and is raised."""
+        returns the notice then (the view's accumulation starts over: its slots
+        may have been used). An error (``SHOT_ERRORS``) ends the screenshot and is raised."""
         job = self.job
+        if job is None or frame.brdf is None:
+            return None
         try:
-            self._step(job, budget_ms)
+            self._step(frame, job, budget_ms)
         except Exception:
             self.job = None
             raise
@@ -262,57 +235,56 @@ class Screenshots:
             return None
         self.job = None
         if job.linear:
-            _write_linear(job.path, job.image, self.session.state)
+            _write_linear(job.path, job.image, frame.state)
         else:
             write_display_png(job.path, job.image)
-        self.session.invalidate()  # the view's reference and accumulation slots may have been used
+        self.frames.restart()
         return f"wrote {job.path}"
 
-    def _step(self, job: ScreenshotJob, budget_ms: float) -> None:
-        from nbrdf.imaging.image_io import tonemap
-
-        ld = self.session
+    def _step(self, frame: Frame, job: ScreenshotJob, budget_ms: float) -> None:
+        stage, state = self.stage, frame.state
         k, (x, y, w, h), have = job.current()
-        view = View.parse(ld.state.view)
+        view = frame.view
         n = 1
         if job.tiled and job.ms_per_pixel_pass:
             n = int(np.clip(budget_ms / (job.ms_per_pixel_pass * w * h), 1, job.passes - have))
-        cam = TileCamera.of(ld.state.camera, job.size, (x, y, w, h)) if job.tiled else None
-        body = ld.bodies.for_frame(ld.brdf, False) if view == View.OBJECT else ld.brdf
-        ld.renderer.quick = False  # a still image: the full estimator
+        cam = TileCamera.of(state.camera, job.size, (x, y, w, h)) if job.tiled else None
+        body = stage.bodies.for_frame(frame.brdf, False) if view == View.OBJECT else frame.brdf
+        stage.renderer.quick = False  # a still image: the full estimator
         t0 = time.perf_counter()
         if job.linear:
-            img, n = self._linear_step(job, view, cam, body, (x, y, w, h), have, n)
-            rgb8 = tonemap(img, ld.state.exposure, ToneMap.parse(ld.state.tonemap).value)
+            img, n = self._linear_step(frame, job, cam, body, (x, y, w, h), have, n)
+            rgb8 = tonemap(img, state.exposure, ToneMap.parse(state.tonemap).value)
         else:
             if (w, h) not in self._fbos:
-                self._fbos[(w, h)] = ld.ctx.simple_framebuffer((w, h), components=4)
+                self._fbos[(w, h)] = stage.ctx.simple_framebuffer((w, h), components=4)
             fbo = self._fbos[(w, h)]
             fbo.use()
             fbo.viewport = (0, 0, w, h)
-            got = ld.frames.draw(fbo, w, h, have, n, SHOT_SLOTS, camera=cam, body=body)
+            got = self.frames.draw(frame, fbo, w, h, have, n, SHOT_SLOTS, camera=cam, body=body)
             n = job.passes - have if view != View.OBJECT else got - have  # the lobe and slice: drawn once
             rgb8 = np.frombuffer(fbo.read(components=3), np.uint8).reshape(h, w, 3)[::-1]
             job.image[y:y + h, x:x + w] = rgb8
-        ld.ctx.finish()
+        stage.ctx.finish()
         if job.tiled and n:
             job.ms_per_pixel_pass = (time.perf_counter() - t0) * 1000.0 / (w * h * n)
         job.done += max(n, 1)
         rgba = np.concatenate([rgb8, np.full(rgb8.shape[:2] + (1,), 255, np.uint8)], -1)[::-1]
         self.texture.write(np.ascontiguousarray(rgba).tobytes(), viewport=(x, job.size[1] - y - h, w, h))
 
-    def _linear_step(self, job: ScreenshotJob, view: View, cam, body, rect, have: int, n: int):
+    def _linear_step(self, frame: Frame, job: ScreenshotJob, cam, body, rect, have: int, n: int):
         """One step of a linear (.exr / .npy) screenshot into ``job.image``: (the tile's image, passes added)."""
-        ld = self.session
+        stage = self.stage
         x, y, w, h = rect
-        state = ld.main_state()
-        if view != View.OBJECT:  # one pass: the lobe and slice views are not accumulated
-            img, n = ld.renderer.render_linear(state, job.size, 1, ld.brdf), job.passes - have
+        state = frame.state
+        if frame.view != View.OBJECT:  # one pass: the lobe and slice views are not accumulated
+            img, n = stage.renderer.render_linear(state, job.size, 1, frame.brdf), job.passes - have
         else:
             if cam is not None:
                 state = replace(state, camera=cam)
-            acc = ld.renderer.accumulate(replace(state, background=False), w, h, have, n, body, SHOT_LINEAR_SLOT)
-            tex = ld.backdrop_part.apply(acc, have + n, state, ld.backdrop, SHOT_LINEAR_SLOT)
+            acc = stage.renderer.accumulate(replace(state, background=False), w, h, have, n, body,
+                                            SHOT_LINEAR_SLOT)
+            tex = stage.backdrop.apply(acc, have + n, state, frame.backdrop, SHOT_LINEAR_SLOT)
             img = np.frombuffer(tex.read(), dtype="f4").reshape(h, w, 4)[::-1, :, :3]
         job.image[y:y + h, x:x + w] = img
         return img, n

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Callable
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent_texture import LatentTexture
+from nbrdf.neural.svbrdf import latent_texture
 from nbrdf.viewer.gpu.pipeline import MaterialPipeline, material_key
 
 if TYPE_CHECKING:
@@ -68,8 +69,6 @@ class TextureJobs:
         model = self.pipeline.model
 
         def build():
-            from nbrdf.neural.svbrdf import latent_texture
-
             try:
                 job.result = latent_texture(model, m, progress=lambda d, n: setattr(job, "progress", d / n))
             except NbrdfError as e:
@@ -90,9 +89,10 @@ class TextureJobs:
         """The running build's share done (None: none running)."""
         return None if self.job is None else self.job.progress
 
-    def wait(self, poll: Callable[[], None], timeout: float = 60.0) -> None:
-        """Calls ``poll`` until no build runs or ``timeout`` seconds have passed."""
+    def wait(self, update: Callable[[], None], timeout: float = 60.0) -> None:
+        """Calls ``update`` (the session's: it picks the texture up) until no build runs
+        or ``timeout`` seconds have passed."""
         end = time.monotonic() + timeout
         while self.job is not None and time.monotonic() < end:
             time.sleep(0.01)
-            poll()
+            update()

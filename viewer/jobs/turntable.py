@@ -1,22 +1,23 @@
 """Turntables: one turn of the camera around the object, written as a video,
-a looping GIF or numbered frames. The session renders them (at once offscreen,
-a frame per displayed frame in the window); this module owns the frames'
-cameras, the capture in progress and the file."""
+a looping GIF or numbered frames, at once (offscreen) or a frame per displayed
+frame (the window: the session's update steps the capture). This module owns
+the frames' cameras, the capture in progress and the file; the frames are drawn
+from the frame description each call is given (viewer/jobs/frame.py)."""
 from __future__ import annotations
 
 import copy
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 import numpy as np
 
+from nbrdf.imaging.image_io import tonemap as to_srgb8
+from nbrdf.imaging.image_io import write_image
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.jobs.frame import Frame, Stage
 from nbrdf.viewer.modes import View
 from nbrdf.viewer.view_settings import ViewState
-
-if TYPE_CHECKING:
-    from nbrdf.viewer.session.lookdev import LookDev
 
 #: Frames per second of a turntable video or GIF.
 TURNTABLE_FPS = 24
@@ -50,10 +51,7 @@ def turntable_states(state: ViewState, frames: int) -> list[ViewState]:
 
 def write_turntable(out: Path, frames: list, exposure: float, tonemap) -> None:
     """Linear frames -> a video (.mp4, H.264 through imageio's ffmpeg plugin), a looping GIF, or numbered files."""
-    import imageio.v2 as iio
-
-    from nbrdf.imaging.image_io import tonemap as to_srgb8
-    from nbrdf.imaging.image_io import write_image
+    import imageio.v2 as iio  # late: ~100 ms of start-up, only needed when a turntable is written
 
     kind = turntable_kind(out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -118,41 +116,43 @@ class TurntableCapture:
 
 class Turntables:
     """A session's turntables: captured from the window a frame per displayed
-    frame (``start``, then the session's ``poll`` calls ``step``), or written at
+    frame (``start``, then ``step`` from the session's update), or written at
     once (``write``, offscreen). Frames are the object over its backdrop."""
 
-    def __init__(self, session: "LookDev"):
-        self.session = session
+    def __init__(self, stage: Stage):
+        self.stage = stage
         self.capture: TurntableCapture | None = None
         """The capture running in the window (None: none)."""
 
-    def _frame(self, state: ViewState, size: tuple[int, int], spp: int) -> np.ndarray:
-        ld = self.session
-        return ld.backdrop_part.render_linear(state, size, spp, ld.brdf, ld.backdrop)
+    def _renders(self, frame: Frame) -> Callable[[ViewState, tuple[int, int], int], np.ndarray]:
+        """What renders a turntable frame of ``frame``'s material and backdrop at a given view state."""
+        def render(state: ViewState, size: tuple[int, int], spp: int) -> np.ndarray:
+            return self.stage.backdrop.render_linear(state, size, spp, frame.brdf, frame.backdrop)
+        return render
 
-    def start(self, path: str | Path, frames: int = 36, size: tuple[int, int] = (480, 480), spp: int = 16) -> bool:
+    def start(self, frame: Frame, path: str | Path, frames: int = 36, size: tuple[int, int] = (480, 480),
+              spp: int = 16) -> None:
         """Starts rendering one camera turn of ``frames`` frames to ``path``
-        (.mp4, .gif or frame_%03d.png), one frame per window frame (a guarded edit)."""
-        ld = self.session
-        return ld.guarded(lambda: setattr(self, "capture", TurntableCapture.of(path, ld.main_state(), frames,
-                                                                               size, spp)))
+        (.mp4, .gif or frame_%03d.png), one frame per ``step`` (a bad request raises ``NbrdfError``)."""
+        self.capture = TurntableCapture.of(path, frame.state, frames, size, spp)
 
     @property
     def progress(self) -> float | None:
         """The share of the capture's frames rendered (None: no capture running)."""
         return None if self.capture is None else self.capture.progress
 
-    def step(self) -> None:
-        """Renders the capture's next frame; writes the file after the last (a failure ends the capture)."""
-        ld = self.session
+    def step(self, frame: Frame) -> str | None:
+        """Renders the capture's next frame; writes the file after the last and returns
+        the notice then (a failure ends the capture and is raised)."""
         job, self.capture = self.capture, None
-        if not job.step(self._frame, ld.state.exposure, ld.state.tonemap):
+        if job is None:
+            return None
+        if not job.step(self._renders(frame), frame.state.exposure, frame.state.tonemap):
             self.capture = job
-        else:
-            ld.notice = f"wrote {job.out} ({len(job.frames)} frames)"
+            return None
+        return f"wrote {job.out} ({len(job.frames)} frames)"
 
-    def write(self, path: str | Path, frames: int, size: tuple[int, int], spp: int) -> None:
-        """Renders a whole turntable of the session's view at once and writes it."""
-        ld = self.session
-        TurntableCapture.of(path, ld.main_state(), frames, size, spp).run(self._frame, ld.state.exposure,
-                                                                          ld.state.tonemap)
+    def write(self, frame: Frame, path: str | Path, frames: int, size: tuple[int, int], spp: int) -> None:
+        """Renders a whole turntable of ``frame``'s view at once and writes it."""
+        TurntableCapture.of(path, frame.state, frames, size, spp).run(self._renders(frame), frame.state.exposure,
+                                                                      frame.state.tonemap)

@@ -8,33 +8,31 @@ a cache.
 from __future__ import annotations
 
 from collections import OrderedDict
-from typing import TYPE_CHECKING
+from typing import Generic, TypeVar
 
-if TYPE_CHECKING:
-    from nbrdf.viewer.jobs.refine_job import RefineResult
-    from nbrdf.viewer.reference.worker import ReferenceImage
-
-    Result = ReferenceImage | RefineResult
+#: What is kept: a worker's ``ReferenceImage`` or ``RefineResult`` (viewer/reference/worker.py,
+#: viewer/jobs/refine_job.py), sized by their arrays; a type variable, so this module imports neither.
+Result = TypeVar("Result")
 
 
-class ReferenceCache:
+class ReferenceCache(Generic[Result]):
     """References by job key; the least recently stored are dropped beyond ``max_items``
     references or ``max_bytes`` of images (the one stored last and the ``keep`` key stay)."""
 
     def __init__(self, max_items: int = 16, max_bytes: int = 256 * 2**20):
         self.max_items, self.max_bytes = max_items, max_bytes
-        self._items: OrderedDict[str, "Result"] = OrderedDict()
+        self._items: OrderedDict[str, Result] = OrderedDict()
 
-    def get(self, key: str) -> "Result | None":
+    def get(self, key: str) -> Result | None:
         return self._items.get(key)
 
     def __len__(self) -> int:
         return len(self._items)
 
-    def __setitem__(self, key: str, ref: "Result") -> None:
+    def __setitem__(self, key: str, ref: Result) -> None:
         self.put(key, ref)
 
-    def put(self, key: str, ref: "Result", keep: str | None = None) -> None:
+    def put(self, key: str, ref: Result, keep: str | None = None) -> None:
         """Stores ``ref`` under ``key`` (the most recent), then drops the oldest over the bounds."""
         self._items.pop(key, None)
         self._items[key] = ref

@@ -34,6 +34,7 @@ import torch
 from nbrdf.imaging.tonemap import ToneMap
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Conductor, Dielectric, Material, material_to_dict
+from nbrdf.training.render_report import flip  # the evaluation of `nbrdf report render`
 from nbrdf.viewer.gpu import shaders
 from nbrdf.viewer.gpu.labels import Label, Labels
 from nbrdf.viewer.gpu.lit_sampling import Term
@@ -150,9 +151,7 @@ class Compare:
             self._gbuf_prog = self.ctx.program(vertex_shader=shaders.source("object.vert"),
                                                fragment_shader=shaders.source("reference_gbuffer.frag"))
         p = self._gbuf_prog
-        vbo, ibo = r._mesh_buffers
-        vao = self.ctx.vertex_array(p, [(vbo, "3f 3f 4f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
-                                    ibo, skip_errors=True)
+        vao = r.mesh_vao(p)  # kept by the renderer until its mesh changes
         targets = [self.ctx.texture((w, h), 4, dtype="f4") for _ in range(2)]
         depth = self.ctx.depth_renderbuffer((w, h))
         fbo = self.ctx.framebuffer(targets, depth)
@@ -168,7 +167,7 @@ class Compare:
             n, x = (np.frombuffer(t.read(), np.float32).reshape(h, w, 4)[::-1] for t in targets)
             return np.ascontiguousarray(n[..., :3]), np.ascontiguousarray(x[..., :3]), n[..., 3] > 0.5
         finally:
-            for res in (vao, fbo, depth, *targets):
+            for res in (fbo, depth, *targets):
                 res.release()
 
     def lit_job(self, material: Material, state: ViewState, key: str, size: tuple[int, int],
@@ -370,8 +369,6 @@ class Compare:
                a.size, int(math.log2(max(pa, 1.0))))
         if key != self._flip_key:
             test = _resample(_read_linear(a, pa), b.size)
-            from nbrdf.training.render_report import flip  # the evaluation of `nbrdf report render`
-
             self.flip_mean, fmap = flip(_read_linear(b, pb), test)
             data = np.ascontiguousarray(fmap, dtype="f4")
             if self._flip_tex is not None:

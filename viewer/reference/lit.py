@@ -21,7 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from nbrdf.neural.material import Material, material_to_dict
+from nbrdf.imaging.environment import EnvironmentMap
+from nbrdf.neural.material import Material, material_to_dict, parse_material
+from nbrdf.neural.microfacet import reflect, sample_vndf, vndf_pdf
+from nbrdf.training.reference import reference_eval
 
 
 def f32(t) -> np.ndarray:
@@ -142,9 +145,6 @@ def lit_samples(spec: LitSpec, material: Material, env, k: int, seed: int) -> np
     coat's environment light: per sample one light path and one environment
     direction on the body (see the module docstring). ``env``: the
     ``EnvironmentMap`` of ``spec.env_file`` (None: no environment)."""
-    from nbrdf.neural.microfacet import reflect, sample_vndf, vndf_pdf
-    from nbrdf.training.reference import reference_eval
-
     n = spec.wo.shape[0]
     wo = np.repeat(spec.wo.astype(np.float64), k, 0)
     out = np.zeros((n * k, 3))
@@ -196,9 +196,6 @@ class LitRun:
     """A lit job's pooled rounds of ``lit_samples`` (samples per pixel doubling, then steady)."""
 
     def __init__(self, job: LitSpec, envs: dict):
-        from nbrdf.imaging.environment import EnvironmentMap
-        from nbrdf.neural.material import parse_material
-
         self.job, self.material = job, parse_material(job.material, job.material_dir)
         self.env = None
         if job.env_file is not None:

@@ -36,7 +36,8 @@ import numpy as np
 import torch
 
 from nbrdf.neural.geometry import incidence, lobe_grid
-from nbrdf.neural.material import Material, material_to_dict
+from nbrdf.neural.material import Material, material_to_dict, parse_material
+from nbrdf.training.reference import reference_eval
 from nbrdf.viewer.reference.cache import ReferenceCache
 from nbrdf.viewer.reference.lit import LitRun, LitSpec, f32
 
@@ -137,8 +138,6 @@ class _PairRun:
     """A pair job's pooled rounds: reference_eval at every pair, paths doubling per round."""
 
     def __init__(self, job: JobSpec):
-        from nbrdf.neural.material import parse_material
-
         self.job, self.material = job, parse_material(job.material, job.material_dir)
         self.wi, self.wo = torch.from_numpy(job.wi), torch.from_numpy(job.wo)
         self.weight = torch.from_numpy(job.weight).double()
@@ -146,8 +145,6 @@ class _PairRun:
 
     def step(self) -> tuple[np.ndarray, int, bool, np.ndarray]:
         """One round: (image, paths so far, done, standard error)."""
-        from nbrdf.training.reference import reference_eval
-
         job, spp = self.job, self.spp
         m, e = reference_eval(self.material, self.wi, self.wo, spp=spp, seed=7919 * self.k)
         # pooled like one run: the sum of the rounds' path sums, its variance the sum of theirs

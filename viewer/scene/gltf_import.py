@@ -49,6 +49,7 @@ import zlib
 from pathlib import Path
 from typing import Any, NamedTuple
 
+import imageio.v3 as iio
 import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
@@ -214,8 +215,6 @@ class _Gltf:
 
     def image(self, texture_index: int) -> np.ndarray:
         """Texels of a texture's image as float (H, W, C) in [0, 1], row 0 = the file's top row."""
-        import imageio.v3 as iio
-
         tex = self.item("textures", texture_index)
         img = self.item("images", tex.get("source"))
         if "uri" in img:
@@ -323,8 +322,6 @@ class _MaterialWriter:
 
     def write(self, img: np.ndarray, suffix: str, bits: int = 16) -> str:
         """A derived map as maps/<material>_<suffix>.png (16-bit grey, or 8-bit)."""
-        import imageio.v3 as iio
-
         rel = f"maps/{self.name}_{suffix}.png"
         p = self.out_dir / rel
         p.parent.mkdir(parents=True, exist_ok=True)
@@ -500,7 +497,7 @@ def _unsupported(m: dict, notes: list[str]) -> None:
 # ---------------------------------------------------------------- meshes
 
 def _primitive_mesh(gltf: _Gltf, prim: dict, world: np.ndarray, place: str):
-    import trimesh
+    import trimesh  # late: trimesh costs 1.1 s and only imported glTF primitives need it
 
     attrs = prim.get("attributes", {})
     if "POSITION" not in attrs:

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.scene.gltf_import import imported_scene, material_groups
 
 
 @dataclass
@@ -102,15 +103,13 @@ def load_mesh(path: str | Path) -> Mesh:
     """OBJ/glTF/PLY/... through trimesh (a .gltf/.glb through the project's glTF
     importer: every primitive, turned z-up, normalised together, one draw range
     per material); normals and tangents computed when missing."""
-    import trimesh
+    import trimesh  # late: trimesh costs 1.1 s and only mesh files (OBJ, glTF, PLY) need it
 
     p = Path(path)
     if not p.is_file():
         raise NbrdfError(f"--mesh {path}: no such file")
     parts: tuple[tuple[int, int], ...] = ()
     if p.suffix.lower() in GLTF_SUFFIXES:
-        from nbrdf.viewer.scene.gltf_import import imported_scene, material_groups
-
         groups = material_groups(imported_scene(p))
         meshes = [m for g in groups for m in g.meshes]
         scene = trimesh.util.concatenate(meshes)

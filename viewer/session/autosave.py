@@ -27,6 +27,7 @@ from typing import Any, Callable
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.files import write_atomic as _write_atomic
+from nbrdf.viewer.session.document import SessionDoc
 
 #: Overrides the state folder (tests, several independent setups on one account).
 STATE_ENV = "NBRDF_STATE_DIR"
@@ -185,8 +186,6 @@ class Autosave:
     def read_recovery(self, path: Path | None = None):
         """The recovery (or the given) file as a checked ``SessionDoc``; None and
         ``error`` set (the file renamed aside) when it cannot be read."""
-        from nbrdf.viewer.session.document import SessionDoc
-
         p = path or self.recovery_path
         try:
             return SessionDoc.load(p)

@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import typing
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from pathlib import Path
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.files import save_text
 from nbrdf.neural.material import Material, material_to_dict, parse_material
 from nbrdf.viewer.gpu.backdrop import BackdropSettings
 from nbrdf.viewer.modes import CompareMode
@@ -144,8 +146,6 @@ class SessionDoc:
 
     def save(self, path: str | Path) -> None:
         """Writes the document atomically (a failed write leaves any previous file whole)."""
-        from nbrdf.neural.files import save_text
-
         save_text(path, json.dumps(self.to_dict(), indent=2) + "\n")
 
     @classmethod
@@ -205,8 +205,6 @@ WINDOW_PREFS_FORMAT = "nbrdf-window/1"
 
 def prefs_path() -> Path:
     """Where the window's size is kept between runs: $XDG_CONFIG_HOME/nbrdf/window.json."""
-    import os
-
     base = os.environ.get("XDG_CONFIG_HOME") or os.path.join(os.path.expanduser("~"), ".config")
     return Path(base) / "nbrdf" / "window.json"
 

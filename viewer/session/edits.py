@@ -11,6 +11,7 @@ import math
 from abc import ABC, abstractmethod
 from dataclasses import asdict, fields, replace
 from pathlib import Path
+from typing import Callable
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material, load_material, material_to_dict, save_material
@@ -131,6 +132,11 @@ class SessionEdits(ABC):
         return self.editor.material
 
     @property
+    def layers(self) -> list[dict]:
+        """The edited stack's layer documents, top first (the base last)."""
+        return self.editor.layers
+
+    @property
     def compare(self) -> CompareMode:
         return self.compare_settings.mode
 
@@ -146,9 +152,33 @@ class SessionEdits(ABC):
     def set_param(self, index: int, key: str, value) -> bool:
         return self.guarded(lambda: (self.editor.set_param(index, key, value), self._apply_material()))
 
-    def edit(self, op: str, *args) -> bool:
-        """A stack edit of ``StackEditor`` by name: add_coat, remove, move, toggle_medium, set_base_type, set_name."""
-        return self.guarded(lambda: (getattr(self.editor, op)(*args), self._apply_material()))
+    def _stack_edit(self, change: Callable[[StackEditor], Material]) -> bool:
+        """One guarded edit of the layer stack through ``StackEditor`` (which validates it)."""
+        return self.guarded(lambda: (change(self.editor), self._apply_material()))
+
+    def add_coat(self, medium: bool = False) -> bool:
+        """A clear coat on top of the stack (``medium``: with a clear varnish slab below it)."""
+        return self._stack_edit(lambda e: e.add_coat(medium))
+
+    def remove_layer(self, index: int) -> bool:
+        """Removes the layer at ``index`` (an interface goes with the medium below it; not the base)."""
+        return self._stack_edit(lambda e: e.remove(index))
+
+    def move_layer(self, index: int, delta: int) -> bool:
+        """Moves the interface at ``index`` (with its medium) up (-1) or down (+1) among the interfaces."""
+        return self._stack_edit(lambda e: e.move(index, delta))
+
+    def toggle_medium(self, interface: int) -> bool:
+        """Adds a medium under the interface at ``interface``, or removes it."""
+        return self._stack_edit(lambda e: e.toggle_medium(interface))
+
+    def set_base_type(self, kind: str) -> bool:
+        """A new base layer of ``kind`` (one of ``BASE_TYPES``) with its default parameters."""
+        return self._stack_edit(lambda e: e.set_base_type(kind))
+
+    def set_name(self, name: str) -> bool:
+        """Renames the material."""
+        return self._stack_edit(lambda e: e.set_name(name))
 
     def _edit_material(self, m: Material) -> None:
         self.editor = StackEditor.from_material(m)
@@ -310,8 +340,3 @@ class SessionEdits(ABC):
 
     def open_session(self, path: str | Path) -> bool:
         return self.guarded(lambda: self.restore(SessionDoc.load(path)))
-
-    def apply_session(self, data: dict, source: str = "session") -> None:
-        """Restores a session dict; validates everything before changing anything."""
-        self.restore(SessionDoc.parse(data, source))
-

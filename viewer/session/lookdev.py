@@ -10,10 +10,12 @@ offscreen path (viewer/offscreen.py) both start there. It delegates each job:
 
 - viewer/session/document.py: the session document (its file format and validation);
 - viewer/gpu/pipeline.py: material -> latents -> the BRDF's GPU resources (``GpuBrdf``);
-- viewer/jobs/view_frames.py: the view drawn frame by frame (accumulation, composite);
+- viewer/jobs/view_frames.py: the view drawn frame by frame (accumulation, composite)
+  from the frame's description (``describe``, viewer/jobs/frame.py);
 - viewer/reference/compare.py: the reference (closed form or the Monte Carlo worker
   process) and the compositor;
-- viewer/jobs/screenshot.py, viewer/jobs/turntable.py: screenshots and turntables;
+- viewer/jobs/screenshot.py, viewer/jobs/turntable.py: screenshots and turntables
+  (run and reported as session methods by viewer/session/captures.py);
 - viewer/jobs/texture_jobs.py: latent textures built in a worker thread;
 - viewer/session/material_parts.py: a glTF file's materials, one per draw range;
 - viewer/jobs/plane_curves.py: the lobe plot's curves;
@@ -22,7 +24,9 @@ offscreen path (viewer/offscreen.py) both start there. It delegates each job:
 
 The window, its panels and the tests drive the same methods; every method
 that takes user input reports a bad input in ``error`` and leaves the session
-as it was (and is one undo step).
+as it was (and is one undo step). A frame updates first (``update``: the
+background results), then renders from ``describe()``: the jobs take that
+description and never call back into the session.
 """
 from __future__ import annotations
 
@@ -40,19 +44,23 @@ from nbrdf.imaging.env_presets import resolve_environment
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent_texture import blend
 from nbrdf.neural.material import Material
+from nbrdf.neural.model import NeuralModel
 from nbrdf.viewer.gpu.backdrop import Backdrop, BackdropSettings
 from nbrdf.viewer.gpu.body_source import BodySource
 from nbrdf.viewer.gpu.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, fallback_note, gpu_brdf, material_key
 from nbrdf.viewer.gpu.renderer import Renderer
+from nbrdf.viewer.jobs.frame import Frame, Stage, render_linear
 from nbrdf.viewer.jobs.plane_curves import PlaneCurves
 from nbrdf.viewer.jobs.refine_job import IdleRefiner
 from nbrdf.viewer.jobs.screenshot import Screenshots
 from nbrdf.viewer.jobs.texture_jobs import TextureJobs
 from nbrdf.viewer.jobs.turntable import Turntables
 from nbrdf.viewer.jobs.view_frames import MAX_PASSES, ViewFrames
-from nbrdf.viewer.modes import BrdfMode, CompareMode, View
+from nbrdf.viewer.modes import BrdfMode, CompareMode
 from nbrdf.viewer.reference.compare import Compare
+from nbrdf.viewer.scene.gltf_import import imported_scene, material_groups
 from nbrdf.viewer.scene.mesh import GLTF_SUFFIXES, named_mesh
+from nbrdf.viewer.session.captures import Captures
 from nbrdf.viewer.session.document import SessionDoc
 from nbrdf.viewer.session.edits import SessionEdits, presets
 from nbrdf.viewer.session.material_parts import MaterialParts, PartMaterial
@@ -82,7 +90,7 @@ class Timings:
     """From an edit to the end of the first frame showing it."""
 
 
-class LookDev(SessionEdits):
+class LookDev(SessionEdits, Captures):
     """One look-development session: the edited material, scene and view, their
     GPU resources, and the jobs that render them (frames, screenshots, turntables)."""
 
@@ -109,11 +117,7 @@ class LookDev(SessionEdits):
         self.other_brdf: GpuBrdf | None = None  # the second material of a BRDF blend
         self._edit_t0: float | None = None
         self.textures = TextureJobs(self.pipeline, threaded)
-        self.turntables = Turntables(self)
         self.material_parts = MaterialParts(lambda m: self.pipeline.build(m, self.brdf_mode))
-        self.frames = ViewFrames(self)
-        self.shots = Screenshots(self)
-        self.curves = PlaneCurves(self)
         self.renderer = Renderer(ctx, mesh=mesh, environment=resolve_environment(str(env)) if env else None)
         if parts is not None:
             self.editor = StackEditor.from_material(
@@ -122,8 +126,15 @@ class LookDev(SessionEdits):
         self.backdrop_part = Backdrop(ctx, self.renderer)
         # The window's frames: decoder or baked body table (viewer/gpu/body_source.py).
         self.bodies = BodySource(ctx, decoder=lambda: self.pipeline.decoder)
+        self.stage = Stage(ctx, self.renderer, self.compare_part, self.backdrop_part, self.bodies)
+        """The GPU parts the jobs draw with (viewer/jobs/frame.py)."""
+        self.frames = ViewFrames(self.stage)
+        self.shots = Screenshots(self.stage, self.frames)
+        self.turntables = Turntables(self.stage)
+        self.curves = PlaneCurves(self.compare_part)
         # A still uniform material's code refined in the worker process (viewer/jobs/refine_job.py).
-        self.idle_refine = IdleRefiner(lambda: self.worker, lambda: self.pipeline.model.decoder)
+        compare, pipeline = self.compare_part, self.pipeline  # the parts it asks, not the session
+        self.idle_refine = IdleRefiner(lambda: compare.worker, lambda: pipeline.model.decoder)
         self._apply_material()
         self.history.reset(self.snapshot())
 
@@ -144,7 +155,7 @@ class LookDev(SessionEdits):
         return ld
 
     @property
-    def model(self):
+    def model(self) -> NeuralModel:
         return self.pipeline.model
 
     @property
@@ -168,6 +179,16 @@ class LookDev(SessionEdits):
         return self.frames.passes
 
     @property
+    def texture_progress(self) -> float | None:
+        """The share of the latent texture being built that is done (None: none building)."""
+        return self.textures.progress
+
+    @property
+    def refine_status(self) -> str:
+        """The idle refinement's line: "", "refining...", "refined, N s" (viewer/jobs/refine_job.py)."""
+        return self.idle_refine.status
+
+    @property
     def flip_mean(self) -> float | None:
         """The mean HDR-FLIP of the FLIP compare view (None until there is a reference)."""
         return self.compare_part.flip_mean
@@ -180,8 +201,6 @@ class LookDev(SessionEdits):
             new = named_mesh(mesh)
             groups = None
             if Path(mesh).suffix.lower() in GLTF_SUFFIXES:
-                from nbrdf.viewer.scene.gltf_import import imported_scene, material_groups
-
                 groups = material_groups(imported_scene(mesh))
             parts = self.material_parts
             old = (self.renderer.mesh, parts.parts, parts.selected, self.editor)
@@ -220,7 +239,7 @@ class LookDev(SessionEdits):
         with a single material."""
         if not self.parts or not (0 <= x < size[0] and 0 <= y < size[1]):
             return -1
-        k = int(self.renderer.material_ids(self.main_state(), size)[int(y), int(x)])
+        k = int(self.renderer.material_ids(self.state, size)[int(y), int(x)])
         if k >= 0 and k != self.selected and not self.select_material(k):
             return -1
         return k
@@ -310,20 +329,28 @@ class LookDev(SessionEdits):
                 raise
         return self.guarded(go)
 
-    def poll(self) -> None:
-        """Picks up finished background work (latent textures) and renders the
-        next frame of a turntable capture."""
+    def update(self) -> None:
+        """Collects what finished in the background since the last frame -- a latent
+        texture built, a refined code -- and renders the next frame of a turntable
+        capture. The window calls it once a frame before rendering, so a render
+        draws a settled session and never calls back into it."""
         if self.textures.finished:
             if not self.guarded(self._apply_material):
                 self._keep_shown_material()
             self.notice = ""
         refined = self.idle_refine.poll()
         if refined is not None:  # a code that beats the network's on the material's own simulation
-            self.brdf = self.pipeline.build(self.material, BrdfMode.NEURAL, latent=refined)
-            self.frames.handover()  # the image so far fades into the refined code's, no restart from noise
-            self.shots.restart()
+            self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=refined))
         if self.turntables.capture is not None and self.brdf is not None:
-            self.guarded(self.turntables.step)
+            self.guarded(self._turntable_step)
+
+    def swap_brdf(self, brdf: GpuBrdf) -> None:
+        """Shows ``brdf`` for the same material without an edit (idle refinement's better
+        code): the image so far fades into the new one (``ViewFrames.handover``), no
+        restart from noise."""
+        self.brdf = brdf
+        self.frames.handover(self.describe())
+        self.shots.restart()
 
     def _keep_shown_material(self) -> None:
         """After a material whose latent texture could not be made (``error`` says why):
@@ -339,7 +366,7 @@ class LookDev(SessionEdits):
 
     def wait_svbrdf(self, timeout: float = 60.0) -> None:
         """Waits for the latent texture being built (tests, scripts)."""
-        self.textures.wait(self.poll, timeout)
+        self.textures.wait(self.update, timeout)
 
     # --- frames ------------------------------------------------------------------------------
     def compare_active(self) -> bool:
@@ -351,10 +378,13 @@ class LookDev(SessionEdits):
         """Whether the view shows two images side by side (each half the view's width)."""
         return self.compare_active() and self.compare == CompareMode.SIDE
 
-    def main_state(self) -> ViewState:
-        """The view state of the neural image (and of its reference: both sides of a
-        comparison are lit by what the view shows)."""
-        return self.state
+    def describe(self) -> Frame:
+        """The frame as the jobs draw it: the view, the BRDFs shown, the compare and blend settings."""
+        comparing, blend = self.compare_active(), self.interp.brdf_blend
+        s = self.compare_settings
+        return Frame(self.state, self.material, self.mesh, self.brdf, self.ref_brdf,
+                     self.other_brdf if blend else None, self.interp.t, s.mode if comparing else CompareMode.OFF,
+                     s.wipe, s.error_scale, self.backdrop)
 
     def render(self, target: moderngl.Framebuffer, size: tuple[int, int], passes: int = 1,
                scale: float = 1.0, interactive: bool = False, quick: bool | None = None) -> None:
@@ -364,8 +394,22 @@ class LookDev(SessionEdits):
         shade with a quicker body (``bodies``; a change of body restarts the accumulation);
         ``quick``: the quick estimator (None: when ``interactive``). Any change of the
         rendered size (window, panels shown or hidden, scale) or of the view starts the
-        accumulation over."""
-        self.frames.render(target, size, passes, scale, interactive, quick)
+        accumulation over. Call ``update`` first (the window does, each frame)."""
+        self.frames.render(self.describe(), target, size, passes, scale, interactive, quick)
+        self.timings.render_ms = self.frames.render_ms
+
+    def calibrate_bodies(self) -> None:
+        """Times the decoder on this GL and picks how the window's frames shade the body
+        (per pixel or from baked tables, viewer/gpu/body_source.py); a change is said in ``notice``."""
+        body_notice = self.bodies.calibrate(self.brdf) if self.brdf is not None else ""
+        self.renderer.table_sampling = self.bodies.sampling(self.renderer.sampling)
+        if body_notice:
+            self.notice = "; ".join(x for x in (self.notice, body_notice) if x)
+
+    def release_targets(self) -> None:
+        """After a failed GL frame: fresh render targets, the accumulation started over."""
+        self.renderer.release_targets()
+        self.invalidate()
 
     def frame_done(self) -> None:
         """Call once the frame is on screen: closes the edit-to-frame measurement."""
@@ -376,12 +420,7 @@ class LookDev(SessionEdits):
     def render_linear(self, size: tuple[int, int], spp: int) -> np.ndarray:
         """The linear image of the view (H, W, 3): the object over its backdrop, or
         the lobe / slice view (the lobe: SPEC section 9's array, row 0 at y = -1)."""
-        if self.brdf is None:
-            raise NbrdfError("the latent texture is still building")
-        state = self.main_state()
-        if View.parse(state.view) == View.OBJECT:
-            return self.backdrop_part.render_linear(state, size, spp, self.brdf, self.backdrop)
-        return self.renderer.render_linear(state, size, spp, self.brdf)
+        return render_linear(self.stage, self.describe(), size, spp)
 
     # --- ground truth -----------------------------------------------------
     def reference_status(self) -> str:
@@ -390,7 +429,7 @@ class LookDev(SessionEdits):
     def reference_linear(self, size: tuple[int, int], spp: int, timeout: float = 300.0) -> np.ndarray:
         """The reference image of the current view (tests, batch): closed form, or Monte Carlo
         with at least ``spp`` paths (waits for the worker)."""
-        return self.compare_part.reference_linear(self.material, self.ref_brdf, self.brdf, self.main_state(),
+        return self.compare_part.reference_linear(self.material, self.ref_brdf, self.brdf, self.state,
                                                   self.mesh, size, spp, timeout)
 
     def restore(self, doc: SessionDoc) -> None:

@@ -13,7 +13,7 @@ from pathlib import Path
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import COLOUR_PARAMS, DIELECTRIC, KINDS, MEDIUM, PARAMETRIC_BASES
 from nbrdf.neural.layer_kinds import RANGES as MATERIAL_RANGES
-from nbrdf.neural.material import Material, parse_material
+from nbrdf.neural.material import Material, material_to_dict, parse_material
 
 #: The base types the editor offers (those given by parameters).
 BASE_TYPES = PARAMETRIC_BASES
@@ -34,8 +34,6 @@ class StackEditor:
 
     @classmethod
     def from_material(cls, m: Material) -> "StackEditor":
-        from nbrdf.neural.material import material_to_dict
-
         return cls(material_to_dict(m), m.base_dir)
 
     @property

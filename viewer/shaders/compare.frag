@@ -1,9 +1,8 @@
 // Display of one or two accumulations: A alone, A | B side by side, an A/B
 // wipe at u_wipe, a false-colour relative error |A - B| / (B + 0.01) over
 // [0, u_err_scale] (blue -> green -> red), the HDR-FLIP map u_flip (computed
-// on the CPU by viewer/compare.py) in magma, or the linear blend of A and B
-// (interpolation of BRDF values). Exposure, tone mapping and sRGB as
-// tonemap.frag (whose functions it includes).
+// on the CPU by viewer/reference/compare.py) in magma, or the linear blend of A and B
+// (interpolation of BRDF values). Exposure, tone mapping and sRGB: tonemap_common.glsl.
 //@INCLUDE tonemap_common.glsl
 uniform sampler2D u_a;
 uniform sampler2D u_b;

@@ -22,7 +22,7 @@ from nbrdf.viewer.scene.camera import FOV_RANGE
 from nbrdf.viewer.session.lookdev import LookDev, presets
 from nbrdf.viewer.session.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
 from nbrdf.viewer.ui.plots import error_bar, flip_bar, polar_plot
-from nbrdf.viewer.ui.preset_browser import preset_browser
+from nbrdf.viewer.ui.preset_browser import PresetBrowser
 from nbrdf.viewer.view_settings import Row, rows
 
 COMPARE_LABELS = {CompareMode.OFF: "off", CompareMode.SIDE: "side by side", CompareMode.WIPE: "A/B wipe",
@@ -60,6 +60,7 @@ class Panels:
         self.expand_all = False  # opens every section (tests draw every widget)
         self.frame_view = lambda: lookdev.frame()  # the window sets its own (it knows the view's aspect)
         self.view_size = (512, 512)  # the 3D view's size, for screenshots
+        self.presets = PresetBrowser(lookdev)  # the preset thumbnails (made once their header is opened)
 
     def _header(self, label: str, default_open: bool = False) -> bool:
         if self.expand_all:
@@ -146,12 +147,12 @@ class Panels:
                 if imgui.selectable(n, False)[0]:
                     ld.load_preset(n)
             imgui.end_combo()
-        preset_browser(ld)
-        progress = ld.textures.progress
+        self.presets.section()
+        progress = ld.texture_progress
         if progress is not None:
             imgui.progress_bar(progress, None, "latent texture")
         imgui.text_wrapped(ld.material.name)
-        layers = ld.editor.layers
+        layers = ld.layers
         for i, layer in enumerate(list(layers)):
             imgui.push_id(f"layer{i}")
             base = i == len(layers) - 1
@@ -161,19 +162,19 @@ class Panels:
             if kind == "dielectric" and not base:
                 hit = self._wrap_buttons(["up", "down", "medium", "remove"])
                 if hit == "up":
-                    ld.edit("move", i, -1)
+                    ld.move_layer(i, -1)
                 elif hit == "down":
-                    ld.edit("move", i, 1)
+                    ld.move_layer(i, 1)
                 elif hit == "medium":
-                    ld.edit("toggle_medium", i)
+                    ld.toggle_medium(i)
                 elif hit == "remove":
-                    ld.edit("remove", i)
+                    ld.remove_layer(i)
             if base:
                 cur = BASE_TYPES.index(kind) if kind in BASE_TYPES else -1
                 if cur >= 0:
                     changed, k = imgui.combo("base type", cur, list(BASE_TYPES))
                     if changed and k != cur:
-                        ld.edit("set_base_type", BASE_TYPES[k])
+                        ld.set_base_type(BASE_TYPES[k])
             for key, value in layer.items():
                 if key in ("type", "path"):
                     if key == "path":
@@ -186,9 +187,9 @@ class Panels:
         imgui.separator()
         hit = self._wrap_buttons(["add clear coat", "save curve"], small=False)
         if hit == "add clear coat":
-            ld.edit("add_coat")
+            ld.add_coat()
         elif hit == "save curve":
-            ld.curves.save()
+            ld.save_curve()
         changed, self.material_path = imgui.input_text("material file", self.material_path)
         hit = self._wrap_buttons(["open material", "save material"], small=False)
         if hit == "open material":
@@ -286,7 +287,7 @@ class Panels:
                 ld.set_mipmapping(on)
         self._interpolation()
         if s.view == View.LOBE:
-            polar_plot(ld.curves.curves())
+            polar_plot(ld.plane_curves())
 
     def _interpolation(self) -> None:
         ld = self.ld
@@ -392,19 +393,19 @@ class Panels:
         if imgui.button("save session"):
             ld.save_session(self.session_path)
         _, self.shot_path = imgui.input_text("screenshot", self.shot_path)
-        shot = ld.shots.progress
+        shot = ld.screenshot_progress
         if shot is None:
             if imgui.button("screenshot (.png/.exr)"):
                 w, h = self.view_size
-                ld.shots.start(self.shot_path, (max(w, 1), max(h, 1)), 16)
+                ld.start_screenshot(self.shot_path, (max(w, 1), max(h, 1)), 16)
         else:
             imgui.progress_bar(shot, imgui.ImVec2(-1, 0), f"screenshot {shot * 100:.0f} %")
             if imgui.small_button("cancel screenshot"):
-                ld.shots.cancel()
+                ld.cancel_screenshot()
         imgui.separator()
         _, self.turntable_path = imgui.input_text("turntable file", self.turntable_path)
         _, self.turntable_frames = imgui.slider_int("frames", self.turntable_frames, 4, 240)
-        progress = ld.turntables.progress
+        progress = ld.turntable_progress
         if progress is None:
             imgui.push_style_color(imgui.Col_.text, DIM)
             imgui.text_wrapped("turntable file: .mp4, .gif or name_%03d.png")
@@ -412,7 +413,7 @@ class Panels:
             if imgui.button("capture turntable"):
                 w, h = self.view_size
                 k = min(1.0, TURNTABLE_MAX_SIDE / max(w, h, 1))  # the view's shape, at most 480 pixels a side
-                ld.turntables.start(self.turntable_path, self.turntable_frames,
+                ld.start_turntable(self.turntable_path, self.turntable_frames,
                                    (max(2, round(w * k)), max(2, round(h * k))))
         else:
             imgui.progress_bar(progress, imgui.ImVec2(-1, 0), "turntable")
@@ -433,8 +434,8 @@ class Panels:
         imgui.text(f"view {t.render_ms:6.1f} ms, passes {ld.passes}")
         imgui.text(f"latent {t.latent_ms:5.2f} ms")
         imgui.text(f"edit -> frame {t.edit_to_frame_ms:6.1f} ms")
-        if ld.idle_refine.status:  # "refined, N s" (viewer/jobs/refine_job.py)
-            imgui.text(ld.idle_refine.status)
+        if ld.refine_status:  # "refined, N s" (viewer/jobs/refine_job.py)
+            imgui.text(ld.refine_status)
         if ld.notice:
             imgui.text_wrapped(ld.notice)
         if ld.error:

@@ -8,11 +8,13 @@ are left), so the window stays responsive and the next start reads them all.
 """
 from __future__ import annotations
 
-import weakref
-
 import moderngl
 import numpy as np
+from imgui_bundle import imgui
 
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import load_material
+from nbrdf.viewer.gallery import TileRenderer
 from nbrdf.viewer.session.lookdev import LookDev, presets
 from nbrdf.viewer.thumbnails import ThumbnailCache
 
@@ -21,11 +23,13 @@ THUMB_SPP = 16     #: passes per thumbnail
 
 
 class PresetBrowser:
-    """A grid of preset thumbnails for the material panel (``draw`` each frame)."""
+    """A grid of preset thumbnails for the material panel (``section`` each frame)."""
 
-    def __init__(self, ld: LookDev, cache: ThumbnailCache | None = None):
+    def __init__(self, ld: LookDev, cache: ThumbnailCache | None = None, default_open: bool = False):
         self.ld = ld
         self.cache = cache or ThumbnailCache(size=THUMB_PX, spp=THUMB_SPP)
+        self.default_open = default_open
+        """Whether the browser's header starts open (closed: no thumbnail work until the user opens it)."""
         self._tiler = None
         self._textures: dict[str, moderngl.Texture] = {}
         self.failed: dict[str, str] = {}
@@ -34,8 +38,6 @@ class PresetBrowser:
     def _renderer(self):
         """The tile renderer in the window's context (made when a thumbnail is first missing)."""
         if self._tiler is None:
-            from nbrdf.viewer.gallery import TileRenderer
-
             self._tiler = TileRenderer(self.ld.ctx)
             self.cache._render = self._tiler.render
         return self._tiler
@@ -44,9 +46,6 @@ class PresetBrowser:
         """The thumbnail of preset ``name`` as a texture: cached, or read, or rendered now."""
         if name in self._textures or name in self.failed:
             return self._textures.get(name)
-        from nbrdf.neural.errors import NbrdfError
-        from nbrdf.neural.material import load_material
-
         try:
             m = load_material(path)
             if not self.cache.path(m).is_file():
@@ -67,8 +66,6 @@ class PresetBrowser:
     def draw(self, columns: int | None = None) -> None:
         """The grid (``columns`` None: as many as fit the panel's width); at most one
         missing thumbnail is made per call."""
-        from imgui_bundle import imgui
-
         if columns is None:
             cell = THUMB_PX + 2 * imgui.get_style().frame_padding.x + imgui.get_style().item_spacing.x
             columns = max(1, int((imgui.get_content_region_avail().x + imgui.get_style().item_spacing.x) // cell))
@@ -96,6 +93,13 @@ class PresetBrowser:
         if left:
             imgui.text(f"rendering thumbnails: {left} left")
 
+    def section(self) -> None:
+        """The grid under a collapsing header (the material panel's one call)."""
+        if self.default_open:
+            imgui.set_next_item_open(True, imgui.Cond_.once)
+        if imgui.collapsing_header("preset browser"):
+            self.draw()
+
     def release(self) -> None:
         for t in self._textures.values():
             t.release()
@@ -103,21 +107,3 @@ class PresetBrowser:
         if self._tiler is not None:
             self._tiler.release()
             self._tiler = None
-
-
-#: Whether the browser's header starts open (closed: no thumbnail work until the user opens it).
-DEFAULT_OPEN = False
-_browsers: "weakref.WeakKeyDictionary[LookDev, PresetBrowser]" = weakref.WeakKeyDictionary()
-
-
-def preset_browser(ld: LookDev) -> None:
-    """The preset browser of ``ld``'s window under a collapsing header (the panel's one call)."""
-    from imgui_bundle import imgui
-
-    if DEFAULT_OPEN:
-        imgui.set_next_item_open(True, imgui.Cond_.once)
-    if imgui.collapsing_header("preset browser"):
-        browser = _browsers.get(ld)
-        if browser is None:
-            browser = _browsers[ld] = PresetBrowser(ld)
-        browser.draw()

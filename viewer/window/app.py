@@ -45,6 +45,7 @@ import moderngl
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.gpu.gl import check_version
 from nbrdf.viewer.session.autosave import WindowAutosave
+from nbrdf.viewer.session.document import WindowPrefs
 from nbrdf.viewer.session.lookdev import MAX_PASSES, LookDev
 from nbrdf.viewer.window import allocator
 from nbrdf.viewer.window.gl_faults import FrameGuard, GlContextLost, fault_types
@@ -113,8 +114,6 @@ class App:
         glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
         glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
         glfw.window_hint(glfw.VISIBLE, visible)
-        from nbrdf.viewer.session.document import WindowPrefs
-
         self.prefs = WindowPrefs.load()
         w, h = size or getattr(opts, "window_size", None) or self.prefs.initial_size(_screen_size())
         self.window = glfw.create_window(w, h, "nbrdf-view", None, None)
@@ -133,9 +132,9 @@ class App:
             glfw.destroy_window(self.window)
             glfw.terminate()
             raise
-        from imgui_bundle.python_backends.glfw_backend import GlfwRenderer
+        from imgui_bundle.python_backends.glfw_backend import GlfwRenderer  # late: imgui_bundle may be missing
 
-        from nbrdf.viewer.ui.panels import Panels
+        from nbrdf.viewer.ui.panels import Panels  # late: imgui_bundle may be missing (WindowUnavailable above)
 
         imgui.create_context()
         implot.create_context()
@@ -154,7 +153,6 @@ class App:
         self.scale = 1.0             # render resolution / view resolution of the last frame
         self.interactive = False     # whether the last frame was an interactive (changing view) one
         self.quick = False           # whether the last frame used the quick estimator (interactive, previews)
-        self._last_ms: float | None = None
         self._frames = 0
         self._events: deque = deque()  # the view's mouse events since the last frame, in order
         self._cursor = glfw.get_cursor_pos(self.window)
@@ -165,10 +163,7 @@ class App:
         self.gl_guard = FrameGuard(self.lookdev, self._recover_gl)
         """A frame whose GL work fails is one line in the panel (viewer/window/gl_faults.py)."""
         imgui.get_io().config_input_trickle_event_queue = True  # one click per imgui pass: none is lost
-        body_notice = self.lookdev.bodies.calibrate(self.lookdev.brdf) if self.lookdev.brdf is not None else ""
-        self.lookdev.renderer.table_sampling = self.lookdev.bodies.sampling(self.lookdev.renderer.sampling)
-        if body_notice:
-            self.lookdev.notice = "; ".join(x for x in (self.lookdev.notice, body_notice) if x)
+        self.lookdev.calibrate_bodies()  # the decoder timed on this GL: per-pixel or baked bodies
         glfw.set_key_callback(self.window, self._on_key)
         glfw.set_mouse_button_callback(self.window, self._on_mouse_button)
         glfw.set_cursor_pos_callback(self.window, self._on_cursor)
@@ -308,7 +303,8 @@ class App:
                 break
 
     def step(self, passes_per_frame: int = 1) -> None:
-        """Processes input, renders the view and the panels, presents the frame."""
+        """Processes input, updates the session (the background results), renders the
+        view and the panels, presents the frame."""
         t0 = time.perf_counter()
         glfw.poll_events()
         self.gui.process_inputs()
@@ -324,7 +320,7 @@ class App:
         ld = self.lookdev
         self._trim_due |= ld.passes == 0  # an edit or a view change: its CPU work freed memory
         changed = ld.passes == 0 or self.dragging or had_input
-        drew = self.gl_guard.run(lambda: self._draw_view(w, h, passes_per_frame))
+        drew = self.gl_guard.run(lambda: self._update_then_draw(w, h, passes_per_frame))
         self.screen.viewport = (0, 0, w, h)  # the panels' pass covers the window (after a failed view too)
         imgui.render()
         _ = self.ctx.error  # PyOpenGL (the panels' backend) raises on any error flag left behind
@@ -341,20 +337,25 @@ class App:
         ld.timings.fps, ld.timings.frame_ms = self.clock.fps, self.clock.frame_ms
         self._measure((time.perf_counter() - t0) * 1000.0)
 
-    def _draw_view(self, w: int, h: int, passes_per_frame: int) -> None:
-        """The 3D view (or the screenshot being rendered) into the window, all its GL work."""
+    def _update_then_draw(self, w: int, h: int, passes_per_frame: int) -> None:
+        """All the frame's GL work: the render scale planned from the view as the last frame
+        left it; ``LookDev.update`` (the background results: a latent texture built, a refined
+        code, a turntable's next frame); then the 3D view drawn from the settled session,
+        or the next step of the screenshot being rendered. Nothing drawn calls back into the session."""
+        ld = self.lookdev
+        vx, vy, vw, vh = self.viewport()
+        shooting = ld.screenshot_progress is not None
+        scale = 1.0 if shooting else self._adapt_scale(vw, vh)
+        ld.update()
         self.screen.use()
         self.screen.viewport = (0, 0, w, h)
         self.screen.clear(0.0, 0.0, 0.0, 1.0)
-        vx, vy, vw, vh = self.viewport()
-        ld = self.lookdev
-        if ld.shots.progress is not None:
+        if shooting:
             # The view shows the screenshot as it is rendered, a step per frame.
-            ld.shots.step()
+            ld.step_screenshot()
             self._show_screenshot()
         else:
             self.screen.viewport = (vx, h - vy - vh, vw, vh)  # GL's origin is the bottom left
-            scale = self._adapt_scale(vw, vh)
             passes = 1 if self.quick else passes_per_frame
             ld.render(self.screen, (vw, vh), passes, scale=scale, interactive=self.interactive, quick=self.quick)
         self.screen.viewport = (0, 0, w, h)
@@ -371,12 +372,11 @@ class App:
     def _recover_gl(self) -> None:
         """After a failed frame: fresh render targets, the accumulation restarted, error flags cleared."""
         _ = self.ctx.error
-        self.lookdev.renderer.release_targets()
-        self.lookdev.invalidate()
+        self.lookdev.release_targets()
 
     def _show_screenshot(self) -> None:
         """The screenshot being rendered, fitted into the view (imgui's background layer)."""
-        tex = self.lookdev.shots.texture
+        tex = self.lookdev.screenshot_image
         if tex is None:
             return
         vx, vy, vw, vh = self.panels.viewport(self._window_size())
@@ -401,7 +401,6 @@ class App:
     def _measure(self, ms: float) -> None:
         self._frames += 1
         if self._frames > 2:  # the first frames build shaders
-            self._last_ms = ms
             self.refine.done(ms)
 
     def read_pixels(self) -> np.ndarray:
@@ -435,7 +434,7 @@ class App:
             return lambda: None
         window = self.window
 
-        def close(signum, frame) -> None:
+        def close(_signum, _frame) -> None:
             glfw.set_window_should_close(window, True)
 
         sigs = [s for s in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None)) if s is not None]

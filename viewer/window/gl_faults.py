@@ -27,7 +27,7 @@ class GlContextLost(NbrdfError):
 def fault_types() -> tuple[type[BaseException], ...]:
     """The exceptions a failing GL raises: moderngl's, and PyOpenGL's when it is there."""
     try:
-        from OpenGL.error import GLError
+        from OpenGL.error import GLError  # late: PyOpenGL is optional (it comes with the imgui backend)
     except ImportError:  # pragma: no cover - PyOpenGL comes with the window's imgui backend
         return (moderngl.Error,)
     return (moderngl.Error, GLError)
