@@ -87,13 +87,14 @@ def cmd_bench_render(a: argparse.Namespace) -> int:
 
 
 def cmd_bench_app(a: argparse.Namespace) -> int:
-    from nbrdf.viewer import bench, offscreen  # late: the previewer (GL, torch), --help needs none
+    from nbrdf.viewer import offscreen  # late: the previewer (GL, torch), --help needs none
+    from nbrdf.viewer.ui.bench_app import bench_app  # late: the window (glfw, imgui)
 
     if not offscreen.has_display():
         raise NbrdfError("bench app: no display (run it under xvfb-run on a headless machine)")
     c: AppBench = build(AppBench, a)
     at_least("--edits", c.edits)
-    print(json.dumps(bench.bench_app(c.size, c.edits), indent=2))
+    print(json.dumps(bench_app(c.size, c.edits), indent=2))
     return 0
 
 

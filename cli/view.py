@@ -41,7 +41,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not has_display():
             render_offscreen(opts, fallback="no display found")
             return 0
-        from nbrdf.viewer.window.app import App, WindowUnavailable  # late: glfw and imgui, only with a display
+        from nbrdf.viewer.ui.app import App, WindowUnavailable  # late: glfw and imgui, only with a display
 
         try:
             app = App(opts)

@@ -21,7 +21,7 @@ import numpy as np
 from nbrdf.viewer.gpu.labels import rasterise
 from nbrdf.viewer.options import ViewOptions
 from nbrdf.viewer.session.edits import presets
-from nbrdf.viewer.window.app import App
+from nbrdf.viewer.ui.app import App
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "figures" / "viewer" / "presets_vs_reference.png"
 

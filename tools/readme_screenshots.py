@@ -18,7 +18,7 @@ from pathlib import Path
 import imageio.v3 as iio
 
 from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
-from nbrdf.viewer.window.app import App
+from nbrdf.viewer.ui.app import App
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "figures" / "viewer"
 

@@ -17,7 +17,7 @@ import sys
 import time
 
 from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
-from nbrdf.viewer.window.app import App
+from nbrdf.viewer.ui.app import App
 
 
 def trace(size: tuple[int, int], roughness: float, seconds: float, settle: float, quiet: bool) -> dict:

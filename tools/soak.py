@@ -9,7 +9,7 @@ squares line through the samples gives the slope per 100 edits.
     python tools/soak.py --edits 1000 --seed 1 --out soak.json   # needs a display (Xvfb: make soak)
 
 Warm-up, left out of the measurement: frames without edits until the window's
-own idle warm-up has built every shader variant (viewer/window/program_warmup.py);
+own idle warm-up has built every shader variant (viewer/ui/program_warmup.py);
 every view and compare mode in each kind of state (a preset of each BRDF kind
 with and without a closed-form reference, every mesh with its materials built,
 the texture-mapped material edited until the pipeline's latent textures of
@@ -205,8 +205,8 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
     from nbrdf.viewer.gpu.programs import ProgramCache
     from nbrdf.viewer.options import ViewOptions
     from nbrdf.viewer.session.lookdev import presets
-    from nbrdf.viewer.window import allocator
-    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.ui import allocator
+    from nbrdf.viewer.ui.app import App
 
     rng = random.Random(seed)
     app = App(ViewOptions(size=size), size=size)
@@ -263,7 +263,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         live = gl_names()
         out = {"rss_mb": rss_mb(), "rss_parts_mb": rss_parts_mb(), "smaps_mb": smaps_mb(), "gl": gl_objects(live),
                "gl_mb": gl_bytes(live), "malloc_mb": malloc_mb()}
-        # The same after the trim the window makes within 2 s of an edit (viewer/window/allocator.py): free heap
+        # The same after the trim the window makes within 2 s of an edit (viewer/ui/allocator.py): free heap
         # pages are resident or not by when the last trim ran; after one, what is resident is held.
         allocator.trim()
         out["rss_trimmed_mb"] = rss_mb()
@@ -285,7 +285,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
 
     ProgramCache._build = traced_build
     try:
-        # Warm-up, 1: the window's own idle warm-up (viewer/window/program_warmup.py) compiles every shader
+        # Warm-up, 1: the window's own idle warm-up (viewer/ui/program_warmup.py) compiles every shader
         # variant its views can reach, frames without edits until it has none left.
         t_idle = time.perf_counter()
         while not app.warmup.done and time.perf_counter() - t_idle < 600:

@@ -45,7 +45,7 @@ def test_wheel_holds_only_the_nbrdf_package(wheel):
     assert len(dist) == 1 and dist[0].startswith("nbrdf-"), tops
     assert tops == {"nbrdf", dist[0]}, tops
     for pkg in ("cli", "neural", "training", "imaging", "viewer", "viewer/ui", "viewer/assets", "viewer/gpu", "viewer/jobs",
-                "viewer/reference", "viewer/scene", "viewer/session", "viewer/window"):
+                "viewer/reference", "viewer/scene", "viewer/session"):
         assert f"nbrdf/{pkg}/__init__.py" in names, pkg
     assert "nbrdf/cli/main.py" in names and "nbrdf/cli/view.py" in names
     assert "nbrdf/neural/data/nbrdf_default.safetensors" in names  # the shipped weights

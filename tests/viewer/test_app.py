@@ -27,7 +27,7 @@ SCRIPT = textwrap.dedent("""
     import json, os, sys
     from pathlib import Path
     import numpy as np
-    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.ui.app import App
     from nbrdf.viewer.options import ViewOptions
     tmp = Path(sys.argv[2])
     app = App(ViewOptions(material=sys.argv[1], size=(64, 48)), size=(64, 48))

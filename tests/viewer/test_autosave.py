@@ -194,7 +194,7 @@ WINDOW = textwrap.dedent("""
     import json, sys, time
     from pathlib import Path
     from nbrdf.cli.view import parse_args
-    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.ui.app import App
     opts = parse_args(sys.argv[1:])
     app = App(opts, size=(64, 48))
     app.autosave.saver.delay = 0.2
@@ -277,7 +277,7 @@ def test_a_killed_window_restores_its_last_autosave_exactly(xvfb_display, tmp_pa
 RUN = textwrap.dedent("""
     import sys
     from nbrdf.cli.view import parse_args
-    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.ui.app import App
     app = App(parse_args(sys.argv[1:]), size=(64, 48))
     app.autosave.saver.delay = 0.2
     app.lookdev.set_param(len(app.lookdev.material.layers) - 1, "roughness", 0.41)

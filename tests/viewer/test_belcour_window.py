@@ -25,7 +25,7 @@ SCRIPT = textwrap.dedent("""
     import json, sys
     from pathlib import Path
     import numpy as np
-    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.ui.app import App
     from nbrdf.viewer.options import ViewOptions
     tmp, deep = Path(sys.argv[2]), sys.argv[3]
     app = App(ViewOptions(material=sys.argv[1], size=(48, 40), brdf="belcour"), size=(48, 40))

@@ -21,7 +21,7 @@ SCRIPT = textwrap.dedent("""
     import json, sys
     from pathlib import Path
     import numpy as np
-    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.ui.app import App
     from nbrdf.viewer.options import ViewOptions
     tmp = Path(sys.argv[2])
     size = (1000, 620)  # the README capture's window

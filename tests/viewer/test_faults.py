@@ -111,7 +111,7 @@ def _unwritable(tmp_path):
 WINDOW = textwrap.dedent("""
     import json, os, signal, sys, time
     from pathlib import Path
-    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.ui.app import App
     from nbrdf.viewer.options import ViewOptions
     good, bad, out = Path(sys.argv[2]), Path(sys.argv[3]), {}
     app = App(ViewOptions(material=sys.argv[1], size=(48, 32)), size=(48, 32))

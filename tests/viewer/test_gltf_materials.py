@@ -167,7 +167,7 @@ def test_the_editor_edits_the_selected_material_only(gl_ctx):
 TURNTABLE_SCRIPT = textwrap.dedent("""
     import json, sys, time
     from pathlib import Path
-    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.ui.app import App
     from nbrdf.viewer.options import ViewOptions
     tmp = Path(sys.argv[2])
     app = App(ViewOptions(mesh=sys.argv[1], size=(48, 48), spp=1), size=(48, 48))

@@ -87,8 +87,8 @@ def test_the_window_keeps_the_material_it_shows(gl_ctx, tmp_path, monkeypatch, l
 WINDOW = textwrap.dedent("""
     import json, sys
     import moderngl
-    from nbrdf.viewer.window.app import App
-    from nbrdf.viewer.window.gl_faults import GlContextLost
+    from nbrdf.viewer.ui.app import App
+    from nbrdf.viewer.ui.gl_faults import GlContextLost
     from nbrdf.viewer.session.lookdev import LookDev
     from nbrdf.viewer.options import ViewOptions
 

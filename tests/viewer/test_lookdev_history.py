@@ -119,7 +119,7 @@ def test_a_tiled_screenshot_is_the_one_shot_image_up_to_noise(ld, tmp_path):
 
 
 def test_frame_clock_counts_presented_frames():
-    from nbrdf.viewer.window.app import FrameClock
+    from nbrdf.viewer.ui.app import FrameClock
 
     c = FrameClock(window=10)
     for k in range(25):

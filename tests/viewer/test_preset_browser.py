@@ -17,7 +17,7 @@ pytestmark = [pytest.mark.gl, pytest.mark.slow]
 SCRIPT = textwrap.dedent("""
     import json, sys
     import numpy as np
-    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.ui.app import App
     from nbrdf.viewer.options import ViewOptions
     size = (900, 700)
     app = App(ViewOptions(size=size), size=size)

@@ -1,4 +1,4 @@
-"""The window's idle warm-up of shader variants (viewer/window/program_warmup.py): after it,
+"""The window's idle warm-up of shader variants (viewer/ui/program_warmup.py): after it,
 no view of any BRDF kind builds a program (the live GL programs stay as they are
 over a session), and it builds nothing before the window has been idle."""
 from __future__ import annotations
@@ -12,7 +12,7 @@ from nbrdf.viewer.gpu.pipeline import BrdfKind, MaterialPipeline, gpu_brdf
 from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 from nbrdf.viewer.modes import View
 from nbrdf.viewer.options import DEFAULT_MATERIAL
-from nbrdf.viewer.window.program_warmup import ProgramWarmup, WarmupSettings, reachable
+from nbrdf.viewer.ui.program_warmup import ProgramWarmup, WarmupSettings, reachable
 
 pytestmark = pytest.mark.gl
 

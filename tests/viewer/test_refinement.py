@@ -1,7 +1,7 @@
-"""The window's refinement policy (viewer/window/refinement.py), driven with made-up frame times."""
+"""The window's refinement policy (viewer/ui/refinement.py), driven with made-up frame times."""
 from __future__ import annotations
 
-from nbrdf.viewer.window.refinement import Refinement, RefinementSettings
+from nbrdf.viewer.ui.refinement import Refinement, RefinementSettings
 
 
 def drive(policy: Refinement, changed: list[bool], frame_ms: float) -> list[tuple[float, bool]]:

@@ -19,8 +19,8 @@ pytestmark = pytest.mark.gl
 
 SCRIPT = textwrap.dedent("""
     import json, sys
-    import nbrdf.viewer.window.app as app_module
-    from nbrdf.viewer.window.app import App
+    import nbrdf.viewer.ui.app as app_module
+    from nbrdf.viewer.ui.app import App
     from nbrdf.viewer.options import ViewOptions
 
     class SlowClock:  # each reading 1.5 s after the one before: every frame takes 1.5 s or more

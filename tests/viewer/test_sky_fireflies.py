@@ -28,7 +28,7 @@ PASSES = 256
 SCRIPT = textwrap.dedent("""
     import sys
     import numpy as np
-    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.ui.app import App
     from nbrdf.viewer.modes import View
     from nbrdf.viewer.options import ViewOptions
     size = (int(sys.argv[1]), int(sys.argv[2]))

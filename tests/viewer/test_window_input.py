@@ -25,7 +25,7 @@ SCRIPT = textwrap.dedent("""
     import numpy as np
     import glfw
     from imgui_bundle import imgui
-    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.ui.app import App
     from nbrdf.viewer.options import ViewOptions
     tmp = Path(sys.argv[2])
     rects = {}

@@ -20,7 +20,7 @@ SCRIPT = textwrap.dedent("""
     import numpy as np
     from imgui_bundle import imgui
     import glfw
-    from nbrdf.viewer.window.app import App
+    from nbrdf.viewer.ui.app import App
     from nbrdf.viewer.options import ViewOptions
     out = {}
     clipped = set()

@@ -56,7 +56,7 @@ class LitSettings:
     """The sampling of draws whose body is a baked table (None: ``sampling``; the window's
     choice, viewer/gpu/body_source.py ``BodySource.sampling``)."""
     quick: bool = False
-    """True: passes use ``sampling.quick()`` (the window's interactive frames, viewer/window/refinement.py)."""
+    """True: passes use ``sampling.quick()`` (the window's interactive frames, viewer/ui/refinement.py)."""
 
     def for_brdf(self, brdf: GpuBrdf | None) -> LitSampling:
         """The sampling of a draw shaded with ``brdf``."""

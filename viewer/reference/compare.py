@@ -197,6 +197,10 @@ class Compare:
         s = min(1.0, (OBJECT_REF_SIZE if view == View.OBJECT else SLICE_REF_SIZE) / max(w, h))
         return max(1, round(w * s)), max(1, round(h * s))
 
+    def collect(self) -> None:
+        """Takes the Monte Carlo worker's new images (once a frame, before rendering: ``LookDev.update``)."""
+        self.worker.collect()
+
     # --- the reference of a frame -------------------------------------------------------------
     def reference(self, material: Material, analytic: GpuBrdf | None, brdf: GpuBrdf | None, state: ViewState,
                   scene: str, w: int, h: int, first: int, n: int, passes: int,
@@ -221,8 +225,8 @@ class Compare:
         vw, vh = view_size or (w, h)
         size = self.mc_size(view, vw, vh)
         key = self.job_key(material, state, None if view == View.LOBE else size, scene)
-        r = self.worker.result(key)
-        if (r is None or not (r.done or r.error)) and self.worker.current != key:
+        r = self.worker.cached(key)
+        if (r is None or not (r.done or r.error)) and self.worker.computing != key:
             self.worker.request(self.job(material, state, key, size, brdf, vw / vh))  # new, or set aside by another
         self._job, self._shown = key, r
         # Until the first round at this size arrives, the body is not there yet: say so, not "0 spp".
@@ -352,8 +356,8 @@ class Compare:
         """f cos(theta_o) RGB at n plane-of-incidence pairs from the worker (None until ready)."""
         key = hashlib.sha1(f"{json.dumps(material_to_dict(material), sort_keys=True)}|plane|{theta_i}"
                            .encode()).hexdigest()
-        r = self.worker.result(key)
-        if (r is None or not (r.done or r.error)) and self.worker.current != key:
+        r = self.worker.cached(key)
+        if (r is None or not (r.done or r.error)) and self.worker.computing != key:
             self.worker.request(ReferenceJob(key, material, wi, wo, wo[:, 2:3], np.ones((1, n), bool), 2048))
         return None if r is None else r.image[0]
 

@@ -306,7 +306,7 @@ class ReferenceWorker:
     def request(self, job) -> None:
         """Makes ``job`` (a ``ReferenceJob``, a ``LitJob``, or another module's job:
         see the module docstring) the one being computed (a finished or failed key is not redone)."""
-        self._drain()
+        self.collect()
         cached = self._cache.get(job.key)
         if cached is not None and (cached.done or cached.error):
             self._current = None
@@ -332,7 +332,7 @@ class ReferenceWorker:
 
     def cancel(self) -> None:
         """Sets the running job aside (its work is kept: requested again, it resumes); never blocks."""
-        self._drain()
+        self.collect()
         if self._current is None or self._proc is None:
             return
         self._requests.put(_CANCEL)
@@ -369,8 +369,9 @@ class ReferenceWorker:
             self._requests.put(spec)
         self._last_death = (time.monotonic(), f"{msg}; restarted" if key else f"{msg}; restarts on the next job")
 
-    def _drain(self) -> None:
-        """Takes every image the process has sent into the cache."""
+    def collect(self) -> None:
+        """Takes every image the process has sent into the cache: the window calls it once a frame, before
+        rendering (``LookDev.update``), so what a frame shows was settled before it was drawn."""
         self._supervise()
         if self._proc is None:
             return
@@ -385,18 +386,28 @@ class ReferenceWorker:
                 self._current = self._spec = None
 
     def result(self, key: str) -> ReferenceImage | None:
-        self._drain()
+        """The latest image of ``key``, after collecting what arrived (scripts, tests, batch use)."""
+        self.collect()
         return self._cache.get(key)
+
+    def cached(self, key: str) -> ReferenceImage | None:
+        """The latest image of ``key`` as last collected: what a render reads (it never collects)."""
+        return self._cache.get(key)
+
+    @property
+    def computing(self) -> str | None:
+        """The key of the job being computed, as last collected (renders read this)."""
+        return self._current
 
     def busy(self) -> bool:
         """A job is being computed."""
-        self._drain()
+        self.collect()
         return self._current is not None
 
     @property
     def current(self) -> str | None:
         """The key of the job being computed."""
-        self._drain()
+        self.collect()
         return self._current
 
     def wait(self, key: str, spp: int, timeout: float = 120.0) -> ReferenceImage | None:

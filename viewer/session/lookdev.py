@@ -5,7 +5,7 @@ offscreen renders alike, without any GUI.
 lighting, the view settings, the compare and interpolation settings, as the
 guarded, undoable edits of viewer/session/edits.py -- and turns every edit
 into what the one renderer draws with. ``from_options`` opens
-it from the command line's options: the window (viewer/window/app.py) and the
+it from the command line's options: the window (viewer/ui/app.py) and the
 offscreen path (viewer/offscreen.py) both start there. It delegates each job:
 
 - viewer/session/document.py: the session document (its file format and validation);
@@ -331,9 +331,10 @@ class LookDev(SessionEdits, Captures):
 
     def update(self) -> None:
         """Collects what finished in the background since the last frame -- a latent
-        texture built, a refined code -- and renders the next frame of a turntable
+        texture built, a refined code, the Monte Carlo worker's reference images -- and renders the next frame of a turntable
         capture. The window calls it once a frame before rendering, so a render
         draws a settled session and never calls back into it."""
+        self.compare_part.collect()
         if self.textures.finished:
             if not self.guarded(self._apply_material):
                 self._keep_shown_material()

@@ -20,7 +20,7 @@ the glfw callbacks and replayed in order, so a click or drag shorter than a
 slow frame is not lost. While the view changes, frames render at the
 fraction of the view that keeps them within about 100 ms; a still view always
 refines, resolution first up to full, then passes accumulate
-(viewer/window/refinement.py). On software OpenGL a uniform material's body comes
+(viewer/ui/refinement.py). On software OpenGL a uniform material's body comes
 from a table baked per edit (viewer/gpu/body_source.py).
 """
 from __future__ import annotations
@@ -47,10 +47,10 @@ from nbrdf.viewer.gpu.gl import check_version
 from nbrdf.viewer.session.autosave import WindowAutosave
 from nbrdf.viewer.session.document import WindowPrefs
 from nbrdf.viewer.session.lookdev import MAX_PASSES, LookDev
-from nbrdf.viewer.window import allocator
-from nbrdf.viewer.window.gl_faults import FrameGuard, GlContextLost, fault_types
-from nbrdf.viewer.window.program_warmup import ProgramWarmup, reachable
-from nbrdf.viewer.window.refinement import Refinement
+from nbrdf.viewer.ui import allocator
+from nbrdf.viewer.ui.gl_faults import FrameGuard, GlContextLost, fault_types
+from nbrdf.viewer.ui.program_warmup import ProgramWarmup, reachable
+from nbrdf.viewer.ui.refinement import Refinement
 
 
 def _screen_size() -> tuple[int, int] | None:
@@ -159,9 +159,9 @@ class App:
         self.clock = FrameClock()
         self._trim_due, self._trimmed_at = False, 0.0
         self.trim_ms = 0.0
-        """The last ``malloc_trim``'s milliseconds (viewer/window/allocator.py)."""
+        """The last ``malloc_trim``'s milliseconds (viewer/ui/allocator.py)."""
         self.gl_guard = FrameGuard(self.lookdev, self._recover_gl)
-        """A frame whose GL work fails is one line in the panel (viewer/window/gl_faults.py)."""
+        """A frame whose GL work fails is one line in the panel (viewer/ui/gl_faults.py)."""
         imgui.get_io().config_input_trickle_event_queue = True  # one click per imgui pass: none is lost
         self.lookdev.calibrate_bodies()  # the decoder timed on this GL: per-pixel or baked bodies
         glfw.set_key_callback(self.window, self._on_key)
@@ -176,7 +176,7 @@ class App:
         self.warmup = ProgramWarmup(ld.renderer, lambda: reachable(
             ld.renderer, ld.pipeline.loaded_decoder, bool(ld.bodies.use_tables), ld.material,
             ld.pipeline.belcour_loaded))
-        """The shader variants the views can reach, compiled on idle frames (viewer/window/program_warmup.py)."""
+        """The shader variants the views can reach, compiled on idle frames (viewer/ui/program_warmup.py)."""
 
     # --- input -----------------------------------------------------------------------
     def _on_key(self, window, key, scancode, action, mods) -> None:
