@@ -109,11 +109,8 @@ def test_every_class_the_architecture_names_exists():
 
 def test_every_file_the_architecture_names_exists():
     paths = set(re.findall(r"\b([\w/]+\.(?:py|glsl|frag|comp|vert|sh))\b", ARCH))
-    missing = []
-    for p in paths:
-        hits = [q for q in ROOT.rglob(Path(p).name) if ".venv" not in q.parts and q.as_posix().endswith(p)]
-        if not hits:
-            missing.append(p)
+    tree = [q.relative_to(ROOT).as_posix() for folder in (*FOLDERS, "tools", "tests") for q in (ROOT / folder).rglob("*")]
+    missing = [p for p in paths if not any(q == p or q.endswith("/" + p) for q in tree)]
     assert not missing, f"docs/ARCHITECTURE.md names files that do not exist: {sorted(missing)}"
 
 
