@@ -204,7 +204,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
     from nbrdf.viewer.gpu.pipeline import TEXTURES_KEPT
     from nbrdf.viewer.gpu.programs import ProgramCache
     from nbrdf.viewer.options import ViewOptions
-    from nbrdf.viewer.session.lookdev import presets
+    from nbrdf.viewer.session.edits import presets
     from nbrdf.viewer.ui import allocator
     from nbrdf.viewer.ui.app import App
 

@@ -164,7 +164,7 @@ def test_screenshots(session_run):
 def test_interpolation_and_svbrdf_in_the_app(session_run):
     from nbrdf.neural.latent_texture import blend
     from nbrdf.neural.material import load_material
-    from nbrdf.viewer.session.lookdev import presets
+    from nbrdf.viewer.session.edits import presets
 
     _, out, f = session_run
     assert out["interp"] == [True, None]

@@ -7,7 +7,7 @@ import pytest
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.gallery import GalleryConfig, render_gallery
-from nbrdf.viewer.session.lookdev import presets
+from nbrdf.viewer.session.edits import presets
 
 pytestmark = pytest.mark.gl
 

@@ -79,7 +79,7 @@ def test_a_session_opened_is_one_step(ld, tmp_path):
 
 
 def test_dropped_files_open_by_kind(ld, tmp_path):
-    from nbrdf.viewer.session.lookdev import presets
+    from nbrdf.viewer.session.edits import presets
 
     assert ld.open_file(presets()["rough_gold"]) and ld.material.name == "rough gold"
     ld.save_session(tmp_path / "s.json")  # a session is a .json too: told apart by content

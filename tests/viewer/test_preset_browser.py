@@ -51,7 +51,7 @@ def _run(env, path):
 
 
 def test_browser_shows_cached_thumbnails(xvfb_display, tmp_path):
-    from nbrdf.viewer.session.lookdev import presets
+    from nbrdf.viewer.session.edits import presets
 
     env = dict(os.environ, DISPLAY=xvfb_display, HOME=str(tmp_path), XDG_CACHE_HOME=str(tmp_path / "cache"))
     first, screen = _run(env, tmp_path / "a.json")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from nbrdf.neural.material import load_material, parse_material
-from nbrdf.viewer.session.lookdev import presets
+from nbrdf.viewer.session.edits import presets
 from nbrdf.viewer.thumbnails import ThumbnailCache, content_hash
 
 GOLD = {"format": "nbrdf-material/1", "name": "g", "layers": [{"type": "conductor", "roughness": 0.3,

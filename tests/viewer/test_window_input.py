@@ -214,7 +214,7 @@ SCRIPT = textwrap.dedent("""
 
 @pytest.fixture(scope="module")
 def run(xvfb_display, tmp_path_factory):
-    from nbrdf.viewer.session.lookdev import presets
+    from nbrdf.viewer.session.edits import presets
 
     tmp = tmp_path_factory.mktemp("input")
     env = dict(os.environ, DISPLAY=xvfb_display, XDG_CONFIG_HOME=str(tmp / "config"))

@@ -4,7 +4,7 @@ of one frame (the view, the BRDFs shown, the compare and blend settings), and
 bodies).
 
 The session (viewer/session/lookdev.py) updates first -- it picks up the
-background results -- and then describes the frame (``LookDev.frame``); the
+background results -- and then describes the frame (``LookDev.describe``); the
 jobs (view_frames.py, screenshot.py, turntable.py) render from that
 description and never call back into the session, as moderngl-window and
 Filament render from a frame's description after the update.

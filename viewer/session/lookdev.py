@@ -55,14 +55,14 @@ from nbrdf.viewer.jobs.refine_job import IdleRefiner
 from nbrdf.viewer.jobs.screenshot import Screenshots
 from nbrdf.viewer.jobs.texture_jobs import TextureJobs
 from nbrdf.viewer.jobs.turntable import Turntables
-from nbrdf.viewer.jobs.view_frames import MAX_PASSES, ViewFrames
+from nbrdf.viewer.jobs.view_frames import ViewFrames
 from nbrdf.viewer.modes import BrdfMode, CompareMode
 from nbrdf.viewer.reference.compare import Compare
 from nbrdf.viewer.scene.gltf_import import imported_scene, material_groups
 from nbrdf.viewer.scene.mesh import GLTF_SUFFIXES, named_mesh
 from nbrdf.viewer.session.captures import Captures
 from nbrdf.viewer.session.document import SessionDoc
-from nbrdf.viewer.session.edits import SessionEdits, presets
+from nbrdf.viewer.session.edits import SessionEdits
 from nbrdf.viewer.session.material_parts import MaterialParts, PartMaterial
 from nbrdf.viewer.session.stack_editor import StackEditor
 from nbrdf.viewer.view_settings import ViewState
@@ -70,9 +70,6 @@ from nbrdf.viewer.view_settings import ViewState
 if TYPE_CHECKING:
     from nbrdf.viewer.options import ViewOptions
     from nbrdf.viewer.scene.gltf_import import MaterialGroup
-
-__all__ = ["MAX_PASSES", "LookDev", "PartMaterial", "Timings", "presets"]
-
 
 @dataclass
 class Timings:

@@ -44,9 +44,10 @@ import moderngl
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.gpu.gl import check_version
+from nbrdf.viewer.jobs.view_frames import MAX_PASSES
 from nbrdf.viewer.session.autosave import WindowAutosave
 from nbrdf.viewer.session.document import WindowPrefs
-from nbrdf.viewer.session.lookdev import MAX_PASSES, LookDev
+from nbrdf.viewer.session.lookdev import LookDev
 from nbrdf.viewer.ui import allocator
 from nbrdf.viewer.ui.gl_faults import FrameGuard, GlContextLost, fault_types
 from nbrdf.viewer.ui.program_warmup import ProgramWarmup, reachable

@@ -19,7 +19,8 @@ from imgui_bundle import imgui
 from nbrdf.imaging.env_presets import ENV_PRESETS
 from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, View
 from nbrdf.viewer.scene.camera import FOV_RANGE
-from nbrdf.viewer.session.lookdev import LookDev, presets
+from nbrdf.viewer.session.edits import presets
+from nbrdf.viewer.session.lookdev import LookDev
 from nbrdf.viewer.session.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
 from nbrdf.viewer.ui.plots import error_bar, flip_bar, polar_plot
 from nbrdf.viewer.ui.preset_browser import PresetBrowser

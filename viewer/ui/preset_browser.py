@@ -15,7 +15,8 @@ from imgui_bundle import imgui
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
 from nbrdf.viewer.gallery import TileRenderer
-from nbrdf.viewer.session.lookdev import LookDev, presets
+from nbrdf.viewer.session.edits import presets
+from nbrdf.viewer.session.lookdev import LookDev
 from nbrdf.viewer.thumbnails import ThumbnailCache
 
 THUMB_PX = 64      #: thumbnail side on screen and in the cache, pixels
