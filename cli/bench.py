@@ -37,7 +37,8 @@ class RenderBench:
 
 @dataclass
 class AppBench:
-    """``nbrdf bench app``: the window's frame time and slider-to-frame latency (needs a display)."""
+    """``nbrdf bench app``: the window's frame times (edits, and the interface while the still view accumulates),
+    slider-to-frame and click-to-frame latency (needs a display; the keys: viewer/ui/bench_app.py ``bench_app``)."""
 
     size: tuple[int, int] = field(default=(1000, 620), metadata={"parse": parse_size, "shown": "1000x620",
                                                                    "metavar": "WxH"})

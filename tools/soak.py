@@ -13,9 +13,10 @@ own idle warm-up has built every shader variant (viewer/ui/program_warmup.py);
 every view and compare mode in each kind of state (a preset of each BRDF kind
 with and without a closed-form reference, every mesh with its materials built,
 the texture-mapped material edited until the pipeline's latent textures of
-earlier edits are at their bound); then the first ``--warmup`` fraction of the
-random edits (the undo history, the reference and size caches fill to their
-bounds). What is created after it is named: every program built with its edit,
+earlier edits are at their bound); the Monte Carlo worker's first reference
+(a cold Numba cache compiles its walk for minutes, while the window's requests
+wait in its queue); then the first ``--warmup`` fraction of the random edits
+(the undo history, the reference and size caches fill to their bounds). What is created after it is named: every program built with its edit,
 the GL objects created and still alive at the end (with their size).
 
 ``--repeat R`` replays the same edit sequence R times: caches (shader
@@ -183,6 +184,16 @@ def malloc_mb() -> dict[str, float]:
             "mmapped": m.hblkhd * mb}
 
 
+def request_backlog(worker) -> dict:
+    """The Monte Carlo requests the window has queued that the reference worker has not taken (they wait
+    in the window's process, arrays and all, while the worker is busy: a cold Numba cache compiles the walk
+    for minutes), and the references it has sent; docs/decisions/108."""
+    buffered = list(getattr(getattr(worker, "_requests", None), "_buffer", ()))
+    arrays = [a for job in buffered for a in getattr(job, "__dict__", {}).values() if isinstance(a, np.ndarray)]
+    return {"requests": len(buffered), "mb": sum(a.nbytes for a in arrays) / 2**20,
+            "references_cached": len(worker._cache)}
+
+
 def slope_per_100(x: list[int], y: list[float]) -> float:
     """Least-squares slope of y over x, per 100 units of x."""
     if len(x) < 2:
@@ -332,6 +343,18 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
                     app.step()
             if i is not None:
                 every_view()
+        # 3: the Monte Carlo worker's first answer. On a cold Numba cache it compiles the walk for minutes, and
+        # meanwhile every compared view's request waits in the window's process (docs/decisions/108): held
+        # while the worker is busy, handed over when it reads its queue; not growth, so not measured.
+        worker = ld.compare_part.worker
+        ld.load_preset("default")
+        ld.set_compare("side")
+        t_ref = time.perf_counter()
+        while not len(worker._cache) and time.perf_counter() - t_ref < 600:
+            app.step()
+            time.sleep(0.05)
+        ld.set_compare("off")
+        worker_warmup = {"seconds": time.perf_counter() - t_ref, "answered": len(worker._cache) > 0}
         passes = [canonical()]
         last_names = gl_names()
         t0 = time.perf_counter()
@@ -386,6 +409,7 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         final = gl_names()
         survivors_gl = [{"kind": kind, "name": n, "sample": s["edit"], "what": gl_describe(kind, n)}
                         for s in samples if s["edit"] > start_edit for kind, n in s["gl_created"] if n in final[kind]]
+        backlog = request_backlog(ld.compare_part.worker)
     finally:
         ProgramCache._build = build
         app.close()
@@ -407,12 +431,14 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
         **in_state_slopes(states, after[0]["edit"]),
         "in_state_all": [{"edit": s["edit"], "gl": s["gl"]} for s in states],
         "idle_warmup": idle_warmup,
+        "worker_warmup": worker_warmup,
         "programs_built": builds,
         "programs_built_after_warmup": [b for b in builds if b["edit"] >= after[0]["edit"]],
         "gl_created_after_warmup_alive": survivors_gl,
         "trace": trace,
         "python_survivors": survivors,
         "python_survivors_mb": survivors_mb,
+        "reference_backlog": backlog,
         "samples": samples,
     }
 
@@ -538,6 +564,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {r['action']:<32} {r['n']:4d} {r['rss_mb']:+8.1f} {r['malloc_used_mb']:+8.1f} "
               f"{r['malloc_system_mb']:+8.1f} {r['steps_over_5mb']:3d}" + (f" {r['gl']:+4d}" if gl_per_edit else ""),
               flush=True)
+    ww = res.get("worker_warmup")
+    if ww is not None:
+        print(f"soak: the Monte Carlo worker's first reference after {ww['seconds']:.1f} s of the warm-up"
+              + ("" if ww["answered"] else " (none within 600 s)"), flush=True)
     iw = res["idle_warmup"]
     print(f"soak: the window's idle warm-up compiled {iw['built']} shader variants in {iw['seconds']:.1f} s"
           + (f", {iw['left']} left" if iw["left"] else "") + (f"; failed: {iw['failed']}" if iw["failed"] else ""),
@@ -559,6 +589,10 @@ def main(argv: list[str] | None = None) -> int:
     for st in res["python_survivors"]:
         print(f"soak: python survivor {st['mb']:.2f} MB in {st['blocks']} blocks from " + " <- ".join(
             reversed(st["where"][-3:])), flush=True)
+    bl = res.get("reference_backlog")
+    if bl is not None:
+        print(f"soak: Monte Carlo requests queued in the window, not yet taken by the worker: {bl['requests']} "
+              f"({bl['mb']:.1f} MB of arrays); references received: {bl['references_cached']}", flush=True)
     if res["failures"]:
         print("soak: failed edits: " + "; ".join(res["failures"]), flush=True)
     return 0

@@ -136,3 +136,100 @@ def test_the_status_line_states_the_references_noise(gl_ctx):
     c._shown = ReferenceImage(img, 4096, True, None, se / 4)
     assert c.status(parse_material(STANDARD_STACK), "object") == (
         "reference: Monte Carlo lights and body, 4096 samples per pixel, noise 0.5 %; the coat in closed form on the GPU")
+
+
+def _waiting_lookdev(gl_ctx, monkeypatch):
+    """A session on the default stack (a Monte Carlo reference) whose worker never
+    computes: its requests are recorded and nothing arrives until the test puts a
+    round in the worker's cache."""
+    from nbrdf.neural.material import load_material
+    from nbrdf.viewer.session.lookdev import LookDev
+
+    ld = LookDev(gl_ctx, load_material(DEFAULT_MATERIAL))
+    sent = []
+    monkeypatch.setattr(ld.worker, "request", sent.append)
+    return ld, sent
+
+
+def _draw(gl_ctx, ld, size, passes: int = 2) -> np.ndarray:
+    """The view as shown, (H, W, 3) uint8, top row first."""
+    fbo = gl_ctx.simple_framebuffer(size, components=4)
+    ld.render(fbo, size, passes)
+    return np.frombuffer(fbo.read(components=3), np.uint8).reshape(size[1], size[0], 3)[::-1]
+
+
+def _deliver(ld, job, image: np.ndarray) -> None:
+    """The worker's first round of ``job`` arrives with ``image``."""
+    from nbrdf.viewer.reference.worker import ReferenceImage
+
+    ld.worker._cache.put(job.key, ReferenceImage(image.astype(np.float32), 8, False))
+    ld.invalidate()
+
+
+def _extent(img: np.ndarray) -> tuple[int, int]:
+    """(width, height) in pixels of what is not background (black) in ``img``."""
+    ys, xs = np.nonzero(img.astype(int).sum(-1) > 24)
+    return int(np.ptp(xs)) + 1, int(np.ptp(ys)) + 1
+
+
+def test_the_lobe_reference_is_drawn_like_the_neural_lobe(gl_ctx, monkeypatch):
+    """Side by side, the Monte Carlo lobe (a 64 x 64 image of the unit disc) is the
+    disc the neural half shows, same size and round -- it was stretched to fill its
+    half (an ellipse); here the reference is the neural lobe itself, so the relative
+    error view shows next to nothing (the stretched image made it large)."""
+    ld, sent = _waiting_lookdev(gl_ctx, monkeypatch)
+    try:
+        ld.compare_part.show_labels = False
+        assert ld.set_view("lobe") and ld.set_compare("side")
+        size = (192, 72)  # two 96 x 72 halves: a disc 72 pixels across in each
+        _draw(gl_ctx, ld, size)
+        own = ld.renderer.render_linear(replace(ld.state, background=False), (64, 64), 1, ld.brdf)
+        _deliver(ld, sent[-1], own)
+        shown = _draw(gl_ctx, ld, size)
+        (nw, nh), (rw, rh) = _extent(shown[:, :96]), _extent(shown[:, 96:])
+        assert abs(nw - nh) <= 2 and nh >= 60  # the neural disc, round
+        assert abs(rw - nw) <= 2 and abs(rh - nh) <= 2, ((nw, nh), (rw, rh))
+        assert np.abs(shown[:, 96:].astype(int) - shown[:, :96]).mean() < 3  # the same picture
+        assert ld.set_compare("error")
+        err = _draw(gl_ctx, ld, size).astype(int)
+        blue = err[..., 2] > err[..., 0] + 40  # the ramp's low end (dark blue .. cyan), not green .. red
+        assert blue.mean() > 0.97, blue.mean()
+    finally:
+        ld.close()
+
+
+def _hatched(half: np.ndarray) -> float:
+    """The fraction of ``half``'s pixels that are the placeholder's hatch."""
+    from nbrdf.viewer.reference.compare import PLACEHOLDER_GREYS
+
+    px = half.astype(int)
+    grey = (px.max(-1) - px.min(-1)) <= 1
+    return float((grey & np.isin(px[..., 0], [round(255 * g) for g in PLACEHOLDER_GREYS])).mean())
+
+
+@pytest.mark.parametrize("view", ["object", "lobe"])
+def test_a_computing_reference_shows_a_placeholder(gl_ctx, monkeypatch, view):
+    """Until the Monte Carlo reference's first round arrives, its half is the
+    placeholder's grey hatch with "computing reference..." -- no object: the
+    lit object used to show the stack's coat over a black body (a black
+    material, for 14 s and more on three layers), the lobe an empty black half.
+    The first round replaces it."""
+    ld, sent = _waiting_lookdev(gl_ctx, monkeypatch)
+    try:
+        ld.compare_part.show_labels = False  # the sides' names off; the placeholder's words stay
+        assert ld.set_view(view) and ld.set_compare("side")
+        size = (256, 96)
+        shown = _draw(gl_ctx, ld, size)
+        assert sent, "no reference was asked for"
+        assert _hatched(shown[:, 128:]) > 0.7 and _hatched(shown[:, :128]) < 0.05
+        assert ld.compare_part.placeholder == "computing reference..."
+        words = shown[40:56, 128:].astype(int).sum(-1)  # the words' white glyphs on their dark box, mid-height
+        assert (words > 600).any() and (words < 120).mean() > 0.3  # the hatch (183, 246) dimmed by the box
+        job = sent[-1]
+        body = np.zeros((*job.mask.shape, 3), np.float32)
+        body[job.mask] = 0.3
+        _deliver(ld, job, body)
+        shown = _draw(gl_ctx, ld, size)
+        assert _hatched(shown[:, 128:]) < 0.05 and ld.compare_part.placeholder is None
+    finally:
+        ld.close()

@@ -211,3 +211,27 @@ def test_the_references_kept_in_the_window_are_bounded():
     assert [c.get(str(k)) is not None for k in range(5)] == [False, False, True, True, True]
     c.put("big", ReferenceImage(np.zeros((64, 64, 3), np.float32), 8, True))  # over the bound alone: kept
     assert len(c) == 1 and c.get("big") is not None
+
+
+def test_a_busy_worker_holds_one_unread_request_not_every_one():
+    """While the process reads nothing (compiling the walk, a long round), requests do not pile up in the
+    window: one waits in the pipe, the newest in hand; once the pipe's one is read, the newest goes."""
+    import multiprocessing as mp
+    import queue as q
+    from types import SimpleNamespace
+
+    from nbrdf.viewer.reference.worker import ReferenceWorker
+
+    w = ReferenceWorker()
+    w._proc = SimpleNamespace(is_alive=lambda: True)  # a process that never reads its pipe
+    w._requests, w._results = q.Queue(), q.Queue()
+    w._taken, w._sent, w._held = mp.get_context("spawn").Value("q", 0), 0, None
+    for k in range(200):
+        w.request(SimpleNamespace(key=f"job{k}"))
+    assert w._requests.qsize() == 1 and w.unread == 2 and w._held.key == "job199"
+    first = w._requests.get_nowait()
+    assert first.key == "job0"
+    with w._taken.get_lock():
+        w._taken.value += 1  # what the process does when it reads
+    w.collect()
+    assert w._requests.get_nowait().key == "job199" and w._held is None and w.unread == 1

@@ -1,6 +1,8 @@
 """The window's refinement policy (viewer/ui/refinement.py), driven with made-up frame times."""
 from __future__ import annotations
 
+import pytest
+
 from nbrdf.viewer.ui.refinement import Refinement, RefinementSettings
 
 
@@ -67,3 +69,31 @@ def test_still_frame_times_change_nothing():
 def test_not_adaptive_is_always_full_resolution_and_still():
     p = Refinement(RefinementSettings(adaptive=False))
     assert drive(p, [True, False, True], frame_ms=5_000.0) == [(1.0, False)] * 3
+
+
+def test_a_pass_in_bands_completes_before_the_scale_doubles_or_the_preview_is_dropped():
+    """A still frame's pass may take several frames (viewer/jobs/pass_bands.py): the preview
+    at a new scale is shown complete before the next scale, or the full estimator, restarts it."""
+    p = Refinement(RefinementSettings(start_scale=0.5))
+    plans = [p.plan(True)]
+    for complete in [True, False, False, True, False, True]:
+        plans.append(p.plan(False, complete=complete))
+    assert [x.scale for x in plans] == [0.5, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0]
+    assert [x.quick for x in plans] == [True, True, True, True, False, False, False]
+    assert [x.restart for x in plans] == [True, True, False, False, True, False, False]
+
+
+def test_still_frames_get_the_budget_the_rest_of_the_frame_leaves():
+    p = Refinement(RefinementSettings(still_budget_ms=40.0, min_view_ms=20.0))
+    assert p.plan(True).budget_ms is None  # interactive frames: whole passes at a reduced scale
+    p.done(100.0)
+    assert p.plan(False).budget_ms == 20.0  # no still frame measured yet: the floor
+    for _ in range(5):
+        p.done(45.0, 30.0)  # 15 ms of panels, swap and composite beside 30 ms of accumulation
+        plan = p.plan(False)
+    assert plan.budget_ms == pytest.approx(25.0)
+    for _ in range(9):
+        p.done(300.0, 20.0)  # a slow rest of the frame: the view still gets its floor
+    assert p.plan(False).budget_ms == 20.0
+    assert Refinement(RefinementSettings(banded=False)).plan(False).budget_ms is None
+    assert Refinement(RefinementSettings(adaptive=False)).plan(False).budget_ms is None

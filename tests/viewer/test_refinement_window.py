@@ -2,7 +2,9 @@
 App's API: with slow frames an edit still ends in a full-resolution view that
 accumulates passes. Frames are made slow by a fake clock in the window's
 module (every reading 1.5 s later than the one before), so no wall clock is
-asserted and the outcome does not depend on the machine's speed."""
+asserted and the outcome does not depend on the machine's speed (a still
+frame's pass is shaded in bands of at least one row, so a 72-row view's pass
+takes at most 72 frames however slow the machine)."""
 from __future__ import annotations
 
 import json
@@ -49,7 +51,7 @@ SCRIPT = textwrap.dedent("""
         for k in range(3):  # a drag: three edits, one frame each
             ld.set_param(len(ld.editor.layers) - 1, "roughness", 0.3 + 0.1 * k)
             step("edit")
-        for _ in range(5):
+        for _ in range(150):
             step("still")
         print(json.dumps({"frames": frames, "notice": ld.notice}))
     finally:
@@ -78,5 +80,14 @@ def test_still_view_reaches_full_resolution_and_accumulates_with_slow_frames(fra
     tail = still[full[0]:]
     assert all(f["scale"] == 1.0 for f in tail), still  # and it stays there
     # The accumulation restarts with the resolution (a one-pass preview at full size), restarts
-    # once more without the preview, then grows a pass per frame.
-    assert [f["passes"] for f in tail] == [1] + list(range(1, len(tail))), still
+    # once more without the preview, then grows a pass at a time. A pass may take several
+    # frames (shaded in bands of at least one row within a frame budget, issue 41): at most 72 here.
+    passes = [f["passes"] for f in still]
+    steps = [b - a for a, b in zip(passes, passes[1:])]
+    # at most one restart, the preview's end (a loaded machine may finish the first full pass before a
+    # preview frame is recorded: then none shows)
+    assert steps.count(-1) <= 1 and all(s in (-1, 0, 1) for s in steps), still
+    if -1 in steps:
+        drop = steps.index(-1)
+        assert passes[drop] == 1 and max(passes[:drop + 1]) == 1, still  # the preview: one complete pass
+    assert passes[-1] >= 2, still  # then the full estimator's passes, one at a time

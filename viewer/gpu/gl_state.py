@@ -70,3 +70,16 @@ def accumulating(ctx: moderngl.Context, fbo: moderngl.Framebuffer) -> Iterator[m
             yield fbo
         finally:
             _rest(ctx)
+
+
+@contextmanager
+def added(ctx: moderngl.Context) -> Iterator[None]:
+    """Full-screen passes added into the bound target: additive blending, no depth test
+    (a pass shaded in bands merged into its accumulation)."""
+    ctx.disable(moderngl.DEPTH_TEST)
+    ctx.enable(moderngl.BLEND)
+    ctx.blend_func = moderngl.ONE, moderngl.ONE
+    try:
+        yield
+    finally:
+        _rest(ctx)

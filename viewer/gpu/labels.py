@@ -38,13 +38,19 @@ def rasterise(text: str, px: int) -> np.ndarray:
 
 @dataclass
 class Label:
-    """One label: ``text`` anchored at ``x`` (a fraction of the view's width) from the top."""
+    """One label: ``text`` anchored at ``x`` (a fraction of the view's width), along the top or at ``y``."""
 
     text: str
     x: float
     """Where the box's anchored edge sits, 0 (left edge of the view) .. 1 (right edge)."""
     align: str = "left"
-    """"left": the box starts at ``x`` (plus the margin); "right": it ends there."""
+    """"left": the box starts at ``x`` (plus the margin); "right": it ends there; "center": it is centred on it."""
+    y: float | None = None
+    """Where the box's centre sits, 0 (top) .. 1 (bottom); None: along the top edge (a side's name)."""
+
+    def __post_init__(self) -> None:
+        if self.align not in ("left", "right", "center"):
+            raise ValueError(f"label align {self.align!r} is not one of left, right, center")
 
 
 class Labels:
@@ -81,9 +87,10 @@ class Labels:
         for lab in labels:
             tex = self._texture(lab.text, px)
             w, h = tex.size
-            x = round(lab.x * vw) + (MARGIN if lab.align == "left" else -MARGIN - w)
+            x = round(lab.x * vw) + {"left": MARGIN, "right": -MARGIN - w, "center": -(w // 2)}[lab.align]
             x = int(np.clip(x, 0, max(0, vw - w)))
-            top = vh - MARGIN  # GL rows count from the bottom
+            # GL rows count from the bottom
+            top = vh - MARGIN if lab.y is None else int(np.clip(round((1 - lab.y) * vh + h / 2), h, vh))
             rect = (2 * x / vw - 1, 2 * (top - h) / vh - 1, 2 * (x + w) / vw - 1, 2 * top / vh - 1)
             tex.use(0)
             self.prog["u_rect"].value = rect

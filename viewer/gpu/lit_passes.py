@@ -8,7 +8,8 @@ instead (after a depth pre-pass), blended into the accumulation target. Both
 call lit_shade.glsl with the same random numbers and the uniforms of
 ``lit_uniforms``. ``LitPasses`` draws with the renderer's ``DrawKit`` (programs,
 mesh, binders) and ``LitSettings`` (sampling); each call names its draws, its
-target and the environment.
+target and the environment, and may shade a band of rows only (``rows``: the
+window's still view shades a pass over several frames, viewer/jobs/pass_bands.py).
 """
 from __future__ import annotations
 
@@ -44,6 +45,8 @@ def incidence(theta_deg: float) -> tuple[float, float, float]:
 
 #: (first index, index count, BRDF) of each draw of the mesh (``Renderer.draws``).
 Draws = list[tuple[int, int, GpuBrdf]]
+#: A band of a target's rows, [first, end), counted as GL does (from the bottom).
+Rows = tuple[int, int]
 
 
 @dataclass
@@ -100,15 +103,17 @@ class LitPasses:
 
     def deferred(self, state: ViewState, w: int, h: int, first: int, passes: int, draws: Draws,
                  target: tuple[moderngl.Framebuffer, moderngl.Texture], env: GpuEnvironment,
-                 slot: str) -> np.ndarray:
-        """The deferred lit path: on a slot's first pass, rasterise its G-buffer
-        (gbuffer_lit.frag); then ``passes`` passes of lit.comp over it into the
-        slot's accumulation image ``target``. Returns the view-projection matrix."""
+                 slot: str, rows: Rows | None = None, raster: bool | None = None,
+                 into: moderngl.Texture | None = None) -> np.ndarray:
+        """The deferred lit path: on a slot's first pass (``raster``), rasterise its G-buffer
+        (gbuffer_lit.frag); then ``passes`` passes of lit.comp over it, over ``rows`` only
+        (GL's rows, bottom up; None: all), added into ``into`` (default: the slot's
+        accumulation image ``target``). Returns the view-projection matrix."""
         kit = self.kit
         gfbo, gtex = self.gbuffer_target(w, h, slot, target[0].depth_attachment)
         g = kit.programs.get(ProgramKey("gbuffer_lit.frag", "object.vert", version=GLSL_430))
         vp = kit.surface_uniforms(g, state, w, h, draws[0][2].normal_map)
-        if first == 0:
+        if first == 0 if raster is None else raster:
             gfbo.use()
             gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             # A sampler array on unit 0 beside the normal map's 2D sampler would void the draw.
@@ -124,7 +129,10 @@ class LitPasses:
                     if "u_material_id" in g:
                         g["u_material_id"].value = part
                     kit.mesh_vao(g).render(moderngl.TRIANGLES, vertices=count, first=start)
-        tex = target[1]
+        if passes <= 0:
+            return vp
+        y0, y1 = rows if rows is not None else (0, h)
+        tex = target[1] if into is None else into
         for part, (_, _, b) in enumerate(draws):
             c = kit.compute_program(b)
             kit.bind_brdf(c, b, compute=True)
@@ -132,6 +140,7 @@ class LitPasses:
             c["u_eye"].value = tuple(state.camera.eye())
             if "u_material_id" in c:  # -1: every covered pixel (one material)
                 c["u_material_id"].value = part if len(draws) > 1 else -1
+            c["u_row0"].value, c["u_row_end"].value = y0, y1
             for t, unit, name in zip(gtex, GBUFFER_UNITS, ("u_gb_normal", "u_gb_world", "u_gb_uv")):
                 t.use(unit)
                 if name in c:
@@ -141,36 +150,48 @@ class LitPasses:
             for k in range(first, first + passes, LIT_CHUNK):
                 c["u_first_pass"].value = k
                 c["u_passes"].value = min(LIT_CHUNK, first + passes - k)
-                c.run(-(-w // LIT_GROUP), -(-h // LIT_GROUP))
+                c.run(-(-w // LIT_GROUP), -(-(y1 - y0) // LIT_GROUP))
                 self.ctx.memory_barrier()
         kit.unbind_textures(*GBUFFER_UNITS)
         return vp
 
     def fragment(self, state: ViewState, w: int, h: int, first: int, passes: int, draws: Draws,
-                 fbo: moderngl.Framebuffer, env: GpuEnvironment) -> np.ndarray:
-        """The fallback lit path: ``passes`` passes of object.frag added into
-        ``fbo`` (per draw range its BRDF's program); returns the view-projection matrix."""
+                 fbo: moderngl.Framebuffer, env: GpuEnvironment, rows: Rows | None = None,
+                 raster: bool | None = None) -> np.ndarray:
+        """The fallback lit path: on the first pass (``raster``) a depth pre-pass; then
+        ``passes`` passes of object.frag added into ``fbo`` (per draw range its BRDF's
+        program), over ``rows`` only (GL's, bottom up; None: all). Returns the
+        view-projection matrix."""
         kit = self.kit
         progs = [(kit.program("object.frag", b, "object.vert"), start, count, b) for start, count, b in draws]
         vp = None
         for p, _, _, b in progs:
             kit.bind_brdf(p, b)
             vp = kit.surface_uniforms(p, state, w, h, b.normal_map)
-        if first == 0:
+        if first == 0 if raster is None else raster:
             # Depth pre-pass of every range: the shading passes then add exactly the visible surface.
             with depth_tested(self.ctx), masked(fbo, color=False):
                 for p, start, count, _ in progs:
                     kit.mesh_vao(p).render(moderngl.TRIANGLES, vertices=count, first=start)
-        with accumulating(self.ctx, fbo):
-            for p, start, count, b in progs:
-                if len(progs) > 1:  # programs may be shared by two ranges: this range's BRDF
-                    kit.bind_brdf(p, b)
-                    kit.surface_uniforms(p, state, w, h, b.normal_map)
-                self.lit_uniforms(p, state, env, b)
-                vao = kit.mesh_vao(p)
-                for k in range(first, first + passes):
-                    p["u_pass"].value = k
-                    vao.render(moderngl.TRIANGLES, vertices=count, first=start)
+        if passes <= 0:
+            return vp
+        if rows is not None:
+            fbo.scissor = (0, rows[0], w, rows[1] - rows[0])
+        try:
+            with accumulating(self.ctx, fbo):
+                for p, start, count, b in progs:
+                    if len(progs) > 1:  # programs may be shared by two ranges: this range's BRDF
+                        kit.bind_brdf(p, b)
+                        kit.surface_uniforms(p, state, w, h, b.normal_map)
+                    self.lit_uniforms(p, state, env, b)
+                    vao = kit.mesh_vao(p)
+                    for k in range(first, first + passes):
+                        p["u_pass"].value = k
+                        vao.render(moderngl.TRIANGLES, vertices=count, first=start)
+        finally:
+            if rows is not None:
+                fbo.scissor = None
+                fbo.use()
         return vp
 
     def lit_uniforms(self, p: moderngl.Program | moderngl.ComputeShader, state: ViewState, env: GpuEnvironment,

@@ -29,6 +29,13 @@ of all ranges first, then shades each range with its own program. One range
 (every mesh but a multi-material glTF) is one draw and one dispatch. GL state
 is set through the scopes of viewer/gpu/gl_state.py; the programs, mesh buffers and
 binders the passes share are a ``DrawKit`` (viewer/gpu/draw_kit.py).
+
+A pass may also be shaded in bands of rows over several calls (the window's still
+view, which must not hold its interface for a whole pass): ``begin_pass``, then
+``shade_rows`` per band into the slot's *pending* image, then ``end_pass`` adds
+the complete pass to the accumulation in one draw. The random numbers depend on
+the pixel and the pass only, so the accumulation is the same image, and it only
+ever holds whole passes (what the composite divides by).
 """
 from __future__ import annotations
 
@@ -44,8 +51,8 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
 from nbrdf.viewer.gpu.draw_kit import DrawKit
 from nbrdf.viewer.gpu.gl import use_compute
-from nbrdf.viewer.gpu.gl_state import accumulating, depth_tested, flat, masked
-from nbrdf.viewer.gpu.lit_passes import LitPasses, LitSettings, incidence
+from nbrdf.viewer.gpu.gl_state import accumulating, added, depth_tested, flat, masked
+from nbrdf.viewer.gpu.lit_passes import LitPasses, LitSettings, Rows, incidence
 from nbrdf.viewer.gpu.lit_sampling import LitSampling
 from nbrdf.viewer.gpu.pipeline import GpuBrdf, MaterialPipeline
 from nbrdf.viewer.gpu.programs import ProgramKey
@@ -78,8 +85,12 @@ class Renderer:
         """The lit passes' sampling (``sampling``, ``table_sampling``, ``quick`` below)."""
         self.lit = LitPasses(self.kit, self.settings)
         """The lit passes of the object view (deferred compute or fragment) and the compute lobe / slice."""
+        self._pending: SizeCache[tuple[moderngl.Framebuffer, moderngl.Texture]] = SizeCache(
+            lambda t: release_all(t[0], t[1]))
+        """The image of the pass being shaded in bands, per (slot, w, h); its framebuffer shares
+        the accumulation target's depth buffer (``begin_pass``)."""
         self._fbo: SizeCache[tuple[moderngl.Framebuffer, moderngl.Texture]] = SizeCache(
-            lambda t: release_all(t[0], t[0].depth_attachment, t[1]), on_evict=self.lit.gbuffers.evict)
+            lambda t: release_all(t[0], t[0].depth_attachment, t[1]), on_evict=self._evict_dependants)
         self.background_prog = self.programs.get(ProgramKey("background.frag"))
         self.brdf: GpuBrdf | None = brdf
         self.part_brdfs: list[GpuBrdf | None] = [None]
@@ -189,10 +200,16 @@ class Renderer:
             return self.ctx.framebuffer([tex], self.ctx.depth_renderbuffer((w, h))), tex
         return self._fbo.get((slot, w, h), make)
 
+    def _evict_dependants(self, key: tuple) -> None:
+        """What shares an evicted target's depth buffer: its G-buffer and its pending pass."""
+        self.lit.gbuffers.evict(key)
+        self._pending.evict(key)
+
     def release_targets(self) -> None:
         """Releases every accumulation target and G-buffer (made again on next use)."""
         self._fbo.clear()
         self.lit.gbuffers.clear()
+        self._pending.clear()
 
     def frame_texture(self, view: View | str, w: int, h: int, slot: str = MAIN) -> moderngl.Texture:
         """The accumulation target of ``view`` at (w, h) in ``slot`` as the last ``accumulate`` left it."""
@@ -223,6 +240,82 @@ class Renderer:
                 self.kit.fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
         return tex
 
+    # --- a pass in bands (the window's still view) ---------------------------------------
+    def _pending_target(self, w: int, h: int, slot: str) -> tuple[moderngl.Framebuffer, moderngl.Texture]:
+        """The image the pass being shaded in bands adds into (the fragment path's blending
+        tests against the accumulation target's depth: the framebuffer shares it)."""
+        depth = self.target(w, h, slot)[0].depth_attachment
+
+        def make():
+            tex = self.ctx.texture((w, h), 4, dtype="f4")
+            return self.ctx.framebuffer([tex], depth), tex
+        return self._pending.get((slot, w, h), make)
+
+    def begin_pass(self, state: ViewState, w: int, h: int, first_pass: int, brdf: GpuBrdf | None = None,
+                   slot: str = MAIN) -> None:
+        """Starts pass ``first_pass`` of the object view's accumulation in ``slot`` as bands
+        (``shade_rows``): its pending image cleared and, on the first pass, the surface
+        rasterised (G-buffer or depth pre-pass). The accumulation itself is not touched
+        until ``end_pass``: a restarted view shows its last image until then."""
+        brdf = self._brdf(brdf)
+        target = self.target(w, h, slot)
+        pfbo, ptex = self._pending_target(w, h, slot)
+        with masked(pfbo, depth=first_pass == 0):  # a later pass keeps the surface's depth
+            pfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        if first_pass == 0:
+            if self.deferred:
+                self.lit.deferred(state, w, h, 0, 0, self.draws(brdf), target, self.env, slot, raster=True)
+            else:
+                self.lit.fragment(state, w, h, 0, 0, self.draws(brdf), pfbo, self.env, raster=True)
+
+    def shade_rows(self, state: ViewState, w: int, h: int, first_pass: int, rows: Rows,
+                   brdf: GpuBrdf | None = None, slot: str = MAIN) -> None:
+        """Shades pass ``first_pass`` of ``slot`` over ``rows`` (GL's rows, bottom up) into
+        its pending image (``begin_pass`` first)."""
+        brdf = self._brdf(brdf)
+        y0, y1 = max(0, rows[0]), min(h, rows[1])
+        if y1 <= y0:
+            return
+        target = self.target(w, h, slot)
+        pfbo, ptex = self._pending_target(w, h, slot)
+        if self.deferred:
+            self.lit.deferred(state, w, h, first_pass, 1, self.draws(brdf), target, self.env, slot,
+                              rows=(y0, y1), raster=False, into=ptex)
+        else:
+            self.lit.fragment(state, w, h, first_pass, 1, self.draws(brdf), pfbo, self.env, rows=(y0, y1),
+                              raster=False)
+
+    def end_pass(self, state: ViewState, w: int, h: int, first_pass: int, slot: str = MAIN) -> moderngl.Texture:
+        """Adds the pending pass, complete, into ``slot``'s accumulation (written over it when
+        ``first_pass`` is 0), with the environment behind the object when ``state`` shows it;
+        returns the accumulation."""
+        fbo, tex = self.target(w, h, slot)
+        _, ptex = self._pending_target(w, h, slot)
+        p = self.programs.get(ProgramKey("accum_merge.frag"))
+        ptex.use(0)
+        p["u_pass"].value = 0
+        fbo.use()
+        if first_pass == 0:
+            with flat(self.ctx):
+                self.kit.fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
+        else:
+            with added(self.ctx):
+                self.kit.fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
+        self.unbind_textures(0)
+        if state.background and state.env_on:
+            cam = state.camera
+            self._background(state, fbo, cam.projection(w / h) @ cam.view(), 1)
+        fbo.use()
+        return tex
+
+    def row_coverage(self, w: int, h: int, slot: str = MAIN) -> np.ndarray:
+        """Pixels of the object per row of ``slot``'s target (GL's rows, bottom up), from the
+        depth its surface left (after ``begin_pass`` of a first pass): what a band's cost
+        follows (lit.comp returns at once off the object)."""
+        fbo = self.target(w, h, slot)[0]
+        depth = np.frombuffer(fbo.read(components=1, attachment=-1, dtype="f4"), np.float32).reshape(h, w)
+        return (depth < 1.0).sum(axis=1)
+
     def _object_passes(self, state: ViewState, w: int, h: int, first: int, passes: int, brdf: GpuBrdf,
                        slot: str = MAIN) -> None:
         target = self.target(w, h, slot)
@@ -232,14 +325,18 @@ class Renderer:
         else:
             vp = self.lit.fragment(state, w, h, first, passes, self.draws(brdf), fbo, self.env)
         if state.background and state.env_on:
-            bg = self.background_prog
-            self.env.bind(bg, math.radians(state.env_rotation))
-            bg["u_inv_view_proj"].write(np.linalg.inv(vp).T.astype("f4").tobytes())
-            bg["u_eye"].value = tuple(state.camera.eye())
-            bg["u_env_intensity"].value = state.env_intensity * passes  # as many passes as the object
-            with accumulating(self.ctx, fbo):
-                self.kit.fullscreen(bg).render(moderngl.TRIANGLES, vertices=3)
+            self._background(state, fbo, vp, passes)
         fbo.use()  # the target stays bound (a first deferred pass bound the G-buffer)
+
+    def _background(self, state: ViewState, fbo: moderngl.Framebuffer, vp: np.ndarray, passes: int) -> None:
+        """The environment behind the object, ``passes`` times (as many as the object), added into ``fbo``."""
+        bg = self.background_prog
+        self.env.bind(bg, math.radians(state.env_rotation))
+        bg["u_inv_view_proj"].write(np.linalg.inv(vp).T.astype("f4").tobytes())
+        bg["u_eye"].value = tuple(state.camera.eye())
+        bg["u_env_intensity"].value = state.env_intensity * passes
+        with accumulating(self.ctx, fbo):
+            self.kit.fullscreen(bg).render(moderngl.TRIANGLES, vertices=3)
 
     def render_linear(self, state: ViewState, size: tuple[int, int] = (256, 256), spp: int = 1,
                       brdf: GpuBrdf | None = None) -> np.ndarray:

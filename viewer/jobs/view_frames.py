@@ -6,16 +6,26 @@ when comparing, the backdrop, and the composite into the window's target.
 body they were shaded with); everything else comes with each call: the frame's
 description (``Frame``) and the GPU parts it is drawn with (``Stage``,
 viewer/jobs/frame.py). It never calls back into the session.
+
+With a budget (the window's still frames) the object view's passes are shaded
+in bands of rows, a band per frame, and counted when complete
+(viewer/jobs/pass_bands.py); until the accumulation has its first complete pass
+the view shows the last complete image (the preview, the lower resolution). The
+composite of such a frame is kept and drawn again until what it shows changes.
 """
 from __future__ import annotations
 
 import time
 from dataclasses import replace
+from typing import Callable
 
 import moderngl
 
+from nbrdf.viewer.gpu.gl_state import flat
 from nbrdf.viewer.gpu.pipeline import GpuBrdf
+from nbrdf.viewer.gpu.programs import ProgramKey
 from nbrdf.viewer.jobs.frame import Frame, Stage
+from nbrdf.viewer.jobs.pass_bands import PassBands
 from nbrdf.viewer.modes import CompareMode, View
 from nbrdf.viewer.view_settings import ViewState
 
@@ -44,10 +54,22 @@ class ViewFrames:
         self._body: GpuBrdf | None = None  # the BRDF the accumulation was shaded with
         self._slot = MAIN_SLOTS[0]  # the slot the image accumulates in
         self._held: tuple[str, int] | None = None  # (slot, passes) of the image a handover fades out
+        self.bands = PassBands(stage.ctx)
+        """The pass being shaded in bands (still frames with a budget)."""
+        self._shown: tuple | None = None  # (w, h, slot, passes, what it shows): the last complete image
+        self.restarted = True
+        """Whether the accumulation was started over and has had nothing drawn since (a change)."""
+        self.accum_ms = 0.0
+        """The last ``render``'s accumulation work, waited for when banded (``PassBands.ms``)."""
+        self._copy: tuple[moderngl.Framebuffer, moderngl.Texture] | None = None  # a banded frame's composite
+        self._copy_key: tuple | None = None  # what it shows
+        self._compose_ms = 0.0  # the last composite into the copy (a completed pass's frame costs it too)
 
     def restart(self) -> None:
         """Starts the accumulation over on the next frame (an edit, a view change)."""
-        self.passes, self._held = 0, None
+        self.passes, self._held, self.restarted = 0, None, True
+        self.bands.reset()
+        self._copy_key = None
 
     def handover(self, frame: Frame) -> None:
         """The shown BRDF changed without an edit (idle refinement swapped a better code
@@ -64,6 +86,48 @@ class ViewFrames:
             self._held = (self._slot, self.passes)
             self._slot = MAIN_SLOTS[1] if self._slot == MAIN_SLOTS[0] else MAIN_SLOTS[0]
         self.passes = 0
+        self.bands.reset()
+
+    def _kept(self, frame: Frame, target: moderngl.Framebuffer, size: tuple[int, int], shown: tuple,
+              draw: Callable[[moderngl.Framebuffer], object]) -> None:
+        """Draws the composite of a banded frame into ``target`` through a kept copy: composited
+        (``draw``) only when what it shows changed -- ``shown`` (the image and its passes) or the
+        frame's settings -- else the copy drawn again (the backdrop and the tone mapping of a
+        full view cost a software GPU as much as a band)."""
+        ctx = self.stage.ctx
+        key = (size, shown, frame.state, frame.backdrop, frame.compare, frame.wipe, frame.error_scale,
+               frame.blend_t, id(frame.brdf), id(frame.other_brdf))
+        if self._copy is None or self._copy[1].size != tuple(size):
+            if self._copy is not None:
+                for res in self._copy:
+                    res.release()
+            tex = ctx.texture(tuple(size), 4)
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._copy, self._copy_key = (ctx.framebuffer([tex]), tex), None
+        fbo, tex = self._copy
+        if key != self._copy_key:
+            t0 = time.perf_counter()
+            fbo.use()
+            fbo.clear(0.0, 0.0, 0.0, 1.0)
+            draw(fbo)
+            ctx.finish()
+            self._compose_ms = (time.perf_counter() - t0) * 1000.0
+            self._copy_key = key
+        renderer = self.stage.renderer
+        p = renderer.programs.get(ProgramKey("image_copy.frag"))
+        target.use()
+        tex.use(0)
+        p["u_image"].value = 0
+        with flat(ctx):
+            renderer.kit.fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
+        renderer.unbind_textures(0)
+
+    def _shown_for(self, size: tuple[int, int], frame: Frame) -> tuple[int, int, str, int] | None:
+        """The last complete image of the object view, if it shows this view at ``size``
+        (a lower render scale or the same): (w, h, slot, passes)."""
+        if self._shown is None or self._shown[4] != (size, frame.side_by_side, frame.blending):
+            return None
+        return self._shown[:4]
 
     @property
     def fading(self) -> bool:
@@ -71,10 +135,14 @@ class ViewFrames:
         return self._held is not None
 
     def render(self, frame: Frame, target: moderngl.Framebuffer, size: tuple[int, int], passes: int = 1,
-               scale: float = 1.0, interactive: bool = False, quick: bool | None = None) -> None:
-        """Draws ``frame`` into ``target`` (see ``LookDev.render``); sets ``render_ms``."""
+               scale: float = 1.0, interactive: bool = False, quick: bool | None = None,
+               budget_ms: float | None = None) -> None:
+        """Draws ``frame`` into ``target`` (see ``LookDev.render``); sets ``render_ms``. ``budget_ms``:
+        the object view's accumulation work this frame may take (a band of a pass; module
+        docstring); None: ``passes`` whole passes."""
         stage = self.stage
         t0 = time.perf_counter()
+        self.accum_ms = 0.0
         if frame.brdf is None:  # the first material's latent texture is still building
             target.use()
             target.clear(0.0, 0.0, 0.0, 1.0)
@@ -90,14 +158,42 @@ class ViewFrames:
         if body is not self._body:
             self._body = body
             self.passes = 0
+            self.bands.reset()
         stage.renderer.quick = interactive if quick is None else quick  # the quick estimator (one pass per frame)
         before = self.passes
-        self.passes = self.draw(frame, target, w, h, self.passes, passes, (self._slot, VIEW_SLOTS[1]), body=body,
-                                view_size=size, held=self._held)
+        slots = (self._slot, VIEW_SLOTS[1])
+        blank = False
+        if budget_ms is not None and view == View.OBJECT and not frame.comparing and self.passes < MAX_PASSES:
+            shaded = [(slots[0], body)] + ([(slots[1], frame.other_brdf)] if frame.blending else [])
+            if self.bands.advance(stage.renderer, replace(frame.state, background=False), w, h, self.passes,
+                                  shaded, budget_ms, (stage.renderer.quick, body.kind, len(shaded)),
+                                  end_extra_ms=self._compose_ms):
+                self.passes += 1
+            self.accum_ms = self.bands.ms
+            last = (w, h, *self._held) if self._held is not None else self._shown_for(size, frame)
+            if self.passes > 0:
+                self._kept(frame, target, size, (w, h, slots, self.passes, self._held), lambda t: self.draw(
+                    frame, t, w, h, self.passes, 0, slots, body=body, view_size=size, held=self._held))
+            elif last is not None:  # nothing complete yet: the last complete image (a preview, a lower scale)
+                self._kept(frame, target, size, last, lambda t: self.draw(
+                    frame, t, last[0], last[1], last[3], 0, (last[2], VIEW_SLOTS[1]), body=body, view_size=size))
+            else:  # nothing of this view to show (a new size): black, and the window sees a change
+                target.use()
+                target.clear(0.0, 0.0, 0.0, 1.0)
+                blank = True
+        else:
+            self.bands.reset()
+            self._copy_key = None
+            self.passes = self.draw(frame, target, w, h, self.passes, passes, slots, body=body,
+                                    view_size=size, held=self._held)
+        if self.passes > before or (self.bands.in_progress and not blank):
+            self.restarted = False
+        if self.passes > 0 and view == View.OBJECT and not frame.comparing:
+            self._shown = (w, h, self._slot, self.passes, (size, frame.side_by_side, frame.blending))
         if self._held is not None and self.passes >= min(self._held[1], HANDOVER_PASSES):
             self._held = None  # faded out: the new code's image alone from the next frame
         self.render_ms = (time.perf_counter() - t0) * 1000.0
-        if view == View.OBJECT and self.passes > before:
+        if view == View.OBJECT and self.passes > before and budget_ms is None:
             self.ms_per_pixel_pass = self.render_ms / (w * h * (self.passes - before))
 
     def draw(self, frame: Frame, target: moderngl.Framebuffer, w: int, h: int, first: int, passes: int,
@@ -125,12 +221,13 @@ class ViewFrames:
         a = self._accumulated(view, lit, vw, h, first, n, body or frame.brdf, slots[0])
         done = first + n if view == View.OBJECT else 1
         pa = float(done)
-        b, pb, weight = None, pa, None
+        b, pb, weight, placeholder = None, pa, None, None
         if comparing:
             # The lobe and slice views are not accumulated: their reference is drawn with them each frame.
             rf, rn = (first, n) if view == View.OBJECT else (0, 1)
             b, pb = stage.compare.reference(frame.material, frame.ref_brdf, frame.brdf, lit, frame.mesh, vw, h, rf,
                                             rn, done, view_size=(max(1, full[0] // 2) if side else full[0], full[1]))
+            placeholder = stage.compare.placeholder  # no reference image yet: its side shows the placeholder
         elif frame.blending:
             b = self._accumulated(view, lit, vw, h, first, n, frame.other_brdf, slots[1])
             weight = frame.blend_t
@@ -144,12 +241,12 @@ class ViewFrames:
         if view == View.OBJECT and mode not in (CompareMode.ERROR, CompareMode.FLIP):
             # The backdrop on what is shown (the error views score the object alone).
             a, pa = stage.backdrop.apply(a, pa, state, frame.backdrop, slots[0]), 1.0
-            if b is not None and (weight is not None or (comparing and b.size == a.size)):
+            if b is not None and (weight is not None or (comparing and placeholder is None and b.size == a.size)):
                 b, pb = stage.backdrop.apply(b, pb, state, frame.backdrop, slots[1]), 1.0
         if b is None:
             b, pb = a, pa
         stage.compare.composite(target, a, pa, b, pb, mode, weight, frame.wipe, frame.error_scale,
-                                frame.state.exposure, frame.state.tonemap)
+                                frame.state.exposure, frame.state.tonemap, placeholder)
         return done
 
     def _accumulated(self, view: View, state: ViewState, w: int, h: int, first: int, n: int, brdf: GpuBrdf,

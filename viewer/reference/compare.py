@@ -25,6 +25,7 @@ import json
 import math
 import os
 import tempfile
+from collections.abc import Callable
 from dataclasses import asdict, replace
 
 import moderngl
@@ -52,6 +53,12 @@ REFERENCE_SLOT = "reference"
 COAT_TERMS = Term.ENV_COAT | Term.LOBE_COAT
 #: The direction strategy around the mirror direction is never sharper than this GGX alpha.
 MIN_LOBE_ALPHA = 0.05
+#: The placeholder's hatch, two greys (display values): a reference's side until its first image.
+PLACEHOLDER_GREYS = (0.24, 0.32)
+#: The placeholder's words while the Monte Carlo worker has sent no round of the view yet.
+COMPUTING = "computing reference..."
+#: The longest side of the Monte Carlo lobe's image as the view shows it (its 64 x 64 disc, upsampled), pixels.
+LOBE_CANVAS = 256
 
 
 def coat_brdf(brdf: GpuBrdf, material: Material) -> GpuBrdf:
@@ -88,6 +95,10 @@ class Compare:
         self.show_labels = True
         """Draw "neural" / "reference (...)" on the compared images."""
         self._ref_label = "reference"     # the reference's label, set by ``reference``
+        self.placeholder: str | None = None
+        """Set by ``reference``: the words its side shows over the placeholder's hatch
+        while there is no reference image (computing, failed, none for the material);
+        None when it shows one. A black stand-in read as a black material."""
         self._sum = None                  # (framebuffer, texture) of the lit object's coat + body
         self._sum_prog = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
                                      fragment_shader=shaders.source("reference_sum.frag"))
@@ -212,6 +223,7 @@ class Compare:
         the view's full size (the Monte Carlo image's resolution follows it, not
         the render scale; default (w, h))."""
         view = View.parse(state.view)
+        self.placeholder = None
         if analytic is not None:
             self._ref_label = "reference (closed form)"
             if n:
@@ -221,6 +233,7 @@ class Compare:
             return tex, float(max(passes, 1) if view == View.OBJECT else 1)
         if material.is_textured:
             self._ref_label = "no reference (texture-mapped)"
+            self.placeholder = "no reference for texture-mapped materials"
             return self._upload(None, np.zeros((1, 1, 3), np.float32)), 1.0
         vw, vh = view_size or (w, h)
         size = self.mc_size(view, vw, vh)
@@ -231,9 +244,15 @@ class Compare:
         self._job, self._shown = key, r
         # Until the first round at this size arrives, the body is not there yet: say so, not "0 spp".
         self._ref_label = f"reference (MC, {r.spp} spp)" if r is not None and r.spp else "reference (MC, computing...)"
+        if r is None or not r.spp:  # no image yet: the placeholder, not a picture of a black body
+            self.placeholder = "reference failed" if r is not None and r.error else COMPUTING
         img = r.image if r is not None else np.zeros((1, 1, 3), np.float32)
+        if view == View.LOBE:
+            # The SPEC's 64 x 64 grid of the unit disc, drawn as lobe.frag draws the neural half:
+            # a round disc as tall as a (w, h) view's shorter side (stretched, it was an ellipse).
+            return self._upload((key, r.spp if r else 0, w, h), img, draw=lambda i: _lobe_canvas(i, (w, h))), 1.0
         if view != View.OBJECT:
-            return self._upload((key, r.spp if r else 0), img, flip=view != View.LOBE), 1.0
+            return self._upload((key, r.spp if r else 0), img), 1.0
         body = self._upload((key, r.spp if r else 0), img, coverage=True)
         coat = brdf is not None and brdf.kind == BrdfKind.NEURAL and bool(material.interfaces)
         if coat:
@@ -271,12 +290,14 @@ class Compare:
         self.renderer.unbind_textures(0, 1)
         return tex
 
-    def _upload(self, key, img: np.ndarray, flip: bool = True, coverage: bool = False) -> moderngl.Texture:
-        """The worker's image as a float texture, uploaded when ``key`` changes;
-        ``coverage``: RGBA with alpha 1 where the image holds the object (reference_sum.frag)."""
+    def _upload(self, key, img: np.ndarray, coverage: bool = False,
+                draw: Callable[[np.ndarray], np.ndarray] | None = None) -> moderngl.Texture:
+        """The worker's image (row 0 on top) as a float texture, uploaded when ``key`` changes;
+        ``coverage``: RGBA with alpha 1 where the image holds the object (reference_sum.frag);
+        ``draw``: what is uploaded in its place, made from it, rows in GL's order (the lobe's canvas)."""
         key = None if key is None else (*key, coverage)
         if key is None or key != self._tex_key or self._tex is None:
-            data = (img[::-1] if flip else img).astype("f4")
+            data = (img[::-1] if draw is None else draw(img)).astype("f4")
             if coverage:
                 cov = (np.abs(data).sum(-1, keepdims=True) > 0).astype("f4")
                 data = np.concatenate([data, cov], -1)
@@ -366,7 +387,7 @@ class Compare:
         """The HDR-FLIP map of A (sum of ``pa`` passes) against the reference B,
         recomputed when B changes or A's passes reach the next power of two (the
         FLIP evaluation is CPU work); returns the mean (None: no reference yet)."""
-        if b.size == (1, 1):  # the Monte Carlo worker has sent nothing yet
+        if self.placeholder is not None:  # no reference image yet (the Monte Carlo worker has sent nothing)
             self.flip_mean, self._flip_key = None, None
             return None
         key = (id(b), b.size, self._tex_key if b is self._tex else int(math.log2(max(pb, 1.0))),
@@ -384,9 +405,11 @@ class Compare:
     # --- the composite ------------------------------------------------------------------------
     def composite(self, target: moderngl.Framebuffer, a: moderngl.Texture, pa: float, b: moderngl.Texture,
                   pb: float, mode: CompareMode, blend: float | None, wipe: float, error_scale: float,
-                  exposure: float, tonemap: ToneMap | str) -> None:
+                  exposure: float, tonemap: ToneMap | str, placeholder: str | None = None) -> None:
         """Draws A (sum of ``pa`` passes) and B as ``mode`` to ``target``;
-        ``blend`` (a weight) draws (1 - blend) A + blend B instead."""
+        ``blend`` (a weight) draws (1 - blend) A + blend B instead; ``placeholder``
+        (words; the reference's ``placeholder``): B has no image, its side shows the
+        hatch with these words, labels off or on."""
         p = self.compositor
         target.use()
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
@@ -406,10 +429,22 @@ class Compare:
         p["u_err_scale"].value = error_scale
         p["u_exposure"].value = exposure
         p["u_tonemap"].value = ToneMap.parse(tonemap).code
+        pending = placeholder is not None and blend is None
+        p["u_pending"].value = int(pending)
+        p["u_hatch"].value = PLACEHOLDER_GREYS
         self._vao.render(moderngl.TRIANGLES, vertices=3)
         self.renderer.unbind_textures(0, 1, 2)
-        if self.show_labels and blend is None:
-            self.labels.draw(target, self.label_list(mode, wipe))
+        labels = self.label_list(mode, wipe) if self.show_labels and blend is None else []
+        if pending:
+            labels.append(self.placeholder_label(placeholder, mode, wipe))
+        self.labels.draw(target, labels)
+
+    @staticmethod
+    def placeholder_label(text: str, mode: CompareMode | str, wipe: float) -> Label:
+        """The placeholder's words, centred on the part of the picture that would show B."""
+        mode = CompareMode.parse(mode)
+        x = 0.75 if mode == CompareMode.SIDE else (1.0 + wipe) / 2 if mode == CompareMode.WIPE else 0.5
+        return Label(text, x, "center", y=0.5)
 
     def close(self) -> None:
         self.worker.close()
@@ -444,8 +479,41 @@ def _resample(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     tw, th = size
     if (w, h) == (tw, th):
         return img
-    x = np.clip((np.arange(tw) + 0.5) * w / tw - 0.5, 0, w - 1)
-    y = np.clip((np.arange(th) + 0.5) * h / th - 0.5, 0, h - 1)
+    return _bilinear(img, (np.arange(tw) + 0.5) * w / tw - 0.5, (np.arange(th) + 0.5) * h / th - 0.5)
+
+
+def _lobe_canvas(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """The lobe image ``img`` (the SPEC's n x n grid over the unit disc, row 0 at
+    y = -1, zeros outside) as lobe.frag maps a (w, h) view: a round disc as wide as
+    the shorter side, centred, zeros outside; (ch, cw, 3), row 0 at the bottom, on a
+    grid of the view's shape at most ``LOBE_CANVAS`` pixels long (the compositor
+    stretches it over the view). Inside, f (the value over the grid's cos theta_o)
+    is interpolated bilinearly over the cells inside the disc alone and shown times
+    the pixel's own cos theta_o, so the rim falls to zero as the neural lobe's does."""
+    n = img.shape[0]
+    w, h = size
+    s, k = min(w, h), min(1.0, LOBE_CANVAS / max(w, h))
+    cw, ch = max(1, round(w * k)), max(1, round(h * k))
+    x = ((np.arange(cw) + 0.5) / cw * 2 - 1) * w / s  # lobe.frag's xy: a round disc in a view of any shape
+    y = ((np.arange(ch) + 0.5) / ch * 2 - 1) * h / s
+    c = (np.arange(n) + 0.5) / n * 2 - 1  # the grid's pixel centres (neural/geometry.py lobe_grid)
+    r2 = c[:, None] ** 2 + c[None, :] ** 2
+    inside = (r2 < 1)[..., None].astype(np.float32)
+    cos = np.sqrt(np.clip(1 - r2, 1e-12, None))[..., None]
+    gx, gy = (x + 1) / 2 * n - 0.5, (y + 1) / 2 * n - 0.5  # fractional grid indices
+    num = _bilinear(np.asarray(img, np.float32)[..., :3] / cos * inside, gx, gy)
+    den = _bilinear(inside, gx, gy)
+    pr2 = x[None, :] ** 2 + y[:, None] ** 2
+    disc = (pr2 < 1)[..., None] & (den > 1e-6)
+    f = num / np.maximum(den, 1e-6)
+    return np.where(disc, f * np.sqrt(np.clip(1 - pr2, 0, None))[..., None], 0.0).astype(np.float32)
+
+
+def _bilinear(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``img`` (H, W, C) bilinearly sampled at every (x[j], y[i]), fractional pixel
+    indices (edges clamped): (len(y), len(x), C)."""
+    h, w = img.shape[:2]
+    x, y = np.clip(x, 0, w - 1), np.clip(y, 0, h - 1)
     x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
     x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
     fx, fy = (x - x0)[None, :, None], (y - y0)[:, None, None]

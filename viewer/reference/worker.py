@@ -165,8 +165,9 @@ _CANCEL = "cancel"
 PAUSED_JOBS = 16  # interrupted jobs whose pooled paths the worker keeps
 
 
-def _next_request(requests, block: bool, parent: int | None = None):
-    """The newest request in the queue (older ones are superseded), or None.
+def _next_request(requests, block: bool, parent: int | None = None, taken=None):
+    """The newest request in the queue (older ones are superseded), or None; ``taken`` (a shared counter)
+    counts every message read, so the window sends a new one only once the last is read.
     Blocking, it wakes every second and ends the worker once the window's process
     (``parent``) is gone: a window killed outright leaves no worker behind."""
     item = None
@@ -176,15 +177,24 @@ def _next_request(requests, block: bool, parent: int | None = None):
                 _orphaned()
             try:
                 item = requests.get(timeout=1.0)
+                _count(taken)
             except queue.Empty:
                 continue
         if item is None:
             item = requests.get_nowait()
+            _count(taken)
         while True:
             item = requests.get_nowait()
+            _count(taken)
     except queue.Empty:
         pass
     return item
+
+
+def _count(taken) -> None:
+    if taken is not None:
+        with taken.get_lock():
+            taken.value += 1
 
 
 def _orphaned() -> None:
@@ -193,7 +203,7 @@ def _orphaned() -> None:
     os._exit(0)
 
 
-def _serve(requests, results, threads: int, parent: int) -> None:
+def _serve(requests, results, threads: int, parent: int, taken=None) -> None:
     """The worker process: runs the newest job in rounds, sends each pooled image;
     ends itself once ``parent`` (the window's process) is gone."""
     try:
@@ -211,7 +221,7 @@ def _serve(requests, results, threads: int, parent: int) -> None:
     if os.getppid() != parent:  # the window was gone before this process started serving
         _orphaned()
     while True:
-        item = _next_request(requests, block=job is None, parent=parent)
+        item = _next_request(requests, block=job is None, parent=parent, taken=taken)
         if item == _STOP:
             return
         if item == _CANCEL:
@@ -235,7 +245,7 @@ def _serve(requests, results, threads: int, parent: int) -> None:
                     break
                 if os.getppid() != parent:
                     _orphaned()
-                newer = _next_request(requests, block=False)
+                newer = _next_request(requests, block=False, taken=taken)
                 if newer == _STOP:
                     return
                 if newer is not None and (newer == _CANCEL or newer.key != job.key):
@@ -281,6 +291,7 @@ class ReferenceWorker:
         self._spec: JobSpec | None = None  # what was sent for ``_current``: sent again after a restart
         self._proc = None
         self._finalizer = None
+        self._taken, self._sent, self._held = None, 0, None  # the pipe's bound (``_send``), set by ``_ensure``
         self.deaths = 0
         """How many times the process died (killed, out of memory, a crash in native code) and was restarted."""
         self._last_death: tuple[float, str] | None = None
@@ -292,8 +303,11 @@ class ReferenceWorker:
             return
         ctx = mp.get_context("spawn")
         self._requests, self._results = ctx.Queue(), ctx.Queue()
-        self._proc = ctx.Process(target=_serve, args=(self._requests, self._results, self.threads, os.getpid()),
-                                 name="nbrdf-reference", daemon=True)
+        # At most one request the process has not read waits in the pipe; newer ones replace ``_held`` until it is
+        # read (a busy or still-compiling worker would otherwise pile up every orbit's job in the window's memory).
+        self._taken, self._sent, self._held = ctx.Value("q", 0), 0, None
+        self._proc = ctx.Process(target=_serve, args=(self._requests, self._results, self.threads, os.getpid(),
+                                                      self._taken), name="nbrdf-reference", daemon=True)
         self._proc.start()
         self._finalizer = weakref.finalize(self, _shutdown, self._proc, self._requests)
         atexit.register(self._finalizer)
@@ -316,7 +330,28 @@ class ReferenceWorker:
         self._ensure()
         self._current = job.key
         self._spec = job.spec(self.start_spp, self.round_spp) if hasattr(job, "spec") else job
-        self._requests.put(self._spec)
+        self._send(self._spec)
+
+    def _send(self, item) -> None:
+        """Puts ``item`` in the pipe unless a request the process has not read is there: then it waits in
+        ``_held`` (replacing an older one: the worker only ever runs the newest) until ``collect`` sees that read."""
+        if self._sent > self._read():
+            self._held = item
+            return
+        self._held = None
+        self._sent += 1
+        self._requests.put(item)
+
+    @property
+    def unread(self) -> int:
+        """Requests sent to the process that it has not read (at most one), plus one held back if any."""
+        if self._proc is None:
+            return 0
+        return self._sent - self._read() + (self._held is not None)
+
+    def _read(self) -> int:
+        """Messages the process has read (all sent, where no counter was made: a process set up by a test)."""
+        return self._taken.value if self._taken is not None else self._sent
 
     #: A job that the process dies on this many times is reported failed, not retried.
     MAX_DEATHS_PER_JOB = 3
@@ -335,7 +370,7 @@ class ReferenceWorker:
         self.collect()
         if self._current is None or self._proc is None:
             return
-        self._requests.put(_CANCEL)
+        self._send(_CANCEL)
         self._current = self._spec = None
 
     def _supervise(self) -> None:
@@ -366,7 +401,7 @@ class ReferenceWorker:
                 self._last_death = (time.monotonic(), f"{msg} {n} times on this job; not retried")
                 return
             self._ensure()
-            self._requests.put(spec)
+            self._send(spec)
         self._last_death = (time.monotonic(), f"{msg}; restarted" if key else f"{msg}; restarts on the next job")
 
     def collect(self) -> None:
@@ -375,6 +410,8 @@ class ReferenceWorker:
         self._supervise()
         if self._proc is None:
             return
+        if self._held is not None and self._sent <= self._read():
+            self._send(self._held)
         while True:
             try:
                 key, img, spp, done, err, se = self._results.get_nowait()

@@ -3,6 +3,7 @@
 // [0, u_err_scale] (blue -> green -> red), the HDR-FLIP map u_flip (computed
 // on the CPU by viewer/reference/compare.py) in magma, or the linear blend of A and B
 // (interpolation of BRDF values). Exposure, tone mapping and sRGB: tonemap_common.glsl.
+// While B has no image yet (u_pending), what would show B shows a grey hatch instead.
 //@INCLUDE tonemap_common.glsl
 uniform sampler2D u_a;
 uniform sampler2D u_b;
@@ -13,6 +14,8 @@ uniform int u_blend;      // 1: (1 - u_wipe) A + u_wipe B (with COMPARE_OFF)
 uniform float u_wipe;     // 0..1, x of the wipe line
 uniform float u_err_scale;
 uniform sampler2D u_flip;  // HDR-FLIP per pixel, 0..1 (COMPARE_FLIP)
+uniform int u_pending;     // 1: B has no image yet (its side: the placeholder's hatch)
+uniform vec2 u_hatch;      // the hatch's two greys, display values
 in vec2 v_uv;
 out vec4 frag;
 
@@ -37,7 +40,18 @@ vec3 magma(float t) {  // matplotlib's magma, a degree-6 polynomial fit (mattz, 
     return clamp(c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * (c5 + t * c6))))), 0.0, 1.0);
 }
 
+// Diagonal stripes of two greys, 8 pixels wide, in display values: no exposure makes them a material.
+vec3 hatch() {
+    return vec3(mod(floor((gl_FragCoord.x + gl_FragCoord.y) / 8.0), 2.0) < 1.0 ? u_hatch.x : u_hatch.y);
+}
+
 void main() {
+    if (u_pending == 1 && u_blend == 0) {
+        bool on_b = u_mode == COMPARE_SIDE ? v_uv.x >= 0.5
+                  : u_mode == COMPARE_WIPE ? v_uv.x >= u_wipe + 0.002
+                  : u_mode == COMPARE_ERROR || u_mode == COMPARE_FLIP;
+        if (on_b) { frag = vec4(hatch(), 1.0); return; }
+    }
     vec3 a = texture(u_a, v_uv).rgb / max(u_passes_a, 1.0);
     vec3 b = texture(u_b, v_uv).rgb / max(u_passes_b, 1.0);
     if (u_mode == COMPARE_SIDE) {

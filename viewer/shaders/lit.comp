@@ -4,6 +4,8 @@
 // fragment path object.frag -- and adds their sum to the float accumulation
 // image (alpha counts the passes, as the fragment path's blending does).
 // A mesh of several materials runs it once per material (u_material_id).
+// A dispatch may cover a band of rows only (u_row0 .. u_row_end - 1): the
+// window's still view shades a pass over several frames (viewer/gpu/renderer.py).
 //@INCLUDE common.glsl
 // No derivatives in a compute shader: the latent texture is read at the mip
 // level the G-buffer pass found (textureQueryLod), which is what texture()
@@ -25,10 +27,12 @@ uniform int u_material_id;      // shade only that material's pixels (-1: every 
 uniform vec3 u_eye;
 uniform uint u_first_pass;
 uniform int u_passes;
+uniform int u_row0;             // the dispatch's first row (invocation y 0)
+uniform int u_row_end;          // rows from here on are another dispatch's
 
 void main() {
-    ivec2 px = ivec2(gl_GlobalInvocationID.xy);
-    if (any(greaterThanEqual(px, imageSize(u_accum)))) return;
+    ivec2 px = ivec2(gl_GlobalInvocationID.xy) + ivec2(0, u_row0);
+    if (any(greaterThanEqual(px, imageSize(u_accum))) || px.y >= u_row_end) return;
     vec4 n = texelFetch(u_gb_normal, px, 0);
     if (n.w < 0.5) return;
     if (u_material_id >= 0 && int(texelFetch(u_gb_uv, px, 0).z + 0.5) != u_material_id) return;

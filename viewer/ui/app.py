@@ -20,7 +20,9 @@ the glfw callbacks and replayed in order, so a click or drag shorter than a
 slow frame is not lost. While the view changes, frames render at the
 fraction of the view that keeps them within about 100 ms; a still view always
 refines, resolution first up to full, then passes accumulate
-(viewer/ui/refinement.py). On software OpenGL a uniform material's body comes
+(viewer/ui/refinement.py), each shaded in bands over as many frames as keep a
+frame within its budget (viewer/jobs/pass_bands.py): the window never waits on
+a whole pass, at any size. On software OpenGL a uniform material's body comes
 from a table baked per edit (viewer/gpu/body_source.py).
 """
 from __future__ import annotations
@@ -154,6 +156,7 @@ class App:
         self.scale = 1.0             # render resolution / view resolution of the last frame
         self.interactive = False     # whether the last frame was an interactive (changing view) one
         self.quick = False           # whether the last frame used the quick estimator (interactive, previews)
+        self.budget_ms: float | None = None  # the last still frame's accumulation budget (None: whole passes)
         self._frames = 0
         self._events: deque = deque()  # the view's mouse events since the last frame, in order
         self._cursor = glfw.get_cursor_pos(self.window)
@@ -319,8 +322,8 @@ class App:
         had_input = bool(self._events) or imgui.is_any_item_active()
         self._mouse()
         ld = self.lookdev
-        self._trim_due |= ld.passes == 0  # an edit or a view change: its CPU work freed memory
-        changed = ld.passes == 0 or self.dragging or had_input
+        self._trim_due |= ld.restarted  # an edit or a view change: its CPU work freed memory
+        changed = ld.restarted or self.dragging or had_input
         drew = self.gl_guard.run(lambda: self._update_then_draw(w, h, passes_per_frame))
         self.screen.viewport = (0, 0, w, h)  # the panels' pass covers the window (after a failed view too)
         imgui.render()
@@ -346,6 +349,7 @@ class App:
         ld = self.lookdev
         vx, vy, vw, vh = self.viewport()
         shooting = ld.screenshot_progress is not None
+        self.budget_ms = None  # whole passes unless the refinement plans a still frame's budget
         scale = 1.0 if shooting else self._adapt_scale(vw, vh)
         ld.update()
         self.screen.use()
@@ -358,7 +362,8 @@ class App:
         else:
             self.screen.viewport = (vx, h - vy - vh, vw, vh)  # GL's origin is the bottom left
             passes = 1 if self.quick else passes_per_frame
-            ld.render(self.screen, (vw, vh), passes, scale=scale, interactive=self.interactive, quick=self.quick)
+            ld.render(self.screen, (vw, vh), passes, scale=scale, interactive=self.interactive, quick=self.quick,
+                      budget_ms=self.budget_ms)
         self.screen.viewport = (0, 0, w, h)
         self.screen.use()
 
@@ -391,18 +396,20 @@ class App:
     def _adapt_scale(self, w: int, h: int) -> float:
         """The next frame's render scale from the refinement policy: reduced while the
         view changes (its accumulation was restarted since the last frame), doubling
-        to full resolution once it is still; a new scale restarts the accumulation."""
-        plan = self.refine.plan(changed=self.lookdev.passes == 0)
-        self.interactive, self.quick = plan.interactive, plan.quick
+        to full resolution once it is still; a new scale restarts the accumulation.
+        A still frame also gets its accumulation budget (``budget_ms``)."""
+        ld = self.lookdev
+        plan = self.refine.plan(changed=ld.restarted, complete=ld.passes > 0)
+        self.interactive, self.quick, self.budget_ms = plan.interactive, plan.quick, plan.budget_ms
         if plan.restart:
-            self.lookdev.invalidate()
+            ld.invalidate()
         self.scale = plan.scale
         return self.scale
 
     def _measure(self, ms: float) -> None:
         self._frames += 1
         if self._frames > 2:  # the first frames build shaders
-            self.refine.done(ms)
+            self.refine.done(ms, self.lookdev.frames.accum_ms)
 
     def read_pixels(self) -> np.ndarray:
         """The presented frame as uint8 (H, W, 3), row 0 at the top."""

@@ -17,7 +17,8 @@ from nbrdf.viewer.ui.app import App
 
 
 def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int = 3,
-              noise_target: float = 0.01, noise_renders: int = 4, noise_spp: int = 4) -> dict:
+              noise_target: float = 0.01, noise_renders: int = 4, noise_spp: int = 4,
+              still_passes: int = 4, clicks: int = 8) -> dict:
     """The look-development window (needs a display; Xvfb will do) as a user gets
     it, adaptive resolution on (viewer/ui/refinement.py):
 
@@ -37,9 +38,25 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
       (``passes_to_target``: the passes are stratified, so the noise falls faster than
       1 / sqrt(passes); ``noise_exponent`` is the measured rate, ``passes_to_converge_sqrt_law``
       the count the square-root law would give from ``noise_spp`` passes, an upper bound);
+    - ``full_res_pass_ms_median``: wall time per full-resolution pass of the still view's
+      estimator, from one completed pass to the next (a pass may be shaded over several frames);
     - ``edit_to_frame_cpu_ms_median``, ``full_res_pass_cpu_ms_median``: CPU time of an edit's
-      frame and of a full-resolution frame, all
+      frame and of a full-resolution pass, all
       threads (llvmpipe's included): what a pass needs of the machine, whatever else runs on it;
+    - ``ui_frame_ms_p95`` (and ``_median``, ``_max``, over ``ui_frames`` frames): the interface's frame
+      time while the still view accumulates -- the wall time between consecutive imgui frames on
+      screen, from the first full-resolution frame until ``still_passes`` more passes are complete
+      (the window reads input only between frames: this is how long a click may wait; target <= 50);
+      ``ui_frame_compiles``: how many of those frames compiled a shader variant the session had not
+      used yet (viewer/ui/program_warmup.py: once the window is idle, one per frame, hundreds of
+      milliseconds each on llvmpipe, early in a session only);
+    - ``input_latency_ms_p95`` (and ``_median``, over ``clicks`` clicks): from a click on a panel's
+      combo box to the end of the frame that shows its list open. The click goes through the
+      window's own glfw mouse callback (the path a real click takes); it is delivered before a
+      frame, and its arrival time is drawn uniformly within the frame before (a real click lands
+      at any moment of a frame and waits for the next one), so the figure is that wait plus the
+      frame that shows it. ``input_latency_frames_max``: the most frames a click took to show (1:
+      the next frame). A second click closes the list between clicks;
     - the machine's load average (1 minute) before and after: other work on the machine slows every figure."""
 
     load0 = os.getloadavg()[0]
@@ -65,7 +82,10 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
             bake.append(ld.bodies.tables.bake_ms)
         _until_full_resolution(app)
         full_res_s = time.perf_counter() - t_edit
-        passes, cpu = _frame_ms(app, 3)  # passes at full resolution
+        built = len(app.warmup.built)
+        ui, passes, cpu = _still_frames(app, still_passes)  # the still view accumulating at full resolution
+        compiles = len(app.warmup.built) - built
+        latencies, frames_to_show = _click_latency(app, clicks)
         # The noise of the still view's estimator, per pass.
         _, _, vw, vh = app.viewport()
         r = ld.renderer
@@ -99,27 +119,129 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
             "noise_exponent": round(rate, 3),
             "passes_to_converge_sqrt_law": need_sqrt,
             "still_converged_s": round(converged_s, 1),
+            "ui_frame_ms_p95": round(_p95(ui), 1),
+            "ui_frame_ms_median": round(statistics.median(ui), 1),
+            "ui_frame_ms_max": round(max(ui), 1),
+            "ui_frames": len(ui),
+            "ui_frame_compiles": compiles,
+            "input_latency_ms_p95": round(_p95(latencies), 1),
+            "input_latency_ms_median": round(statistics.median(latencies), 1),
+            "input_latency_frames_max": max(frames_to_show),
             "load_average_1min": [round(load0, 2), round(os.getloadavg()[0], 2)],
         }
     finally:
         app.close()
 
 
-def _until_full_resolution(app, frames: int = 16) -> None:
-    """Steps a still window until it shows a full-resolution frame (the refinement's preview)."""
+def _until_full_resolution(app, frames: int = 2000) -> None:
+    """Steps a still window until it shows a full-resolution frame (the refinement's preview,
+    complete: its pass may be shaded over several frames)."""
     for _ in range(frames):
         app.step()
-        if app.scale >= 1.0 and not app.interactive:
+        if app.scale >= 1.0 and not app.interactive and app.lookdev.passes > 0:
             return
     raise RuntimeError(f"bench app: the still view did not reach full resolution in {frames} frames")
 
 
-def _frame_ms(app, frames: int) -> tuple[list[float], list[float]]:
-    """Wall and CPU milliseconds of each of ``frames`` window frames."""
-    wall, cpu = [], []
-    for _ in range(frames):
-        t, c = time.perf_counter(), time.process_time()
+def _p95(values: list[float]) -> float:
+    """The 95th percentile (linear interpolation between the closest ranks)."""
+    return float(np.percentile(np.asarray(values, dtype=float), 95))
+
+
+def _still_frames(app, passes: int, limit_s: float = 120.0) -> tuple[list[float], list[float], list[float]]:
+    """Steps the still window until ``passes`` more passes are complete (at most ``limit_s``):
+    the wall milliseconds between consecutive frames on screen, and the wall and CPU
+    milliseconds from one completed pass to the next."""
+    ld = app.lookdev
+    frames, per_pass, cpu = [], [], []
+    t0 = t_prev = t_pass = time.perf_counter()
+    c_pass = time.process_time()
+    start = ld.passes
+    done = 0
+    while done < passes and time.perf_counter() - t0 < limit_s:
+        before = ld.passes
         app.step()
-        wall.append((time.perf_counter() - t) * 1000.0)
-        cpu.append((time.process_time() - c) * 1000.0)
-    return wall, cpu
+        now = time.perf_counter()
+        frames.append((now - t_prev) * 1000.0)
+        t_prev = now
+        if ld.passes < before:  # the refinement restarted (its preview dropped): count from here
+            start, done, t_pass, c_pass = ld.passes, 0, now, time.process_time()
+            per_pass.clear()
+            cpu.clear()
+        elif ld.passes > before:
+            if done:  # whole passes between two completions (the first completion only starts the clock)
+                per_pass.append((now - t_pass) * 1000.0 / (ld.passes - before))
+                cpu.append((time.process_time() - c_pass) * 1000.0 / (ld.passes - before))
+            done = ld.passes - start
+            t_pass, c_pass = now, time.process_time()
+    if not per_pass:
+        raise RuntimeError(f"bench app: the still view completed {done} passes in {limit_s} s")
+    return frames, per_pass, cpu
+
+
+def _click_latency(app, clicks: int, seed: int = 0, limit: int = 8) -> tuple[list[float], list[int]]:
+    """``clicks`` clicks on the panels' first combo box through the window's glfw mouse
+    callback; per click the milliseconds from its (drawn) arrival to the end of the frame that
+    shows the combo's list open, and that frame's number (1: the next frame)."""
+    import glfw  # late: the window's libraries, imported by the window first (viewer/ui/app.py)
+    from imgui_bundle import imgui  # late: as above
+
+    rects: dict[str, tuple[float, float, float, float]] = {}
+    real = imgui.combo
+
+    def combo(label, *a, **k):  # where imgui put each combo box (by label): the click aims at it
+        width = imgui.calc_item_width()
+        r = real(label, *a, **k)
+        lo = imgui.get_item_rect_min()
+        hi = imgui.get_item_rect_max()
+        rects[label] = (lo.x, lo.y, lo.x + width, hi.y)
+        return r
+
+    imgui.combo = combo
+    try:
+        win = app.window
+        ww, wh = app._window_size()
+        rng = np.random.default_rng(seed)
+        app.step()
+        t_prev = time.perf_counter()
+        app.step()
+        t_end = time.perf_counter()
+        seen = [r for r in rects.values() if 0 <= r[0] and r[3] <= wh and r[2] <= ww]
+        if not seen:
+            raise RuntimeError("bench app: no combo box on screen to click")
+        x0, y0, x1, y1 = seen[0]
+        x, y = (x0 + x1) / 2, (y0 + y1) / 2  # the middle of the box (its label follows it)
+        button = glfw.set_mouse_button_callback(win, None)  # the callbacks the window installed
+        glfw.set_mouse_button_callback(win, button)
+        cursor = glfw.set_cursor_pos_callback(win, None)
+        glfw.set_cursor_pos_callback(win, cursor)
+        latencies, frames = [], []
+        for _ in range(clicks):
+            arrived = t_end - float(rng.uniform()) * (t_end - t_prev)  # a moment of the frame before
+            cursor(win, x, y)
+            button(win, glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
+            button(win, glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
+            shown_after = 0
+            while not shown_after or not imgui.is_popup_open("", imgui.PopupFlags_.any_popup_id):
+                if shown_after == limit:
+                    raise RuntimeError(f"bench app: a click on a combo box showed nothing in {limit} frames")
+                t_prev = t_end
+                app.step()
+                t_end = time.perf_counter()
+                shown_after += 1
+            latencies.append((t_end - arrived) * 1000.0)
+            frames.append(shown_after)
+            cursor(win, x, y)  # a second click on the box closes its list
+            button(win, glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
+            button(win, glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
+            for _ in range(limit):
+                t_prev = t_end
+                app.step()
+                t_end = time.perf_counter()
+                if not imgui.is_popup_open("", imgui.PopupFlags_.any_popup_id):
+                    break
+            else:
+                raise RuntimeError(f"bench app: a second click on a combo box did not close it in {limit} frames")
+        return latencies, frames
+    finally:
+        imgui.combo = real

@@ -14,11 +14,23 @@ accumulation with the full estimator, so the preview's noisier pass is not
 averaged into the converging image. A scale change restarts the accumulation,
 so passes of two resolutions are never mixed.
 
+A still frame never waits on a whole pass: it has a *budget* for the view's
+accumulation work (``FramePlan.budget_ms``), and the view shades a band of the
+pass per frame (viewer/jobs/pass_bands.py), so the interface keeps drawing
+and reading input at ``still_budget_ms`` per frame at any window size. The
+budget is ``still_budget_ms`` less the rest of a still frame (panels, swap,
+composite: the median of the last still frames' measured time outside the
+accumulation), never under ``min_view_ms``. A pass shaded in bands is complete
+only after several frames: the scale doubles, and the preview gives way to the
+full estimator, only once the accumulation has a complete pass.
+
 The policy sees no clock: the window tells it whether the view changed and how
 long each frame took, so tests drive it with made-up frame times.
 """
 from __future__ import annotations
 
+import statistics
+from collections import deque
 from dataclasses import dataclass, field
 
 
@@ -39,6 +51,16 @@ class RefinementSettings:
     that reads as the material (a useful image beats the budget on slow machines)."""
     raise_below: float = 0.5
     """An interactive frame shorter than this fraction of the budget raises the interactive scale a step."""
+    banded: bool = True
+    """Still frames shade their passes in bands within a budget (False: a whole pass per frame)."""
+    still_budget_ms: float = 40.0
+    """A still frame's target duration: the interface at 25 fps while the view accumulates
+    (the frame-to-frame goal is 50 ms; the rest is the margin of a band's predicted cost)."""
+    min_view_ms: float = 20.0
+    """The least accumulation work a still frame gets, however slow the rest of the frame:
+    the view converges at a useful rate on any machine."""
+    overhead_frames: int = 9
+    """Still frames whose time outside the accumulation (median) is the budget's overhead."""
 
 
 @dataclass(frozen=True)
@@ -53,6 +75,8 @@ class FramePlan:
     """The quick estimator: interactive frames and previews at a new scale."""
     restart: bool = False
     """Restart the accumulation before this frame (a new scale, or the end of a preview)."""
+    budget_ms: float | None = None
+    """The accumulation work this frame may take (a band of a pass, still frames); None: whole passes."""
 
 
 @dataclass
@@ -70,33 +94,54 @@ class Refinement:
     quick: bool = False
     """Whether the frame planned last used the quick estimator."""
 
+    overheads: deque[float] = field(default_factory=deque)
+    """The last still frames' milliseconds outside the accumulation (``done``)."""
+
     def __post_init__(self) -> None:
         if self.interactive_scale < 0:
             self.interactive_scale = self.settings.start_scale
+        self.overheads = deque(self.overheads, maxlen=self.settings.overhead_frames)
 
-    def plan(self, changed: bool) -> FramePlan:
+    @property
+    def still_budget(self) -> float:
+        """A still frame's accumulation budget: ``still_budget_ms`` less the measured rest of the
+        frame (``min_view_ms`` until a still frame was measured), never under ``min_view_ms``."""
+        s = self.settings
+        if not self.overheads:
+            return s.min_view_ms
+        return max(s.min_view_ms, s.still_budget_ms - statistics.median(self.overheads))
+
+    def plan(self, changed: bool, complete: bool = True) -> FramePlan:
         """The next frame: ``changed`` says the view changed since the last frame
-        (its accumulation was restarted by an edit, a camera move, ...)."""
+        (its accumulation was restarted by an edit, a camera move, ...); ``complete``
+        that the accumulation holds a whole pass (a pass shaded in bands may not yet)."""
         s = self.settings
         restart = False
         if not s.adaptive:
             scale, self.interactive, quick = 1.0, False, False
         elif changed:  # the accumulation was restarted by the change itself
             scale, self.interactive, quick = self.interactive_scale, True, True
+        elif not complete and not self.interactive:  # the still frame's pass is being shaded: on with it
+            scale, quick = self.scale, self.quick
         elif self.scale < 1.0:  # still: resolution first, doubling; a preview at each new scale
             scale, self.interactive, quick = min(1.0, self.scale * 2.0), False, True
         else:  # then samples at full resolution, after the preview is dropped
             scale, self.interactive, quick, restart = 1.0, False, False, self.quick
         restart = restart or scale != self.scale
         self.scale, self.quick = scale, quick
-        return FramePlan(scale, self.interactive, quick, restart)
+        budget = self.still_budget if s.adaptive and s.banded and not self.interactive else None
+        return FramePlan(scale, self.interactive, quick, restart, budget)
 
-    def done(self, frame_ms: float) -> None:
-        """The duration of the frame planned last; interactive frames adapt the
-        interactive scale one step toward the budget (down past it, up well
-        under it). Still frames change nothing: refinement never waits on time."""
+    def done(self, frame_ms: float, accum_ms: float = 0.0) -> None:
+        """The duration of the frame planned last and of its accumulation work; interactive
+        frames adapt the interactive scale one step toward the budget (down past it, up well
+        under it). Still frames measure the rest of the frame (``still_budget``); the
+        refinement itself never waits on time."""
         s = self.settings
-        if not (self.interactive and s.adaptive) or not frame_ms >= 0:
+        if not frame_ms >= 0 or not s.adaptive:
+            return
+        if not self.interactive:
+            self.overheads.append(max(0.0, frame_ms - max(accum_ms, 0.0)))
             return
         ladder = [x for x in s.scales if x >= s.min_scale] or [s.min_scale]
         i = min(range(len(ladder)), key=lambda k: abs(ladder[k] - self.interactive_scale))
