@@ -26,7 +26,7 @@ class EvalConfig:
     """``nbrdf eval``: evaluate a material's BRDF on direction pairs."""
 
     material: str
-    """material JSON (SPEC section 4)"""
+    """material JSON (SPEC section 4) or MaterialX document (FILE.mtlx, FILE.mtlx#Material; SPEC section 11)"""
     pairs: str
     """float32 (N, 6) .npy: wi.xyz, wo.xyz in the local frame"""
     out: str
@@ -48,7 +48,7 @@ class LobeConfig:
     """``nbrdf lobe``: the standard 64x64 lobe image (SPEC section 9)."""
 
     material: str
-    """material JSON (SPEC section 4)"""
+    """material JSON (SPEC section 4) or MaterialX document (FILE.mtlx, FILE.mtlx#Material; SPEC section 11)"""
     theta_i: float
     """incidence angle in degrees (phi_i = 0)"""
     out: str
@@ -67,7 +67,7 @@ class SampleConfig:
     mixed with the body's learned proxy pdf)."""
 
     material: str
-    """material JSON (SPEC section 4)"""
+    """material JSON (SPEC section 4) or MaterialX document (FILE.mtlx, FILE.mtlx#Material; SPEC section 11)"""
     theta_i: float
     """incidence angle in degrees (phi_i = 0)"""
     n: int

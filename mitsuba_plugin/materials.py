@@ -23,7 +23,7 @@ from nbrdf.mitsuba.textures import LatentTextureKernel, ParamMaps, sharpest_top_
 from nbrdf.neural.body_table import TableSize, bake_body
 from nbrdf.neural.coat import IOR_RANGE, NO_COAT, ROUGHNESS_RANGE
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import LatentBase, Measured, load_material
+from nbrdf.neural.material import LatentBase, Measured, is_material_file, load_material
 from nbrdf.neural.material_code import code_parts, load_code
 from nbrdf.neural.model import default_model, load_model
 from nbrdf.neural.stack import material_stack
@@ -66,7 +66,7 @@ def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 
     if body not in Body.words():
         raise PluginError(f'nbrdf: body {body!r} is not one of {", ".join(map(repr, Body.words()))}')
     try:
-        if str(material).lower().endswith(".json"):
+        if is_material_file(material):
             m = load_material(material)
             if m.is_textured:
                 model = load_model(weights) if weights else default_model()
@@ -95,7 +95,7 @@ def _textured_kernel(material, model, pixel_angle: float) -> TexturedCodeKernel:
 def material_normal_map(material: str, owner: str) -> NormalMapKernel | None:
     """The normal map of a material JSON (None: a code file, or no map);
     ``owner`` names the plugin in the one-line error (``PluginError``)."""
-    if not str(material).lower().endswith(".json"):
+    if not is_material_file(material):
         return None
     try:
         m = load_material(material)

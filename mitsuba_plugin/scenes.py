@@ -40,7 +40,7 @@ from nbrdf.mitsuba.generated import NORMAL_MAPS, globe_material, normal_map, tor
 from nbrdf.mitsuba.kernel import Body
 from nbrdf.mitsuba.teapot import teapot_ply
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import load_material
+from nbrdf.neural.material import is_material_file, load_material
 from nbrdf.neural.methods import Method
 
 ASSETS = Path(__file__).resolve().parents[1] / "viewer" / "assets" / "materials"
@@ -284,7 +284,7 @@ def _neural_entry(path: str, body: str) -> dict[str, Any]:
 
 def is_textured(path: str) -> bool:
     """Whether the material at ``path`` is texture-mapped (a code file never is)."""
-    if not str(path).lower().endswith(".json"):
+    if not is_material_file(path):
         return False
     return load_material(path).is_textured
 

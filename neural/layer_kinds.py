@@ -13,6 +13,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+#: The material document's "format" word (SPEC section 4).
+FORMAT = "nbrdf-material/1"
+
 #: Legal ranges of the numeric parameters (SPEC section 3), shared by every kind that has them.
 RANGES: dict[str, tuple[float, float]] = {
     "roughness": (0.01, 1.0),
@@ -20,6 +23,7 @@ RANGES: dict[str, tuple[float, float]] = {
     "r0": (0.0, 1.0),
     "albedo": (0.0, 1.0),
     "sigma_t": (0.0, 5.0),
+    "f82_tint": (0.0, 1.0),
 }
 
 Shape = Literal["scalar", "rgb", "path"]
@@ -35,6 +39,8 @@ class Param:
     """"scalar" (one number, or a texture), "rgb" (a number or three, each may be a texture) or "path" (a file)"""
     default: float | tuple[float, float, float] | None = None
     """the value a layer added in the editor starts with (None: a file path, no default)"""
+    optional: bool = False
+    """a material file may leave it out (it then takes ``default``); written only where it differs"""
 
     @property
     def range(self) -> tuple[float, float] | None:
@@ -75,9 +81,12 @@ LATENT = "latent"
 KINDS: dict[str, LayerKind] = {k.name: k for k in (
     LayerKind(DIELECTRIC, (Param("roughness", "scalar", 0.05), Param("ior", "scalar", 1.5)),
               interface=True, base=True, base_code=2),
-    LayerKind(MEDIUM, (Param("albedo", "rgb", (0.0, 0.0, 0.0)), Param("sigma_t", "scalar", 0.05)),  # a clear varnish
+    LayerKind(MEDIUM, (Param("albedo", "rgb", (0.0, 0.0, 0.0)), Param("sigma_t", "rgb", 0.05)),  # a clear varnish;
+              # sigma_t per channel: a coloured absorbing coat (OpenPBR's coat_color, SPEC section 11)
               interface=False, base=False),
-    LayerKind(CONDUCTOR, (Param("roughness", "scalar", 0.2), Param("r0", "rgb", (0.95, 0.64, 0.54))),
+    # f82_tint: OpenPBR's F82-tint edge colour (SPEC section 11); 1 = Schlick's Fresnel, the paper's conductor
+    LayerKind(CONDUCTOR, (Param("roughness", "scalar", 0.2), Param("r0", "rgb", (0.95, 0.64, 0.54)),
+                          Param("f82_tint", "rgb", (1.0, 1.0, 1.0), optional=True)),
               interface=False, base=True, base_code=0),
     LayerKind(DIFFUSE, (Param("albedo", "rgb", (0.5, 0.5, 0.5)),), interface=False, base=True, base_code=1),
     LayerKind(MEASURED, (Param("path", "path"),), interface=False, base=True),
@@ -91,6 +100,6 @@ _CODED = {k.base_code: k.name for k in KINDS.values() if k.base_code is not None
 PARAMETRIC_BASES: tuple[str, ...] = tuple(_CODED[code] for code in range(len(_CODED)))
 #: Base kind -> its integer in the shaders and the walk.
 BASE_CODES: dict[str, int] = {n: i for i, n in enumerate(PARAMETRIC_BASES)}
-#: Parameters holding colours (one value or three).
+#: Parameters holding colours (one value or three, in [0, 1]; a medium's per-channel sigma_t is not one).
 COLOUR_PARAMS: tuple[str, ...] = tuple(dict.fromkeys(p.name for k in KINDS.values() for p in k.params
-                                                     if p.shape == "rgb"))
+                                                     if p.shape == "rgb" and p.range == (0.0, 1.0)))

@@ -6,6 +6,11 @@ the frozen decoder against the closed-form BRDFs (``training.train_operations``)
 so a slider moves a latent in microseconds instead of a projection's seconds.
 Inputs are reparametrised so the paper's distributions are near uniform:
 roughness enters as its cube root, ior linearly over its legal range.
+
+A conductor's F82 tint (OpenPBR's edge colour, SPEC section 11) enters through
+a second network whose output is added times (1 - tint): a tint of 1 gives
+exactly the latent of the paper's Schlick conductor, so every stack built on
+it (the layering network was trained on those latents) is unchanged.
 """
 from __future__ import annotations
 
@@ -21,12 +26,17 @@ Tensor = torch.Tensor
 #: Leaf type -> parameter names, in input order.
 LEAF_PARAMS: dict[str, tuple[str, ...]] = {k: tuple(p.name for p in KINDS[k].params)
                                            for k in (CONDUCTOR, DIELECTRIC, DIFFUSE)}
+#: The conductor's F82-tint correction network (its output times 1 - tint is added to the conductor's latent).
+F82 = "conductor_f82"
+#: Every network of the leaf encoders; a bundle from before the F82 tint lacks the last.
+LEAF_NETS: tuple[str, ...] = (*LEAF_PARAMS, F82)
 
 
 def leaf_features(kind: str, params: Tensor) -> Tensor:
-    """Network inputs (N, k) from raw parameters (N, k) in LEAF_PARAMS order."""
+    """Network inputs (N, k) from raw parameters (N, k) in LEAF_PARAMS order (the conductor's
+    third feature, its F82 tint, feeds the correction network only)."""
     if kind == CONDUCTOR:
-        return torch.stack([params[:, 0].clamp(1e-4, 1).pow(1 / 3), params[:, 1]], -1)
+        return torch.stack([params[:, 0].clamp(1e-4, 1).pow(1 / 3), params[:, 1], params[:, 2]], -1)
     if kind == DIELECTRIC:
         return torch.stack([params[:, 0].clamp(1e-4, 1).pow(1 / 3), (params[:, 1] - 1.05) / 0.95], -1)
     if kind == DIFFUSE:
@@ -35,20 +45,29 @@ def leaf_features(kind: str, params: Tensor) -> Tensor:
 
 
 def leaf_spec(kind: str, width: int = 64, depth: int = 3) -> MLPSpec:
-    """Every leaf has two input features (``leaf_features``)."""
-    if kind not in LEAF_PARAMS:
+    """Every leaf has two input features (``leaf_features``); the F82 correction three."""
+    if kind not in LEAF_NETS:
         raise NbrdfError(f"no leaf encoder for {kind!r} (one of {', '.join(LEAF_PARAMS)})")
-    return MLPSpec(inputs=2, outputs=32, width=width, depth=depth)
+    return MLPSpec(inputs=3 if kind == F82 else 2, outputs=32, width=width, depth=depth)
 
 
 class LeafEncoders(nn.Module):
-    """The three leaf encoders; ``encode(kind, params)`` -> latents (N, 32)."""
+    """The three leaf encoders (and the conductor's F82 correction); ``encode(kind, params)``
+    -> latents (N, 32)."""
 
     def __init__(self, specs: dict[str, MLPSpec] | None = None):
         super().__init__()
-        specs = specs or {k: leaf_spec(k) for k in LEAF_PARAMS}
+        specs = specs or {k: leaf_spec(k) for k in LEAF_NETS}
+        missing = [k for k in LEAF_PARAMS if k not in specs]
+        if missing:
+            raise NbrdfError(f"leaf encoders: no network for {', '.join(missing)}")
         self.specs = specs
-        self.nets = nn.ModuleDict({k: MLP(specs[k]) for k in LEAF_PARAMS})
+        self.nets = nn.ModuleDict({k: MLP(specs[k]) for k in LEAF_NETS if k in specs})
+
+    @property
+    def has_f82(self) -> bool:
+        """Whether these encoders take a conductor's F82 tint (bundles from before it do not)."""
+        return F82 in self.nets
 
     def encode(self, kind: str, params: Tensor) -> Tensor:
         if kind not in self.nets:
@@ -59,10 +78,20 @@ class LeafEncoders(nn.Module):
                              f"({', '.join(LEAF_PARAMS[kind])}), got {tuple(params.shape)}")
         if not torch.isfinite(params).all():
             raise NbrdfError(f"{kind} leaf: parameters hold NaN or infinite values")
-        return self.nets[kind](leaf_features(kind, params))
+        x = leaf_features(kind, params)
+        if kind != CONDUCTOR:
+            return self.nets[kind](x)
+        z = self.nets[kind](x[:, :2])
+        edge = 1.0 - params[:, 2:3]
+        if self.has_f82:
+            return z + edge * self.nets[F82](x)
+        if bool((edge != 0).any()):
+            raise NbrdfError("these leaf encoders predate the F82 tint (a conductor with f82_tint 1 only); "
+                             "use the shipped weights or `nbrdf train leaf --part f82`")
+        return z
 
-    def conductor(self, roughness: Tensor, r0: Tensor) -> Tensor:
-        return self.encode(CONDUCTOR, torch.stack(torch.broadcast_tensors(_t(roughness), _t(r0)), -1))
+    def conductor(self, roughness: Tensor, r0: Tensor, f82_tint: Tensor | float = 1.0) -> Tensor:
+        return self.encode(CONDUCTOR, torch.stack(torch.broadcast_tensors(_t(roughness), _t(r0), _t(f82_tint)), -1))
 
     def dielectric(self, roughness: Tensor, ior: Tensor) -> Tensor:
         return self.encode(DIELECTRIC, torch.stack(torch.broadcast_tensors(_t(roughness), _t(ior)), -1))

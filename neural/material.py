@@ -11,15 +11,32 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Union
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.files import save_text
-from nbrdf.neural.layer_kinds import BASE_KINDS, CONDUCTOR, DIELECTRIC, DIFFUSE, KINDS, LATENT, MEASURED, MEDIUM, RANGES
+from nbrdf.neural.layer_kinds import (
+    BASE_KINDS,
+    CONDUCTOR,
+    DIELECTRIC,
+    DIFFUSE,
+    FORMAT,
+    KINDS,
+    LATENT,
+    MEASURED,
+    MEDIUM,
+    RANGES,
+)
 
-FORMAT = "nbrdf-material/1"
+
+def _plain_default(v: Any) -> Any:
+    """A parameter default as a material holds it: one number where the three channels agree."""
+    if isinstance(v, tuple) and len(set(v)) == 1:
+        return float(v[0])
+    return v
 
 CHANNELS = ("r", "g", "b", "a", "l")
 
@@ -49,7 +66,7 @@ class Dielectric:
 @dataclass(frozen=True)
 class Medium:
     albedo: PerChannel
-    sigma_t: Scalar
+    sigma_t: PerChannel
     type: str = field(default=MEDIUM, init=False)
 
 
@@ -57,6 +74,8 @@ class Medium:
 class Conductor:
     roughness: Scalar
     r0: PerChannel
+    f82_tint: PerChannel = 1.0
+    """OpenPBR's F82-tint edge colour; 1 = Schlick's Fresnel"""
     type: str = field(default=CONDUCTOR, init=False)
 
 
@@ -88,6 +107,9 @@ Layer = Union[Dielectric, Medium, Conductor, Diffuse, Measured, LatentBase]
 
 #: layer type -> {parameter: "scalar" | "rgb" | "path"}, from the table of layer kinds.
 _FIELDS: dict[str, dict[str, str]] = {k.name: {p.name: p.shape for p in k.params} for k in KINDS.values()}
+#: layer type -> {optional parameter: the value it takes when left out}.
+_OPTIONAL: dict[str, dict[str, Any]] = {k.name: {p.name: _plain_default(p.default) for p in k.params if p.optional}
+                                        for k in KINDS.values()}
 _CLASSES = {DIELECTRIC: Dielectric, MEDIUM: Medium, CONDUCTOR: Conductor, DIFFUSE: Diffuse,
             MEASURED: Measured, LATENT: LatentBase}
 BASE_TYPES = BASE_KINDS
@@ -99,6 +121,9 @@ class Material:
     layers: tuple[Layer, ...]
     normal_map: str | None = None
     base_dir: Path = field(default=Path("."), compare=False)
+    openpbr: tuple[tuple[str, Any], ...] | None = None
+    """the OpenPBR Surface inputs this stack was made from (name, number or (r, g, b)), in the file's
+    order; None for a material made here (SPEC section 11: round trips and editing in OpenPBR's terms)"""
 
     @property
     def base(self) -> Layer:
@@ -228,12 +253,16 @@ def _layer(v: Any, i: int, base_dir: Path) -> Layer:
     for k in v:
         if k != "type" and k not in fields:
             raise NbrdfError(f"{place}.{k}: unknown key")
+    optional = _OPTIONAL[t]
     for k in fields:
-        if k not in v:
+        if k not in v and k not in optional:
             raise NbrdfError(f'{place}: missing key "{k}"')
     kw: dict[str, Any] = {}
     for k, kind in fields.items():
         p = f"{place}.{k}"
+        if k not in v:
+            kw[k] = optional[k]
+            continue
         if kind == "scalar":
             kw[k] = _scalar(v[k], p, k, base_dir)
         elif kind == "rgb":
@@ -268,7 +297,7 @@ def parse_material(data: object, base_dir: Path | str = ".", source: str = "mate
     if not isinstance(data, dict):
         raise NbrdfError(f"{source}: expected a JSON object at the top level, got {_kind(data)}")
     for k in data:
-        if k not in ("format", "name", "layers", "normal_map"):
+        if k not in ("format", "name", "layers", "normal_map", "openpbr"):
             raise NbrdfError(f"{k}: unknown key")
     if "format" not in data:
         raise NbrdfError(f'{source}: missing key "format" (expected "{FORMAT}")')
@@ -290,15 +319,62 @@ def parse_material(data: object, base_dir: Path | str = ".", source: str = "mate
             raise NbrdfError(f"normal_map: expected a file path, got {_kind(normal)}")
         if not (base_dir / normal).is_file():
             raise NbrdfError(f"normal_map: {(base_dir / normal).resolve()} not found")
-    return Material(name=name, layers=tuple(layers), normal_map=normal, base_dir=base_dir.resolve())
+    record = _openpbr_record(data["openpbr"]) if "openpbr" in data else None
+    return Material(name=name, layers=tuple(layers), normal_map=normal, base_dir=base_dir.resolve(), openpbr=record)
+
+
+def _openpbr_record(v: Any) -> tuple[tuple[str, Any], ...]:
+    """The "openpbr" object: input names to numbers or [r, g, b] (the inputs themselves are
+    checked where they are used, ``neural.openpbr``)."""
+    if not isinstance(v, dict):
+        raise NbrdfError(f"openpbr: expected an object of OpenPBR inputs, got {_kind(v)}")
+    out: list[tuple[str, Any]] = []
+    for k, x in v.items():
+        place = f"openpbr.{k}"
+        if isinstance(x, list):
+            if len(x) != 3:
+                raise NbrdfError(f"{place}: expected a number or 3 values (r, g, b), got {len(x)}")
+            out.append((k, tuple(_number(c, f"{place}[{i}]", -math.inf, math.inf) for i, c in enumerate(x))))
+        elif isinstance(x, bool):
+            out.append((k, x))
+        else:
+            out.append((k, _number(x, place, -math.inf, math.inf)))
+    return tuple(out)
 
 
 def _reject_constant(token: str):
     raise ValueError(f"{token} is not a number")
 
 
-def load_material(path: str | Path) -> Material:
-    """Reads and validates a material JSON file."""
+def is_mtlx(path: str | Path) -> bool:
+    """Whether ``path`` names a MaterialX document (``FILE.mtlx``, or ``FILE.mtlx#Material`` for one of several)."""
+    head, sep, _ = str(path).rpartition("#")
+    return (head if sep and head.lower().endswith(".mtlx") else str(path)).lower().endswith(".mtlx")
+
+
+def is_material_file(path: str | Path) -> bool:
+    """Whether ``path`` names a material description (JSON or MaterialX), not a code file."""
+    return is_mtlx(path) or str(path).lower().endswith(".json")
+
+
+def load_material(path: str | Path, notes: list[str] | None = None) -> Material:
+    """Reads and validates a material file: the project's JSON, or a MaterialX document (``FILE.mtlx``,
+    ``FILE.mtlx#Name``) mapped to a stack (``neural.openpbr``, SPEC section 11). What the stack cannot hold
+    comes back as one-line notes, each starting with the file: appended to ``notes``, or, without a list,
+    printed on stderr (never dropped in silence)."""
+    if is_mtlx(path):
+        from nbrdf.neural.mtlx import read_mtlx, split_material_ref  # late: MaterialX loads for .mtlx files only
+
+        file, name = split_material_ref(str(path))
+        data, found = read_mtlx(file, name)
+        material = parse_material(data, Path(file).parent, source=str(path))
+        lines = [f"{path}: {note}" for note in found]
+        if notes is None:
+            for line in lines:
+                print(line, file=sys.stderr)
+        else:
+            notes.extend(lines)
+        return material
     p = Path(path)
     if not p.is_file():
         raise NbrdfError(f"{path}: no such file")
@@ -341,12 +417,16 @@ def material_to_dict(m: Material, new_dir: Path | None = None) -> dict:
     for layer in m.layers:
         d: dict[str, Any] = {"type": layer.type}
         for k in _FIELDS[layer.type]:
+            if k in _OPTIONAL[layer.type] and getattr(layer, k) == _OPTIONAL[layer.type][k]:
+                continue  # left out: the file stays as it was before the parameter existed
             if isinstance(layer, (Measured, LatentBase)) and k == "path":
                 d[k] = layer.path if new_dir is None else _rel(layer.resolved, new_dir)
             else:
                 d[k] = _value_to_json(getattr(layer, k), new_dir)
         layers.append(d)
     out: dict[str, Any] = {"format": FORMAT, "name": m.name, "layers": layers}
+    if m.openpbr is not None:
+        out["openpbr"] = {k: list(v) if isinstance(v, tuple) else v for k, v in m.openpbr}
     if m.normal_map is not None:
         out["normal_map"] = m.normal_map if new_dir is None else _rel(m.base_dir / m.normal_map, new_dir)
     return out

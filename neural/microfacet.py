@@ -102,6 +102,25 @@ def fresnel_schlick(cos_i: Tensor, r0: Tensor) -> Tensor:
     return r0 + (1.0 - r0) * (1.0 - cos_i.abs().clamp(max=1.0)) ** 5
 
 
+#: The cosine of OpenPBR's F82-tint edge angle (about 82 degrees), mu_bar = 1/7.
+F82_MU = 1.0 / 7.0
+
+
+def f82_coefficient(r0, tint):
+    """OpenPBR's F82-tint coefficient b = F_Schlick(mu_bar) (1 - tint) / (mu_bar (1 - mu_bar)^6): the
+    weight of the correction that makes the conductor's reflectance at mu_bar its Schlick value times
+    ``tint`` (tint 1: b = 0, Schlick itself). Works on floats, numpy arrays and tensors alike."""
+    schlick = r0 + (1.0 - r0) * (1.0 - F82_MU) ** 5
+    return schlick * (1.0 - tint) / (F82_MU * (1.0 - F82_MU) ** 6)
+
+
+def fresnel_f82(cos_i: Tensor, r0: Tensor, b: Tensor | float) -> Tensor:
+    """OpenPBR's F82-tint conductor Fresnel: Schlick minus b |cos| (1 - |cos|)^6 (b from
+    ``f82_coefficient``), kept in [0, 1]; b = 0 is ``fresnel_schlick`` exactly."""
+    c = cos_i.abs().clamp(max=1.0)
+    return (fresnel_schlick(c, r0) - b * c * (1.0 - c) ** 6).clamp(0.0, 1.0)
+
+
 def reflect(w: Tensor, m: Tensor) -> Tensor:
     """Mirror of w about m (both pointing away from the surface)."""
     return 2.0 * (w * m).sum(-1, keepdim=True) * m - w

@@ -21,7 +21,7 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent import load_latent
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, LATENT
 from nbrdf.neural.layering import CODE, LayeringNet, LayeringSpec
-from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
+from nbrdf.neural.leaf import LEAF_NETS, LeafEncoders
 from nbrdf.neural.material import Material, Measured
 from nbrdf.neural.nets import MLPSpec, load_state, prefixed
 from nbrdf.neural.sampling import SamplerNet
@@ -103,7 +103,8 @@ def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, sta
         raise NbrdfError(f"a {stack.base} base needs the leaf encoders")
     elif stack.base == CONDUCTOR:
         r0 = stack.base_param("base_r0").expand(n, C).reshape(-1)
-        z = with_coat(leaf.conductor(chan(stack.base_param("base_roughness")), r0), None)
+        tint = (stack.base_f82 if stack.base_f82 is not None else torch.ones(1, 1)).expand(n, C).reshape(-1)
+        z = with_coat(leaf.conductor(chan(stack.base_param("base_roughness")), r0, tint), None)
     elif stack.base == DIELECTRIC:  # a bare interface: all coat, achromatic, the encoder gives a black body
         z_b = leaf.dielectric(stack.base_param("base_roughness"), stack.base_param("base_ior"))
         z_b = z_b[:, None].expand(n, C, -1).reshape(n * C, -1)
@@ -117,7 +118,7 @@ def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, sta
             raise NbrdfError("a stack of interfaces needs the layering network")
         top = chan_pair(torch.stack([stack.roughness[:, j], stack.ior[:, j]], -1).to(z.dtype), C)
         z = layering(top, z, stack.albedo[:, j].expand(n, C).reshape(-1).to(z.dtype),
-                     chan(stack.sigma_t[:, j]).to(z.dtype))
+                     stack.sigma_t[:, j].expand(n, C).reshape(-1).to(z.dtype))
     return z.reshape(n, C, -1)
 
 
@@ -179,7 +180,7 @@ def load_model(path: str | Path | None = None) -> NeuralModel:
             raise NbrdfError(f"{path}: the operation networks were trained for decoder {ops.get('decoder_id')}, "
                              f"not for this file's decoder {model.decoder_id}")
         if "leaf" in specs:
-            model.leaf = LeafEncoders({k: MLPSpec(**specs["leaf"][k]) for k in LEAF_PARAMS})
+            model.leaf = LeafEncoders({k: MLPSpec(**specs["leaf"][k]) for k in LEAF_NETS if k in specs["leaf"]})
             load_state(model.leaf, tensors, "leaf", str(path))
         if "layering" in specs:
             model.layering = LayeringNet(LayeringSpec(**specs["layering"]))

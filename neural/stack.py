@@ -48,9 +48,9 @@ ParamValues = Callable[[object, str], Tensor]
 @dataclass
 class Stack:
     """N stacks of one shape with C colour channels (the simulator's and the
-    networks' input). Shapes: ``roughness``, ``ior``, ``sigma_t`` (N, L);
-    ``albedo`` (N, L, C); ``base_roughness`` (N,); ``base_r0`` and
-    ``base_albedo`` (N, C); ``base_ior`` (N,). Base parameters a base kind
+    networks' input). Shapes: ``roughness``, ``ior`` (N, L);
+    ``albedo``, ``sigma_t`` (N, L, C); ``base_roughness`` (N,); ``base_r0``,
+    ``base_f82`` (a conductor's F82 tint) and ``base_albedo`` (N, C); ``base_ior`` (N,). Base parameters a base kind
     does not have are None; a latent or measured base keeps its file in
     ``base_path``."""
 
@@ -61,6 +61,7 @@ class Stack:
     base: str
     base_roughness: Tensor | None = None
     base_r0: Tensor | None = None
+    base_f82: Tensor | None = None
     base_ior: Tensor | None = None
     base_albedo: Tensor | None = None
     base_path: Path | None = None
@@ -124,9 +125,9 @@ class Stack:
         C = self.channels
         out: dict[str, Any] = {}
         for k, v in self.tensors().items():
-            if k == "albedo":
+            if k in ("albedo", "sigma_t"):
                 out[k] = v.permute(0, 2, 1).reshape(self.n * C, self.layers, 1)
-            elif k in ("base_r0", "base_albedo"):
+            elif k in ("base_r0", "base_f82", "base_albedo"):
                 out[k] = v.reshape(-1, 1)
             else:
                 out[k] = v.repeat_interleave(C, dim=0)
@@ -151,14 +152,15 @@ def material_stack(material: Material, values: ParamValues | None = None,
                    dtype: torch.dtype = torch.float64) -> Stack:
     """A material's stack with three channels. Uniform parameters give one
     stack (N = 1); with ``values`` a texture-mapped material gives one per
-    texel. Shared parameters (roughness, ior, sigma_t) take channel 0."""
+    texel. Shared parameters (roughness, ior) take channel 0."""
     values = values or uniform_values
     # the base first, then the interfaces bottom up: a bad parameter is named in that order
     base, place = material.base, f"layers[{len(material.layers) - 1}]"
     kw: dict[str, Any] = {}
     if isinstance(base, Conductor):
         kw = dict(base_roughness=values(base.roughness, f"{place}.roughness")[:, 0].to(dtype),
-                  base_r0=values(base.r0, f"{place}.r0").to(dtype))
+                  base_r0=values(base.r0, f"{place}.r0").to(dtype),
+                  base_f82=values(base.f82_tint, f"{place}.f82_tint").to(dtype))
     elif isinstance(base, Diffuse):
         kw = dict(base_roughness=torch.full((1,), 0.5, dtype=dtype),
                   base_albedo=values(base.albedo, f"{place}.albedo").to(dtype))
@@ -181,10 +183,10 @@ def material_stack(material: Material, values: ParamValues | None = None,
         cols["ior"].append(values(iface.ior, f"layers[{i}].ior")[:, 0].to(dtype))
         if med is not None:
             cols["albedo"].append(values(med.albedo, f"layers[{i + 1}].albedo").to(dtype))
-            cols["sigma_t"].append(values(med.sigma_t, f"layers[{i + 1}].sigma_t")[:, 0].to(dtype))
+            cols["sigma_t"].append(values(med.sigma_t, f"layers[{i + 1}].sigma_t").to(dtype))
         else:
             cols["albedo"].append(zero)
-            cols["sigma_t"].append(zero[:, 0])
+            cols["sigma_t"].append(zero)
     cols = {k: v[::-1] for k, v in cols.items()}  # top down
     tensors = [t for c in cols.values() for t in c] + [v for v in kw.values() if isinstance(v, Tensor)]
     n = max([t.shape[0] for t in tensors], default=1)
@@ -194,7 +196,7 @@ def material_stack(material: Material, values: ParamValues | None = None,
         roughness=torch.stack([grow(t) for t in cols["roughness"]], 1) if L else torch.zeros(n, 0, dtype=dtype),
         ior=torch.stack([grow(t) for t in cols["ior"]], 1) if L else torch.zeros(n, 0, dtype=dtype),
         albedo=torch.stack([grow(t) for t in cols["albedo"]], 1) if L else torch.zeros(n, 0, 3, dtype=dtype),
-        sigma_t=torch.stack([grow(t) for t in cols["sigma_t"]], 1) if L else torch.zeros(n, 0, dtype=dtype),
+        sigma_t=torch.stack([grow(t) for t in cols["sigma_t"]], 1) if L else torch.zeros(n, 0, 3, dtype=dtype),
         base=kind, **{k: grow(v) if isinstance(v, Tensor) else v for k, v in kw.items()})
 
 
@@ -223,19 +225,20 @@ def params_to_stack(params: Tensor) -> Stack:
     col = lambda c: params[:, P[c]]
     k = params.shape[0]
     empty: dict[str, Any] = dict(roughness=params.new_zeros(k, 0), ior=params.new_zeros(k, 0), albedo=params.new_zeros(k, 0, 1),
-                 sigma_t=params.new_zeros(k, 0))
+                 sigma_t=params.new_zeros(k, 0, 1))
     if cls == CONDUCTOR:
         return Stack(**empty, base=CONDUCTOR, base_roughness=col("base_roughness"),
-                     base_r0=col("base_value")[:, None])
+                     base_r0=col("base_value")[:, None], base_f82=torch.ones_like(col("base_value")[:, None]))
     if cls == DIELECTRIC:
         return Stack(**empty, base=DIELECTRIC, base_roughness=col("top_roughness"), base_ior=col("top_ior"))
     used = _INTERFACE_COLUMNS[: 2 if cls in THREE_LAYERED else 1]
     st = lambda j: torch.stack([col(c[j]) for c in used], -1)
-    kw: dict[str, Any] = dict(roughness=st(0), ior=st(1), albedo=st(2)[..., None], sigma_t=st(3),
+    kw: dict[str, Any] = dict(roughness=st(0), ior=st(1), albedo=st(2)[..., None], sigma_t=st(3)[..., None],
               base_roughness=col("base_roughness"))
     if cls in DIFFUSE_BASED:
         return Stack(**kw, base=DIFFUSE, base_albedo=col("base_value")[:, None])
-    return Stack(**kw, base=CONDUCTOR, base_r0=col("base_value")[:, None])
+    return Stack(**kw, base=CONDUCTOR, base_r0=col("base_value")[:, None],
+                 base_f82=torch.ones_like(col("base_value")[:, None]))
 
 
 def stack_class(stack: Stack) -> str:
@@ -261,9 +264,12 @@ def stack_to_params(stack: Stack) -> Tensor:
         p[:, P["top_roughness"]], p[:, P["top_ior"]] = stack.base_param("base_roughness"), stack.base_param("base_ior")
         return p
     for j, names in enumerate(_INTERFACE_COLUMNS[: stack.layers]):
-        for name, t in zip(names, (stack.roughness[:, j], stack.ior[:, j], stack.albedo[:, j, 0], stack.sigma_t[:, j])):
+        for name, t in zip(names, (stack.roughness[:, j], stack.ior[:, j], stack.albedo[:, j, 0],
+                                      stack.sigma_t[:, j, 0])):
             p[:, P[name]] = t
     if stack.base == CONDUCTOR:
+        if stack.base_f82 is not None and not bool((stack.base_f82 == 1).all()):
+            raise NbrdfError("the data sets' parameter vectors hold no F82 tint (a conductor with f82_tint 1 only)")
         p[:, P["base_roughness"]] = stack.base_param("base_roughness")
         p[:, P["base_value"]] = stack.base_param("base_r0")[:, 0]
     else:
@@ -278,7 +284,7 @@ def params_to_material(p: Tensor, name: str = "sample") -> Material:
     layers: list[dict] = []
     for j in range(s.layers):
         layers += [{"type": DIELECTRIC, "roughness": f(s.roughness[:, j]), "ior": f(s.ior[:, j])},
-                   {"type": MEDIUM, "albedo": f(s.albedo[:, j]), "sigma_t": f(s.sigma_t[:, j])}]
+                   {"type": MEDIUM, "albedo": f(s.albedo[:, j]), "sigma_t": f(s.sigma_t[:, j, 0])}]
     if s.base == CONDUCTOR:
         layers.append({"type": CONDUCTOR, "roughness": f(s.base_roughness), "r0": f(s.base_r0)})
     elif s.base == DIFFUSE:

@@ -8,7 +8,7 @@ _ = SimpleNamespace()
 
 # moderngl objects: setting these attributes is the GL call (texture wrap, context state, blending).
 _.repeat_x, _.repeat_y, _.repeat_z, _.anisotropy
-_.depth_func, _.blend_func, _.color_mask, _.depth_mask
+_.depth_func, _.blend_func, _.color_mask, _.depth_mask, _.scissor
 # imgui's IO configuration, read by imgui itself.
 _.config_input_trickle_event_queue
 # argparse reads a sub-parser's description.
@@ -23,3 +23,5 @@ _.BRDF
 _.p99, _.seconds_per_render, _.cpu_seconds_per_render, _.cpu_seconds
 # functools.lru_cache key: a file's modification time makes an edited file miss the cache.
 mtime_ns
+# MaterialX's shader generator reads its GenOptions; moderngl reads the context's point size (viewer/gpu/materialx_glsl.py).
+_.hwSpecularEnvironmentMethod, _.hwMaxActiveLightSources, _.point_size

@@ -21,8 +21,9 @@ import torch
 from nbrdf.neural.brdf import Sample
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.microfacet import (
+    f82_coefficient,
     fresnel_dielectric,
-    fresnel_schlick,
+    fresnel_f82,
     ggx_d,
     reflect,
     refract,
@@ -49,18 +50,20 @@ def _safe_div(a: Tensor, b: Tensor) -> Tensor:
 
 @dataclass
 class GGXConductor:
-    """Rough conductor: GGX D, separable Smith G, Schlick Fresnel.
-    Reflects in the upper hemisphere only."""
+    """Rough conductor: GGX D, separable Smith G, OpenPBR's F82-tint Fresnel (Schlick's
+    when ``f82_tint`` is 1). Reflects in the upper hemisphere only."""
 
     roughness: Tensor | float
     r0: Tensor | float
+    f82_tint: Tensor | float = 1.0
 
     def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
         a, r0 = _param(self.roughness, wi), _param(self.r0, wi)
+        b = f82_coefficient(r0, _param(self.f82_tint, wi))
         h = wi + wo
         h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-30)
         up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
-        f = (fresnel_schlick(_dot(wi, h), r0) * ggx_d(h, a) * smith_g1(wi, h, a) * smith_g1(wo, h, a)
+        f = (fresnel_f82(_dot(wi, h), r0, b) * ggx_d(h, a) * smith_g1(wi, h, a) * smith_g1(wo, h, a)
              / (4.0 * wi[..., 2].abs() * wo[..., 2].abs()).clamp_min(1e-30))
         return torch.where(up, f, torch.zeros_like(f))
 

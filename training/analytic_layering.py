@@ -40,10 +40,10 @@ def _stack_eval(interfaces, base, wi: Tensor, wo: Tensor) -> Tensor:
     ti = 1 - fresnel_dielectric(wi[:, 2], torch.tensor(eta, dtype=wi.dtype))
     to = 1 - fresnel_dielectric(wo[:, 2], torch.tensor(eta, dtype=wi.dtype))
     wi_in, wo_in = _refract_down(wi, eta), _refract_down(wo, eta)
-    sigma = float(med.sigma_t) if med is not None else 0.0
-    atten = torch.exp(-sigma * (1 / wi_in[:, 2] + 1 / wo_in[:, 2]))
+    sigma = torch.tensor(Material.rgb(med.sigma_t) if med is not None else (0.0, 0.0, 0.0), dtype=wi.dtype)
+    atten = torch.exp(-sigma[None, :] * (1 / wi_in[:, 2] + 1 / wo_in[:, 2])[:, None])
     below = _stack_eval(rest, base, wi_in, wo_in)
-    return top + (ti * to * atten / (eta * eta))[:, None] * below
+    return top + (ti * to / (eta * eta))[:, None] * atten * below
 
 
 def check_analytic(material: Material) -> None:

@@ -98,8 +98,8 @@ class Atom:
     """relative ior below over above (interfaces and a dielectric base), in [1, 2]"""
     color: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """r0 (conductor) or albedo (medium, diffuse)"""
-    sigma_t: float = 0.0
-    """optical depth along the normal (medium)"""
+    sigma_t: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """optical depth along the normal per channel (medium)"""
 
 
 def atoms_of(material: Material) -> list[Atom]:
@@ -112,7 +112,7 @@ def atoms_of(material: Material) -> list[Atom]:
         if isinstance(layer, Dielectric):
             out.append(Atom("dielectric" if last else "interface", float(layer.roughness), float(layer.ior)))
         elif isinstance(layer, Medium):
-            out.append(Atom("medium", color=Material.rgb(layer.albedo), sigma_t=float(layer.sigma_t)))
+            out.append(Atom("medium", color=Material.rgb(layer.albedo), sigma_t=Material.rgb(layer.sigma_t)))
         elif isinstance(layer, Conductor):
             out.append(Atom("conductor", float(layer.roughness), color=Material.rgb(layer.r0)))
         elif isinstance(layer, Diffuse):
@@ -160,7 +160,7 @@ def _atom_stats(atom: Atom, cti: Tensor, tables: BelcourTables) -> _Stats:
         return _Stats(ctt, R12[:, None].expand(-1, 3), T12[:, None].expand(-1, 3), R21[:, None].expand(-1, 3),
                       T21[:, None].expand(-1, 3), s_r, s_t12, s_r, s_t21, j12, j21)
     if atom.kind == "medium":  # Beer-Lambert along the mean; what scatters leaves the chain (``scattered``)
-        T = torch.exp(-atom.sigma_t / cti.clamp_min(1e-8))[:, None].expand(-1, 3)
+        T = _beer(atom, cti)
         return _Stats(cti, z3, T, z3, T, z, z, z, z, one, one)
     a = torch.full_like(cti, atom.roughness)
     if atom.kind == "conductor":
@@ -189,7 +189,12 @@ def scattered(atom: Atom, mu: Tensor) -> Tensor:
     (1 - g) / (1 + g), g = sqrt(1 - A) (Hapke), so a white medium loses
     nothing and a dark one about A / 4."""
     g = torch.sqrt(1 - torch.tensor(atom.color, dtype=mu.dtype))
-    return ((1 - g) / (1 + g))[None, :] * (1 - torch.exp(-atom.sigma_t / mu.clamp_min(1e-8)))[:, None]
+    return ((1 - g) / (1 + g))[None, :] * (1 - _beer(atom, mu))
+
+
+def _beer(atom: Atom, mu: Tensor) -> Tensor:
+    """(N, 3) Beer-Lambert transmittance of a medium atom along cosine mu, per channel."""
+    return torch.exp(-torch.tensor(atom.sigma_t, dtype=mu.dtype)[None, :] / mu.clamp_min(1e-8)[:, None])
 
 
 @dataclass
@@ -243,7 +248,7 @@ def decompose(atoms: list[Atom], mu: Tensor, tables: BelcourTables | None = None
     r_hemi = torch.zeros(3, dtype=dt)
     eta_abs = 1.0
     for atom in atoms:
-        if atom.kind == "medium" and max(atom.color) > 0 and atom.sigma_t > 0 or atom.kind == "diffuse":
+        if atom.kind == "medium" and max(atom.color) > 0 and max(atom.sigma_t) > 0 or atom.kind == "diffuse":
             slabs.append(Slab(atom, T0i, cti, eta_abs, r_hemi))
         if atom.kind == "diffuse":
             break
@@ -298,7 +303,7 @@ def _hemi_rt(atom: Atom, tables: BelcourTables) -> tuple[Tensor, Tensor, Tensor,
                 _hemi(lambda m: rt(m, False)[0]), _hemi(lambda m: rt(m, False)[1]))
     if atom.kind == "medium":  # unscattered light passes, scattered light leaves half up, half down
         s = _hemi(lambda m: scattered(atom, m))
-        t = _hemi(lambda m: torch.exp(-atom.sigma_t / m.clamp_min(1e-8))[:, None].expand(-1, 3)) + 0.5 * s
+        t = _hemi(lambda m: _beer(atom, m)) + 0.5 * s
         return 0.5 * s, t, 0.5 * s, t
     if atom.kind == "conductor":
         col = torch.tensor(atom.color, dtype=torch.float64)

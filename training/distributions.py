@@ -172,13 +172,21 @@ def mixed_params(n: int, g: torch.Generator) -> Tensor:
     return torch.cat([sample_params(c, k, g) for c, k in zip(CLASSES, per)])
 
 
+def f82_tint(u: U) -> U:
+    """A conductor's F82 tint (OpenPBR's specular_color on a metal): 1 (Schlick) for u < 1/4, else
+    U(0, 1) (the paper's distributions have no tint; a quarter of plain conductors keeps the
+    correction network honest at its anchor)."""
+    return torch.where(u < 0.25, torch.ones_like(u), (u - 0.25) / 0.75) if isinstance(u, torch.Tensor) else (
+        1.0 if u < 0.25 else (u - 0.25) / 0.75)
+
+
 def random_leaf_params(kind: str, n: int, g: torch.Generator) -> Tensor:
     """n single-channel leaf parameters (float32) in ``neural.leaf.LEAF_PARAMS``
-    order: conductor (roughness, r0), dielectric (roughness, ior), diffuse (albedo)."""
-    u = torch.rand(n, 2, generator=g)
+    order: conductor (roughness, r0, f82_tint), dielectric (roughness, ior), diffuse (albedo)."""
+    u = torch.rand(n, 3, generator=g)
     rough = roughness(u[:, 0])
     if kind == CONDUCTOR:
-        return torch.stack([rough, colour(u[:, 1])], -1)
+        return torch.stack([rough, colour(u[:, 1]), f82_tint(u[:, 2])], -1)
     if kind == DIELECTRIC:
         return torch.stack([rough, ior(u[:, 1])], -1)
     return colour(u[:, :1])

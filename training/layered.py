@@ -35,6 +35,7 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import DIFFUSE, PARAMETRIC_BASES
+from nbrdf.neural.microfacet import f82_coefficient
 from nbrdf.training.analytic import GGXDielectric
 from nbrdf.training.walk import BLOCK
 
@@ -50,9 +51,10 @@ class StackParams:
     """N stacks (one per (wi, wo) pair or per lane group), top to bottom.
 
     L interfaces, each a GGX dielectric followed by a medium slab (sigma_t 0 =
-    no medium); then the base. Shapes: ``roughness``, ``ior``, ``sigma_t``
-    (N, L); ``albedo`` (N, L, C) or (N, L); ``base_r0`` / ``base_albedo``
-    (N, C) or (N,); ``base_roughness`` / ``base_ior`` (N,). C is the number of
+    no medium); then the base. Shapes: ``roughness``, ``ior`` (N, L);
+    ``albedo`` (N, L, C) or (N, L); ``sigma_t`` (N, L) shared by the channels
+    or (N, L, C) per channel (a coloured absorbing coat); ``base_r0`` / ``base_f82`` (a conductor's
+    F82 tint, None: 1) / ``base_albedo`` (N, C) or (N,); ``base_roughness`` / ``base_ior`` (N,). C is the number of
     colour channels carried together (they share paths)."""
 
     roughness: Tensor
@@ -62,6 +64,7 @@ class StackParams:
     base: str
     base_roughness: Tensor
     base_r0: Tensor = field(default=None)  # type: ignore[assignment]
+    base_f82: Tensor = field(default=None)  # type: ignore[assignment]
     base_ior: Tensor = field(default=None)  # type: ignore[assignment]
     base_albedo: Tensor = field(default=None)  # type: ignore[assignment]
 
@@ -85,11 +88,13 @@ class StackParams:
         def scal(t: Tensor | None, default: float) -> Tensor:
             return torch.full((n,), default, dtype=dtype) if t is None else torch.as_tensor(t, dtype=dtype).expand(n)
 
+        sig = self.sigma_t.to(dtype)
+        sig = (sig[..., None] if sig.dim() == 2 else sig).expand(n, L, C)
         p = StackParams(
             roughness=self.roughness.to(dtype), ior=self.ior.to(dtype), albedo=alb.to(dtype),
-            sigma_t=self.sigma_t.to(dtype), base=self.base,
+            sigma_t=sig, base=self.base,
             base_roughness=scal(self.base_roughness, 0.5), base_r0=chan(self.base_r0, 0.0),
-            base_ior=scal(self.base_ior, 1.5), base_albedo=chan(self.base_albedo, 0.0))
+            base_f82=chan(self.base_f82, 1.0), base_ior=scal(self.base_ior, 1.5), base_albedo=chan(self.base_albedo, 0.0))
         return p, squeeze
 
 
@@ -110,7 +115,8 @@ def _check(p: StackParams, wi: Tensor, wo: Tensor, spp: int) -> None:
     n = p.roughness.shape[0]
     if wi.dim() != 2 or wi.shape != wo.shape or wi.shape != (n, 3):
         raise NbrdfError(f"wi and wo must be ({n}, 3) like the stack (got {tuple(wi.shape)} and {tuple(wo.shape)})")
-    for name in ("roughness", "ior", "albedo", "sigma_t", "base_roughness", "base_r0", "base_ior", "base_albedo"):
+    for name in ("roughness", "ior", "albedo", "sigma_t", "base_roughness", "base_r0", "base_f82", "base_ior",
+                 "base_albedo"):
         t = getattr(p, name)
         if not bool(torch.isfinite(t).all()):
             raise NbrdfError(f"stack parameter {name} holds NaN or infinite values")
@@ -124,6 +130,8 @@ def _check(p: StackParams, wi: Tensor, wo: Tensor, spp: int) -> None:
         raise NbrdfError("a roughness is not positive")
     if bool((p.sigma_t < 0).any()):
         raise NbrdfError("sigma_t is negative")
+    if bool((p.base_f82 < 0).any()) or bool((p.base_f82 > 1).any()):
+        raise NbrdfError("an F82 tint lies outside [0, 1]")
     if bool((p.albedo < 0).any()) or bool((p.albedo > 1).any()) or bool((p.base_albedo < 0).any()):
         raise NbrdfError("an albedo lies outside [0, 1]")
 
@@ -159,16 +167,24 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     N, L = p.roughness.shape
     npy = lambda t: t.detach().cpu().numpy()
     torch_threads = torch.get_num_threads()
+    b_f82 = f82_coefficient(p.base_r0, p.base_f82)
+    # the walk's paths carry every channel through one medium; where the extinction differs per channel
+    # (a coloured absorbing coat), each channel walks on its own, from the same seed
+    shared = bool((p.sigma_t == p.sigma_t[..., :1]).all())
+    parts = [slice(None)] if shared else [slice(c, c + 1) for c in range(p.albedo.shape[-1])]
     try:
-        s1, s2, blocks, verts, dropped = run_walk(
-            npy(wi), npy(wo), spp, seed, npy(p.roughness), npy(p.ior), npy(p.sigma_t), npy(p.albedo), p.base,
-            npy(p.base_roughness), npy(p.base_r0), npy(p.base_ior), npy(p.base_albedo), rr_depth=rr_depth,
-            max_depth=max_depth, forced=forced_top_reflection, device=device)
+        runs = [run_walk(
+            npy(wi), npy(wo), spp, seed, npy(p.roughness), npy(p.ior), npy(p.sigma_t[..., ch][..., 0]),
+            npy(p.albedo[..., ch]), p.base, npy(p.base_roughness), npy(p.base_r0[:, ch]), npy(b_f82[:, ch]),
+            npy(p.base_ior), npy(p.base_albedo[:, ch]), rr_depth=rr_depth, max_depth=max_depth,
+            forced=forced_top_reflection, device=device) for ch in parts]
     finally:
         # Numba's OpenMP layer sets the OpenMP runtime's thread count it shares with torch: put torch's
         # back, or every torch operation after a walk (a projection's fit) runs on the walk's threads,
         # up to 15 times slower on a loaded machine (docs/decisions/056-refinement-on-idle.md).
         torch.set_num_threads(torch_threads)
+    s1, s2, blocks = (np.concatenate([r[i] for r in runs], -1) for i in range(3))
+    verts, dropped = sum(r[3] for r in runs), sum(r[4] for r in runs)
     mean = s1 / spp
     if spp > 1:
         var_paths = np.maximum(s2 / spp - mean * mean, 0.0) * spp / (spp - 1)

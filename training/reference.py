@@ -67,7 +67,7 @@ def single_layer_eval(layer, wi: Tensor, wo: Tensor) -> Tensor:
     wo3 = wo[:, None, :].expand(-1, 3, -1)
     up = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
     if isinstance(layer, Conductor):
-        f = GGXConductor(layer.roughness, _rgb(layer.r0).to(wi.dtype)).eval(wi3, wo3)
+        f = GGXConductor(layer.roughness, _rgb(layer.r0).to(wi.dtype), _rgb(layer.f82_tint).to(wi.dtype)).eval(wi3, wo3)
     elif isinstance(layer, Dielectric):
         f = GGXDielectric(layer.roughness, layer.ior).eval(wi, wo)[:, None].expand(-1, 3)
     elif isinstance(layer, Diffuse):

@@ -193,7 +193,9 @@ def material_class(m: Material) -> str:
 
 
 def load_set(spec: str, heldout_per_class: int = 3) -> list[tuple[str, Material]]:
-    """(class, material) pairs of a set name or a path (file or folder of JSONs)."""
+    """(class, material) pairs of a set name or a path (file or folder of JSON or .mtlx materials). The
+    ``openpbr`` set (training/sets/openpbr/, written by tools/openpbr_set.py) is OpenPBR documents, each file's
+    class the part of its name before "-"."""
     if spec == "heldout":
         out, seen = [], {}
         for cls, m in heldout_set():
@@ -201,21 +203,24 @@ def load_set(spec: str, heldout_per_class: int = 3) -> list[tuple[str, Material]
                 seen[cls] = seen.get(cls, 0) + 1
                 out.append((cls, m))
         return out
-    path = SETS_DIR / spec if spec == "lookdev" else Path(spec)
+    path = SETS_DIR / spec if spec in ("lookdev", "openpbr") else Path(spec)
     if path.is_dir():
-        files = sorted(path.glob("*.json"))
+        files = sorted([*path.glob("*.json"), *path.glob("*.mtlx")])
         if not files:
-            raise NbrdfError(f"{spec}: no material .json files in this folder")
+            raise NbrdfError(f"{spec}: no material .json or .mtlx files in this folder")
     elif path.is_file():
         files = [path]
     else:
         raise NbrdfError(f"{spec}: not a set name (lookdev, heldout), a material file or a folder")
     out = []
     for f in files:
-        m = load_material(f)
+        notes: list[str] = []
+        m = load_material(f, notes)
+        for note in notes:  # what a document's stack cannot hold is said, not dropped
+            print(note, file=sys.stderr)
         if m.is_textured:
             raise NbrdfError(f"{f}: texture-mapped materials have no single render-space reference")
-        out.append((material_class(m), m))
+        out.append((f.stem.split("-")[0] if f.suffix == ".mtlx" else material_class(m), m))
     return out
 
 
@@ -355,9 +360,17 @@ def summarise(rows: list[dict], methods: tuple[Method, ...]) -> dict:
     return out
 
 
-def run_render_report(config: RenderReportConfig) -> dict:
+#: An extra column of a render report: a material and the sphere's pixels -> its linear image (or ``NbrdfError``,
+#: recorded as the column's one line); e.g. OpenPBR as MaterialX's generated GLSL renders it (the previewer's
+#: ``viewer.gpu.materialx_glsl``, handed in by the command line: this package never imports the previewer).
+ExtraColumn = Callable[[Material, SphereGeometry], np.ndarray]
+
+
+def run_render_report(config: RenderReportConfig, extra: dict[str, ExtraColumn] | None = None) -> dict:
     """Renders and scores every set; writes render.json and one figure per set
-    into ``config.out``. Returns the JSON's content."""
+    into ``config.out``. Returns the JSON's content. ``extra``: further columns by name (scored like a method;
+    a material a column cannot render gets that column's one-line reason in its row instead)."""
+    extra = extra or {}
     unknown = [x for x in config.methods if x not in METHODS]
     if unknown:
         raise NbrdfError(f"methods: {unknown[0]!r} is not one of {', '.join(METHODS)}")
@@ -401,26 +414,37 @@ def run_render_report(config: RenderReportConfig) -> dict:
                     row[meth]["refinement"] = {k: getattr(how, k) for k in ("seconds", "cpu_seconds", "rounds",
                                                                             "pairs", "converged", "error",
                                                                             "network_error") if hasattr(how, k)}
+            for name, render in extra.items():
+                try:
+                    img = render(m, geo)
+                except NbrdfError as e:
+                    row[f"{name}_error"] = str(e)
+                    continue
+                fl, fmap = flip(ref.image, img)
+                row[name] = {"flip": fl, "flip_disk": float(fmap[mask].mean()),
+                             "psnr": compressed_psnr(img, ref.image, mask)}
+                imgs[name], imgs[f"flip_{name}"] = img, fmap
             row["method_seconds"] = round(time.perf_counter() - t0, 2)
             rows.append(row)
             images.append(imgs)
-        entry = {"rows": rows, "summary": summarise(rows, config.methods)}
+        columns = (*config.methods, *extra)
+        entry = {"rows": rows, "summary": summarise(rows, columns)}
         if config.figure and rows:
             fig = out / f"render_{label}.png"
-            save_render_figure(rows, images, config.methods, fig, config.figure_dpi)
+            save_render_figure(rows, images, columns, fig, config.figure_dpi)
             entry["figure"] = str(fig)
         result["sets"][label] = entry
     (out / "render.json").write_text(json.dumps(result, indent=1, default=_json_default) + "\n")
-    (out / "render.md").write_text(markdown_tables(result))
+    (out / "render.md").write_text(markdown_tables(result, (*METHODS, *extra)))
     return result
 
 
-def markdown_tables(result: dict) -> str:
-    """Per set: one row per class (and all), median / worst FLIP and PSNR per method."""
+def markdown_tables(result: dict, columns: tuple[str, ...] = METHODS) -> str:
+    """Per set: one row per class (and all), median / worst FLIP and PSNR per method (and extra column)."""
     lines = []
     for label, entry in result["sets"].items():
         summ = entry["summary"]
-        meths = [m for m in METHODS if any(m in v for v in summ.values())]
+        meths = [m for m in columns if any(m in v for v in summ.values())]
         lines += [f"**{label}**", "",
                   "| class | n | " + " | ".join(f"{m} FLIP median / worst | {m} PSNR median / worst (dB)"
                                                  for m in meths) + " | reference noise (half-FLIP, worst) |",

@@ -34,7 +34,7 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC
 from nbrdf.neural.layering import CODE, LATENT, MEDIUM_SETS, LayeringNet, layering_spec
-from nbrdf.neural.leaf import LEAF_PARAMS, LeafEncoders
+from nbrdf.neural.leaf import F82, LEAF_PARAMS, LeafEncoders, leaf_spec
 from nbrdf.neural.model import NeuralModel, layered_latents, load_model, save_model
 from nbrdf.neural.sampling import SamplerNet, lambert_pdf, proxy_pdf, proxy_sample
 from nbrdf.neural.stack import CLASSES, THREE_LAYERED, P, params_to_stack
@@ -99,6 +99,10 @@ class OpsConfig:
 class LeafConfig(OpsConfig):
     """``nbrdf train leaf``: leaf encoders, through the frozen decoder against closed-form layers."""
 
+    part: str = field(default="all", metadata={"choices": ("all", "f82")})
+    """all: every leaf encoder from scratch (the layering network and sampler must then be retrained); f82: only
+    the conductor's F82-tint correction, added to a bundle's encoders (a tint of 1 keeps their latents exactly,
+    so the bundle's layering network and sampler stay valid)"""
     steps: int = 6000
     batch: int = 32
     pairs: int = 128
@@ -248,7 +252,7 @@ def leaf_values(kind: str, params: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
     """Closed-form values (B, P) of B leaves' bodies at pairs (B, P, 3): a
     bare dielectric is all coat (``neural.coat``), so its body is black."""
     if kind == CONDUCTOR:
-        return GGXConductor(params[:, 0:1], params[:, 1:2]).eval(wi, wo)
+        return GGXConductor(params[:, 0:1], params[:, 1:2], params[:, 2:3]).eval(wi, wo)
     if kind == DIELECTRIC:
         return torch.zeros(wi.shape[:-1], dtype=wi.dtype)
     return Lambertian(params[:, 0:1]).eval(wi, wo)
@@ -273,10 +277,17 @@ def train_leaf(cfg: OpsConfig, progress: bool = True) -> Path:
     torch.manual_seed(cfg.seed)
     g = torch.Generator().manual_seed(cfg.seed)
     pool = _PairPool(1 << 18, g, model.decoder.spec.encoding)
+    only_f82 = getattr(cfg, "part", "all") == "f82"
+    if only_f82:
+        return _train_leaf_f82(cfg, model, pool, g, progress)
     leaf = LeafEncoders()
     with torch.no_grad():  # start every encoder at the training latents' mean
-        for net in leaf.nets.values():
-            net.net[-1].bias.copy_(model.decoder.latent_mean)
+        for name, net in leaf.nets.items():
+            if name == F82:  # a correction: it starts at zero (the plain conductor's latent)
+                net.net[-1].weight.zero_()
+                net.net[-1].bias.zero_()
+            else:
+                net.net[-1].bias.copy_(model.decoder.latent_mean)
     s_ = model.decoder.spec.loss_scale
     gv = torch.Generator().manual_seed(cfg.seed + 1)
     val = {k: (random_leaf_params(k, 64, gv), *pool.draw(64, 512, gv)) for k in LEAF_PARAMS}
@@ -301,6 +312,45 @@ def train_leaf(cfg: OpsConfig, progress: bool = True) -> Path:
         model.trained_on.pop(stale, None)
     return _finish("leaf", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
                                                  "val_loss": history["val"][-1]})
+
+
+def _train_leaf_f82(cfg: OpsConfig, model: NeuralModel, pool: "_PairPool", g: torch.Generator,
+                    progress: bool) -> Path:
+    """Adds the conductor's F82-tint correction to a bundle's leaf encoders and trains it alone: the
+    other encoders, the layering network and the sampler are kept (a tint of 1 leaves every latent as
+    it was)."""
+    old = model.require("leaf")
+    specs = {**old.specs, F82: leaf_spec(F82)}
+    leaf = LeafEncoders(specs)
+    for name in old.nets:
+        leaf.nets[name].load_state_dict(old.nets[name].state_dict())
+        leaf.nets[name].requires_grad_(False)
+    net = leaf.nets[F82]
+    with torch.no_grad():
+        net.net[-1].weight.zero_()
+        net.net[-1].bias.zero_()
+    s_ = model.decoder.spec.loss_scale
+    gv = torch.Generator().manual_seed(cfg.seed + 1)
+
+    def tinted(n: int, gen: torch.Generator) -> Tensor:
+        p = random_leaf_params(CONDUCTOR, n, gen)
+        p[:, 2] = torch.rand(n, generator=gen)  # the correction only matters away from tint 1
+        return p
+
+    val = (tinted(64, gv), *pool.draw(64, 512, gv))
+
+    def loss_of(params: Tensor, wi: Tensor, wo: Tensor, feats: Tensor) -> Tensor:
+        cos_o = wo[..., 2]
+        target = loss_target(leaf_values(CONDUCTOR, params, wi, wo), cos_o, s_)
+        return _decoder_loss(model, leaf.encode(CONDUCTOR, params), feats, cos_o, target, s_)
+
+    t0 = time.perf_counter()
+    history = _run_loop("leaf_f82", cfg, {"leaf_f82": net}, cfg.steps,
+                        lambda _s: loss_of(tinted(cfg.batch, g), *pool.draw(cfg.batch, cfg.pairs, g)),
+                        lambda: loss_of(*val).item(), progress, rng=g)
+    model.leaf = leaf
+    return _finish("leaf", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
+                                                 "val_loss": history["val"][-1], "part": "f82"})
 
 
 # --- layering -------------------------------------------------------------------------------

@@ -37,7 +37,7 @@ class ViewOptions:
     """What the previewer opens and how it renders (SPEC section 8)."""
 
     material: Path = field(default=DEFAULT_MATERIAL, metadata={"positional": True, "shown": "varnished copper"})
-    """material JSON"""
+    """material file: the project's JSON, or a MaterialX document (FILE.mtlx, FILE.mtlx#Material for one of several)"""
     mesh: str = "sphere"
     """sphere, testmesh, or an OBJ/glTF file (a .gltf/.glb also brings its materials, one per primitive, when no
     MATERIAL is given)"""
@@ -115,7 +115,8 @@ class ViewOptions:
             notes = [f"{self.mesh}: {g.material.name + ': ' if named else ''}{note}"
                      for g in groups for note in g.notes]
             return groups[0].material, notes
-        return read_material(self.material), []
+        notes: list[str] = []
+        return read_material(self.material, notes), notes
 
     def check(self) -> "ViewOptions":
         """Raises ``NbrdfError`` (one line naming the flag) for values out of range."""

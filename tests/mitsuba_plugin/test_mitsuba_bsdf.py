@@ -101,3 +101,24 @@ def test_bad_input_is_one_clear_line(mi, materials, tmp_path, props, message):
     last = str(info.value).strip().splitlines()[-1]
     assert last.startswith("PluginError: nbrdf: ")
     assert message in last
+
+
+def test_a_materialx_document_loads_like_its_stack(mi, tmp_path):
+    """``material`` may name an OpenPBR document (SPEC section 11): the plugin evaluates the stack the mapping
+    makes, F82-tinted metal under a coloured coat included, within SPEC 7's tolerance of the torch path."""
+    from pathlib import Path
+
+    from nbrdf.neural.material import save_material
+
+    src = Path(__file__).resolve().parents[1] / "neural" / "data" / "mtlx" / "openpbr_coated_gold.mtlx"
+    m = load_material(src, [])
+    save_material(m, tmp_path / "gold.json")
+    rng = np.random.default_rng(3)
+    light, view = directions(rng, 512), directions(rng, 512)
+    a = mi.load_dict({"type": "nbrdf", "material": str(src)})
+    b = mi.load_dict({"type": "nbrdf", "material": str(tmp_path / "gold.json")})
+    va = np.array(a.eval(mi.BSDFContext(), interactions(mi, view), mi.Vector3f(light.T))).T
+    vb = np.array(b.eval(mi.BSDFContext(), interactions(mi, view), mi.Vector3f(light.T))).T
+    np.testing.assert_array_equal(va, vb)
+    ref = brdf_for(m, "neural").eval(torch.from_numpy(light), torch.from_numpy(view)).numpy() * np.clip(light[:, 2:3], 0, None)
+    assert _within_spec(va, ref) <= 1.0 and ref.max() > 0.1

@@ -91,6 +91,12 @@ ERRORS = [
     ([1, 2], "expected a JSON object"),
     (doc({"type": "measured", "path": "nowhere.binary"}), "layers[0].path:"),
     (doc({**C, "roughness": {"texture": "missing.png"}}), "layers[0].roughness.texture:"),
+    (doc({**C, "f82_tint": [1, 1.2, 1]}), "layers[0].f82_tint[1]: 1.2 is outside [0, 1]"),
+    (doc(D, {**M, "sigma_t": [1, 2]}, C), "layers[1].sigma_t: expected 3 values"),
+    (doc(D, {**M, "sigma_t": [1, 2, -1]}, C), "layers[1].sigma_t[2]: -1 is outside [0, 5]"),
+    ({**doc(C), "openpbr": [1]}, "openpbr: expected an object of OpenPBR inputs, got a list"),
+    ({**doc(C), "openpbr": {"base_color": [1, 2]}}, "openpbr.base_color: expected a number or 3 values"),
+    ({**doc(C), "openpbr": {"base_weight": "x"}}, "openpbr.base_weight: expected a number"),
 ]
 
 
@@ -276,3 +282,18 @@ def test_names_paths_and_saved_form(tmp_path):
     (tmp_path / "u.json").write_bytes('{"format": "nbrdf-material/1", "name": "é", "layers": [{"type": "diffuse", '
                                       '"albedo": 0.5}]}'.encode())
     assert load_material(tmp_path / "u.json").name == "é"  # read as UTF-8 whatever the locale
+
+
+def test_openpbr_parameters_are_optional_and_round_trip(tmp_path):
+    """A conductor's F82 tint may be left out (1: Schlick) and is then not written; a medium's sigma_t may be
+    per channel; the "openpbr" record of a material made from OpenPBR inputs survives a save and a load."""
+    plain = parse_material(doc(C))
+    assert plain.layers[0].f82_tint == 1.0 and "f82_tint" not in material_to_dict(plain)["layers"][0]
+    m = parse_material({**doc(D, {**M, "albedo": 0.0, "sigma_t": [0.1, 0.5, 2.0]},
+                              {**C, "f82_tint": [1.0, 0.5, 0.25]}),
+                        "openpbr": {"base_metalness": 1, "specular_color": [1.0, 0.5, 0.25], "coat_weight": 1}})
+    assert m.layers[1].sigma_t == (0.1, 0.5, 2.0) and m.layers[2].f82_tint == (1.0, 0.5, 0.25)
+    assert dict(m.openpbr)["specular_color"] == (1.0, 0.5, 0.25)
+    save_material(m, tmp_path / "m.json")
+    back = load_material(tmp_path / "m.json")
+    assert back == m and material_to_dict(back) == material_to_dict(m)

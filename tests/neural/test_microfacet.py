@@ -10,7 +10,10 @@ import pytest
 import torch
 
 from nbrdf.neural.microfacet import (
+    F82_MU,
+    f82_coefficient,
     fresnel_dielectric,
+    fresnel_f82,
     fresnel_schlick,
     ggx_d,
     reflect,
@@ -148,6 +151,22 @@ def test_fresnel_schlick_end_points():
     assert fresnel_schlick(torch.tensor(0.0, dtype=F64), r0) == pytest.approx(1.0)
     assert fresnel_schlick(torch.tensor(-0.5, dtype=F64), r0) == pytest.approx(0.2 + 0.8 / 32)
     assert fresnel_schlick(torch.tensor(2.0, dtype=F64), r0) == pytest.approx(0.2)  # |cos| clamped to 1
+
+
+def test_f82_tint_sets_the_edge_reflectance_and_a_white_tint_is_schlick():
+    """OpenPBR's F82-tint form: at mu_bar = 1/7 the reflectance is the Schlick value times the tint; a tint
+    of 1 is Schlick's curve exactly; normal incidence keeps r0; values stay in [0, 1]."""
+    r0 = torch.tensor([0.05, 0.5, 0.95], dtype=F64)
+    tint = torch.tensor([0.0, 0.4, 0.9], dtype=F64)
+    b = f82_coefficient(r0, tint)
+    mu = torch.tensor(F82_MU, dtype=F64)
+    assert torch.allclose(fresnel_f82(mu, r0, b), tint * fresnel_schlick(mu, r0), atol=1e-12)
+    assert torch.allclose(fresnel_f82(torch.tensor(1.0, dtype=F64), r0, b), r0, atol=1e-12)
+    c = torch.linspace(0, 1, 101, dtype=F64)[:, None]
+    assert torch.equal(fresnel_f82(c, r0, f82_coefficient(r0, torch.ones(3, dtype=F64))), fresnel_schlick(c, r0))
+    f = fresnel_f82(c, r0, b)
+    assert bool((f >= 0).all()) and bool((f <= 1).all())
+    assert bool((f[:, 1:] < fresnel_schlick(c, r0)[:, 1:] + 1e-15).all())  # a tint below 1 only darkens
 
 
 def test_reflect_mirrors_about_the_normal():

@@ -37,7 +37,7 @@ def test_vectors_round_trip_through_stacks_and_materials(cls):
     s = params_to_stack(p)
     assert stack_class(s) == cls and s.channels == 1 and s.n == 5
     L = s.layers
-    assert s.roughness.shape == s.ior.shape == s.sigma_t.shape == (5, L) and s.albedo.shape == (5, L, 1)
+    assert s.roughness.shape == s.ior.shape == (5, L) and s.albedo.shape == s.sigma_t.shape == (5, L, 1)
     assert torch.equal(stack_to_params(s), p)
     m = params_to_material(p[2])
     back = material_stack(m)  # the material the vector describes has the same stack
@@ -54,7 +54,7 @@ def test_material_stack_reads_every_layer_top_down():
     s = material_stack(m)
     assert s.n == 1 and s.layers == 2 and s.channels == 3 and s.base == "diffuse"
     assert s.roughness.tolist() == [[0.1, 0.3]] and s.ior.tolist() == [[1.4, 1.6]]
-    assert s.sigma_t.tolist() == [[2.0, 0.0]]  # no medium under the second interface
+    assert s.sigma_t.tolist() == [[[2.0] * 3, [0.0] * 3]]  # no medium under the second interface
     assert s.albedo[0].tolist() == [[0.9, 0.5, 0.1], [0.0, 0.0, 0.0]]
     assert s.base_albedo.tolist() == [[0.2, 0.3, 0.4]] and s.base_r0 is None
     one = s.per_channel()
@@ -103,7 +103,7 @@ def test_every_base_kind_gives_its_parameters_in_the_asked_dtype(tmp_path):
         for dtype in (torch.float64, torch.float32):
             s = material_stack(_material(layer), dtype=dtype)
             assert s.base == layer["type"] and s.n == 1 and s.layers == 0
-            assert s.roughness.shape == (1, 0) and s.ior.shape == (1, 0) and s.sigma_t.shape == (1, 0)
+            assert s.roughness.shape == (1, 0) and s.ior.shape == (1, 0) and s.sigma_t.shape == (1, 0, 3)
             assert s.albedo.shape == (1, 0, 3)
             for t in s.tensors().values():
                 assert t.dtype == dtype
@@ -131,7 +131,7 @@ def test_every_base_kind_gives_its_parameters_in_the_asked_dtype(tmp_path):
 
 def test_per_texel_values_take_channel_0_of_shared_parameters_and_name_their_place():
     """With a values function (a texture-mapped material: one row per texel), every parameter comes from its
-    own place, shared ones (roughness, ior, sigma_t) from channel 0, and rows broadcast against uniform ones."""
+    own place, shared ones (roughness, ior) from channel 0, and rows broadcast against uniform ones."""
     m = _material({"type": "dielectric", "roughness": 0.1, "ior": 1.4},
                   {"type": "medium", "albedo": 0.5, "sigma_t": 2.0},
                   {"type": "dielectric", "roughness": 0.3, "ior": 1.6},
@@ -140,7 +140,7 @@ def test_per_texel_values_take_channel_0_of_shared_parameters_and_name_their_pla
     seen = []
     code = {"layers[0].roughness": 1, "layers[0].ior": 2, "layers[1].albedo": 3, "layers[1].sigma_t": 4,
             "layers[2].roughness": 5, "layers[2].ior": 6, "layers[3].albedo": 7, "layers[3].sigma_t": 8,
-            "layers[4].roughness": 9, "layers[4].r0": 10}
+            "layers[4].roughness": 9, "layers[4].r0": 10, "layers[4].f82_tint": 11}
 
     def values(v, place):
         seen.append(place)
@@ -151,13 +151,14 @@ def test_per_texel_values_take_channel_0_of_shared_parameters_and_name_their_pla
 
     s = material_stack(m, values, dtype=torch.float32)
     assert sorted(seen) == sorted(code)
-    assert seen[:2] == ["layers[4].roughness", "layers[4].r0"]  # the base first, then bottom up
+    assert seen[:3] == ["layers[4].roughness", "layers[4].r0", "layers[4].f82_tint"]  # the base first, then bottom up
     assert s.n == 4 and all(t.dtype == torch.float32 for t in s.tensors().values())
     assert s.roughness.tolist() == [[1.0, 5.0 + 100 * t] for t in range(4)]
     assert s.ior[:, 0].tolist() == [2.0] * 4 and s.ior[:, 1].tolist() == [6.0] * 4
-    assert s.sigma_t.tolist() == [[4.0, 8.0]] * 4
+    assert s.sigma_t.tolist() == [[[4.0, 4.25, 4.5], [8.0, 8.25, 8.5]]] * 4  # per channel
     assert s.albedo[0].tolist() == [[3.0, 3.25, 3.5], [7.0, 7.25, 7.5]]
     assert s.base_roughness.tolist() == [9.0] * 4 and s.base_r0[3].tolist() == [10.0, 10.25, 10.5]
+    assert s.base_f82[3].tolist() == [11.0, 11.25, 11.5]
 
 
 def test_a_texture_mapped_parameter_without_values_is_named(tmp_path):

@@ -23,7 +23,7 @@ def analog_exits(layers: list[tuple[float, float, float, float]], base: tuple, w
     """Every photon's exit direction (n, 3) and energy (n,) (0: absorbed, or
     its single reflection off the top left out with ``skip_top_reflection``).
     ``layers``: (roughness, ior, albedo, sigma_t) top to bottom; ``base``:
-    ("conductor", roughness, r0) | ("diffuse", albedo) | ("dielectric",
+    ("conductor", roughness, r0[, f82 tint]) | ("diffuse", albedo) | ("dielectric",
     roughness, ior). The mean of energy x [exit in B] over photons estimates
     the integral over B of f(wi, wo) cos(theta_o). Third: which photons left
     by the single reflection off the top. ``top_only``: photons that enter
@@ -90,7 +90,7 @@ def analog_exits(layers: list[tuple[float, float, float, float]], base: tuple, w
             else:
                 kind = base[0]
                 if kind == "conductor":
-                    ss = GGXConductor(base[1], base[2]).sample(win, u3[sel])
+                    ss = GGXConductor(base[1], base[2], base[3] if len(base) > 3 else 1.0).sample(win, u3[sel])
                 elif kind == "diffuse":
                     ss = Lambertian(base[1]).sample(win, u3[sel])
                 else:

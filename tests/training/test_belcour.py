@@ -238,7 +238,7 @@ def test_the_shipped_tables_load_without_generating_and_hold_the_generators_valu
 
 
 def test_the_reciprocal_variant_is_reciprocal_and_the_papers_is_not():
-    atoms = [Atom("interface", 0.1, 1.5), Atom("medium", color=(0.5, 0.7, 0.9), sigma_t=1.0),
+    atoms = [Atom("interface", 0.1, 1.5), Atom("medium", color=(0.5, 0.7, 0.9), sigma_t=(1.0, 1.0, 1.0)),
              Atom("conductor", 0.3, color=(0.9, 0.6, 0.3))]
     wi, wo = pairs(1000)
     f = belcour_eval_atoms(atoms, wi, wo, reciprocal=True)

@@ -32,7 +32,10 @@ def test_leaf_parameters_follow_them():
     g = torch.Generator().manual_seed(1)
     for kind in ("conductor", "dielectric", "diffuse"):
         p = D.random_leaf_params(kind, 4096, g)
-        assert p.dtype == torch.float32 and p.shape == (4096, 1 if kind == "diffuse" else 2)
+        assert p.dtype == torch.float32 and p.shape == (4096, {"diffuse": 1, "dielectric": 2, "conductor": 3}[kind])
+    tint = D.random_leaf_params("conductor", 4096, g)[:, 2]  # F82 tint: a quarter plain (1), the rest U(0, 1)
+    assert 0.2 < float((tint == 1).float().mean()) < 0.3 and float(tint.min()) >= 0 and float(tint.max()) <= 1
+    assert abs(float(tint[tint < 1].mean()) - 0.5) < 0.03
     p = D.random_leaf_params("dielectric", 4096, g)
     assert float(p[:, 1].min()) >= RANGES["ior"][0] and float(p[:, 1].max()) <= RANGES["ior"][1]
 

@@ -104,6 +104,42 @@ def test_absorbing_medium_falls_monotonically_with_sigma_t():
         assert gap > 3 * math.hypot(errs[k], errs[k + 1]), (k, means, errs)
 
 
+def test_per_channel_extinction_walks_each_channel_as_its_own_stack():
+    """A coloured absorbing coat (sigma_t per channel, OpenPBR's coat_color): each channel's estimate is, to the
+    bit, the walk of a stack whose extinction is that channel's for every channel (same seed, same paths)."""
+    wi, wo = _pairs(16, 11)
+    n, sig = 16, (0.1, 0.8, 2.5)
+    rgb = StackParams(roughness=torch.full((n, 1), 0.2, dtype=torch.float64), ior=torch.full((n, 1), 1.5, dtype=torch.float64),
+                      albedo=torch.full((n, 1, 3), 0.3, dtype=torch.float64),
+                      sigma_t=torch.tensor(sig, dtype=torch.float64).expand(n, 1, 3), base="conductor",
+                      base_roughness=torch.full((n,), 0.3, dtype=torch.float64),
+                      base_r0=torch.tensor([0.9, 0.6, 0.3], dtype=torch.float64).expand(n, 3))
+    m, se = simulate(rgb, wi, wo, spp=64, seed=4, dtype=torch.float64)
+    for c, tau in enumerate(sig):
+        one = StackParams(roughness=rgb.roughness, ior=rgb.ior, albedo=rgb.albedo[..., c], sigma_t=torch.full((n, 1), tau, dtype=torch.float64),
+                          base="conductor", base_roughness=rgb.base_roughness, base_r0=rgb.base_r0[:, c])
+        mc, sc = simulate(one, wi, wo, spp=64, seed=4, dtype=torch.float64)
+        assert torch.equal(m[:, c], mc) and torch.equal(se[:, c], sc)
+    assert bool((m[:, 0] > m[:, 2]).all())  # the thinner channel's body is brighter
+
+
+def test_an_f82_tint_darkens_the_base_seen_through_a_coat():
+    """The walk's conductor takes OpenPBR's F82 tint: a tint of 1 is the plain walk bit for bit, a tint of 0
+    darkens every pair's body (the correction only subtracts), beyond the noise."""
+    wi, wo = _pairs(32, 12)
+    n = 32
+    st = lambda tint: StackParams(roughness=torch.full((n, 1), 0.3, dtype=torch.float64), ior=torch.full((n, 1), 1.1, dtype=torch.float64),
+                                  albedo=torch.zeros(n, 1, dtype=torch.float64), sigma_t=torch.zeros(n, 1, dtype=torch.float64),
+                                  base="conductor", base_roughness=torch.full((n,), 0.6, dtype=torch.float64),
+                                  base_r0=torch.full((n,), 0.5, dtype=torch.float64),
+                                  base_f82=None if tint is None else torch.full((n,), tint, dtype=torch.float64))
+    plain, _ = simulate(st(None), wi, wo, spp=256, seed=9, dtype=torch.float64, include_top_reflection=False)
+    white, _ = simulate(st(1.0), wi, wo, spp=256, seed=9, dtype=torch.float64, include_top_reflection=False)
+    dark, se = simulate(st(0.0), wi, wo, spp=256, seed=9, dtype=torch.float64, include_top_reflection=False)
+    assert torch.equal(plain, white)
+    assert float((white - dark).sum()) > 5 * float(se.pow(2).sum().sqrt())
+
+
 @pytest.mark.parametrize("layers,base", [CONFIGS[0], CONFIGS[5], CONFIGS[-2], CONFIGS[-1]])
 def test_reciprocity(layers, base):
     n = 24

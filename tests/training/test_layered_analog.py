@@ -63,6 +63,13 @@ CONFIGS = {
     "two-slabs-conductor": ([(0.1, 1.5, 0.9, 0.3), (0.1, 1.3, 0.5, 0.3)], ("conductor", 0.03, 0.9), 530),
     "coat-medium-dielectric": ([(0.1, 1.4, 0.6, 0.25)], ("dielectric", 0.03, 4.0), 540),
 }
+#: OpenPBR's F82-tint conductor (r0, tint) under a low-index coat (a rough base sees grazing facets): its own
+#: agreement test and the rejection of a walk that drops the tint (the five perturbations above are the
+#: other configurations' job; its thin slab would hide the sigma_t one).
+F82_CONFIGS = {
+    "coat-f82-conductor": ([(0.1, 1.1, 0.9, 0.2)], ("conductor", 0.5, 0.5, 0.1), 550),
+}
+ALL_CONFIGS = {**CONFIGS, **F82_CONFIGS}
 
 
 def perturbed(layers, base, what: str):
@@ -81,6 +88,8 @@ def perturbed(layers, base, what: str):
             x[2] *= 0.9
     elif what == "ior":
         ls[0][1] *= 1.03
+    elif what == "f82_tint":  # the tint ignored (Schlick's Fresnel): what a part that drops it computes
+        b = b[:3]
     else:
         raise ValueError(what)
     return [tuple(x) for x in ls], tuple(b)
@@ -96,6 +105,7 @@ def _stack(layers, base, n):
         roughness=col(0), ior=col(1), albedo=col(2), sigma_t=col(3), base=kind,
         base_roughness=torch.full((n,), base[1] if kind != "diffuse" else 0.5, dtype=torch.float64),
         base_r0=torch.full((n,), base[2] if kind == "conductor" else 0.0, dtype=torch.float64),
+        base_f82=torch.full((n,), base[3] if kind == "conductor" and len(base) > 3 else 1.0, dtype=torch.float64),
         base_ior=torch.full((n,), base[2] if kind == "dielectric" else 1.5, dtype=torch.float64),
         base_albedo=torch.full((n,), base[1] if kind == "diffuse" else 0.0, dtype=torch.float64))
 
@@ -110,7 +120,7 @@ def _analog(name: str):
     walk's estimates in them (the top's single reflection from a run that
     stops at the top, the rest from a full run), computed once for the tests
     that share them."""
-    layers, base, seed = CONFIGS[name]
+    layers, base, seed = ALL_CONFIGS[name]
     wi = _wi()
     pw, pb, ptop = analog_exits(layers, base, wi, N_PHOTONS // 10, seed, skip_top_reflection=False)
     bins = disk_bins(pw, pb, ptop, wi, RINGS_TOP, RINGS_BODY, SECTORS)
@@ -128,7 +138,7 @@ def p_values(name: str, perturbation: str | None = None) -> dict[str, tuple[floa
     only) against the analog walk on the unperturbed one: the top's
     single reflection (closed form in the walk) and the light that entered
     the stack (the walk's paths)."""
-    layers, base, seed = CONFIGS[name]
+    layers, base, seed = ALL_CONFIGS[name]
     bins, keep, est = _analog(name)
     if perturbation is not None:
         layers, base = perturbed(layers, base, perturbation)
@@ -161,7 +171,7 @@ def _describe(res) -> str:
 
 @pytest.mark.slow
 @pytest.mark.ci_slow
-@pytest.mark.parametrize("name", CONFIGS)
+@pytest.mark.parametrize("name", ALL_CONFIGS)
 def test_walk_agrees_with_the_analog_walk_over_fine_bins(name):
     res = p_values(name)
     assert combined(res) >= ALPHA, f"{name}: {_describe(res)}"
@@ -175,3 +185,11 @@ def test_a_perturbed_walk_is_rejected(name, perturbation):
     """Power: the same check with the walk's stack 10 % off (the index 3 %) rejects it."""
     res = p_values(name, perturbation)
     assert combined(res) < ALPHA, f"{name}, {perturbation}: {_describe(res)}"
+
+
+@pytest.mark.slow
+@pytest.mark.ci_slow
+def test_a_walk_that_ignores_the_f82_tint_is_rejected():
+    """Power for the F82-tint Fresnel: the walk with Schlick's Fresnel in place of the tinted one."""
+    res = p_values("coat-f82-conductor", "f82_tint")
+    assert combined(res) < ALPHA, f"f82_tint: {_describe(res)}"

@@ -115,7 +115,7 @@ def test_the_kernel_compiles_for_an_h100():
         from nbrdf.training import walk_cuda
         from nbrdf.training.walk import walk_params
         f = lambda *s: np.zeros(s)
-        P = walk_params(f(4, 3), f(4, 3), 64, 7, f(4, 1), f(4, 1), f(4, 1), f(4, 1, 3), 0, f(4), f(4, 3), f(4), f(4, 3),
+        P = walk_params(f(4, 3), f(4, 3), 64, 7, f(4, 1), f(4, 1), f(4, 1), f(4, 1, 3), 0, f(4), f(4, 3), f(4, 3), f(4), f(4, 3),
                         4, 100000, True)
         args = (P, f(8, 3), f(8, 3), np.zeros(8, np.int64), np.zeros(8, np.int64))
         ptx, _ = cuda.compile_ptx(walk_cuda._run_kernel.py_func, tuple(numba.typeof(a) for a in args), cc=(9, 0))

@@ -23,6 +23,22 @@ def _rand_dir(rng, upper: bool, lo: float = 0.02):
     return r * math.cos(ph), r * math.sin(ph), z if upper else -z
 
 
+def test_the_walks_conductor_fresnel_is_the_f82_form():
+    """``ggx.conductor_f`` (from x = (1 - cos)^5, what the samplers return) equals
+    ``neural.microfacet.fresnel_f82`` over cosines, r0 and tints; b = 0 is Schlick's form."""
+    import torch
+
+    from nbrdf.neural.microfacet import f82_coefficient, fresnel_f82
+    rng = np.random.default_rng(3)
+    for _ in range(500):
+        c, r0, tint = rng.uniform(0, 1), rng.uniform(0, 1), rng.uniform(0, 1)
+        x = (1.0 - c) ** 5
+        b = f82_coefficient(r0, tint)
+        want = float(fresnel_f82(torch.tensor(c, dtype=torch.float64), torch.tensor(r0, dtype=torch.float64), b))
+        assert ggx.conductor_f(x, r0, b) == pytest.approx(want, abs=1e-12)
+        assert ggx.conductor_f(x, r0, 0.0) == pytest.approx(x + r0 * (1.0 - x), abs=1e-15)  # FMA rounding only
+
+
 def test_polynomial_sincos_matches_libm():
     u = np.concatenate([np.random.default_rng(0).random(20000), np.arange(9) / 8.0, [1 - 2.0 ** -53]])
     err = max(max(abs(c - math.cos(2 * math.pi * x)), abs(s - math.sin(2 * math.pi * x)))

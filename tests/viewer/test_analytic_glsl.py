@@ -17,6 +17,10 @@ COAT = {"type": "dielectric", "roughness": 0.15, "ior": 1.5}
 STACKS = {
     "coated_conductor": [COAT, {"type": "medium", "albedo": [0.9, 0.5, 0.2], "sigma_t": 0.7},
                          {"type": "conductor", "roughness": 0.3, "r0": [0.95, 0.64, 0.54]}],
+    # OpenPBR's coat: a coloured absorbing slab (per-channel sigma_t) over an F82-tinted metal
+    "tinted_metal_under_a_coloured_coat": [COAT, {"type": "medium", "albedo": 0.0, "sigma_t": [0.05, 0.3, 0.9]},
+                                           {"type": "conductor", "roughness": 0.3, "r0": [0.9, 0.7, 0.3],
+                                            "f82_tint": [1.0, 0.6, 0.2]}],
     "coat_without_medium": [{"type": "dielectric", "roughness": 0.4, "ior": 1.9},
                             {"type": "diffuse", "albedo": [0.2, 0.4, 0.8]}],
     "two_coats_over_dielectric": [COAT, {"type": "medium", "albedo": 0.8, "sigma_t": 2.0},

@@ -17,6 +17,19 @@ TWO_PI = 2.0 * math.pi
 
 
 @njit(**JIT)
+def conductor_f(x, r0, b):
+    """A conductor's Fresnel from x = (1 - cos)^5 (what the samplers return): OpenPBR's F82-tint
+    form r0 + (1 - r0) x - b cos (1 - cos)^6, kept in [0, 1]; b = 0 is Schlick's exactly
+    (``neural.microfacet.fresnel_f82``; b from ``f82_coefficient``)."""
+    f = x + r0 * (1.0 - x)
+    if b != 0.0:
+        y = x ** 0.2  # 1 - cos
+        f -= b * (1.0 - y) * y ** 6
+        f = min(max(f, 0.0), 1.0)
+    return f
+
+
+@njit(**JIT)
 def cos_sin_2pi(u):
     """(cos 2 pi u, sin 2 pi u) for u in [0, 1]: reduction to a quarter turn
     (exact in binary) and Taylor polynomials; absolute error < 1e-15, about

@@ -9,7 +9,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from nbrdf.training.walk.ggx import INV_4PI, survival
+from nbrdf.training.walk.ggx import INV_4PI, conductor_f, survival
 from nbrdf.training.walk.interfaces import ft_pdf, ft_sample
 from nbrdf.training.walk.params import JIT, JIT_INLINE
 from nbrdf.training.walk.rng import (
@@ -28,7 +28,7 @@ from nbrdf.training.walk.vertices import NO_CONNECTION, base_vertex, interior_ve
 
 
 @njit(**JIT_INLINE)
-def enter(ix, iy, iz, s, spp, q, T, M, b_r0, key, out):
+def enter(ix, iy, iz, s, spp, q, T, M, b_r0, b_f82, key, out):
     """The path's start from wi = (ix, iy, iz): the entry refraction at the
     top (the first uniform stratified by the sample index s of spp) and, with
     the connection, its two strategies from the entry (into ``out``, zeroed
@@ -44,8 +44,8 @@ def enter(ix, iy, iz, s, spp, q, T, M, b_r0, key, out):
          uniform(key, ENTRY_CONNECTION + 6), uniform(key, ENTRY_CONNECTION + 7))
     k, x, kd, xd = connection(ix, iy, iz, T, 1.0, False, M.a_wide, M.agw, u, True)
     for c in range(out.shape[0]):
-        r0 = b_r0[q, c]
-        out[c] += k * (x + r0 * (1.0 - x)) + kd * (xd + r0 * (1.0 - xd))
+        r0, b = b_r0[q, c], b_f82[q, c]
+        out[c] += k * conductor_f(x, r0, b) + kd * conductor_f(xd, r0, b)
     C4 = (ft_pdf(T.a0, T.e0, ix, iy, iz, dx, dy, dz), ft_pdf(T.a0, T.e0, T.ox, T.oy, T.oz, -dx, -dy, dz),
           ft_pdf(M.agw, T.e0, T.ox, T.oy, T.oz, -dx, -dy, dz), survival(T.tau0, 1.0, dz))
     return dx, dy, dz, w_entry, START_DIMS_CONNECTION, C4
@@ -93,11 +93,11 @@ def path(q, s, P, out, beta, stk):
     """Path s of pair q: writes its contribution per channel to ``out`` and
     returns the number of vertices (``beta``: scratch of C weights; ``stk``:
     scratch of the pending copies of a split path, (kmax - 1, 7 + C))."""
-    rough, ior, sigma, alb, b_r0, b_alb = P.rough, P.ior, P.sigma, P.alb, P.b_r0, P.b_alb
+    rough, ior, sigma, alb, b_r0, b_f82, b_alb = P.rough, P.ior, P.sigma, P.alb, P.b_r0, P.b_f82, P.b_alb
     L = rough.shape[1]
     key = key0 = lane_key(P.seed, q * P.spp + s)
     T, M = pair_of(P, q), setup_of(P, q)
-    dx, dy, dz, w_entry, ctr, C4 = enter(P.wi[q, 0], P.wi[q, 1], P.wi[q, 2], s, P.spp, q, T, M, b_r0, key, out)
+    dx, dy, dz, w_entry, ctr, C4 = enter(P.wi[q, 0], P.wi[q, 1], P.wi[q, 2], s, P.spp, q, T, M, b_r0, b_f82, key, out)
     if w_entry <= 0.0:
         return 0
     for c in range(beta.shape[0]):
@@ -123,14 +123,14 @@ def path(q, s, P, out, beta, stk):
         scat_prev, scat = scat, scatter
         if scatter:
             C4 = NO_CONNECTION  # the connection makes only unscattered segments
-            dx, dy, dz, ctr = scatter_vertex(q, T, M, alb, b_r0, slab, depth, key, ctr, out, beta)
+            dx, dy, dz, ctr = scatter_vertex(q, T, M, alb, b_r0, b_f82, slab, depth, key, ctr, out, beta)
             pdf_last = INV_4PI
         else:
             k_if = slab + 1 if dz < 0.0 else slab
             depth = slab + 1.0 if dz < 0.0 else float(slab)
             wx, wy, wz = -dx, -dy, -dz
             if k_if == 0:
-                nx, ny, nz, wgt, p, ctr, C4n = top_vertex(q, T, M, b_r0, wx, wy, wz, pdf_last, C4, seg_in, seg,
+                nx, ny, nz, wgt, p, ctr, C4n = top_vertex(q, T, M, b_r0, b_f82, wx, wy, wz, pdf_last, C4, seg_in, seg,
                                                           scat_prev, resume, key, ctr, out, beta)
                 if M.split and not resume:
                     sp = split_at_top(wx, wy, wz, T, guide, M.a_wide, M.kmax, M.kstep, M.ifloor, bounces, sp, beta,
@@ -150,7 +150,7 @@ def path(q, s, P, out, beta, stk):
                 for c in range(beta.shape[0]):
                     beta[c] *= wgt
             else:
-                nx, ny, nz, p, alive, starts, ctr = base_vertex(q, T, M, b_r0, b_alb, L, wx, wy, wz, depth, pdf_last,
+                nx, ny, nz, p, alive, starts, ctr = base_vertex(q, T, M, b_r0, b_f82, b_alb, L, wx, wy, wz, depth, pdf_last,
                                                                 C4, scat_prev, key, ctr, out, beta)
                 if starts:
                     seg_on, seg = True, (wx, wy, wz, pdf_last, seg[4])

@@ -61,26 +61,26 @@ JIT_INLINE = dict(JIT, inline="always")
 #: namedtuple: Numba passes it to ``@njit`` and ``@cuda.jit`` code alike).
 #: Arrays (float64): wi, wo (N, 3) the pairs; rough, ior, sigma (N, L) per
 #: interface / slab; alb (N, L, C) the slabs' albedo; b_rough, b_ior (N,) and
-#: b_r0, b_alb (N, C) the base's. Scalars: spp, seed; base (0 conductor,
+#: b_r0, b_f82 (the F82-tint coefficient b, 0: Schlick), b_alb (N, C) the base's. Scalars: spp, seed; base (0 conductor,
 #: 1 diffuse, 2 dielectric); rr_depth, max_depth; forced (the forced top
 #: reflection and every strategy; False: the plain walk); rr_weight;
 #: a_wide, lam, lam_w, agw (WIDE_ROUGHNESS, GUIDE_LAM, WIDE_LAM,
 #: WIDE_GUIDE_ROUGHNESS); kmax, kstep, ifloor (SPLIT_MAX, SPLIT_STEP,
 #: SPLIT_FLOOR); block (paths per work item).
 WalkParams = namedtuple("WalkParams", [
-    "wi", "wo", "rough", "ior", "sigma", "alb", "b_rough", "b_r0", "b_ior", "b_alb",
+    "wi", "wo", "rough", "ior", "sigma", "alb", "b_rough", "b_r0", "b_f82", "b_ior", "b_alb",
     "spp", "seed", "base", "rr_depth", "max_depth", "forced", "rr_weight", "a_wide", "lam", "lam_w", "agw",
     "kmax", "kstep", "ifloor", "block"])
 
 
 def walk_params(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndarray, ior: np.ndarray,
                 sigma: np.ndarray, alb: np.ndarray, base: int, b_rough: np.ndarray, b_r0: np.ndarray,
-                b_ior: np.ndarray, b_alb: np.ndarray, rr_depth: int, max_depth: int, forced: bool) -> WalkParams:
+                b_f82: np.ndarray, b_ior: np.ndarray, b_alb: np.ndarray, rr_depth: int, max_depth: int, forced: bool) -> WalkParams:
     """The record for N pairs (arrays made contiguous float64, the seed
     folded to 63 bits) with this module's tuning constants, read when called."""
     f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)
     return WalkParams(f64(wi), f64(wo), f64(rough), f64(ior), f64(sigma), f64(alb), f64(b_rough), f64(b_r0),
-                      f64(b_ior), f64(b_alb), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, int(base), int(rr_depth),
+                      f64(b_f82), f64(b_ior), f64(b_alb), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, int(base), int(rr_depth),
                       int(max_depth), bool(forced), float(RR_WEIGHT), float(WIDE_ROUGHNESS), float(GUIDE_LAM),
                       float(WIDE_LAM), float(WIDE_GUIDE_ROUGHNESS), int(SPLIT_MAX), int(SPLIT_STEP),
                       float(SPLIT_FLOOR), int(BLOCK))

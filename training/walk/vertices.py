@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from numba import njit
 
-from nbrdf.training.walk.ggx import g1_dir, survival
+from nbrdf.training.walk.ggx import conductor_f, g1_dir, survival
 from nbrdf.training.walk.interfaces import (
     CONDUCTOR,
     DIFFUSE,
@@ -62,12 +62,12 @@ NO_CONNECTION = (1.0, 0.0, 0.0, 1.0)
 
 
 @njit(**JIT_INLINE)
-def scatter_vertex(q, T, M, alb, b_r0, slab, depth, key, ctr, out, beta):
+def scatter_vertex(q, T, M, alb, b_r0, b_f82, slab, depth, key, ctr, out, beta):
     """A scattering at ``depth`` in ``slab``: next-event estimation (slab 0),
     the chain by way of the base (``mirror``) or through both interfaces
     (slab 1, ``chain``), the albedo into beta and the phase function's
     direction. Returns (d, counter). T: the pair's ``Pair``, M: the path's
-    ``Setup``; alb, b_r0: the slabs' albedos and the base's r0 (all pairs)."""
+    ``Setup``; alb, b_r0, b_f82: the slabs' albedos, the base's r0 and F82 coefficient (all pairs)."""
     C = out.shape[0]
     dims = SCATTER_DIMS
     if slab == 0:
@@ -81,7 +81,7 @@ def scatter_vertex(q, T, M, alb, b_r0, slab, depth, key, ctr, out, beta):
                                         uniform(key, ctr + SCATTER_MIRROR + 3))
             if k != 0.0:
                 for c in range(C):
-                    out[c] += beta[c] * alb[q, slab, c] * k * (x + b_r0[q, c] * (1.0 - x))
+                    out[c] += beta[c] * alb[q, slab, c] * k * conductor_f(x, b_r0[q, c], b_f82[q, c])
         if M.mirror:
             dims = SCATTER_DIMS_MIRROR
     elif M.chain and slab == 1:
@@ -100,7 +100,7 @@ def scatter_vertex(q, T, M, alb, b_r0, slab, depth, key, ctr, out, beta):
 
 
 @njit(**JIT_INLINE)
-def top_vertex(q, T, M, b_r0, wx, wy, wz, pdf_last, C4, seg_in, seg, scat_prev, resume, key, ctr, out, beta):
+def top_vertex(q, T, M, b_r0, b_f82, wx, wy, wz, pdf_last, C4, seg_in, seg, scat_prev, resume, key, ctr, out, beta):
     """The top seen from below (w toward where the light came from): the exit
     toward wo (unless ``resume``: a split copy, whose vertex was evaluated),
     the walk's reflection (forced) or its Fresnel-chosen sample (plain walk),
@@ -130,8 +130,8 @@ def top_vertex(q, T, M, b_r0, wx, wy, wz, pdf_last, C4, seg_in, seg, scat_prev, 
              uniform(key, ctr + TOP_CONNECTION + 6), uniform(key, ctr + TOP_CONNECTION + 7))
         k, x, kd, xd = connection(wx, wy, wz, T, lm, wide, M.a_wide, M.agw, u, False)
         for c in range(C):
-            r0 = b_r0[q, c]
-            out[c] += beta[c] * (k * (x + r0 * (1.0 - x)) + kd * (xd + r0 * (1.0 - xd)))
+            r0, b = b_r0[q, c], b_f82[q, c]
+            out[c] += beta[c] * (k * conductor_f(x, r0, b) + kd * conductor_f(xd, r0, b))
     C4 = connection_densities(T.a0, T.e0, M.agw, T.tau0, T.ox, T.oy, T.oz, p, nx, ny, nz)
     return nx, ny, nz, wgt, p, ctr + TOP_DIMS_CONNECTION, C4
 
@@ -157,7 +157,7 @@ def interior_vertex(T, k_if, a, e, wx, wy, wz, dz, z0, pdf_last, chain, key, ctr
 
 
 @njit(**JIT_INLINE)
-def base_vertex(q, T, M, b_r0, b_alb, L, wx, wy, wz, depth, pdf_last, C4, scat_prev, key, ctr, out, beta):
+def base_vertex(q, T, M, b_r0, b_f82, b_alb, L, wx, wy, wz, depth, pdf_last, C4, scat_prev, key, ctr, out, beta):
     """The base (w toward where the light came from): next-event estimation
     through the top (one interface) or through both (two), and the base's
     sample with its weight into beta. Returns (n, density, alive, whether the
@@ -174,7 +174,7 @@ def base_vertex(q, T, M, b_r0, b_alb, L, wx, wy, wz, depth, pdf_last, C4, scat_p
                           uniform(key, ctr + BASE_CHAIN + 2), uniform(key, ctr + BASE_CHAIN + 3))
         if k != 0.0:
             for c in range(C):
-                col = (x + b_r0[q, c] * (1.0 - x)) if base == CONDUCTOR else (
+                col = conductor_f(x, b_r0[q, c], b_f82[q, c]) if base == CONDUCTOR else (
                     b_alb[q, c] if base == DIFFUSE else 1.0)
                 out[c] += beta[c] * k * col
         ctr += BASE_CHAIN_DIMS
@@ -184,7 +184,7 @@ def base_vertex(q, T, M, b_r0, b_alb, L, wx, wy, wz, depth, pdf_last, C4, scat_p
         if k != 0.0:
             for c in range(C):
                 if base == CONDUCTOR:
-                    out[c] += beta[c] * k * (x + b_r0[q, c] * (1.0 - x))
+                    out[c] += beta[c] * k * conductor_f(x, b_r0[q, c], b_f82[q, c])
                 elif base == DIFFUSE:
                     out[c] += beta[c] * b_alb[q, c] * k
                 else:
@@ -194,7 +194,7 @@ def base_vertex(q, T, M, b_r0, b_alb, L, wx, wy, wz, depth, pdf_last, C4, scat_p
         nx, ny, nz, wgt, p, x = cond_sample(wx, wy, wz, ba, g1w, u0, u1)
         alive = p > 0.0 and wgt > 0.0
         for c in range(C):
-            beta[c] *= wgt * (x + b_r0[q, c] * (1.0 - x))
+            beta[c] *= wgt * conductor_f(x, b_r0[q, c], b_f82[q, c])
     elif base == DIFFUSE:
         nx, ny, nz, p = diffuse_sample(u0, u1)
         alive = wz > 0.0 and p > 0.0

@@ -95,7 +95,7 @@ def belcour_uniforms(material: Material, tables: BelcourTables | None = None) ->
         "u_bc_roughness": pad([float(a.roughness) for a in atoms], 0.0),
         "u_bc_ior": pad([float(a.ior) for a in atoms], 1.0),
         "u_bc_color": pad([tuple(float(c) for c in a.color) for a in atoms], (0.0, 0.0, 0.0)),
-        "u_bc_sigma_t": pad([float(a.sigma_t) for a in atoms], 0.0),
+        "u_bc_sigma_t": pad([tuple(float(c) for c in a.sigma_t) for a in atoms], (0.0, 0.0, 0.0)),
         "u_bc_slab": slab,
         "u_bc_r_above": r_above,
         "u_bc_r_below": r_below,

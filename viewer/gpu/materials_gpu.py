@@ -6,6 +6,7 @@ from __future__ import annotations
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIFFUSE
 from nbrdf.neural.material import Material
+from nbrdf.neural.microfacet import f82_coefficient
 from nbrdf.neural.stack import material_stack
 from nbrdf.viewer.modes import BaseKind
 
@@ -32,9 +33,10 @@ def analytic_uniforms(m: Material) -> dict:
         "u_num_interfaces": L,
         "u_if_roughness": pad([float(x) for x in s.roughness[0]], 0.5),
         "u_if_ior": pad([float(x) for x in s.ior[0]], 1.5),
-        "u_med_sigma_t": pad([float(x) for x in s.sigma_t[0]], 0.0),
+        "u_med_sigma_t": pad([rgb(x) for x in s.sigma_t[0]], (0.0, 0.0, 0.0)),
         "u_base_type": BaseKind(s.base).code,
         "u_base_roughness": float(s.base_roughness[0]),
         "u_base_ior": float(s.base_ior[0]) if s.base_ior is not None else 1.5,
         "u_base_color": rgb(colour[0]) if colour is not None else (0.0, 0.0, 0.0),
+        "u_base_f82": rgb(f82_coefficient(s.base_r0[0], s.base_f82[0])) if s.base_f82 is not None else (0.0, 0.0, 0.0),
     }

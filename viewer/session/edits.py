@@ -6,6 +6,7 @@ rendering session, viewer/session/lookdev.py's ``LookDev``, builds on it.
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 from abc import ABC, abstractmethod
@@ -31,8 +32,31 @@ DISPLAY_FIELDS = ("exposure", "tonemap")
 
 
 def presets() -> dict[str, Path]:
-    """The bundled materials by name (file stem)."""
+    """The bundled materials by key, the file stem (what ``load_preset`` takes;
+    the lists show ``preset_name``)."""
     return {p.stem: p for p in sorted(PRESETS_DIR.glob("*.json"))}
+
+
+def preset_name(path: Path) -> str:
+    """What a preset is listed as: its material's name (the JSON's "name"), or
+    the file's stem when that is empty, missing or unreadable (the list stays whole)."""
+    try:
+        stamp = path.stat().st_mtime_ns
+    except OSError:
+        return path.stem
+    return _json_name(path, stamp) or path.stem
+
+
+@functools.lru_cache(maxsize=256)
+def _json_name(path: Path, stamp: int) -> str:
+    """The stripped "name" of the JSON file at ``path`` as of modification time
+    ``stamp`` ("" when there is none); cached: the lists ask every frame."""
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return ""
+    name = doc.get("name") if isinstance(doc, dict) else None
+    return name.strip() if isinstance(name, str) else ""
 
 
 class SessionEdits(ABC):
@@ -54,6 +78,10 @@ class SessionEdits(ABC):
         self.backdrop = backdrop or BackdropSettings()
         self.error: str | None = None
         self.notice: str = ""
+        self.notes: list[str] = []
+        """One line per property of the opened file a stack cannot hold (a glTF's or MaterialX document's)."""
+        self.material_file: str | None = None
+        """The material file last opened (a MaterialX document may hold several: the window lists them)."""
         self.history = History()
         """Undo / redo over the session's snapshots (``undo``, ``redo``)."""
         self.edits = GuardedEdits(self.history, self.snapshot)
@@ -180,12 +208,30 @@ class SessionEdits(ABC):
         """Renames the material."""
         return self._stack_edit(lambda e: e.set_name(name))
 
-    def _edit_material(self, m: Material) -> None:
+    def set_openpbr(self, name: str, value) -> bool:
+        """Sets one OpenPBR input of a material made from OpenPBR; its stack is rebuilt from the inputs (the same
+        live path as a stack edit) and the mapping's notes become ``notes``."""
+        def go():
+            _, notes = self.editor.set_openpbr(name, value)
+            self._apply_material()
+            self.notes = notes
+        return self.guarded(go)
+
+    def _edit_material(self, m: Material, notes: list[str] | None = None) -> None:
         self.editor = StackEditor.from_material(m)
         self._apply_material()
+        self.notes = list(notes or [])
 
     def open_material(self, path: str | Path) -> bool:
-        return self.guarded(lambda: self._edit_material(load_material(path)))
+        """Opens a material file (JSON or MaterialX); a MaterialX document's notes (what its stack cannot hold)
+        become ``notes`` and the notice."""
+        def go():
+            notes: list[str] = []
+            self._edit_material(load_material(path, notes), notes)
+            self.material_file = str(path)
+            if notes:
+                self.notice = "; ".join(notes)
+        return self.guarded(go)
 
     def open_file(self, path: str | Path) -> bool:
         """Opens a file dropped on the window by its kind: a material or a session
@@ -194,16 +240,18 @@ class SessionEdits(ABC):
         suffix = p.suffix.lower()
         if suffix == ".json":
             ok = self.guarded(lambda: self._open_json(p))
+        elif suffix == ".mtlx":
+            ok = self.open_material(p)
         elif suffix in ENV_SUFFIXES:
             ok = self.set_environment(str(p))
         elif suffix in MESH_SUFFIXES:
             ok = self.set_mesh(str(p))
         else:
             self.error = (f"{p.name}: cannot open a {suffix or 'file without a suffix'} (a material or session "
-                          f".json, an {'/'.join(ENV_SUFFIXES)} environment, a {'/'.join(MESH_SUFFIXES)} mesh)")
+                          f".json, a MaterialX .mtlx, an {'/'.join(ENV_SUFFIXES)} environment, a {'/'.join(MESH_SUFFIXES)} mesh)")
             return False
         if ok:
-            self.notice = f"opened {p.name}"
+            self.notice = "; ".join([f"opened {p.name}", *(self.notes if suffix == ".mtlx" else [])])
         return ok
 
     def _open_json(self, p: Path) -> None:

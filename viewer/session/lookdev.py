@@ -106,8 +106,6 @@ class LookDev(SessionEdits, Captures):
         self.brdf_note = ""
         """One line when the edited material is shown other than ``brdf_mode`` asks (a stated fallback)."""
         self.pipeline = MaterialPipeline(ctx)
-        self.notes: list[str] = []
-        """One line per property of the opened file without an equivalent (a glTF file's materials)."""
         self.timings = Timings()
         self.brdf: GpuBrdf | None = None        # the neural image's BRDF (None: a latent texture is building)
         self.ref_brdf: GpuBrdf | None = None    # the closed form of a single layer (the reference)
@@ -146,6 +144,7 @@ class LookDev(SessionEdits, Captures):
                  parts=opts.file_materials(), brdf=brdf, threaded=threaded)
         ld.notes = notes
         ld.notice = "; ".join(notes)
+        ld.material_file = None if ld.parts else str(opts.material)
         if opts.session and not ld.open_session(opts.session):
             ld.close()
             raise NbrdfError(ld.error or f"{opts.session}: cannot open the session")
@@ -174,6 +173,11 @@ class LookDev(SessionEdits, Captures):
     def passes(self) -> int:
         """Passes accumulated in the view so far."""
         return self.frames.passes
+
+    @property
+    def restarted(self) -> bool:
+        """Whether the view was started over (an edit, a view change) and nothing drawn since."""
+        return self.frames.restarted
 
     @property
     def texture_progress(self) -> float | None:
@@ -385,15 +389,18 @@ class LookDev(SessionEdits, Captures):
                      s.wipe, s.error_scale, self.backdrop)
 
     def render(self, target: moderngl.Framebuffer, size: tuple[int, int], passes: int = 1,
-               scale: float = 1.0, interactive: bool = False, quick: bool | None = None) -> None:
+               scale: float = 1.0, interactive: bool = False, quick: bool | None = None,
+               budget_ms: float | None = None) -> None:
         """Adds ``passes`` to the accumulation (up to MAX_PASSES) and draws the
         view -- or the compare / BRDF-blend composite -- into ``target``; ``scale``
         < 1 renders fewer pixels while the user drags; ``interactive`` frames may
         shade with a quicker body (``bodies``; a change of body restarts the accumulation);
         ``quick``: the quick estimator (None: when ``interactive``). Any change of the
         rendered size (window, panels shown or hidden, scale) or of the view starts the
-        accumulation over. Call ``update`` first (the window does, each frame)."""
-        self.frames.render(self.describe(), target, size, passes, scale, interactive, quick)
+        accumulation over. ``budget_ms``: the object view's accumulation work may take this long
+        (a band of a pass, counted when complete: viewer/jobs/pass_bands.py); None: ``passes``
+        whole passes. Call ``update`` first (the window does, each frame)."""
+        self.frames.render(self.describe(), target, size, passes, scale, interactive, quick, budget_ms)
         self.timings.render_ms = self.frames.render_ms
 
     def calibrate_bodies(self) -> None:

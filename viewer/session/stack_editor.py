@@ -14,6 +14,7 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import COLOUR_PARAMS, DIELECTRIC, KINDS, MEDIUM, PARAMETRIC_BASES
 from nbrdf.neural.layer_kinds import RANGES as MATERIAL_RANGES
 from nbrdf.neural.material import Material, material_to_dict, parse_material
+from nbrdf.neural.openpbr import OpenPbr, openpbr_from_record, openpbr_record, openpbr_to_material
 
 #: The base types the editor offers (those given by parameters).
 BASE_TYPES = PARAMETRIC_BASES
@@ -40,11 +41,35 @@ class StackEditor:
     def layers(self) -> list[dict]:
         return self.doc["layers"]
 
-    def _apply(self, doc: dict) -> Material:
-        """Validates ``doc`` and makes it current (or raises, changing nothing)."""
+    def _apply(self, doc: dict, openpbr: bool = False) -> Material:
+        """Validates ``doc`` and makes it current (or raises, changing nothing). A material made from OpenPBR
+        inputs keeps its "openpbr" record while its layers are those inputs' stack (``openpbr``: an edit in
+        OpenPBR's terms); an edit of the stack itself ends that, and the record goes."""
+        if not openpbr and "openpbr" in doc and doc["layers"] != self.doc["layers"]:
+            doc = {k: v for k, v in doc.items() if k != "openpbr"}
         m = parse_material(doc, self.base_dir)
         self.doc, self.material = doc, m
         return m
+
+    @property
+    def openpbr(self) -> OpenPbr | None:
+        """The OpenPBR inputs the material follows (None: a stack made here, or edited as a stack)."""
+        record = self.doc.get("openpbr")
+        return openpbr_from_record(record) if record is not None else None
+
+    def set_openpbr(self, name: str, value) -> tuple[Material, list[str]]:
+        """Sets one OpenPBR input and rebuilds the stack from the inputs (``neural.openpbr``): the material and
+        the mapping's notes (what the stack cannot hold)."""
+        current = self.openpbr
+        if current is None:
+            raise NbrdfError("this material has no OpenPBR inputs (it was made or edited as a layer stack)")
+        if self.material.is_textured:
+            raise NbrdfError(f"{self.material.textures()[0][0]}: image-mapped; its OpenPBR record holds uniform "
+                             "values only, so edit the stack's parameters instead")
+        p = openpbr_from_record({**openpbr_record(current), name: value})
+        new, notes = openpbr_to_material(p, self.doc.get("name", ""))
+        doc = {**copy.deepcopy(self.doc), "layers": new["layers"], "openpbr": new["openpbr"]}  # a normal map stays
+        return self._apply(doc, openpbr=True), notes
 
     def set_param(self, index: int, key: str, value) -> Material:
         doc = copy.deepcopy(self.doc)

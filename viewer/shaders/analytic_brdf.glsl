@@ -14,28 +14,33 @@ const int MAX_INTERFACES = 2;
 uniform int u_num_interfaces;                 // interfaces above the base
 uniform float u_if_roughness[MAX_INTERFACES];
 uniform float u_if_ior[MAX_INTERFACES];      // relative IOR (below / above)
-uniform float u_med_sigma_t[MAX_INTERFACES];
+uniform vec3 u_med_sigma_t[MAX_INTERFACES];    // per channel (a coloured absorbing coat)
 uniform int u_base_type;                      // BASE_CONDUCTOR, BASE_DIFFUSE or BASE_DIELECTRIC (reflection only)
 uniform float u_base_roughness;
 uniform float u_base_ior;
 uniform vec3 u_base_color;                    // conductor r0 or diffuse albedo
+uniform vec3 u_base_f82;                      // conductor: OpenPBR's F82-tint coefficient b (0: Schlick)
 
 //@INCLUDE microfacet.glsl
 
-vec3 fresnel_schlick(float cos_i, vec3 r0) {
-    return r0 + (1.0 - r0) * pow(1.0 - min(abs(cos_i), 1.0), 5.0);
+// OpenPBR's F82-tint conductor Fresnel: Schlick minus b cos (1 - cos)^6 (neural/microfacet.py fresnel_f82).
+vec3 fresnel_f82(float cos_i, vec3 r0, vec3 b) {
+    float c = min(abs(cos_i), 1.0);
+    float m = 1.0 - c;
+    float m5 = m * m * m * m * m;
+    return clamp(r0 + (1.0 - r0) * m5 - b * (c * m5 * m), 0.0, 1.0);
 }
 
-vec3 conductor_brdf(vec3 wi, vec3 wo, float a, vec3 r0) {
+vec3 conductor_brdf(vec3 wi, vec3 wo, float a, vec3 r0, vec3 b) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
     vec3 h;
     float dg = microfacet_reflection(wi, wo, a, h);
-    return fresnel_schlick(dot(wi, h), r0) * dg;
+    return fresnel_f82(dot(wi, h), r0, b) * dg;
 }
 
 vec3 base_brdf(vec3 wi, vec3 wo) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
-    if (u_base_type == BASE_CONDUCTOR) return conductor_brdf(wi, wo, u_base_roughness, u_base_color);
+    if (u_base_type == BASE_CONDUCTOR) return conductor_brdf(wi, wo, u_base_roughness, u_base_color, u_base_f82);
     if (u_base_type == BASE_DIFFUSE) return u_base_color / PI;
     return vec3(dielectric_reflection(wi, wo, u_base_roughness, u_base_ior));
 }
@@ -64,7 +69,7 @@ vec3 brdf(vec3 wi, vec3 wo) {
     for (int k = MAX_INTERFACES - 1; k >= 0; --k) {
         if (k >= u_num_interfaces) continue;
         vec3 a = di[k + 1], b = dout[k + 1];
-        float tau = u_med_sigma_t[k];
+        vec3 tau = u_med_sigma_t[k];
         float path = 1.0 / a.z + 1.0 / b.z;
         float eta = u_if_ior[k];
         float ti = 1.0 - fresnel_dielectric(di[k].z, eta);

@@ -22,7 +22,7 @@ uniform int u_bc_kind[BC_MAX_ATOMS];
 uniform float u_bc_roughness[BC_MAX_ATOMS];
 uniform float u_bc_ior[BC_MAX_ATOMS];      // relative ior below over above (interfaces, dielectric base)
 uniform vec3 u_bc_color[BC_MAX_ATOMS];     // r0 (conductor) or albedo (medium, diffuse)
-uniform float u_bc_sigma_t[BC_MAX_ATOMS];  // optical depth along the normal (medium)
+uniform vec3 u_bc_sigma_t[BC_MAX_ATOMS];   // optical depth along the normal per channel (medium)
 uniform int u_bc_slab[BC_MAX_ATOMS];       // 1: the atom is a diffuse slab (a scattering medium, the diffuse base)
 uniform vec3 u_bc_r_above[BC_MAX_ATOMS];   // a slab's hemispherical reflectance of the stack above it
 uniform vec3 u_bc_r_below[BC_MAX_ATOMS];   // ... of it and the stack below it
@@ -136,7 +136,7 @@ BcStats bc_atom_stats(int k, float cti) {
         s.j12 = ctt * eta / max(cti, 1e-8);
         s.j21 = cti / (ctt * eta);
     } else if (kind == BC_MEDIUM) {  // Beer-Lambert along the mean
-        s.T12 = s.T21 = vec3(exp(-u_bc_sigma_t[k] / max(cti, 1e-8)));
+        s.T12 = s.T21 = exp(-u_bc_sigma_t[k] / max(cti, 1e-8));
     } else {  // a reflecting base
         s.R12 = kind == BC_CONDUCTOR ? bc_conductor_albedo(cti, a, u_bc_color[k]) : vec3(bc_dielectric(cti, a, eta).x);
         s.s_r12 = s.s_r21 = bc_r2v(a);

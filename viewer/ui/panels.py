@@ -11,19 +11,18 @@ light, camera and field of view, exposure in EV, tone mapping) and Files
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 from imgui_bundle import imgui
 
 from nbrdf.imaging.env_presets import ENV_PRESETS
+from nbrdf.neural.layer_kinds import KINDS
 from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, View
 from nbrdf.viewer.scene.camera import FOV_RANGE
-from nbrdf.viewer.session.edits import presets
 from nbrdf.viewer.session.lookdev import LookDev
-from nbrdf.viewer.session.stack_editor import BASE_TYPES, COLOUR_KEYS, RANGES
+from nbrdf.viewer.session.stack_editor import BASE_TYPES
+from nbrdf.viewer.ui.material_widgets import DIM, MaterialWidgets
 from nbrdf.viewer.ui.plots import error_bar, flip_bar, polar_plot
-from nbrdf.viewer.ui.preset_browser import PresetBrowser
+from nbrdf.viewer.ui.preset_browser import PresetBrowser, preset_combo
 from nbrdf.viewer.view_settings import Row, rows
 
 COMPARE_LABELS = {CompareMode.OFF: "off", CompareMode.SIDE: "side by side", CompareMode.WIPE: "A/B wipe",
@@ -41,10 +40,10 @@ SIDEBAR_SHARE, SIDEBAR_MIN, SIDEBAR_MAX = 0.24, 240, 360
 #: The widest widget label: widgets leave room for it, so no label is clipped.
 WIDEST_LABEL = "background colour"
 RED = imgui.ImVec4(1.0, 0.35, 0.3, 1.0)
-DIM = imgui.ImVec4(0.7, 0.7, 0.7, 1.0)
 
 
-class Panels:
+
+class Panels(MaterialWidgets):
     """Draws the panels each frame; text fields keep their contents between frames."""
 
     def __init__(self, lookdev: LookDev):
@@ -142,17 +141,15 @@ class Panels:
         ld = self.ld
         if ld.parts:
             self._part_list()
-        names = list(presets())
-        if imgui.begin_combo("preset", "choose..."):
-            for n in names:
-                if imgui.selectable(n, False)[0]:
-                    ld.load_preset(n)
-            imgui.end_combo()
+        preset_combo("preset", "choose...", ld.load_preset)
         self.presets.section()
         progress = ld.texture_progress
         if progress is not None:
             imgui.progress_bar(progress, None, "latent texture")
         imgui.text_wrapped(ld.material.name)
+        self._document_materials()
+        if ld.editor.openpbr is not None:
+            self._openpbr(ld.editor.openpbr)
         layers = ld.layers
         for i, layer in enumerate(list(layers)):
             imgui.push_id(f"layer{i}")
@@ -176,7 +173,10 @@ class Panels:
                     changed, k = imgui.combo("base type", cur, list(BASE_TYPES))
                     if changed and k != cur:
                         ld.set_base_type(BASE_TYPES[k])
-            for key, value in layer.items():
+            # every parameter of the kind, optional ones a file left out at their defaults (a conductor's F82 tint)
+            shown = {**{p.name: KINDS[kind].new_layer()[p.name] for p in KINDS[kind].params if p.optional},
+                     **layer} if kind in KINDS else layer
+            for key, value in shown.items():
                 if key in ("type", "path"):
                     if key == "path":
                         imgui.push_style_color(imgui.Col_.text, DIM)
@@ -202,54 +202,6 @@ class Panels:
             ld.undo()
         elif hit:
             ld.redo()
-
-    def _part_list(self) -> None:
-        """The materials of a multi-material mesh (a glTF file's) with their notes;
-        the selected one is what the editor below edits (a click selects another)."""
-        ld = self.ld
-        imgui.text(f"materials of {Path(ld.mesh).name}")
-        for k, part in enumerate(ld.parts):
-            name = ld.material.name if k == ld.selected else part.material.name
-            clicked = imgui.selectable(f"{k}: {name}##part{k}", k == ld.selected)[0]
-            if clicked and k != ld.selected:
-                ld.select_material(k)
-            imgui.push_style_color(imgui.Col_.text, DIM)
-            for note in part.notes:
-                imgui.text_wrapped(f"  {note}")
-            imgui.pop_style_color()
-        imgui.separator()
-        imgui.text(f"editing material {ld.selected}:")
-
-    def _param(self, i: int, key: str, value) -> None:
-        ld = self.ld
-        lo, hi = RANGES.get(key, (0.0, 1.0))
-        if isinstance(value, dict):  # a texture reference
-            imgui.push_style_color(imgui.Col_.text, DIM)
-            imgui.text_wrapped(f"{key}: {value.get('texture')} [{value.get('channel')}]")
-            imgui.pop_style_color()
-            changed, rng = imgui.drag_float2(f"{key} range", list(value.get("range", [lo, hi])), 0.005, lo, hi)
-            if changed:
-                with ld.coalescing(self._held(f"{i}.{key}.range")):
-                    ld.set_param(i, key, {**value, "range": [float(rng[0]), float(rng[1])]})
-            return
-        if key in COLOUR_KEYS:
-            if isinstance(value, list) and any(isinstance(x, dict) for x in value):
-                imgui.text_colored(DIM, f"{key}: per-channel textures")
-                return
-            rgb = list(value) if isinstance(value, list) else [float(value)] * 3
-            changed, new = imgui.color_edit3(key, rgb)
-            group = self._held(f"{i}.{key}")
-            if changed:
-                self._grouped = True
-                with ld.coalescing(group or f"{i}.{key}.picker"):  # a picker's drag, too
-                    ld.set_param(i, key, [float(x) for x in new])
-            return
-        changed, v = imgui.slider_float(key, float(value), lo, hi,
-                                        "%.3f", imgui.SliderFlags_.logarithmic if key == "roughness" else 0)
-        group = self._held(f"{i}.{key}")
-        if changed:
-            with ld.coalescing(group):
-                ld.set_param(i, key, float(v))
 
     # --- view ---------------------------------------------------------------------------------
     def _view(self) -> None:
@@ -294,13 +246,8 @@ class Panels:
         ld = self.ld
         if not self._header("Interpolation"):
             return
-        names = list(presets())
         other = ld.interp.other["name"] if ld.interp.other else "off"
-        if imgui.begin_combo("blend with", other):
-            for n in names:
-                if imgui.selectable(n, False)[0]:
-                    ld.set_interpolation(n)
-            imgui.end_combo()
+        preset_combo("blend with", other, ld.set_interpolation)
         if ld.interp.other is not None:
             changed, t = imgui.slider_float("weight", ld.interp.t, 0.0, 1.0)
             group = self._held("interp.t")
