@@ -97,3 +97,19 @@ def test_still_frames_get_the_budget_the_rest_of_the_frame_leaves():
     assert p.plan(False).budget_ms == 20.0
     assert Refinement(RefinementSettings(banded=False)).plan(False).budget_ms is None
     assert Refinement(RefinementSettings(adaptive=False)).plan(False).budget_ms is None
+
+
+def test_an_idle_interface_gives_the_view_most_of_the_frame_and_input_takes_it_back():
+    """Hands off for ``idle_after_s``, a still frame's budget rises to ``idle_budget_ms`` less the measured rest
+    of the frame; any input (idle 0) brings the short budget back at once; interactive frames have none."""
+    r = Refinement(RefinementSettings(still_budget_ms=40.0, min_view_ms=20.0, idle_after_s=1.0, idle_budget_ms=150.0))
+    r.plan(changed=False)
+    for _ in range(9):
+        r.done(50.0, accum_ms=25.0)  # 25 ms of panels and swap per still frame
+    short = r.plan(changed=False, idle_s=0.2).budget_ms
+    idle = r.plan(changed=False, idle_s=1.5).budget_ms
+    back = r.plan(changed=False, idle_s=0.0).budget_ms
+    assert short == pytest.approx(20.0) and idle == pytest.approx(125.0) and back == pytest.approx(20.0)
+    assert r.plan(changed=True, idle_s=5.0).budget_ms is None
+    off = Refinement(RefinementSettings(idle_budget_ms=0.0))
+    assert off.plan(changed=False, idle_s=10.0).budget_ms == off.still_budget

@@ -150,6 +150,7 @@ class App:
         self._side = self.lookdev.side_by_side  # framed for two halves (compare side by side)
         self.dragging = False
         self.refine = Refinement()   # each frame's render scale and body (progressive refinement)
+        self._last_input = time.monotonic()  # the last key, click, pointer move or scroll (the idle budget)
         # An edit's CPU work is small tensors (latents, the body table) beside the GL driver's
         # threads: one torch thread (two measured 5-10x slower bakes on a loaded 2-core machine).
         torch.set_num_threads(1)
@@ -186,18 +187,22 @@ class App:
     def _on_key(self, window, key, scancode, action, mods) -> None:
         """Keys go to imgui's queue; the shortcuts are read from it after the panels
         (``_shortcuts``), so a key typed into a text field never reaches the view."""
+        self._last_input = time.monotonic()
         self.gui.keyboard_callback(window, key, scancode, action, mods)
 
     def _on_mouse_button(self, window, button, action, mods) -> None:
+        self._last_input = time.monotonic()
         self.gui.mouse_button_callback(window, button, action, mods)
         self._events.append(("button", button, action == glfw.PRESS) + tuple(self._cursor))
 
     def _on_cursor(self, window, x, y) -> None:
+        self._last_input = time.monotonic()
         imgui.get_io().add_mouse_pos_event(x, y)  # where the event happened (not where the pointer is now)
         self._cursor = (x, y)
         self._events.append(("move", None, None, x, y))
 
     def _on_scroll(self, window, dx, dy) -> None:
+        self._last_input = time.monotonic()
         self.gui.scroll_callback(window, dx, dy)
         self._events.append(("scroll", None, dy) + tuple(self._cursor))
 
@@ -399,7 +404,8 @@ class App:
         to full resolution once it is still; a new scale restarts the accumulation.
         A still frame also gets its accumulation budget (``budget_ms``)."""
         ld = self.lookdev
-        plan = self.refine.plan(changed=ld.restarted, complete=ld.passes > 0)
+        plan = self.refine.plan(changed=ld.restarted, complete=ld.passes > 0,
+                                idle_s=time.monotonic() - self._last_input)
         self.interactive, self.quick, self.budget_ms = plan.interactive, plan.quick, plan.budget_ms
         if plan.restart:
             ld.invalidate()
