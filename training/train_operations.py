@@ -320,15 +320,16 @@ def _train_leaf_f82(cfg: OpsConfig, model: NeuralModel, pool: "_PairPool", g: to
     other encoders, the layering network and the sampler are kept (a tint of 1 leaves every latent as
     it was)."""
     old = model.require("leaf")
-    specs = {**old.specs, F82: leaf_spec(F82)}
+    specs = {**old.specs, F82: old.specs.get(F82, leaf_spec(F82))}
     leaf = LeafEncoders(specs)
-    for name in old.nets:
+    for name in old.nets:  # the bundle's encoders, frozen; its own F82 correction, if any, fine-tuned
         leaf.nets[name].load_state_dict(old.nets[name].state_dict())
-        leaf.nets[name].requires_grad_(False)
+        leaf.nets[name].requires_grad_(name == F82)
     net = leaf.nets[F82]
-    with torch.no_grad():
-        net.net[-1].weight.zero_()
-        net.net[-1].bias.zero_()
+    if F82 not in old.nets:  # a new correction starts at zero: the plain conductor's latent
+        with torch.no_grad():
+            net.net[-1].weight.zero_()
+            net.net[-1].bias.zero_()
     s_ = model.decoder.spec.loss_scale
     gv = torch.Generator().manual_seed(cfg.seed + 1)
 

@@ -199,3 +199,34 @@ def test_relative_loss_scale_follows_each_stack_brightness(bundles):
     assert all(math.isfinite(v) for v in metrics["val_loss"].values())
     with pytest.raises(NbrdfError, match="--relative-scale"):
         train_layering(replace(cfg, out=str(root / "lay_rel_bad"), relative_scale=-0.1), progress=False)
+
+
+def test_the_f82_part_adds_or_fine_tunes_the_correction_and_keeps_the_rest(bundles):
+    """``--part f82`` on a bundle from before the tint adds the correction (plain conductors' latents unchanged,
+    the layering network kept); on a bundle that has one, it fine-tunes that one alone."""
+    from nbrdf.neural.leaf import F82, LEAF_PARAMS, LeafEncoders
+    from nbrdf.neural.model import save_model
+
+    root, _, lay, _ = bundles
+    m = load_model(lay)
+    old = LeafEncoders({k: m.leaf.specs[k] for k in LEAF_PARAMS})
+    for k in LEAF_PARAMS:
+        old.nets[k].load_state_dict(m.leaf.nets[k].state_dict())
+    m.leaf = old
+    save_model(m, root / "no_f82.safetensors", like=lay)
+    out = train_leaf(_f82_config(root / "no_f82.safetensors", root / "f82a"), progress=False)
+    a = load_model(out)
+    assert a.leaf.has_f82 and a.layering is not None
+    assert torch.equal(a.leaf.conductor(0.3, 0.7), old.conductor(0.3, 0.7))  # a tint of 1: the old latent
+    assert not torch.equal(a.leaf.conductor(0.3, 0.7, 0.2), old.conductor(0.3, 0.7))
+    b = load_model(train_leaf(_f82_config(out, root / "f82b"), progress=False))
+    changed = [not torch.equal(p, q) for p, q in zip(a.leaf.nets[F82].parameters(), b.leaf.nets[F82].parameters())]
+    assert any(changed)  # the existing correction is trained further, not frozen
+    for k in LEAF_PARAMS:
+        assert all(torch.equal(p, q) for p, q in zip(a.leaf.nets[k].parameters(), b.leaf.nets[k].parameters()))
+
+
+def _f82_config(decoder, out):
+    from nbrdf.training.train_operations import LeafConfig
+
+    return LeafConfig(decoder=str(decoder), out=str(out), steps=20, batch=8, pairs=32, part="f82")
