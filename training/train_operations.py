@@ -350,8 +350,8 @@ def _train_leaf_f82(cfg: OpsConfig, model: NeuralModel, pool: "_PairPool", g: to
                         lambda _s: loss_of(tinted(cfg.batch, g), *pool.draw(cfg.batch, cfg.pairs, g)),
                         lambda: loss_of(*val).item(), progress, rng=g)
     model.leaf = leaf
-    return _finish("leaf", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
-                                                 "val_loss": history["val"][-1], "part": "f82"})
+    return _finish("leaf_f82", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
+                                                     "val_loss": history["val"][-1]})
 
 
 # --- layering -------------------------------------------------------------------------------
