@@ -348,8 +348,9 @@ def _reject_constant(token: str):
 
 def is_mtlx(path: str | Path) -> bool:
     """Whether ``path`` names a MaterialX document (``FILE.mtlx``, or ``FILE.mtlx#Material`` for one of several)."""
-    head, sep, _ = str(path).rpartition("#")
-    return (head if sep and head.lower().endswith(".mtlx") else str(path)).lower().endswith(".mtlx")
+    s = str(path).lower()
+    head, sep, _ = s.rpartition("#")
+    return s.endswith(".mtlx") or (bool(sep) and head.endswith(".mtlx"))
 
 
 def is_material_file(path: str | Path) -> bool:

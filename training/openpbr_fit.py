@@ -91,9 +91,7 @@ def structural_guess(m: Material) -> OpenPbr:
     """OpenPBR inputs read off the stack's shape: its base (a conductor: a metal; a diffuse base, with the
     interface just above it as the specular layer: a dielectric base), its top interface over anything else
     as the coat, and the top slab's normal two-way transmittance as the coat's colour."""
-    def rgb(v) -> tuple[float, float, float]:
-        return Material.rgb(v)
-
+    rgb = Material.rgb
     base, ifaces = m.base, m.interfaces
     p = OpenPbr(coat_weight=0.0)
     if isinstance(base, Conductor):

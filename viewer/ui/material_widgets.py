@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 from pathlib import Path
+from typing import Callable
 
 from imgui_bundle import imgui
 
@@ -28,12 +29,8 @@ class MaterialWidgets:
 
     ld: LookDev
     _grouped: bool
-
-    def _header(self, label: str, default_open: bool = False) -> bool:
-        raise NotImplementedError
-
-    def _held(self, group: str) -> str | None:
-        raise NotImplementedError
+    _header: Callable[..., bool]
+    _held: Callable[[str], str | None]
 
     def _part_list(self) -> None:
         """The materials of a multi-material mesh (a glTF file's) with their notes;

@@ -174,8 +174,9 @@ class Panels(MaterialWidgets):
                     if changed and k != cur:
                         ld.set_base_type(BASE_TYPES[k])
             # every parameter of the kind, optional ones a file left out at their defaults (a conductor's F82 tint)
-            shown = {**{p.name: KINDS[kind].new_layer()[p.name] for p in KINDS[kind].params if p.optional},
-                     **layer} if kind in KINDS else layer
+            defaults = KINDS[kind].new_layer() if kind in KINDS else {}
+            shown = {**{p.name: defaults[p.name] for p in KINDS[kind].params if p.optional}, **layer} \
+                if kind in KINDS else layer
             for key, value in shown.items():
                 if key in ("type", "path"):
                     if key == "path":
