@@ -52,7 +52,7 @@ class OperationsReport:
     """show every N-th stack in the lobe figure"""
     set: str = "heldout"
     """materials scored: heldout (the paper-distribution held-out set), lookdev (the look-development set,
-    training/sets/lookdev) or depth (stacks of 2, 3 and 4 layers: how the error grows with depth); keep one
+    training/sets/lookdev) or depth (stacks of 2 to 6 layers: how the error grows with depth); keep one
     --refs folder per set"""
     per_depth: int = 8
     """depth: stacks of each depth"""
@@ -275,6 +275,66 @@ def cmd_report_gallery(ns: argparse.Namespace) -> int:
     return 0
 
 
+@dataclass
+class FurnaceReport:
+    """``nbrdf report furnace``: directional albedo (per channel, 8 incidences) and reciprocity of the neural and
+    refined paths against the walk, on 20 fixed held-out stacks (10 lossless, 10 absorbing, 2 to 4 layers).
+    Usage: nbrdf report furnace --out runs/furnace [--model BUNDLE] [--ref-max-paths 262144 --ref-target 0.002];
+    writes furnace.json (every albedo with its standard error, the summary), furnace.md and furnace.png."""
+
+    out: str
+    """folder for furnace.json, furnace.md and furnace.png"""
+    model: str | None = None
+    """bundle (default: the shipped weights)"""
+    methods: str = "neural,refined"
+    """comma-separated methods scored against the walk: neural (the full neural path), refined (its code refined
+    within --budget seconds)"""
+    per_class: int = 10
+    """lossless and absorbing stacks each (the set is fixed; fewer: its first ones)"""
+    samples: int = 1024
+    """Sobol points per replicate of a neural or refined albedo"""
+    replicates: int = 8
+    """independent scrambles of a neural or refined albedo (its standard error comes from their spread)"""
+    ref_paths: int = 16384
+    """walk paths per incidence in the reference's first round (rounds double the total)"""
+    ref_max_paths: int = 262144
+    """walk paths per incidence at most"""
+    ref_target: float = 0.002
+    """relative standard error the reference albedo is refined to (or --ref-max-paths)"""
+    budget: float = 3.0
+    """seconds of refinement per stack (refined)"""
+    pairs: int = 64
+    """random (wi, wo) pairs of the reciprocity figure, per stack"""
+    pair_spp: int = 256
+    """walk paths per pair and order of the reference's reciprocity (its noise level)"""
+    seed: int = 0
+    """seed of the estimators (the stacks have their own fixed seed)"""
+    cache: str = ""
+    """folder keeping the references between runs (bundles then compare on the same references; empty: none)"""
+
+
+def cmd_report_furnace(ns: argparse.Namespace) -> int:
+    from nbrdf.training import furnace_report  # late: torch and the walk, --help needs neither
+
+    c: FurnaceReport = build(FurnaceReport, ns)
+    if min(c.per_class, c.samples, c.pairs, c.pair_spp) < 1 or c.replicates < 2 or c.ref_paths < 2 \
+            or c.ref_max_paths < c.ref_paths or not (c.ref_target > 0 and c.budget > 0):
+        raise NbrdfError("report furnace: --per-class, --samples, --pairs and --pair-spp must be at least 1, "
+                         "--replicates at least 2, --ref-paths at least 2, --ref-max-paths at least --ref-paths, "
+                         "--ref-target and --budget positive")
+    methods = tuple(dict.fromkeys(method_words(c.methods, furnace_report.FURNACE_METHODS)))
+    if not methods:
+        raise NbrdfError(f"--methods: {c.methods!r} names no method")
+    cfg = furnace_report.FurnaceConfig(out=Path(c.out), methods=methods, model=model_or_default(c.model),
+                                       per_class=c.per_class, samples=c.samples, replicates=c.replicates,
+                                       ref_paths=c.ref_paths, ref_max_paths=c.ref_max_paths, ref_target=c.ref_target,
+                                       budget=c.budget, pairs=c.pairs, pair_spp=c.pair_spp, seed=c.seed,
+                                       cache=Path(c.cache) if c.cache else None)
+    result = furnace_report.run_furnace_report(cfg, log=lambda s: print(s, file=sys.stderr))
+    print(furnace_report.table(result))
+    return 0
+
+
 #: ``nbrdf report`` subcommands: name -> (config, command, one-line help).
 @dataclass
 class ScenesReport:
@@ -380,6 +440,8 @@ REPORTS = {
                 "every preset rendered with the previewer's defaults, one image grid"),
     "scenes": (ScenesReport, cmd_report_scenes,
                "neural vs Monte Carlo material at equal time in Mitsuba 3 scenes (the paper's Table 3)"),
+    "furnace": (FurnaceReport, cmd_report_furnace,
+                "directional albedo and reciprocity of the neural and refined paths against the walk"),
     "mis": (MisReport, cmd_report_mis, "light vs BSDF sampling vs MIS for neural materials in Mitsuba 3 (a figure)"),
 }
 

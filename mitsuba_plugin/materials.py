@@ -20,6 +20,7 @@ from nbrdf.mitsuba.kernel import Body, Coat, CodeKernel, DecoderKernel, Proxy, T
 from nbrdf.mitsuba.normal_map import NormalMapKernel
 from nbrdf.mitsuba.param_table import param_table_kernel
 from nbrdf.mitsuba.textures import LatentTextureKernel, ParamMaps, sharpest_top_roughness
+from nbrdf.neural.anisotropy import require_isotropic
 from nbrdf.neural.body_table import TableSize, bake_body
 from nbrdf.neural.coat import IOR_RANGE, NO_COAT, ROUGHNESS_RANGE
 from nbrdf.neural.errors import NbrdfError
@@ -54,6 +55,11 @@ def table_body(decoder, code, size: TableSize = BODY_TABLE_SIZE) -> TableBody:
     return TableBody(bake_body(decoder, code, size).numpy())
 
 
+#: How the plugin names itself when it refuses an anisotropic material (Mitsuba's shading frame is not
+#: SPEC section 10's tangent frame yet).
+PLUGIN_PATH = "the Mitsuba plugin"
+
+
 def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 0.0,
                 body: str = Body.DECODER) -> CodeKernel:
     """The Dr.Jit kernel of a material JSON or code file (``neural.material_code``);
@@ -68,6 +74,7 @@ def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 
     try:
         if is_material_file(material):
             m = load_material(material)
+            require_isotropic(m, PLUGIN_PATH)
             if m.is_textured:
                 model = load_model(weights) if weights else default_model()
                 if body == Body.TABLE:
@@ -127,6 +134,7 @@ class ReferenceWalk:
         """Loads the material (``PluginError``: one line, unusable)."""
         try:
             self.material = load_material(path)
+            require_isotropic(self.material, PLUGIN_PATH)
             if self.material.is_textured:
                 self.maps, self.sampler = _texture_reference(self.material)
             else:

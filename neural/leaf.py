@@ -18,13 +18,14 @@ import torch
 from torch import nn
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, KINDS
+from nbrdf.neural.layer_kinds import ANISOTROPY, CONDUCTOR, DIELECTRIC, DIFFUSE, KINDS
 from nbrdf.neural.nets import MLP, MLPSpec
 
 Tensor = torch.Tensor
 
-#: Leaf type -> parameter names, in input order.
-LEAF_PARAMS: dict[str, tuple[str, ...]] = {k: tuple(p.name for p in KINDS[k].params)
+#: Leaf type -> parameter names, in input order (anisotropy, SPEC section 10, has no input yet: an
+#: anisotropic material is refused before it reaches the encoders, ``neural.model``).
+LEAF_PARAMS: dict[str, tuple[str, ...]] = {k: tuple(p.name for p in KINDS[k].params if p.name != ANISOTROPY)
                                            for k in (CONDUCTOR, DIELECTRIC, DIFFUSE)}
 #: The conductor's F82-tint correction network (its output times 1 - tint is added to the conductor's latent).
 F82 = "conductor_f82"

@@ -29,6 +29,7 @@ from nbrdf.neural.layer_kinds import (
     MEASURED,
     MEDIUM,
     RANGES,
+    ROTATION_RANGE,
 )
 
 
@@ -60,6 +61,8 @@ PerChannel = Union[float, tuple[Union[float, TextureRef], ...], TextureRef]
 class Dielectric:
     roughness: Scalar
     ior: Scalar
+    anisotropy: Scalar = 0.0
+    """SPEC section 10's a in [0, 0.95]: alpha_x, alpha_y from roughness; 0 = isotropic"""
     type: str = field(default=DIELECTRIC, init=False)
 
 
@@ -76,6 +79,8 @@ class Conductor:
     r0: PerChannel
     f82_tint: PerChannel = 1.0
     """OpenPBR's F82-tint edge colour; 1 = Schlick's Fresnel"""
+    anisotropy: Scalar = 0.0
+    """SPEC section 10's a in [0, 0.95]: alpha_x, alpha_y from roughness; 0 = isotropic"""
     type: str = field(default=CONDUCTOR, init=False)
 
 
@@ -124,6 +129,9 @@ class Material:
     openpbr: tuple[tuple[str, Any], ...] | None = None
     """the OpenPBR Surface inputs this stack was made from (name, number or (r, g, b)), in the file's
     order; None for a material made here (SPEC section 11: round trips and editing in OpenPBR's terms)"""
+    anisotropy_rotation: float = 0.0
+    """degrees the tangent turns about the normal, counter-clockwise seen from above, shared by every
+    interface (SPEC section 10); written only where it is not 0"""
 
     @property
     def base(self) -> Layer:
@@ -297,7 +305,7 @@ def parse_material(data: object, base_dir: Path | str = ".", source: str = "mate
     if not isinstance(data, dict):
         raise NbrdfError(f"{source}: expected a JSON object at the top level, got {_kind(data)}")
     for k in data:
-        if k not in ("format", "name", "layers", "normal_map", "openpbr"):
+        if k not in ("format", "name", "layers", "normal_map", "openpbr", "anisotropy_rotation"):
             raise NbrdfError(f"{k}: unknown key")
     if "format" not in data:
         raise NbrdfError(f'{source}: missing key "format" (expected "{FORMAT}")')
@@ -320,7 +328,10 @@ def parse_material(data: object, base_dir: Path | str = ".", source: str = "mate
         if not (base_dir / normal).is_file():
             raise NbrdfError(f"normal_map: {(base_dir / normal).resolve()} not found")
     record = _openpbr_record(data["openpbr"]) if "openpbr" in data else None
-    return Material(name=name, layers=tuple(layers), normal_map=normal, base_dir=base_dir.resolve(), openpbr=record)
+    rotation = data.get("anisotropy_rotation", 0.0)
+    _number(rotation, "anisotropy_rotation", *ROTATION_RANGE)
+    return Material(name=name, layers=tuple(layers), normal_map=normal, base_dir=base_dir.resolve(), openpbr=record,
+                    anisotropy_rotation=rotation)
 
 
 def _openpbr_record(v: Any) -> tuple[tuple[str, Any], ...]:
@@ -428,6 +439,8 @@ def material_to_dict(m: Material, new_dir: Path | None = None) -> dict:
     out: dict[str, Any] = {"format": FORMAT, "name": m.name, "layers": layers}
     if m.openpbr is not None:
         out["openpbr"] = {k: list(v) if isinstance(v, tuple) else v for k, v in m.openpbr}
+    if m.anisotropy_rotation != 0:
+        out["anisotropy_rotation"] = m.anisotropy_rotation
     if m.normal_map is not None:
         out["normal_map"] = m.normal_map if new_dir is None else _rel(m.base_dir / m.normal_map, new_dir)
     return out

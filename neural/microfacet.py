@@ -2,7 +2,10 @@
 
 Every function takes directions as (..., 3) tensors in the local frame and
 roughness ``alpha`` (the GGX alpha itself) broadcastable to the batch. The
-microfacet normal ``m`` always lies in the upper hemisphere.
+microfacet normal ``m`` always lies in the upper hemisphere. ``alpha_y``
+(None: isotropic, ``alpha`` on both axes, the isotropic formulas exactly)
+makes them the anisotropic GGX of Heitz 2014 / 2018 with ``alpha`` along x
+and ``alpha_y`` along y (SPEC section 10; the frame is the caller's).
 """
 from __future__ import annotations
 
@@ -13,8 +16,13 @@ import torch
 Tensor = torch.Tensor
 
 
-def ggx_d(m: Tensor, alpha: Tensor) -> Tensor:
-    """D(m) = 1 / (pi a^2 cos^4 t (1 + tan^2 t / a^2)^2), 0 below the horizon."""
+def ggx_d(m: Tensor, alpha: Tensor, alpha_y: Tensor | None = None) -> Tensor:
+    """D(m) = 1 / (pi a^2 cos^4 t (1 + tan^2 t / a^2)^2), 0 below the horizon; with ``alpha_y``
+    1 / (pi ax ay (mx^2 / ax^2 + my^2 / ay^2 + mz^2)^2)."""
+    if alpha_y is not None:
+        s = m[..., 0] ** 2 / (alpha * alpha) + m[..., 1] ** 2 / (alpha_y * alpha_y) + m[..., 2] ** 2
+        d = 1.0 / (math.pi * alpha * alpha_y * s * s)
+        return torch.where(m[..., 2] > 0, d, torch.zeros_like(d))
     sin2 = m[..., 0] ** 2 + m[..., 1] ** 2
     cos2 = m[..., 2] ** 2
     a2 = alpha * alpha
@@ -23,30 +31,36 @@ def ggx_d(m: Tensor, alpha: Tensor) -> Tensor:
     return torch.where(m[..., 2] > 0, d, torch.zeros_like(d))
 
 
-def smith_g1(w: Tensor, m: Tensor, alpha: Tensor) -> Tensor:
-    """G1(w) = 2 / (1 + sqrt(1 + a^2 tan^2 t_w)); 0 when w and m disagree in side."""
+def _a2_tan2(w: Tensor, alpha: Tensor, alpha_y: Tensor | None) -> Tensor:
+    """alpha_w^2 tan^2 t_w, the argument of Smith's Lambda (alpha_w: the roughness along w's azimuth)."""
     z2 = (w[..., 2] ** 2).clamp_min(1e-30)
+    if alpha_y is not None:
+        return (alpha * alpha * w[..., 0] ** 2 + alpha_y * alpha_y * w[..., 1] ** 2) / z2
     tan2 = (w[..., 0] ** 2 + w[..., 1] ** 2) / z2
-    g = 2.0 / (1.0 + torch.sqrt(1.0 + alpha * alpha * tan2))
+    return alpha * alpha * tan2
+
+
+def smith_g1(w: Tensor, m: Tensor, alpha: Tensor, alpha_y: Tensor | None = None) -> Tensor:
+    """G1(w) = 2 / (1 + sqrt(1 + a^2 tan^2 t_w)); 0 when w and m disagree in side."""
+    g = 2.0 / (1.0 + torch.sqrt(1.0 + _a2_tan2(w, alpha, alpha_y)))
     side = (w * m).sum(-1) * w[..., 2] > 0
     return torch.where(side, g, torch.zeros_like(g))
 
 
-def smith_g1_dir(w: Tensor, alpha: Tensor) -> Tensor:
+def smith_g1_dir(w: Tensor, alpha: Tensor, alpha_y: Tensor | None = None) -> Tensor:
     """G1 of a direction alone (no side test): the visible fraction toward w."""
-    z2 = (w[..., 2] ** 2).clamp_min(1e-30)
-    tan2 = (w[..., 0] ** 2 + w[..., 1] ** 2) / z2
-    return 2.0 / (1.0 + torch.sqrt(1.0 + alpha * alpha * tan2))
+    return 2.0 / (1.0 + torch.sqrt(1.0 + _a2_tan2(w, alpha, alpha_y)))
 
 
-def sample_vndf(w: Tensor, alpha: Tensor, u1: Tensor, u2: Tensor) -> Tensor:
+def sample_vndf(w: Tensor, alpha: Tensor, u1: Tensor, u2: Tensor, alpha_y: Tensor | None = None) -> Tensor:
     """A normal m drawn from the distribution of normals visible from w
     (Heitz 2018). w may lie in either hemisphere: it is mirrored to the upper
     one, which leaves the visible-normal distribution of the upper-hemisphere
     microsurface unchanged."""
     sgn = torch.where(w[..., 2] < 0, -1.0, 1.0).to(w.dtype)
     wx, wy, wz = w[..., 0] * sgn, w[..., 1] * sgn, w[..., 2] * sgn
-    vx, vy, vz = alpha * wx, alpha * wy, wz
+    ay = alpha if alpha_y is None else alpha_y  # the stretch: (ax wx, ay wy, wz), unstretched by (ax, ay, 1)
+    vx, vy, vz = alpha * wx, ay * wy, wz
     inv = torch.rsqrt((vx * vx + vy * vy + vz * vz).clamp_min(1e-30))
     vx, vy, vz = vx * inv, vy * inv, vz * inv
     lensq = vx * vx + vy * vy
@@ -68,18 +82,18 @@ def sample_vndf(w: Tensor, alpha: Tensor, u1: Tensor, u2: Tensor) -> Tensor:
     nx = p1 * t1x + p2 * t2x + p3 * vx
     ny = p1 * t1y + p2 * t2y + p3 * vy
     nz = p2 * t2z + p3 * vz
-    m = torch.stack([alpha * nx, alpha * ny, nz.clamp_min(1e-12)], dim=-1)
+    m = torch.stack([alpha * nx, ay * ny, nz.clamp_min(1e-12)], dim=-1)
     return m / m.norm(dim=-1, keepdim=True)
 
 
-def vndf_pdf(w: Tensor, m: Tensor, alpha: Tensor) -> Tensor:
+def vndf_pdf(w: Tensor, m: Tensor, alpha: Tensor, alpha_y: Tensor | None = None) -> Tensor:
     """Density of ``sample_vndf(w)`` returning m: G1(w) |w.m| D(m) / |w.z|,
     with w mirrored to the upper hemisphere as the sampler does."""
     sgn = torch.where(w[..., 2] < 0, -1.0, 1.0).to(w.dtype)
     wu = w * sgn[..., None]
     wm = (wu * m).sum(-1)
-    g1 = smith_g1_dir(wu, alpha)
-    pdf = g1 * wm.clamp_min(0.0) * ggx_d(m, alpha) / wu[..., 2].abs().clamp_min(1e-30)
+    g1 = smith_g1_dir(wu, alpha, alpha_y)
+    pdf = g1 * wm.clamp_min(0.0) * ggx_d(m, alpha, alpha_y) / wu[..., 2].abs().clamp_min(1e-30)
     return torch.where(wm > 0, pdf, torch.zeros_like(pdf))
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import torch
 
+from nbrdf.neural.anisotropy import require_isotropic
 from nbrdf.neural.coat import with_coat
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bundle, save_decoder
 from nbrdf.neural.errors import NbrdfError
@@ -31,6 +32,8 @@ from nbrdf.neural.stack import uniform_values as stack_uniform_values
 Tensor = torch.Tensor
 OPS_FORMAT = "nbrdf-operations/2"  # /2: codes under the coat split (neural.coat)
 PARTS = ("leaf", "layering", "sampler")
+#: How the neural path names itself when it refuses an anisotropic material (issue 39: retrained later).
+NEURAL_PATH = "the neural leaf encoders and layering network"
 
 
 @dataclass
@@ -63,6 +66,7 @@ class NeuralModel:
         """(P, 3, 34) codes of a material whose parameters ``values`` turns
         into (P, 3) tensors (P = 1 for a uniform material, texels for a
         textured one): ``layered_latents`` of its stack."""
+        require_isotropic(material, NEURAL_PATH)
         if isinstance(material.base, Measured):
             raise NbrdfError(f"layers[{len(material.layers) - 1}]: a measured base has no leaf encoder; project it "
                              "first (`nbrdf project --merl FILE --out Z.safetensors`) and use it as a latent base")
@@ -92,6 +96,8 @@ def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, sta
     C, 34)), then the layering network over each interface and its medium,
     bottom up. Differentiable in both networks; the one place leaves meet
     layering."""
+    if stack.is_anisotropic:
+        raise NbrdfError(f"anisotropy is not yet supported by {NEURAL_PATH}")
     n, C = stack.n, stack.channels
     chan = lambda t: t[:, None].expand(n, C).reshape(-1)  # shared parameter, per channel
     if z_base is not None:

@@ -27,18 +27,31 @@ from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Ma
 
 Tensor = torch.Tensor
 
-#: The data sets' stack classes (SPEC section 9), in the order of their class index.
-CLASSES = (CONDUCTOR, DIELECTRIC, "two_layer", "three_layer", "diffuse_base", "three_layer_diffuse")
+#: The data sets' stack classes (SPEC section 9), in the order of their class index; the paper's six,
+#: then the deep stacks (3 and 4 coats over a conductor) that train the recursion past three layers (issue 40).
+CLASSES = (CONDUCTOR, DIELECTRIC, "two_layer", "three_layer", "diffuse_base", "three_layer_diffuse",
+           "four_layer", "five_layer")
+#: The paper's classes (the sampler's and the decoder's mixtures draw from these).
+PAPER_CLASSES = CLASSES[:6]
 #: Classes whose base is a Lambertian (base_value = its albedo); the others end in a conductor.
 DIFFUSE_BASED = ("diffuse_base", "three_layer_diffuse")
 THREE_LAYERED = ("three_layer", "three_layer_diffuse")
+DEEP = ("four_layer", "five_layer")
+#: Interfaces (each over its medium slab) above the base, per stack class.
+COATS = {"two_layer": 1, "three_layer": 2, "diffuse_base": 1, "three_layer_diffuse": 2, "four_layer": 3,
+         "five_layer": 4}
 
-#: The flat single-channel parameter vector of the data sets' files; unused columns hold 0.
+#: The flat single-channel parameter vector of the data sets' files; unused columns hold 0. The first 11
+#: are the paper's classes' (files written before the deep classes have only those: ``pad_params``).
 PARAM_NAMES = ("class", "top_roughness", "top_ior", "albedo_1", "sigma_t_1", "mid_roughness", "mid_ior",
-               "albedo_2", "sigma_t_2", "base_roughness", "base_value")
+               "albedo_2", "sigma_t_2", "base_roughness", "base_value",
+               "roughness_3", "ior_3", "albedo_3", "sigma_t_3", "roughness_4", "ior_4", "albedo_4", "sigma_t_4")
 P = {n: i for i, n in enumerate(PARAM_NAMES)}
-_INTERFACE_COLUMNS = (("top_roughness", "top_ior", "albedo_1", "sigma_t_1"),
-                      ("mid_roughness", "mid_ior", "albedo_2", "sigma_t_2"))
+PAPER_WIDTH = 11
+INTERFACE_COLUMNS = (("top_roughness", "top_ior", "albedo_1", "sigma_t_1"),
+                     ("mid_roughness", "mid_ior", "albedo_2", "sigma_t_2"),
+                     ("roughness_3", "ior_3", "albedo_3", "sigma_t_3"),
+                     ("roughness_4", "ior_4", "albedo_4", "sigma_t_4"))
 
 #: values(parameter, place) -> (P, 3) tensor: how a parameter becomes numbers
 #: (one row for a uniform parameter, one per texel for a texture-mapped one).
@@ -52,7 +65,9 @@ class Stack:
     ``albedo``, ``sigma_t`` (N, L, C); ``base_roughness`` (N,); ``base_r0``,
     ``base_f82`` (a conductor's F82 tint) and ``base_albedo`` (N, C); ``base_ior`` (N,). Base parameters a base kind
     does not have are None; a latent or measured base keeps its file in
-    ``base_path``."""
+    ``base_path``. Anisotropy (SPEC section 10): ``anisotropy`` (N, L), ``base_anisotropy`` (N,) of a
+    conductor or dielectric base, ``rotation`` (N,) in degrees; ``material_stack`` fills them (zeros when
+    isotropic), None (stacks made elsewhere) reads as isotropic."""
 
     roughness: Tensor
     ior: Tensor
@@ -65,6 +80,17 @@ class Stack:
     base_ior: Tensor | None = None
     base_albedo: Tensor | None = None
     base_path: Path | None = None
+    anisotropy: Tensor | None = None
+    """(N, L) each interface's anisotropy a (None: all 0)"""
+    base_anisotropy: Tensor | None = None
+    """(N,) a conductor or dielectric base's anisotropy (None: 0, or a base kind without one)"""
+    rotation: Tensor | None = None
+    """(N,) the material's anisotropy_rotation in degrees, shared by every interface (None: 0)"""
+
+    @property
+    def is_anisotropic(self) -> bool:
+        """Whether any interface or the base has a non-zero anisotropy (the rotation alone changes nothing)."""
+        return any(t is not None and bool((t != 0).any()) for t in (self.anisotropy, self.base_anisotropy))
 
     @property
     def n(self) -> int:
@@ -160,13 +186,15 @@ def material_stack(material: Material, values: ParamValues | None = None,
     if isinstance(base, Conductor):
         kw = dict(base_roughness=values(base.roughness, f"{place}.roughness")[:, 0].to(dtype),
                   base_r0=values(base.r0, f"{place}.r0").to(dtype),
-                  base_f82=values(base.f82_tint, f"{place}.f82_tint").to(dtype))
+                  base_f82=values(base.f82_tint, f"{place}.f82_tint").to(dtype),
+                  base_anisotropy=values(base.anisotropy, f"{place}.anisotropy")[:, 0].to(dtype))
     elif isinstance(base, Diffuse):
         kw = dict(base_roughness=torch.full((1,), 0.5, dtype=dtype),
                   base_albedo=values(base.albedo, f"{place}.albedo").to(dtype))
     elif isinstance(base, Dielectric):
         kw = dict(base_roughness=values(base.roughness, f"{place}.roughness")[:, 0].to(dtype),
-                  base_ior=values(base.ior, f"{place}.ior")[:, 0].to(dtype))
+                  base_ior=values(base.ior, f"{place}.ior")[:, 0].to(dtype),
+                  base_anisotropy=values(base.anisotropy, f"{place}.anisotropy")[:, 0].to(dtype))
     elif isinstance(base, (LatentBase, Measured)):
         kw = dict(base_path=base.resolved)
     elif isinstance(base, Medium):  # the parser forbids it; guard all the same
@@ -176,11 +204,12 @@ def material_stack(material: Material, values: ParamValues | None = None,
     kind = base.type
     interfaces = material.interfaces
     places = [i for i, layer in enumerate(material.layers) if isinstance(layer, Dielectric)][: len(interfaces)]
-    cols: dict[str, list[Tensor]] = {"roughness": [], "ior": [], "albedo": [], "sigma_t": []}
+    cols: dict[str, list[Tensor]] = {"roughness": [], "ior": [], "albedo": [], "sigma_t": [], "anisotropy": []}
     zero = torch.zeros(1, 3, dtype=dtype)
     for (iface, med), i in reversed(list(zip(interfaces, places))):
         cols["roughness"].append(values(iface.roughness, f"layers[{i}].roughness")[:, 0].to(dtype))
         cols["ior"].append(values(iface.ior, f"layers[{i}].ior")[:, 0].to(dtype))
+        cols["anisotropy"].append(values(iface.anisotropy, f"layers[{i}].anisotropy")[:, 0].to(dtype))
         if med is not None:
             cols["albedo"].append(values(med.albedo, f"layers[{i + 1}].albedo").to(dtype))
             cols["sigma_t"].append(values(med.sigma_t, f"layers[{i + 1}].sigma_t").to(dtype))
@@ -197,6 +226,8 @@ def material_stack(material: Material, values: ParamValues | None = None,
         ior=torch.stack([grow(t) for t in cols["ior"]], 1) if L else torch.zeros(n, 0, dtype=dtype),
         albedo=torch.stack([grow(t) for t in cols["albedo"]], 1) if L else torch.zeros(n, 0, 3, dtype=dtype),
         sigma_t=torch.stack([grow(t) for t in cols["sigma_t"]], 1) if L else torch.zeros(n, 0, 3, dtype=dtype),
+        anisotropy=torch.stack([grow(t) for t in cols["anisotropy"]], 1) if L else torch.zeros(n, 0, dtype=dtype),
+        rotation=torch.full((n,), float(material.anisotropy_rotation), dtype=dtype),
         base=kind, **{k: grow(v) if isinstance(v, Tensor) else v for k, v in kw.items()})
 
 
@@ -212,10 +243,18 @@ def params_coats(params: Tensor) -> Tensor:
     return torch.where(bare[:, None], torch.tensor(NO_COAT, dtype=c.dtype), c)
 
 
+def pad_params(params: Tensor) -> Tensor:
+    """Parameter vectors of a file written before the deep classes (K, 11), zero-padded to today's width."""
+    params = torch.as_tensor(params)
+    if params.dim() == 2 and params.shape[1] == PAPER_WIDTH:
+        return torch.cat([params, params.new_zeros(params.shape[0], len(PARAM_NAMES) - PAPER_WIDTH)], 1)
+    return params
+
+
 def params_to_stack(params: Tensor) -> Stack:
-    """Decodes K single-channel parameter vectors (K, 11) of ONE class into
+    """Decodes K single-channel parameter vectors (K, 19; the paper's 11 are padded) of ONE class into
     a stack (C = 1), float64."""
-    params = torch.as_tensor(params).double()
+    params = pad_params(params).double()
     if params.dim() != 2 or params.shape[1] != len(PARAM_NAMES):
         raise NbrdfError(f"stack parameters must be (K, {len(PARAM_NAMES)}), got {tuple(params.shape)}")
     codes = params[:, P["class"]].round().long().unique()
@@ -231,7 +270,7 @@ def params_to_stack(params: Tensor) -> Stack:
                      base_r0=col("base_value")[:, None], base_f82=torch.ones_like(col("base_value")[:, None]))
     if cls == DIELECTRIC:
         return Stack(**empty, base=DIELECTRIC, base_roughness=col("top_roughness"), base_ior=col("top_ior"))
-    used = _INTERFACE_COLUMNS[: 2 if cls in THREE_LAYERED else 1]
+    used = INTERFACE_COLUMNS[: COATS[cls]]
     st = lambda j: torch.stack([col(c[j]) for c in used], -1)
     kw: dict[str, Any] = dict(roughness=st(0), ior=st(1), albedo=st(2)[..., None], sigma_t=st(3)[..., None],
               base_roughness=col("base_roughness"))
@@ -246,15 +285,15 @@ def stack_class(stack: Stack) -> str:
     L = stack.layers
     if L == 0 and stack.base in (CONDUCTOR, DIELECTRIC):
         return stack.base
-    if stack.base == CONDUCTOR and L in (1, 2):
-        return ("two_layer", "three_layer")[L - 1]
+    if stack.base == CONDUCTOR and 1 <= L <= 4:
+        return ("two_layer", "three_layer", "four_layer", "five_layer")[L - 1]
     if stack.base == DIFFUSE and L in (1, 2):
         return ("diffuse_base", "three_layer_diffuse")[L - 1]
     raise NbrdfError(f"a stack of {L} interface(s) over a {stack.base} base is none of the data-set classes")
 
 
 def stack_to_params(stack: Stack) -> Tensor:
-    """Encodes single-channel stacks (C = 1) as parameter vectors (N, 11), float64."""
+    """Encodes single-channel stacks (C = 1) as parameter vectors (N, 19), float64."""
     if stack.channels != 1:
         raise NbrdfError(f"the parameter vector holds one colour channel; the stack has {stack.channels}")
     cls = stack_class(stack)
@@ -263,7 +302,7 @@ def stack_to_params(stack: Stack) -> Tensor:
     if cls == DIELECTRIC:
         p[:, P["top_roughness"]], p[:, P["top_ior"]] = stack.base_param("base_roughness"), stack.base_param("base_ior")
         return p
-    for j, names in enumerate(_INTERFACE_COLUMNS[: stack.layers]):
+    for j, names in enumerate(INTERFACE_COLUMNS[: stack.layers]):
         for name, t in zip(names, (stack.roughness[:, j], stack.ior[:, j], stack.albedo[:, j, 0],
                                       stack.sigma_t[:, j, 0])):
             p[:, P[name]] = t

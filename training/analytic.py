@@ -10,6 +10,11 @@ them. All follow the ``neural.brdf.BRDF`` interface:
 - ``sample(w, u)``: given ``w`` in the role of ``wi`` draws ``wo`` by
   visible-normal sampling and returns it with ``f(w, wo)`` and its pdf;
 - ``pdf(w, w_other)``: the solid-angle density of that sampler.
+
+The GGX interfaces take SPEC section 10's ``anisotropy`` and the material's
+``rotation`` (degrees): the anisotropic D, masking and visible-normal
+sampling in the rotated tangent frame. Where every anisotropy is 0 they run
+the isotropic formulas untouched (the rotation then changes nothing).
 """
 from __future__ import annotations
 
@@ -18,6 +23,7 @@ from dataclasses import dataclass
 
 import torch
 
+from nbrdf.neural.anisotropy import alphas, from_frame, to_frame
 from nbrdf.neural.brdf import Sample
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.microfacet import (
@@ -48,44 +54,80 @@ def _safe_div(a: Tensor, b: Tensor) -> Tensor:
     return torch.where(ok, a / torch.where(ok, b, torch.ones_like(b)), torch.zeros_like(a))
 
 
+class _Anisotropic:
+    """The frame and alphas of an interface with ``roughness``, ``anisotropy`` and ``rotation``."""
+
+    roughness: Tensor | float
+    anisotropy: Tensor | float
+    rotation: Tensor | float
+
+    def _isotropic(self) -> bool:
+        return not bool((torch.as_tensor(self.anisotropy) != 0).any())
+
+    def _alphas(self, like: Tensor) -> tuple[Tensor, Tensor | None]:
+        """(alpha_x, alpha_y); alpha_y None where every anisotropy is 0 (the isotropic code paths)."""
+        a = _param(self.roughness, like)
+        if self._isotropic():
+            return a, None
+        return alphas(a, _param(self.anisotropy, like))
+
+    def _in(self, w: Tensor) -> Tensor:
+        """w in the rotated tangent frame (itself when isotropic)."""
+        return w if self._isotropic() else to_frame(w, _param(self.rotation, w))
+
+    def _out(self, w: Tensor) -> Tensor:
+        """w from the rotated tangent frame back in the shading frame."""
+        return w if self._isotropic() else from_frame(w, _param(self.rotation, w))
+
+
 @dataclass
-class GGXConductor:
+class GGXConductor(_Anisotropic):
     """Rough conductor: GGX D, separable Smith G, OpenPBR's F82-tint Fresnel (Schlick's
     when ``f82_tint`` is 1). Reflects in the upper hemisphere only."""
 
     roughness: Tensor | float
     r0: Tensor | float
     f82_tint: Tensor | float = 1.0
+    anisotropy: Tensor | float = 0.0
+    """SPEC section 10's a (0: isotropic)"""
+    rotation: Tensor | float = 0.0
+    """the tangent's turn about the normal in degrees, counter-clockwise seen from above"""
 
     def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
-        a, r0 = _param(self.roughness, wi), _param(self.r0, wi)
+        a, ay = self._alphas(wi)
+        wi, wo = self._in(wi), self._in(wo)
+        r0 = _param(self.r0, wi)
         b = f82_coefficient(r0, _param(self.f82_tint, wi))
         h = wi + wo
         h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-30)
         up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
-        f = (fresnel_f82(_dot(wi, h), r0, b) * ggx_d(h, a) * smith_g1(wi, h, a) * smith_g1(wo, h, a)
+        f = (fresnel_f82(_dot(wi, h), r0, b) * ggx_d(h, a, ay) * smith_g1(wi, h, a, ay) * smith_g1(wo, h, a, ay)
              / (4.0 * wi[..., 2].abs() * wo[..., 2].abs()).clamp_min(1e-30))
         return torch.where(up, f, torch.zeros_like(f))
 
     def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
-        a = _param(self.roughness, w)
+        a, ay = self._alphas(w)
+        w, w_other = self._in(w), self._in(w_other)
         h = w + w_other
         h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-30)
-        p = _safe_div(vndf_pdf(w, h, a), 4.0 * _dot(w, h).abs())
+        p = _safe_div(vndf_pdf(w, h, a, ay), 4.0 * _dot(w, h).abs())
         return torch.where((w[..., 2] > 0) & (w_other[..., 2] > 0), p, torch.zeros_like(p))
 
     def sample(self, w: Tensor, u: Tensor) -> Sample:
-        a = _param(self.roughness, w)
-        m = sample_vndf(w, a, u[..., 0], u[..., 1])
-        wo = reflect(w, m)
-        ok = (w[..., 2] > 0) & (wo[..., 2] > 0)
-        pdf = torch.where(ok, _safe_div(vndf_pdf(w, m, a), 4.0 * _dot(w, m).abs()), torch.zeros_like(a * w[..., 2]))
+        a, ay = self._alphas(w)
+        wl = self._in(w)
+        m = sample_vndf(wl, a, u[..., 0], u[..., 1], ay)
+        wo = reflect(wl, m)
+        ok = (wl[..., 2] > 0) & (wo[..., 2] > 0)
+        pdf = torch.where(ok, _safe_div(vndf_pdf(wl, m, a, ay), 4.0 * _dot(wl, m).abs()),
+                          torch.zeros_like(a * wl[..., 2]))
+        wo = self._out(wo)
         f = torch.where(pdf > 0, self.eval(w, wo), torch.zeros_like(pdf))
         return Sample(wo, f, pdf)
 
 
 @dataclass
-class GGXDielectric:
+class GGXDielectric(_Anisotropic):
     """Rough dielectric interface (Walter et al. 2007): reflection and
     refraction, exact unpolarised Fresnel with total internal reflection.
     ``ior`` is the relative index below over above; light may arrive from
@@ -93,9 +135,14 @@ class GGXDielectric:
 
     roughness: Tensor | float
     ior: Tensor | float
+    anisotropy: Tensor | float = 0.0
+    """SPEC section 10's a (0: isotropic)"""
+    rotation: Tensor | float = 0.0
+    """the tangent's turn about the normal in degrees, counter-clockwise seen from above"""
 
     def _setup(self, wi: Tensor, wo: Tensor):
-        a, eta = _param(self.roughness, wi), _param(self.ior, wi)
+        """wi, wo are in the rotated frame already."""
+        eta = _param(self.ior, wi)
         above_i = wi[..., 2] > 0
         reflection = wi[..., 2] * wo[..., 2] > 0
         eta_i = torch.where(above_i, torch.ones_like(eta), eta).expand_as(wi[..., 2])
@@ -105,13 +152,15 @@ class GGXDielectric:
         h = torch.where(h[..., 2:3] < 0, -h, h)
         # Fresnel sees the index across the interface from wi's side.
         eta_rel = torch.where(above_i, eta, 1.0 / eta).expand_as(eta_i)
-        return a, eta_i, eta_o, h, reflection, eta_rel
+        return eta_i, eta_o, h, reflection, eta_rel
 
     def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
-        a, eta_i, eta_o, h, refl, eta_rel = self._setup(wi, wo)
+        a, ay = self._alphas(wi)
+        wi, wo = self._in(wi), self._in(wo)
+        eta_i, eta_o, h, refl, eta_rel = self._setup(wi, wo)
         ih, oh = _dot(wi, h), _dot(wo, h)
         F = fresnel_dielectric(ih, eta_rel)
-        dg = ggx_d(h, a) * smith_g1(wi, h, a) * smith_g1(wo, h, a)
+        dg = ggx_d(h, a, ay) * smith_g1(wi, h, a, ay) * smith_g1(wo, h, a, ay)
         cos_io = (wi[..., 2] * wo[..., 2]).abs().clamp_min(1e-30)
         f_r = F * dg / (4.0 * cos_io)
         denom = eta_i * ih + eta_o * oh
@@ -122,10 +171,12 @@ class GGXDielectric:
         return torch.where(valid, f, torch.zeros_like(f))
 
     def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
-        a, eta_i, eta_o, h, refl, eta_rel = self._setup(w, w_other)
+        a, ay = self._alphas(w)
+        w, w_other = self._in(w), self._in(w_other)
+        eta_i, eta_o, h, refl, eta_rel = self._setup(w, w_other)
         ih, oh = _dot(w, h), _dot(w_other, h)
         F = fresnel_dielectric(ih, eta_rel)
-        pm = vndf_pdf(w, h, a)
+        pm = vndf_pdf(w, h, a, ay)
         p_r = F * _safe_div(pm, 4.0 * ih.abs())
         denom = eta_i * ih + eta_o * oh
         p_t = (1.0 - F) * _safe_div(pm * eta_o * eta_o * oh.abs(), denom * denom)
@@ -135,8 +186,10 @@ class GGXDielectric:
         return torch.where(valid, p, torch.zeros_like(p))
 
     def sample(self, w: Tensor, u: Tensor) -> Sample:
-        a, eta = _param(self.roughness, w), _param(self.ior, w)
-        m = sample_vndf(w, a, u[..., 0], u[..., 1])
+        a, ay = self._alphas(w)
+        eta = _param(self.ior, w)
+        w_shading, w = w, self._in(w)
+        m = sample_vndf(w, a, u[..., 0], u[..., 1], ay)
         above = w[..., 2] > 0
         eta_i = torch.where(above, torch.ones_like(eta), eta).expand_as(w[..., 2])
         eta_t = torch.where(above, eta, torch.ones_like(eta)).expand_as(w[..., 2])
@@ -147,8 +200,9 @@ class GGXDielectric:
         wo = torch.where(choose_r[..., None], wr, wt)
         # A reflection must stay on w's side, a refraction must cross.
         side_ok = torch.where(choose_r, w[..., 2] * wo[..., 2] > 0, w[..., 2] * wo[..., 2] < 0)
-        pdf = torch.where(side_ok, self.pdf(w, wo), torch.zeros_like(F))
-        f = torch.where(pdf > 0, self.eval(w, wo), torch.zeros_like(pdf))
+        wo = self._out(wo)
+        pdf = torch.where(side_ok, self.pdf(w_shading, wo), torch.zeros_like(F))
+        f = torch.where(pdf > 0, self.eval(w_shading, wo), torch.zeros_like(pdf))
         return Sample(wo, f, pdf)
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import torch
 
+from nbrdf.neural.anisotropy import require_isotropic
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.material import Material
@@ -53,6 +54,7 @@ def check_analytic(material: Material) -> None:
         raise NbrdfError(f"{material.textures()[0][0]}: texture-mapped; the analytic model needs uniform layers")
     if material.base.type not in PARAMETRIC_BASES:
         raise NbrdfError(f"a {material.base.type} base has no analytic layering model")
+    require_isotropic(material, "the analytic layering model")
 
 
 def analytic_layered_eval(material: Material, wi: Tensor, wo: Tensor) -> Tensor:

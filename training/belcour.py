@@ -56,6 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from nbrdf.neural.anisotropy import require_isotropic
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, Material, Medium
 from nbrdf.neural.microfacet import (
@@ -106,6 +107,7 @@ def atoms_of(material: Material) -> list[Atom]:
     """The material's atoms; a clear one-line error for what the model does not cover."""
     if material.is_textured:
         raise NbrdfError(f"{material.textures()[0][0]}: texture-mapped; the belcour model needs uniform layers")
+    require_isotropic(material, "Belcour's model")
     out = []
     for i, layer in enumerate(material.layers):
         last = i == len(material.layers) - 1

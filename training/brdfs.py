@@ -49,17 +49,20 @@ class ClosedFormBRDF(ExactRGB):
     """A lone conductor, dielectric (its reflection: the material is seen
     from above) or diffuse layer; samples its own lobe."""
 
-    def __init__(self, layer: Conductor | Dielectric | Diffuse):
+    def __init__(self, layer: Conductor | Dielectric | Diffuse, rotation: float = 0.0):
         if not isinstance(layer, (Conductor, Dielectric, Diffuse)):
             raise NbrdfError(f"a {layer.type} layer has no closed form")
         self.layer = layer
+        self.rotation = rotation
+        """the material's anisotropy_rotation in degrees (SPEC section 10)"""
         # the direction sampler (one channel; the colour does not steer it)
-        self.lobe = (GGXConductor(float(layer.roughness), 1.0) if isinstance(layer, Conductor)
-                     else GGXDielectric(float(layer.roughness), float(layer.ior)) if isinstance(layer, Dielectric)
-                     else Lambertian(1.0))
+        self.lobe = (GGXConductor(float(layer.roughness), 1.0, 1.0, float(layer.anisotropy), rotation)
+                     if isinstance(layer, Conductor)
+                     else GGXDielectric(float(layer.roughness), float(layer.ior), float(layer.anisotropy), rotation)
+                     if isinstance(layer, Dielectric) else Lambertian(1.0))
 
     def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
-        return single_layer_eval(self.layer, wi, wo)
+        return single_layer_eval(self.layer, wi, wo, self.rotation)
 
     def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
         return self.lobe.pdf(w, w_other)
@@ -202,5 +205,5 @@ def brdf_for(material: Material, method: Method, spp: int = 256, seed: int = 0, 
             return MeasuredBRDF(material.base.resolved)
         if isinstance(material.base, LatentBase):
             raise NbrdfError("layers[0]: a latent base has no closed form; use --method neural")
-        return ClosedFormBRDF(material.base)
+        return ClosedFormBRDF(material.base, material.anisotropy_rotation)
     return AnalyticLayeredBRDF(material)

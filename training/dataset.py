@@ -14,6 +14,7 @@ result does not depend on interruptions.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -39,6 +40,7 @@ from nbrdf.neural.stack import (  # noqa: F401
     PARAM_NAMES,
     THREE_LAYERED,
     P,
+    pad_params,
     params_coats,
     params_to_material,
     params_to_stack,
@@ -48,6 +50,7 @@ from nbrdf.training.distributed import run_shards
 from nbrdf.training.distributions import (  # noqa: F401
     clear_top_slabs,
     darken_top_slabs,
+    lossless_stacks,
     paint_base_coats,
     sample_params,
     sharpen_coats,
@@ -74,6 +77,7 @@ class DataConfig:
     clear_top_slabs: float = 0.0  # share of stacks whose top slab is redrawn clear (sigma_t 0, or U(0, 0.3))
     dark_top_slabs: float = 0.0  # share of stacks whose top slab is redrawn dark and thick (darken_top_slabs)
     paint_base_coats: float = 0.0  # share of three-layered stacks whose lower half is redrawn a car paint's base coat
+    lossless: float = 0.0  # share of stacks made lossless (every albedo and the base's r0 or albedo 1)
 
 
 PRESETS: dict[str, DataConfig] = {
@@ -126,6 +130,20 @@ PRESETS: dict[str, DataConfig] = {
                                          three_layer_diffuse=16),
                          pairs=768, spp=64, seed=11, sharp_coats=0.9, bright_bases=0.5, clear_top_slabs=0.9,
                          paint_base_coats=0.8),
+    # deep stacks (3 and 4 coats over a conductor) for training the recursion past the paper's depth
+    # (issue 40: the error jumped at 4 layers, the first depth absent from training)
+    "deep": DataConfig(counts=dict(conductor=0, dielectric=0, two_layer=0, three_layer=0, diffuse_base=0,
+                                   four_layer=640, five_layer=512),
+                       val_counts=dict(conductor=0, dielectric=0, two_layer=0, three_layer=0, diffuse_base=0,
+                                       four_layer=32, five_layer=32),
+                       pairs=768, spp=32, seed=13, sharp_coats=0.4, clear_top_slabs=0.3),
+    # white-furnace stacks of every depth: most lossless (media, conductor r0 and diffuse albedo 1), which
+    # the paper's distributions never draw, and whose long paths the energy term needs to see (issue 40)
+    "lossless": DataConfig(counts=dict(conductor=0, dielectric=0, two_layer=320, three_layer=192, diffuse_base=192,
+                                       three_layer_diffuse=96, four_layer=128, five_layer=64),
+                           val_counts=dict(conductor=0, dielectric=0, two_layer=16, three_layer=16, diffuse_base=16,
+                                           three_layer_diffuse=16, four_layer=16, five_layer=16),
+                           pairs=768, spp=32, seed=17, sharp_coats=0.3, clear_top_slabs=0.3, lossless=0.7),
     "paper": DataConfig(counts=dict(conductor=300, dielectric=300, two_layer=12720, three_layer=1800,
                                     diffuse_base=1200),
                         val_counts=dict(conductor=32, dielectric=32, two_layer=128, three_layer=64, diffuse_base=32),
@@ -166,6 +184,37 @@ def sample_pairs(n: int, g: torch.Generator, peak_fraction: float = 0.5) -> tupl
         have += int(ok.sum())
     wi, wo = torch.cat(out_i)[:n], torch.cat(out_o)[:n]
     return wi / wi.norm(dim=-1, keepdim=True), wo / wo.norm(dim=-1, keepdim=True)
+
+
+@functools.cache
+def _peak_acceptance() -> float:
+    """The share of ``sample_pairs``' peak-branch draws with both directions above the horizon (a fixed
+    2^21-draw estimate: the same number every run)."""
+    g = torch.Generator().manual_seed(12_345)
+    u = torch.rand(1 << 21, 4, generator=g, dtype=torch.float64)
+    th, ph = 0.5 * math.pi * u[:, 0] ** 2, 2 * math.pi * u[:, 1]
+    td, pd = torch.acos(1 - u[:, 2]), 2 * math.pi * u[:, 3]
+    h = torch.stack([th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()], -1)
+    d = torch.stack([td.sin() * pd.cos(), td.sin() * pd.sin(), td.cos()], -1)
+    z_i = -th.sin() * d[:, 0] + th.cos() * d[:, 2]  # wi's z after the rotation of sample_pairs
+    z_o = 2 * d[:, 2] * h[:, 2] - z_i  # wo = 2 (wi.h) h - wi, and wi.h = d_z
+    return float(((z_i > 1e-4) & (z_o > 1e-4)).double().mean())
+
+
+def pair_pdf(wi: Tensor, wo: Tensor, peak_fraction: float = 0.5) -> Tensor:
+    """The density (per solid angle of wi and of wo) of ``sample_pairs``' pairs at (wi, wo) (..., 3):
+    the peak branch's half vector (theta_h = (pi/2) u^2) and uniform difference vector, with the
+    reflection's Jacobian 1 / (4 wi.h), mixed with the cosine pairs, both over the accepted share. With
+    it, sums over a data set's pairs weighted by cos_i cos_o / pdf estimate integrals (the energy term)."""
+    h = wi + wo
+    h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    th = torch.acos(h[..., 2].clamp(-1.0, 1.0)).clamp_min(1e-9)
+    p_h = 1.0 / (2 * math.pi * th.sin().clamp_min(1e-12) * torch.sqrt(2 * math.pi * th))
+    peak = torch.where(th < 0.5 * math.pi, p_h / (2 * math.pi) / (4 * (wi * h).sum(-1).clamp_min(1e-9)),
+                       torch.zeros_like(th))
+    cos = wi[..., 2].clamp_min(0) * wo[..., 2].clamp_min(0) / math.pi ** 2
+    return (peak_fraction * peak + (1 - peak_fraction) * cos) / (peak_fraction * _peak_acceptance()
+                                                                 + (1 - peak_fraction))
 
 
 # --- values ------------------------------------------------------------------------
@@ -229,7 +278,7 @@ def make_shard(cfg: DataConfig, shard: Shard) -> dict[str, np.ndarray]:
     # the look-development redraws, in this order, each from its own stream
     redraws = (("coats", cfg.sharp_coats, lambda p, share, g: sharpen_coats(p, share, g, cfg.bright_bases)),
                ("slabs", cfg.clear_top_slabs, clear_top_slabs), ("dark", cfg.dark_top_slabs, darken_top_slabs),
-               ("paint", cfg.paint_base_coats, paint_base_coats))
+               ("paint", cfg.paint_base_coats, paint_base_coats), ("lossless", cfg.lossless, lossless_stacks))
     for stream, share, redraw in redraws:
         if share > 0:
             redraw(params, share, torch.Generator().manual_seed(
@@ -297,7 +346,7 @@ def generate(out: str | Path, cfg: DataConfig, preset: str = "custom", overwrite
 # --- reading ------------------------------------------------------------------------
 @dataclass
 class BRDFSet:
-    """All BRDFs of a split in memory: params (K, 11), wi/wo (K, n, 3), f/stderr (K, n)."""
+    """All BRDFs of a split in memory: params (K, 19), wi/wo (K, n, 3), f/stderr (K, n)."""
 
     params: Tensor
     wi: Tensor
@@ -352,7 +401,7 @@ def load_split(folder: str | Path, split: str = "train") -> BRDFSet:
             raise NbrdfError(f"{path}: missing; the data set is unfinished (run the same `nbrdf data` again)")
         arrays = load_file(str(path))
         for k in parts:
-            parts[k].append(torch.from_numpy(arrays[k]))
+            parts[k].append(torch.from_numpy(arrays[k]) if k != "params" else pad_params(torch.from_numpy(arrays[k])))
     if not parts["params"]:
         raise NbrdfError(f"{folder}: no BRDFs in split {split!r}")
     cat = {k: torch.cat(v) for k, v in parts.items()}

@@ -22,7 +22,16 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC
-from nbrdf.neural.stack import CLASSES, DIFFUSE_BASED, PARAM_NAMES, THREE_LAYERED, P
+from nbrdf.neural.stack import (
+    CLASSES,
+    COATS,
+    DIFFUSE_BASED,
+    INTERFACE_COLUMNS,
+    PAPER_CLASSES,
+    PARAM_NAMES,
+    THREE_LAYERED,
+    P,
+)
 
 Tensor = torch.Tensor
 U = TypeVar("U")  # a float, a numpy array or a torch tensor of uniforms
@@ -81,11 +90,9 @@ def sample_params(cls: str, n: int, g: torch.Generator) -> Tensor:
     elif cls == "dielectric":
         p[:, P["top_roughness"]], p[:, P["top_ior"]] = roughness(_u(g, n)), ior(_u(g, n))
     else:
-        p[:, P["top_roughness"]], p[:, P["top_ior"]] = roughness(_u(g, n)), ior(_u(g, n))
-        p[:, P["albedo_1"]], p[:, P["sigma_t_1"]] = medium_albedo(_u(g, n)), sigma_t(_u(g, n))
-        if cls in THREE_LAYERED:
-            p[:, P["mid_roughness"]], p[:, P["mid_ior"]] = roughness(_u(g, n)), ior(_u(g, n))
-            p[:, P["albedo_2"]], p[:, P["sigma_t_2"]] = medium_albedo(_u(g, n)), sigma_t(_u(g, n))
+        for rough, eta, alb, sig in INTERFACE_COLUMNS[: COATS[cls]]:  # top down, each coat's four in turn
+            p[:, P[rough]], p[:, P[eta]] = roughness(_u(g, n)), ior(_u(g, n))
+            p[:, P[alb]], p[:, P[sig]] = medium_albedo(_u(g, n)), sigma_t(_u(g, n))
         if cls in DIFFUSE_BASED:
             p[:, P["base_value"]] = colour(_u(g, n))
         else:
@@ -165,11 +172,24 @@ def paint_base_coats(p: Tensor, share: float, g: torch.Generator) -> Tensor:
     return p
 
 
+def lossless_stacks(p: Tensor, share: float, g: torch.Generator) -> Tensor:
+    """Makes a ``share`` of the stacks in ``p`` (in place; returned) lossless: every medium's albedo, the
+    conductor's r0 or the diffuse base's albedo set to 1, so the stack loses light only at its rough
+    interfaces (the white-furnace stacks: their light bounces longest, and the paper's distributions,
+    albedo 1 - U^2, never draw exactly 1). Single interfaces are left alone; a fixed number of uniforms per row."""
+    _u3, pick = _pick_stacks(p, share, g)
+    coats = torch.tensor([COATS.get(c, 0) for c in CLASSES])[p[:, P["class"]].round().long()]
+    for j, (_r, _i, alb, _s) in enumerate(INTERFACE_COLUMNS):
+        p[pick & (coats > j), P[alb]] = 1.0  # the class's own slabs: unused columns stay 0
+    p[pick, P["base_value"]] = 1.0
+    return p
+
+
 def mixed_params(n: int, g: torch.Generator) -> Tensor:
-    """n parameter vectors over every class (even shares, the rest two-layer)."""
-    per = [n // len(CLASSES)] * len(CLASSES)
-    per[CLASSES.index("two_layer")] += n - sum(per)
-    return torch.cat([sample_params(c, k, g) for c, k in zip(CLASSES, per)])
+    """n parameter vectors over the paper's classes (even shares, the rest two-layer)."""
+    per = [n // len(PAPER_CLASSES)] * len(PAPER_CLASSES)
+    per[PAPER_CLASSES.index("two_layer")] += n - sum(per)
+    return torch.cat([sample_params(c, k, g) for c, k in zip(PAPER_CLASSES, per)])
 
 
 def f82_tint(u: U) -> U:

@@ -73,25 +73,33 @@ def heldout_set(counts: dict[str, int] = CLASS_COUNTS, seed: int = HELDOUT_SEED)
 
 
 DEPTH_SEED = 20_221_123  # never a training seed, not the held-out set's
-DEPTHS = (2, 3, 4)
+DEPTHS = (2, 3, 4, 5, 6)
+#: Depths whose coats come from the first stream (the set as it was first drawn); deeper coats have their own.
+FIRST_DEPTHS = 4
 
 
 def depth_set(per_depth: int = 8, seed: int = DEPTH_SEED) -> list[tuple[str, Material]]:
-    """Stacks of 2, 3 and 4 layers (1, 2, 3 coats, each an interface and a
+    """Stacks of 2 to 6 layers (1 to 5 coats, each an interface and a
     medium, over a conductor), ``per_depth`` of each, drawn from the paper's
     distributions: how the recursive layering's error grows with depth (each
     extra layer is one more call of the network on its own output). Classes
-    ``depth2`` .. ``depth4``; the k-th stack of depth d+1 is the k-th of
+    ``depth2`` .. ``depth6``; the k-th stack of depth d+1 is the k-th of
     depth d with one more coat just above its base (same draws), so the
-    depths differ by the extra layer only."""
+    depths differ by the extra layer only. The coats of depths 5 and 6 come
+    from a second stream, so the stacks of 2 to 4 layers are those the set
+    had before it grew (earlier figures stay comparable)."""
     g = np.random.default_rng([seed])
+    deep = np.random.default_rng([seed, 1])
     r6 = lambda x: float(round(x, 6))
     out = []
     for i in range(per_depth):
         base = {"type": CONDUCTOR, "roughness": r6(D.roughness(_u(g))), "r0": [r6(D.colour(x)) for x in _u(g, 3)]}
         coats = [[{"type": DIELECTRIC, "roughness": r6(D.roughness(_u(g))), "ior": r6(D.ior(_u(g)))},
                   {"type": MEDIUM, "albedo": [r6(D.medium_albedo(x)) for x in _u(g, 3)],
-                   "sigma_t": r6(D.sigma_t(_u(g)))}] for _ in range(max(DEPTHS) - 1)]
+                   "sigma_t": r6(D.sigma_t(_u(g)))}] for _ in range(FIRST_DEPTHS - 1)]
+        coats += [[{"type": DIELECTRIC, "roughness": r6(D.roughness(_u(deep))), "ior": r6(D.ior(_u(deep)))},
+                   {"type": MEDIUM, "albedo": [r6(D.medium_albedo(x)) for x in _u(deep, 3)],
+                    "sigma_t": r6(D.sigma_t(_u(deep)))}] for _ in range(max(DEPTHS) - FIRST_DEPTHS)]
         for d in DEPTHS:
             layers = [x for c in coats[: d - 1] for x in c] + [base]
             out.append((f"depth{d}", parse_material({"format": MATERIAL_FORMAT, "name": f"depth{d}-{i:03d}",

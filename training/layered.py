@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from nbrdf.neural.anisotropy import alphas, to_frame
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import DIFFUSE, PARAMETRIC_BASES
 from nbrdf.neural.microfacet import f82_coefficient
@@ -55,7 +56,8 @@ class StackParams:
     ``albedo`` (N, L, C) or (N, L); ``sigma_t`` (N, L) shared by the channels
     or (N, L, C) per channel (a coloured absorbing coat); ``base_r0`` / ``base_f82`` (a conductor's
     F82 tint, None: 1) / ``base_albedo`` (N, C) or (N,); ``base_roughness`` / ``base_ior`` (N,). C is the number of
-    colour channels carried together (they share paths)."""
+    colour channels carried together (they share paths). Anisotropy (SPEC section 10; None: 0):
+    ``anisotropy`` (N, L), ``base_anisotropy`` (N,), ``rotation`` (N,) in degrees."""
 
     roughness: Tensor
     ior: Tensor
@@ -67,6 +69,9 @@ class StackParams:
     base_f82: Tensor = field(default=None)  # type: ignore[assignment]
     base_ior: Tensor = field(default=None)  # type: ignore[assignment]
     base_albedo: Tensor = field(default=None)  # type: ignore[assignment]
+    anisotropy: Tensor = field(default=None)  # type: ignore[assignment]
+    base_anisotropy: Tensor = field(default=None)  # type: ignore[assignment]
+    rotation: Tensor = field(default=None)  # type: ignore[assignment]
 
     def normalized(self, dtype: torch.dtype) -> tuple["StackParams", bool]:
         """Copy with every tensor in ``dtype`` and channel dims made explicit;
@@ -94,7 +99,10 @@ class StackParams:
             roughness=self.roughness.to(dtype), ior=self.ior.to(dtype), albedo=alb.to(dtype),
             sigma_t=sig, base=self.base,
             base_roughness=scal(self.base_roughness, 0.5), base_r0=chan(self.base_r0, 0.0),
-            base_f82=chan(self.base_f82, 1.0), base_ior=scal(self.base_ior, 1.5), base_albedo=chan(self.base_albedo, 0.0))
+            base_f82=chan(self.base_f82, 1.0), base_ior=scal(self.base_ior, 1.5), base_albedo=chan(self.base_albedo, 0.0),
+            anisotropy=(torch.zeros(n, L, dtype=dtype) if self.anisotropy is None
+                        else torch.as_tensor(self.anisotropy, dtype=dtype).expand(n, L)),
+            base_anisotropy=scal(self.base_anisotropy, 0.0), rotation=scal(self.rotation, 0.0))
         return p, squeeze
 
 
@@ -116,7 +124,7 @@ def _check(p: StackParams, wi: Tensor, wo: Tensor, spp: int) -> None:
     if wi.dim() != 2 or wi.shape != wo.shape or wi.shape != (n, 3):
         raise NbrdfError(f"wi and wo must be ({n}, 3) like the stack (got {tuple(wi.shape)} and {tuple(wo.shape)})")
     for name in ("roughness", "ior", "albedo", "sigma_t", "base_roughness", "base_r0", "base_f82", "base_ior",
-                 "base_albedo"):
+                 "base_albedo", "anisotropy", "base_anisotropy", "rotation"):
         t = getattr(p, name)
         if not bool(torch.isfinite(t).all()):
             raise NbrdfError(f"stack parameter {name} holds NaN or infinite values")
@@ -130,6 +138,9 @@ def _check(p: StackParams, wi: Tensor, wo: Tensor, spp: int) -> None:
         raise NbrdfError("a roughness is not positive")
     if bool((p.sigma_t < 0).any()):
         raise NbrdfError("sigma_t is negative")
+    if bool((p.anisotropy < 0).any()) or bool((p.anisotropy >= 1).any()) or bool((p.base_anisotropy < 0).any()) \
+            or bool((p.base_anisotropy >= 1).any()):
+        raise NbrdfError("an anisotropy lies outside [0, 1)")
     if bool((p.base_f82 < 0).any()) or bool((p.base_f82 > 1).any()):
         raise NbrdfError("an F82 tint lies outside [0, 1]")
     if bool((p.albedo < 0).any()) or bool((p.albedo > 1).any()) or bool((p.base_albedo < 0).any()):
@@ -168,16 +179,17 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     npy = lambda t: t.detach().cpu().numpy()
     torch_threads = torch.get_num_threads()
     b_f82 = f82_coefficient(p.base_r0, p.base_f82)
+    ax, ay, b_ax, b_ay, wi_w, wo_w = _walk_frame(p, wi, wo)
     # the walk's paths carry every channel through one medium; where the extinction differs per channel
     # (a coloured absorbing coat), each channel walks on its own, from the same seed
     shared = bool((p.sigma_t == p.sigma_t[..., :1]).all())
     parts = [slice(None)] if shared else [slice(c, c + 1) for c in range(p.albedo.shape[-1])]
     try:
         runs = [run_walk(
-            npy(wi), npy(wo), spp, seed, npy(p.roughness), npy(p.ior), npy(p.sigma_t[..., ch][..., 0]),
-            npy(p.albedo[..., ch]), p.base, npy(p.base_roughness), npy(p.base_r0[:, ch]), npy(b_f82[:, ch]),
+            npy(wi_w), npy(wo_w), spp, seed, npy(ax), npy(p.ior), npy(p.sigma_t[..., ch][..., 0]),
+            npy(p.albedo[..., ch]), p.base, npy(b_ax), npy(p.base_r0[:, ch]), npy(b_f82[:, ch]),
             npy(p.base_ior), npy(p.base_albedo[:, ch]), rr_depth=rr_depth, max_depth=max_depth,
-            forced=forced_top_reflection, device=device) for ch in parts]
+            forced=forced_top_reflection, device=device, rough_y=npy(ay), b_rough_y=npy(b_ay)) for ch in parts]
     finally:
         # Numba's OpenMP layer sets the OpenMP runtime's thread count it shares with torch: put torch's
         # back, or every torch operation after a walk (a projection's fit) runs on the walk's threads,
@@ -196,7 +208,8 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     else:
         se = np.full_like(mean, np.inf)
     if include_top_reflection:
-        mean = mean + GGXDielectric(p.roughness[:, 0], p.ior[:, 0]).eval(wi, wo).numpy()[:, None]
+        top = GGXDielectric(p.roughness[:, 0], p.ior[:, 0], p.anisotropy[:, 0], p.rotation)
+        mean = mean + top.eval(wi, wo).numpy()[:, None]
     if stats is not None:
         stats.paths += N * spp
         stats.vertices += verts
@@ -207,6 +220,18 @@ def simulate(stack: StackParams, wi: Tensor, wo: Tensor, spp: int = 64, seed: in
     if squeeze:
         return mean_t[:, 0], se_t[:, 0]
     return mean_t, se_t
+
+
+def _walk_frame(p: StackParams, wi: Tensor, wo: Tensor) -> tuple[Tensor, ...]:
+    """(alpha_x, alpha_y of the interfaces (N, L), of the base (N,), wi and wo in the material's rotated
+    tangent frame): the walk's inputs (SPEC section 10). Isotropic stacks get their roughness and the
+    directions themselves, bit for bit (the walk's estimates then equal those before anisotropy to
+    rounding: docs/RESULTS.md section 1)."""
+    ax, ay = alphas(p.roughness, p.anisotropy)
+    b_ax, b_ay = alphas(p.base_roughness, p.base_anisotropy)
+    if not bool((p.rotation != 0).any()):
+        return ax, ay, b_ax, b_ay, wi, wo
+    return ax, ay, b_ax, b_ay, to_frame(wi, p.rotation), to_frame(wo, p.rotation)
 
 
 def _batch_error(blocks, spp: int, se_paths):

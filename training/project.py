@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from nbrdf.neural.anisotropy import require_isotropic
 from nbrdf.neural.coat import coat_eval
 from nbrdf.neural.decoder import Decoder, loss_target, predicted_target
 from nbrdf.neural.errors import NbrdfError
@@ -55,7 +56,9 @@ def material_coat(material: Material) -> Tensor | None:
 
 
 def material_samples(material: Material, n: int = 2048, spp: int = 64, seed: int = 0) -> Samples:
-    """Reference values of a material at n pairs drawn like the training data."""
+    """Reference values of a material at n pairs drawn like the training data (an anisotropic material is
+    refused: the decoder's latents are isotropic, a projection would drop the anisotropy in silence)."""
+    require_isotropic(material, "the projection onto the decoder's latents")
     t0 = time.perf_counter()
     if isinstance(material.base, Measured) and not material.interfaces:
         return merl_samples(material.base.resolved, n, seed)

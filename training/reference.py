@@ -46,7 +46,7 @@ def simulator_params(stack: Stack) -> StackParams:
         raise NbrdfError(f"a {stack.base} base has no Monte Carlo reference under other layers")
     kw = {k: v for k, v in stack.tensors().items() if k.startswith("base_")}
     return StackParams(roughness=stack.roughness, ior=stack.ior, albedo=stack.albedo, sigma_t=stack.sigma_t,
-                       base=stack.base, **kw)
+                       base=stack.base, anisotropy=stack.anisotropy, rotation=stack.rotation, **kw)
 
 
 def stack_params(material: Material, n: int = 1) -> StackParams:
@@ -61,15 +61,17 @@ def stack_params(material: Material, n: int = 1) -> StackParams:
     return simulator_params(material_stack(material).expand(n))
 
 
-def single_layer_eval(layer, wi: Tensor, wo: Tensor) -> Tensor:
-    """Closed-form RGB values (N, 3) of a lone conductor, dielectric or diffuse layer."""
+def single_layer_eval(layer, wi: Tensor, wo: Tensor, rotation: float = 0.0) -> Tensor:
+    """Closed-form RGB values (N, 3) of a lone conductor, dielectric or diffuse layer; ``rotation``: the
+    material's anisotropy_rotation (degrees) for an anisotropic layer."""
     wi3 = wi[:, None, :].expand(-1, 3, -1)
     wo3 = wo[:, None, :].expand(-1, 3, -1)
     up = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
     if isinstance(layer, Conductor):
-        f = GGXConductor(layer.roughness, _rgb(layer.r0).to(wi.dtype), _rgb(layer.f82_tint).to(wi.dtype)).eval(wi3, wo3)
+        f = GGXConductor(layer.roughness, _rgb(layer.r0).to(wi.dtype), _rgb(layer.f82_tint).to(wi.dtype),
+                         layer.anisotropy, rotation).eval(wi3, wo3)
     elif isinstance(layer, Dielectric):
-        f = GGXDielectric(layer.roughness, layer.ior).eval(wi, wo)[:, None].expand(-1, 3)
+        f = GGXDielectric(layer.roughness, layer.ior, layer.anisotropy, rotation).eval(wi, wo)[:, None].expand(-1, 3)
     elif isinstance(layer, Diffuse):
         f = Lambertian(_rgb(layer.albedo).to(wi.dtype)).eval(wi3, wo3)
     else:
@@ -99,7 +101,7 @@ def reference_eval(material: Material, wi: Tensor, wo: Tensor, spp: int = 256, s
         elif isinstance(base, LatentBase):
             raise NbrdfError("layers[0]: a latent base has no reference; use --method neural")
         else:
-            f = single_layer_eval(base, wi, wo)
+            f = single_layer_eval(base, wi, wo, material.anisotropy_rotation)
         return f.to(dtype), torch.zeros(n, 3, dtype=dtype)
     up = (wi[:, 2] > 0) & (wo[:, 2] > 0)
     mean = torch.zeros(n, 3, dtype=dtype)

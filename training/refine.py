@@ -41,6 +41,7 @@ from typing import Callable
 
 import torch
 
+from nbrdf.neural.anisotropy import require_isotropic
 from nbrdf.neural.coat import coat_eval, with_coat
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.errors import NbrdfError
@@ -462,8 +463,10 @@ class Refiner:
 
 
 def check_refinable(material: Material) -> None:
-    """One line for a material refinement cannot take (it needs a reference)."""
+    """One line for a material refinement cannot take (it needs a reference; the decoder's latents are
+    isotropic)."""
     check_uniform(material)
+    require_isotropic(material, "the refinement of a neural code")
     if isinstance(material.base, LatentBase) and not material.interfaces:
         raise NbrdfError("layers[0]: a latent base has no reference to refine against; use --method neural")
 

@@ -37,9 +37,9 @@ from nbrdf.neural.layering import CODE, LATENT, MEDIUM_SETS, LayeringNet, layeri
 from nbrdf.neural.leaf import F82, LEAF_PARAMS, LeafEncoders, leaf_spec
 from nbrdf.neural.model import NeuralModel, layered_latents, load_model, save_model
 from nbrdf.neural.sampling import SamplerNet, lambert_pdf, proxy_pdf, proxy_sample
-from nbrdf.neural.stack import CLASSES, THREE_LAYERED, P, params_to_stack
+from nbrdf.neural.stack import CLASSES, DEEP, THREE_LAYERED, P, params_to_stack
 from nbrdf.training.analytic import GGXConductor, Lambertian
-from nbrdf.training.dataset import body_values, data_folders, load_manifest, load_split, sample_pairs
+from nbrdf.training.dataset import body_values, data_folders, load_manifest, load_split, pair_pdf, sample_pairs
 from nbrdf.training.distributions import mixed_params, random_leaf_params  # noqa: F401 (random_leaf_params re-exported)
 from nbrdf.training.plots import save_curves
 
@@ -90,6 +90,11 @@ class OpsConfig:
     """layering: when > 0, each stack's loss scale is this times the stack's mean body value f cos (an
     exposure-adapted loss, as HDR-FLIP adapts to each image: a dark material's relative errors weigh like a
     bright one's); 0: the fixed loss scale"""
+    energy_weight: float = 0.0
+    """layering: weight of the energy term (issue 40): the squared error of the decoded body's directional albedo
+    in four incidence bands, relative to the stack's whole albedo, both estimated on the batch's own pairs with the
+    same quadrature weights (cos_i cos_o / the pairs' density), so the decoded and the Monte Carlo estimates share
+    their sampling; 0: off"""
     ema: float = 0.0
     """decay of an exponential moving average of the weights, validated and shipped instead of the last
     step's (0: off; 0.999 averages about the last 1,000 steps, smoothing minibatch and Monte Carlo noise)"""
@@ -241,7 +246,11 @@ def _decoder_loss(model: NeuralModel, z: Tensor, feats: Tensor, cos_o: Tensor, t
     """The decoder's training loss with scale ``s`` (a number or per BRDF (B, 1); ``target`` made with the same s)
     for latents z (B, 32) at pairs (B, P, .); with the values ``f`` themselves,
     ``neural.decoder.unbiased_error`` instead."""
-    y = model.decoder.log_f(z[:, None, :], feats)
+    return _pair_loss(model.decoder.log_f(z[:, None, :], feats), cos_o, target, s, f)
+
+
+def _pair_loss(y: Tensor, cos_o: Tensor, target: Tensor, s: float | Tensor, f: Tensor | None) -> Tensor:
+    """``_decoder_loss`` of decoded log values y (B, P)."""
     if f is not None:
         return unbiased_error(y, f, cos_o, s).mean()
     return ((predicted_target(y, cos_o, s) - target) ** 2).mean()
@@ -385,6 +394,9 @@ class _StackData:
         self.feats = torch.cat([encode(d.wi, d.wo, encoding) for d in parts])
         self.cos_o = torch.cat([d.wo[..., 2] for d in parts])
         self.body = torch.cat([body_values(d) for d in parts])
+        self.total = torch.cat([d.f for d in parts]).clamp_min(0.0)
+        wi = torch.cat([d.wi for d in parts])
+        self.weight, self.band = energy_quadrature(wi, torch.cat([d.wo for d in parts]))
         level = (self.body * self.cos_o).mean(1)
         self.scale = ((relative * level).clamp_min(1e-6) if relative > 0 else torch.full_like(level, scale))[:, None]
         self.target = loss_target(self.body, self.cos_o, self.scale)
@@ -399,7 +411,34 @@ class _StackData:
             torch.arange(n).expand(idx.numel(), n)
         rows = idx[:, None].expand_as(cols)
         return (self.params[idx], self.feats[rows, cols], self.cos_o[rows, cols], self.target[rows, cols],
-                self.body[rows, cols], self.scale[idx])
+                self.body[rows, cols], self.scale[idx],
+                (self.weight[rows, cols], self.band[rows, cols], self.total[rows, cols]))
+
+
+#: cos(theta_i) edges of the energy term's incidence bands (normal to grazing)
+ENERGY_BANDS = (1.0, 0.85, 0.6, 0.3, 0.0)
+
+
+def energy_quadrature(wi: Tensor, wo: Tensor) -> tuple[Tensor, Tensor]:
+    """Per pair (K, n): the weight w with E[w f 1(band)] = the band's cosine-weighted mean directional
+    albedo (the pairs' density from ``training.dataset.pair_pdf``, each band's projected solid angle
+    pi (b^2 - a^2) divided out), and the pair's band index."""
+    ci = wi[..., 2].clamp(0.0, 1.0)
+    edges = torch.tensor(ENERGY_BANDS, dtype=ci.dtype)
+    band = (ci[..., None] < edges[1:-1]).sum(-1)  # 0: near normal ... 3: grazing
+    area = math.pi * (edges[:-1] ** 2 - edges[1:] ** 2)
+    w = ci * wo[..., 2].clamp_min(0.0) / pair_pdf(wi.double(), wo.double()).to(ci.dtype).clamp_min(1e-12)
+    return (w / area[band]).float(), band
+
+
+def energy_error(f_dec: Tensor, f_ref: Tensor, total: Tensor, weight: Tensor, band: Tensor) -> Tensor:
+    """Mean over stacks and bands of ((A_dec - A_ref) / (A_total + 0.01))^2: the bodies' band albedos
+    (B, P) values -> (B, bands) sums, relative to the whole stack's (coat included) albedo in the band
+    (a band with no pair of a stack in the batch counts 0)."""
+    n = len(ENERGY_BANDS) - 1
+    one_hot = torch.nn.functional.one_hot(band, n).to(weight.dtype)  # (B, P, bands)
+    per = lambda f: torch.einsum("bp,bpk->bk", weight * f, one_hot) / f.shape[1]
+    return ((per(f_dec) - per(f_ref)) / (per(total).detach() + 0.01)).pow(2).mean()
 
 
 def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
@@ -419,6 +458,7 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
     val = _StackData(cfg.data, "val", s_, enc, cfg.relative_scale)
     two = train.index_of("two_layer", "diffuse_base")
     three = train.index_of(*THREE_LAYERED)
+    deep = train.index_of(*DEEP)
     if two.numel() == 0:
         raise NbrdfError(f"{cfg.data}: no two-layer or diffuse-base stacks to train the layering network on")
     net = LayeringNet(layering_spec(width=cfg.width or 256, depth=cfg.depth or 3, medium=cfg.medium))
@@ -440,25 +480,44 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
     if cfg.loss not in ("log", "mean"):
         raise NbrdfError(f"--loss: {cfg.loss!r} is not one of log, mean")
 
-    def loss_on(data: _StackData, idx: Tensor, pairs: int, fit_mean: bool = cfg.loss == "mean") -> Tensor:
-        params, feats, cos_o, target, body, scale = data.batch(idx, pairs, g)
-        return _decoder_loss(model, stack_latents(model, params, net), feats, cos_o, target, scale,
-                             body if fit_mean else None)
+    if not cfg.energy_weight >= 0:
+        raise NbrdfError(f"--energy-weight: {cfg.energy_weight} is negative")
+
+    def loss_on(data: _StackData, idx: Tensor, pairs: int, fit_mean: bool = cfg.loss == "mean",
+                energy: float = cfg.energy_weight) -> Tensor:
+        params, feats, cos_o, target, body, scale, (weight, band, total) = data.batch(idx, pairs, g)
+        y = model.decoder.log_f(stack_latents(model, params, net)[:, None, :], feats)
+        loss = _pair_loss(y, cos_o, target, scale, body if fit_mean else None)
+        if energy > 0:
+            loss = loss + energy * energy_error(torch.exp(y.clamp(max=30.0)), body, total, weight, band)
+        return loss
+
+    def pick(rows: Tensor, k: int) -> Tensor:
+        return rows[torch.randint(0, rows.numel(), (k,), generator=g)]
 
     def step(s: int) -> Tensor:
         if s >= cfg.steps - cfg.recursion_steps and three.numel():
-            half = cfg.batch // 2
-            a = two[torch.randint(0, two.numel(), (cfg.batch - half,), generator=g)]
-            b = three[torch.randint(0, three.numel(), (half,), generator=g)]
-            return loss_on(train, torch.cat([a, b]), cfg.pairs)
-        return loss_on(train, two[torch.randint(0, two.numel(), (cfg.batch,), generator=g)], cfg.pairs)
+            # half two-layer, the rest three-layer; with deep stacks in the data, a quarter of those
+            n_deep = cfg.batch // 4 if deep.numel() else 0
+            n_three = cfg.batch // 2 - n_deep
+            parts = [pick(two, cfg.batch - n_three - n_deep), pick(three, n_three)]
+            return loss_on(train, torch.cat(parts + ([pick(deep, n_deep)] if n_deep else [])), cfg.pairs)
+        return loss_on(train, pick(two, cfg.batch), cfg.pairs)
+
+    def _val_energy(idx: Tensor) -> float:
+        params, feats, _c, _t, body, _s, (weight, band, total) = val.batch(idx, val.feats.shape[1], g)
+        z = stack_latents(model, params, net)
+        f_dec = torch.exp(model.decoder.log_f(z[:, None, :], feats).clamp(max=30.0))
+        return energy_error(f_dec, body, total, weight, band).item()
 
     def validate() -> dict:
         out = {}
-        for name in ("two_layer", "diffuse_base") + THREE_LAYERED:
+        for name in ("two_layer", "diffuse_base") + THREE_LAYERED + DEEP:
             idx = val.index_of(name)
             if idx.numel():
-                out[name] = loss_on(val, idx, val.feats.shape[1], fit_mean=False).item()  # comparable across runs
+                out[name] = loss_on(val, idx, val.feats.shape[1], fit_mean=False, energy=0.0).item()  # comparable
+                if cfg.energy_weight > 0:  # the energy error alone, per class
+                    out[f"{name}_energy"] = _val_energy(idx)
         return out
 
     t0 = time.perf_counter()

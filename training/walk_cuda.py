@@ -78,7 +78,8 @@ def _run_kernel(P, s1, s2, verts, dropped):
 
 
 #: The record's array fields (copied to the device).
-_ARRAYS = ("wi", "wo", "rough", "ior", "sigma", "alb", "b_rough", "b_r0", "b_f82", "b_ior", "b_alb")
+_ARRAYS = ("wi", "wo", "rough", "ior", "sigma", "alb", "b_rough", "b_r0", "b_f82", "b_ior", "b_alb", "rough_y",
+           "b_rough_y")
 
 
 def run_items(P: WalkParams) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

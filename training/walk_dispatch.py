@@ -21,9 +21,12 @@ from nbrdf.training.walk import kernel, walk_params
 def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndarray, ior: np.ndarray,
              sigma: np.ndarray, alb: np.ndarray, base: str, b_rough: np.ndarray, b_r0: np.ndarray,
              b_f82: np.ndarray, b_ior: np.ndarray, b_alb: np.ndarray, rr_depth: int = 4, max_depth: int = 100_000,
-             forced: bool = True, device: str | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+             forced: bool = True, device: str | None = None, rough_y: np.ndarray | None = None,
+             b_rough_y: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
     """Runs the walk for N pairs (float64 arrays, shapes as ``StackParams``
     with explicit channels) on ``device`` ("cpu", "cuda"; None: ``walk_device()``).
+    ``rough`` / ``b_rough`` are alpha_x, ``rough_y`` / ``b_rough_y`` alpha_y (None: isotropic); wi and wo
+    are in the material's rotated tangent frame (SPEC section 10).
     Returns per pair the sum and sum of squares of the path contributions
     (N, C), the per-block sums (N, n_blocks, C) for batch means, the vertex
     count and the number of dropped paths."""
@@ -38,8 +41,7 @@ def run_walk(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndar
     N = wi.shape[0]
     C = alb.shape[2]
     P = walk_params(wi, wo, spp, seed, rough, ior, sigma, alb, BASE_CODES[base], b_rough, b_r0, b_f82, b_ior, b_alb,
-                    rr_depth,
-                    max_depth, forced)
+                    rr_depth, max_depth, forced, rough_y, b_rough_y)
     if walk_device(device) == "cuda":
         s1, s2, verts, dropped = walk_cuda.run_items(P)
     else:

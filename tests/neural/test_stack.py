@@ -27,7 +27,7 @@ def _vectors(cls: str, k: int = 5) -> torch.Tensor:
     g = torch.Generator().manual_seed(CLASSES.index(cls))
     p = torch.rand(k, len(PARAM_NAMES), generator=g, dtype=torch.float64) * 0.9 + 0.05
     p[:, P["class"]] = CLASSES.index(cls)
-    p[:, [P["top_ior"], P["mid_ior"]]] += 1.05  # legal indices
+    p[:, [P["top_ior"], P["mid_ior"], P["ior_3"], P["ior_4"]]] += 1.05  # legal indices
     return stack_to_params(params_to_stack(p))  # unused columns zeroed
 
 
@@ -65,7 +65,7 @@ def test_material_stack_reads_every_layer_top_down():
 def test_bad_input_is_one_clear_error():
     with pytest.raises(NbrdfError, match="one class"):
         params_to_stack(torch.cat([_vectors("conductor", 1), _vectors("dielectric", 1)]))
-    with pytest.raises(NbrdfError, match=r"\(K, 11\)"):
+    with pytest.raises(NbrdfError, match=r"\(K, 19\)"):
         params_to_stack(torch.zeros(3, 4))
     with pytest.raises(NbrdfError, match="one colour channel"):
         stack_to_params(material_stack(_material({"type": "conductor", "roughness": 0.2, "r0": 0.5})))
@@ -140,7 +140,8 @@ def test_per_texel_values_take_channel_0_of_shared_parameters_and_name_their_pla
     seen = []
     code = {"layers[0].roughness": 1, "layers[0].ior": 2, "layers[1].albedo": 3, "layers[1].sigma_t": 4,
             "layers[2].roughness": 5, "layers[2].ior": 6, "layers[3].albedo": 7, "layers[3].sigma_t": 8,
-            "layers[4].roughness": 9, "layers[4].r0": 10, "layers[4].f82_tint": 11}
+            "layers[4].roughness": 9, "layers[4].r0": 10, "layers[4].f82_tint": 11, "layers[4].anisotropy": 12,
+            "layers[0].anisotropy": 13, "layers[2].anisotropy": 14}
 
     def values(v, place):
         seen.append(place)
@@ -159,6 +160,7 @@ def test_per_texel_values_take_channel_0_of_shared_parameters_and_name_their_pla
     assert s.albedo[0].tolist() == [[3.0, 3.25, 3.5], [7.0, 7.25, 7.5]]
     assert s.base_roughness.tolist() == [9.0] * 4 and s.base_r0[3].tolist() == [10.0, 10.25, 10.5]
     assert s.base_f82[3].tolist() == [11.0, 11.25, 11.5]
+    assert s.base_anisotropy.tolist() == [12.0] * 4 and s.anisotropy.tolist() == [[13.0, 14.0]] * 4
 
 
 def test_a_texture_mapped_parameter_without_values_is_named(tmp_path):
@@ -176,3 +178,16 @@ def test_a_texture_mapped_parameter_without_values_is_named(tmp_path):
         uniform_values(m.layers[1].sigma_t, "x.y", "hint")
     with pytest.raises(ValueError, match="expand needs one stack, got 2"):
         material_stack(_material({"type": "diffuse", "albedo": 0.5})).expand(2).expand(3)
+
+
+def test_files_written_before_the_deep_classes_read_as_they_were():
+    """A vector of the paper's 11 columns decodes to the stack its 19-column padding does, and the deep
+    classes hold 3 and 4 coats over a conductor."""
+    from nbrdf.neural.stack import PAPER_WIDTH, pad_params
+
+    p = _vectors("three_layer")
+    old = p[:, :PAPER_WIDTH]
+    assert torch.equal(pad_params(old), p)
+    a, b = params_to_stack(old), params_to_stack(p)
+    assert torch.equal(a.roughness, b.roughness) and torch.equal(a.sigma_t, b.sigma_t)
+    assert params_to_stack(_vectors("four_layer")).layers == 3 and params_to_stack(_vectors("five_layer")).layers == 4

@@ -18,7 +18,8 @@ from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
 
 
 def analog_exits(layers: list[tuple[float, float, float, float]], base: tuple, wi: torch.Tensor,
-                 n_photons: int, seed: int, skip_top_reflection: bool = True, top_only: bool = False
+                 n_photons: int, seed: int, skip_top_reflection: bool = True, top_only: bool = False,
+                 anisotropy: tuple[float, ...] | None = None, base_anisotropy: float = 0.0, rotation: float = 0.0
                  ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Every photon's exit direction (n, 3) and energy (n,) (0: absorbed, or
     its single reflection off the top left out with ``skip_top_reflection``).
@@ -27,14 +28,17 @@ def analog_exits(layers: list[tuple[float, float, float, float]], base: tuple, w
     roughness, ior). The mean of energy x [exit in B] over photons estimates
     the integral over B of f(wi, wo) cos(theta_o). Third: which photons left
     by the single reflection off the top. ``top_only``: photons that enter
-    the stack are dropped at once (a cheap run of the top's reflection alone)."""
+    the stack are dropped at once (a cheap run of the top's reflection alone). ``anisotropy`` (per layer,
+    None: 0), ``base_anisotropy`` (a conductor or dielectric base) and ``rotation`` (degrees): SPEC section
+    10, through the closed forms' own anisotropic sampling."""
+    aniso = anisotropy or (0.0,) * len(layers)
     g = torch.Generator().manual_seed(seed)
     dt = torch.float64
     L = len(layers)
     n = n_photons
     pid = torch.arange(n)
     w = wi.to(dt).expand(n, 3).clone()
-    top = GGXDielectric(layers[0][0], layers[0][1])
+    top = GGXDielectric(layers[0][0], layers[0][1], aniso[0], rotation)
     s = top.sample(w, torch.rand(n, 3, generator=g, dtype=dt))
     beta = s.weight
     exit_w = torch.zeros(n, 3, dtype=dt)
@@ -76,7 +80,7 @@ def analog_exits(layers: list[tuple[float, float, float, float]], base: tuple, w
                 continue
             win = -d[sel]
             if kk < L:
-                ss = GGXDielectric(layers[kk][0], layers[kk][1]).sample(win, u3[sel])
+                ss = GGXDielectric(layers[kk][0], layers[kk][1], aniso[kk], rotation).sample(win, u3[sel])
                 ok = ss.pdf > 0
                 crossed = ok & (win[:, 2] * ss.w[:, 2] < 0)
                 if kk == 0:
@@ -90,11 +94,12 @@ def analog_exits(layers: list[tuple[float, float, float, float]], base: tuple, w
             else:
                 kind = base[0]
                 if kind == "conductor":
-                    ss = GGXConductor(base[1], base[2], base[3] if len(base) > 3 else 1.0).sample(win, u3[sel])
+                    ss = GGXConductor(base[1], base[2], base[3] if len(base) > 3 else 1.0, base_anisotropy,
+                                      rotation).sample(win, u3[sel])
                 elif kind == "diffuse":
                     ss = Lambertian(base[1]).sample(win, u3[sel])
                 else:
-                    ss = GGXDielectric(base[1], base[2]).sample(win, u3[sel])
+                    ss = GGXDielectric(base[1], base[2], base_anisotropy, rotation).sample(win, u3[sel])
                 ok = (ss.pdf > 0) & (ss.w[:, 2] > 0)
             beta[sel] = beta[sel] * torch.where(ok, ss.weight, torch.zeros_like(ss.weight))
             nd[sel] = ss.w

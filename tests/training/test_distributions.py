@@ -121,3 +121,28 @@ def test_paint_base_coats_redraw_the_lower_half_of_three_layer_stacks_only():
     assert float(s[:, P["mid_ior"]].min()) >= 1.0 and float(s[:, P["sigma_t_2"]].max()) <= 5.0
     for row in s[::197]:
         assert params_to_material(row).layers
+
+
+def test_lossless_stacks_lose_light_only_at_their_interfaces():
+    """``lossless_stacks`` sets the share's media albedos and base value to 1 (their own slabs only: unused
+    columns stay 0) and leaves single interfaces and the other stacks alone."""
+    import torch
+
+    from nbrdf.neural.stack import INTERFACE_COLUMNS, P, params_to_stack
+    from nbrdf.training.distributions import lossless_stacks, sample_params
+
+    g = torch.Generator().manual_seed(0)
+    for cls, coats in (("two_layer", 1), ("three_layer_diffuse", 2), ("five_layer", 4), ("conductor", 0)):
+        p = sample_params(cls, 64, g)
+        before = p.clone()
+        lossless_stacks(p, 0.5, torch.Generator().manual_seed(1))
+        changed = (p != before).any(1)
+        if coats == 0:
+            assert not changed.any()
+            continue
+        assert 16 < int(changed.sum()) < 48  # about half
+        s = params_to_stack(p[changed])
+        assert torch.all(s.albedo == 1) and s.albedo.shape[1] == coats
+        assert torch.all(p[changed][:, P["base_value"]] == 1)
+        for _r, _i, alb, _s in INTERFACE_COLUMNS[coats:]:
+            assert torch.all(p[:, P[alb]] == 0)

@@ -69,7 +69,25 @@ CONFIGS = {
 F82_CONFIGS = {
     "coat-f82-conductor": ([(0.1, 1.1, 0.9, 0.2)], ("conductor", 0.5, 0.5, 0.1), 550),
 }
-ALL_CONFIGS = {**CONFIGS, **F82_CONFIGS}
+#: SPEC section 10: a clear coat over an anisotropic conductor (a 0.8: alphas 0.28 and 0.055) turned by
+#: 30 degrees; its agreement test and the rejection of a walk whose anisotropy is 10 % off or whose rotation
+#: is 10 degrees off. name: (per-layer anisotropy, the base's, rotation in degrees).
+ANISO_CONFIGS = {
+    "coat-anisotropic-conductor": ([(0.08, 1.5, 0.9, 0.2)], ("conductor", 0.2, 0.9), 560),
+}
+ANISOTROPY = {"coat-anisotropic-conductor": ((0.0,), 0.8, 30.0)}
+ALL_CONFIGS = {**CONFIGS, **F82_CONFIGS, **ANISO_CONFIGS}
+
+
+def _anisotropy(name: str, perturbation: str | None = None) -> dict:
+    """The configuration's anisotropy as ``analog_exits`` keywords; "anisotropy": the base's 10 % off,
+    "rotation": 10 degrees off."""
+    layers_a, base_a, rot = ANISOTROPY.get(name, (None, 0.0, 0.0))
+    if perturbation == "anisotropy":
+        base_a *= 1.1
+    elif perturbation == "rotation":
+        rot += 10.0
+    return dict(anisotropy=layers_a, base_anisotropy=base_a, rotation=rot)
 
 
 def perturbed(layers, base, what: str):
@@ -90,6 +108,8 @@ def perturbed(layers, base, what: str):
         ls[0][1] *= 1.03
     elif what == "f82_tint":  # the tint ignored (Schlick's Fresnel): what a part that drops it computes
         b = b[:3]
+    elif what in ("anisotropy", "rotation"):  # carried by ``_anisotropy``
+        pass
     else:
         raise ValueError(what)
     return [tuple(x) for x in ls], tuple(b)
@@ -98,10 +118,12 @@ def perturbed(layers, base, what: str):
 PERTURBATIONS = ("top_roughness", "base_roughness", "sigma_t", "albedo", "ior")
 
 
-def _stack(layers, base, n):
+def _stack(layers, base, n, anisotropy=None, base_anisotropy=0.0, rotation=0.0):
     col = lambda i: torch.tensor([[x[i] for x in layers]] * n, dtype=torch.float64)
     kind = base[0]
-    return StackParams(
+    aniso = torch.tensor([list(anisotropy or (0.0,) * len(layers))] * n, dtype=torch.float64)
+    return StackParams(anisotropy=aniso, base_anisotropy=torch.full((n,), base_anisotropy, dtype=torch.float64),
+        rotation=torch.full((n,), rotation, dtype=torch.float64),
         roughness=col(0), ior=col(1), albedo=col(2), sigma_t=col(3), base=kind,
         base_roughness=torch.full((n,), base[1] if kind != "diffuse" else 0.5, dtype=torch.float64),
         base_r0=torch.full((n,), base[2] if kind == "conductor" else 0.0, dtype=torch.float64),
@@ -122,13 +144,14 @@ def _analog(name: str):
     that share them."""
     layers, base, seed = ALL_CONFIGS[name]
     wi = _wi()
-    pw, pb, ptop = analog_exits(layers, base, wi, N_PHOTONS // 10, seed, skip_top_reflection=False)
+    an = _anisotropy(name)
+    pw, pb, ptop = analog_exits(layers, base, wi, N_PHOTONS // 10, seed, skip_top_reflection=False, **an)
     bins = disk_bins(pw, pb, ptop, wi, RINGS_TOP, RINGS_BODY, SECTORS)
     zero = torch.zeros_like(pb)
     keep = (well_populated(pw, torch.where(ptop, pb, zero), bins, N_TOP / pw.shape[0]),
             well_populated(pw, torch.where(ptop, zero, pb), bins, N_PHOTONS / pw.shape[0]))
-    tw, tb, _ = analog_exits(layers, base, wi, N_TOP, seed + 1, skip_top_reflection=False, top_only=True)
-    ew, eb, top = analog_exits(layers, base, wi, N_PHOTONS, seed + 2, skip_top_reflection=True)
+    tw, tb, _ = analog_exits(layers, base, wi, N_TOP, seed + 1, skip_top_reflection=False, top_only=True, **an)
+    ew, eb, top = analog_exits(layers, base, wi, N_PHOTONS, seed + 2, skip_top_reflection=True, **an)
     return bins, keep, (analog_disk_estimate(tw, tb, bins), analog_disk_estimate(ew, eb, bins))
 
 
@@ -140,6 +163,7 @@ def p_values(name: str, perturbation: str | None = None) -> dict[str, tuple[floa
     the stack (the walk's paths)."""
     layers, base, seed = ALL_CONFIGS[name]
     bins, keep, est = _analog(name)
+    an = _anisotropy(name, perturbation)
     if perturbation is not None:
         layers, base = perturbed(layers, base, perturbation)
     wi = _wi()
@@ -150,9 +174,10 @@ def p_values(name: str, perturbation: str | None = None) -> dict[str, tuple[floa
         n = idx.numel()
         f = torch.zeros(pts.shape[0], dtype=torch.float64)
         if part == "top":
-            f[idx] = GGXDielectric(layers[0][0], layers[0][1]).eval(wi.expand(n, 3), pts[idx])
+            top_a = an["anisotropy"][0] if an["anisotropy"] else 0.0
+            f[idx] = GGXDielectric(layers[0][0], layers[0][1], top_a, an["rotation"]).eval(wi.expand(n, 3), pts[idx])
         else:
-            f[idx], _ = simulate(_stack(layers, base, n), wi.expand(n, 3), pts[idx], spp=1, seed=seed + 5,
+            f[idx], _ = simulate(_stack(layers, base, n, **an), wi.expand(n, 3), pts[idx], spp=1, seed=seed + 5,
                                  dtype=torch.float64, include_top_reflection=False)
         w, w_var = walk_disk_estimate(f, inside, bins, k)
         chi, dof = chi_square(a, a_cov, w, w_var, kp)
@@ -193,3 +218,13 @@ def test_a_walk_that_ignores_the_f82_tint_is_rejected():
     """Power for the F82-tint Fresnel: the walk with Schlick's Fresnel in place of the tinted one."""
     res = p_values("coat-f82-conductor", "f82_tint")
     assert combined(res) < ALPHA, f"f82_tint: {_describe(res)}"
+
+
+@pytest.mark.slow
+@pytest.mark.ci_slow
+@pytest.mark.parametrize("perturbation", ["anisotropy", "rotation"])
+def test_a_walk_with_the_anisotropy_or_its_rotation_off_is_rejected(perturbation):
+    """Power for SPEC section 10: the walk with the base's anisotropy 10 % off, or the frame turned 10 degrees
+    further, against the analog walk of the true stack."""
+    res = p_values("coat-anisotropic-conductor", perturbation)
+    assert combined(res) < ALPHA, f"{perturbation}: {_describe(res)}"

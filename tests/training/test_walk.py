@@ -74,7 +74,8 @@ def test_results_do_not_depend_on_the_thread_count(stack_fn):
     assert not torch.equal(a[0], c[0])
 
 
-@pytest.mark.parametrize("what", ["nan_direction", "below_horizon", "zero_paths", "nan_sigma", "negative_ior"])
+@pytest.mark.parametrize("what", ["nan_direction", "below_horizon", "zero_paths", "nan_sigma", "negative_ior",
+                                  "anisotropy_one", "nan_rotation"])
 def test_input_that_cannot_be_simulated_is_one_line(what):
     n = 4
     st, wi, wo, spp = standard_stack(n), _wi(n).clone(), _dirs(n, 2), 8
@@ -86,6 +87,10 @@ def test_input_that_cannot_be_simulated_is_one_line(what):
         spp = 0
     elif what == "nan_sigma":
         st.sigma_t[0, 0] = float("nan")
+    elif what == "anisotropy_one":  # alpha_y would be 0
+        st.base_anisotropy = torch.ones(n, dtype=torch.float64)
+    elif what == "nan_rotation":
+        st.rotation = torch.full((n,), float("nan"), dtype=torch.float64)
     else:
         st.ior[3, 0] = -1.0
     with pytest.raises(NbrdfError) as e:

@@ -33,8 +33,9 @@ def _dirs(seed: int) -> np.ndarray:
 def _stacks() -> dict[str, StackParams]:
     """The benchmark's stack (medium, RGB), the trapping stack (the two-bounce
     connection and splitting, RGB), a one-channel two-interface diffuse-base
-    stack (next-event estimation through the stack) and a medium over a sharp
-    base (by way of the base)."""
+    stack (next-event estimation through the stack), a medium over a sharp
+    base (by way of the base) and an anisotropic coat over an anisotropic
+    conductor in a turned frame (SPEC section 10)."""
     f = lambda v, *shape: torch.full(shape, float(v), dtype=torch.float64)
     return {
         "standard": StackParams(f(0.1, N, 1), f(1.5, N, 1), f(0.9, N, 1, 3), f(1.0, N, 1), "conductor", f(0.3, N),
@@ -45,6 +46,9 @@ def _stacks() -> dict[str, StackParams]:
                                base_albedo=f(0.6, N)),
         "sharp_base": StackParams(f(0.05, N, 1), f(1.5, N, 1), f(0.9, N, 1, 3), f(1.0, N, 1), "conductor", f(0.02, N),
                                   base_r0=f(0.9, N, 3)),
+        "anisotropic": StackParams(f(0.1, N, 1), f(1.5, N, 1), f(0.9, N, 1, 3), f(0.5, N, 1), "conductor", f(0.2, N),
+                                   base_r0=f(0.9, N, 3), anisotropy=f(0.5, N, 1), base_anisotropy=f(0.8, N),
+                                   rotation=f(30.0, N)),
     }
 
 

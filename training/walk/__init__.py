@@ -20,7 +20,9 @@ The parts, each a module:
   interface and the base;
 - ``kernel``: one path (start, flights, vertices, roulette) and ``run``.
 
-Physics: SPEC section 5 and ``training.layered``. The estimator's design and
+Physics: SPEC section 5 and ``training.layered``; anisotropic interfaces (SPEC
+section 10): every roughness is a pair (alpha_x, alpha_y) and the pairs come
+in the material's rotated tangent frame (``training.layered._walk_frame``). The estimator's design and
 its measurements: docs/decisions/001-009 and 061.
 """
 from nbrdf.training.walk.params import BLOCK, RR_WEIGHT, WalkParams, walk_params

@@ -2,7 +2,14 @@
 distribution, Smith's G1, VNDF sampling and its density, Fresnel, reflection,
 refraction and a slab's transmittance. The same formulas as
 ``training.microfacet`` (tests/training/test_walk_kernels.py checks them),
-written per direction so that Numba compiles them into the per-path code."""
+written per direction so that Numba compiles them into the per-path code.
+
+Roughness is a pair (ax, ay): alpha along the x and y axes of the walk's
+frame (SPEC section 10: the material's rotated tangent frame; the walk gets
+its directions in it). Where ax == ay the isotropic formulas run exactly as
+they did before anisotropy (the same numbers, bit for bit); the stretch of
+the VNDF sampler is written per axis, which for equal alphas is the same
+arithmetic."""
 from __future__ import annotations
 
 import math
@@ -60,58 +67,68 @@ def norm3(x, y, z):
 
 
 @njit(**JIT)
-def ggx_d(mx, my, mz, a):
+def ggx_d(mx, my, mz, ax, ay):
+    """D(m); anisotropic (Heitz 2014): 1 / (pi ax ay (mx^2 / ax^2 + my^2 / ay^2 + mz^2)^2)."""
     if mz <= 0.0:
         return 0.0
-    a2 = a * a
-    den = mx * mx + my * my + mz * mz * a2
-    return a2 / (math.pi * den * den)
+    if ax == ay:
+        a2 = ax * ax
+        den = mx * mx + my * my + mz * mz * a2
+        return a2 / (math.pi * den * den)
+    sx, sy = mx / ax, my / ay
+    den = sx * sx + sy * sy + mz * mz
+    return 1.0 / (math.pi * ax * ay * den * den)
 
 
 @njit(**JIT)
-def g1_dir(wx, wy, wz, a):
-    """Smith G1 = 2 / (1 + sqrt(1 + a^2 tan^2)), written with one division."""
+def g1_dir(wx, wy, wz, ax, ay):
+    """Smith G1 = 2 / (1 + sqrt(1 + a_w^2 tan^2)), written with one division; a_w^2 tan^2 =
+    (ax^2 wx^2 + ay^2 wy^2) / wz^2 (Heitz 2014's Lambda along w's azimuth)."""
     z = abs(wz)
-    den = z + math.sqrt(wz * wz + a * a * (wx * wx + wy * wy))
+    if ax == ay:
+        den = z + math.sqrt(wz * wz + ax * ax * (wx * wx + wy * wy))
+    else:
+        den = z + math.sqrt(wz * wz + ax * ax * wx * wx + ay * ay * wy * wy)
     return 2.0 * z / den if den > 0.0 else 0.0
 
 
 @njit(**JIT)
-def g1(wx, wy, wz, mx, my, mz, a):
+def g1(wx, wy, wz, mx, my, mz, ax, ay):
     if (wx * mx + wy * my + wz * mz) * wz > 0.0:
-        return g1_dir(wx, wy, wz, a)
+        return g1_dir(wx, wy, wz, ax, ay)
     return 0.0
 
 
 @njit(**JIT)
-def sample_vndf(wx, wy, wz, a, u1, u2):
+def sample_vndf(wx, wy, wz, ax, ay, u1, u2):
     """A VNDF facet normal for w (which may lie below: it is mirrored up)."""
     if wz < 0.0:
         wx, wy, wz = -wx, -wy, -wz
-    vx, vy, vz = norm3(a * wx, a * wy, wz)
-    return vndf_std(vx, vy, vz, a, u1, u2)
+    vx, vy, vz = norm3(ax * wx, ay * wy, wz)
+    return vndf_std(vx, vy, vz, ax, ay, u1, u2)
 
 
 @njit(**JIT)
-def vndf_std(vx, vy, vz, a, u1, u2):
+def vndf_std(vx, vy, vz, ax, ay, u1, u2):
     """A VNDF facet normal from the stretched, normalised view direction
-    v = (a wx, a wy, wz) / |.| (vz >= 0; per pair for next-event estimation):
+    v = (ax wx, ay wy, wz) / |.| (vz >= 0; per pair for next-event estimation):
     Dupuy and Benyoub 2023 (exact; a point of the spherical cap below v, one
-    square root fewer than Heitz's disk mapping and no frame)."""
+    square root fewer than Heitz's disk mapping and no frame), unstretched by
+    (ax, ay, 1) as Heitz 2018's anisotropic sampler."""
     cph, sph = cos_sin_2pi(u2)
     z = (1.0 - u1) * (1.0 + vz) - vz
     st = math.sqrt(max(1.0 - z * z, 0.0))
-    return norm3(a * (st * cph + vx), a * (st * sph + vy), max(z + vz, 1e-12))
+    return norm3(ax * (st * cph + vx), ay * (st * sph + vy), max(z + vz, 1e-12))
 
 
 @njit(**JIT)
-def vndf_pdf(wx, wy, wz, mx, my, mz, a):
+def vndf_pdf(wx, wy, wz, mx, my, mz, ax, ay):
     if wz < 0.0:
         wx, wy, wz = -wx, -wy, -wz
     wm = wx * mx + wy * my + wz * mz
     if wm <= 0.0:
         return 0.0
-    return g1_dir(wx, wy, wz, a) * wm * ggx_d(mx, my, mz, a) / max(abs(wz), 1e-30)
+    return g1_dir(wx, wy, wz, ax, ay) * wm * ggx_d(mx, my, mz, ax, ay) / max(abs(wz), 1e-30)
 
 
 @njit(**JIT)

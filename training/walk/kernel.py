@@ -34,7 +34,7 @@ def enter(ix, iy, iz, s, spp, q, T, M, b_r0, b_f82, key, out):
     the connection, its two strategies from the entry (into ``out``, zeroed
     first). Returns (d, the entry weight, the counter after the start, C4 of d)."""
     u0 = (s + uniform(key, ENTRY)) / spp
-    dx, dy, dz, w_entry, _ = ft_sample(T.a0, T.e0, ix, iy, iz, u0, uniform(key, ENTRY + 1))
+    dx, dy, dz, w_entry, _ = ft_sample(T.a0, T.ay0, T.e0, ix, iy, iz, u0, uniform(key, ENTRY + 1))
     for c in range(out.shape[0]):
         out[c] = 0.0
     if not M.conn:
@@ -46,8 +46,8 @@ def enter(ix, iy, iz, s, spp, q, T, M, b_r0, b_f82, key, out):
     for c in range(out.shape[0]):
         r0, b = b_r0[q, c], b_f82[q, c]
         out[c] += k * conductor_f(x, r0, b) + kd * conductor_f(xd, r0, b)
-    C4 = (ft_pdf(T.a0, T.e0, ix, iy, iz, dx, dy, dz), ft_pdf(T.a0, T.e0, T.ox, T.oy, T.oz, -dx, -dy, dz),
-          ft_pdf(M.agw, T.e0, T.ox, T.oy, T.oz, -dx, -dy, dz), survival(T.tau0, 1.0, dz))
+    C4 = (ft_pdf(T.a0, T.ay0, T.e0, ix, iy, iz, dx, dy, dz), ft_pdf(T.a0, T.ay0, T.e0, T.ox, T.oy, T.oz, -dx, -dy, dz),
+          ft_pdf(M.agw, M.agw, T.e0, T.ox, T.oy, T.oz, -dx, -dy, dz), survival(T.tau0, 1.0, dz))
     return dx, dy, dz, w_entry, START_DIMS_CONNECTION, C4
 
 
@@ -140,8 +140,9 @@ def path(q, s, P, out, beta, stk):
                 for c in range(beta.shape[0]):
                     beta[c] *= wgt
             elif k_if < L:
-                nx, ny, nz, wgt, p, t1, ctr = interior_vertex(T, k_if, rough[q, k_if], ior[q, k_if], wx, wy, wz, dz,
-                                                              z0, pdf_last, M.chain, key, ctr, out, beta)
+                nx, ny, nz, wgt, p, t1, ctr = interior_vertex(T, k_if, rough[q, k_if], P.rough_y[q, k_if], ior[q, k_if],
+                                                              wx, wy, wz, dz, z0, pdf_last, M.chain, key, ctr, out,
+                                                              beta)
                 alive = p > 0.0 and wgt > 0.0
                 if M.chain and alive and wz < 0.0 and nz > 0.0:  # up through interface 1: the segment starts
                     seg_on, seg = True, (-wx, -wy, -wz, pdf_last, t1)

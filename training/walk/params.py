@@ -59,8 +59,10 @@ JIT_INLINE = dict(JIT, inline="always")
 
 #: The walk's input, one record for the CPU and the CUDA entry points (a
 #: namedtuple: Numba passes it to ``@njit`` and ``@cuda.jit`` code alike).
-#: Arrays (float64): wi, wo (N, 3) the pairs; rough, ior, sigma (N, L) per
-#: interface / slab; alb (N, L, C) the slabs' albedo; b_rough, b_ior (N,) and
+#: Arrays (float64): wi, wo (N, 3) the pairs, in the material's rotated
+#: tangent frame (SPEC section 10); rough, rough_y (alpha_x, alpha_y: equal
+#: for an isotropic interface), ior, sigma (N, L) per interface / slab; alb
+#: (N, L, C) the slabs' albedo; b_rough, b_rough_y, b_ior (N,) and
 #: b_r0, b_f82 (the F82-tint coefficient b, 0: Schlick), b_alb (N, C) the base's. Scalars: spp, seed; base (0 conductor,
 #: 1 diffuse, 2 dielectric); rr_depth, max_depth; forced (the forced top
 #: reflection and every strategy; False: the plain walk); rr_weight;
@@ -68,19 +70,23 @@ JIT_INLINE = dict(JIT, inline="always")
 #: WIDE_GUIDE_ROUGHNESS); kmax, kstep, ifloor (SPLIT_MAX, SPLIT_STEP,
 #: SPLIT_FLOOR); block (paths per work item).
 WalkParams = namedtuple("WalkParams", [
-    "wi", "wo", "rough", "ior", "sigma", "alb", "b_rough", "b_r0", "b_f82", "b_ior", "b_alb",
+    "wi", "wo", "rough", "ior", "sigma", "alb", "b_rough", "b_r0", "b_f82", "b_ior", "b_alb", "rough_y", "b_rough_y",
     "spp", "seed", "base", "rr_depth", "max_depth", "forced", "rr_weight", "a_wide", "lam", "lam_w", "agw",
     "kmax", "kstep", "ifloor", "block"])
 
 
 def walk_params(wi: np.ndarray, wo: np.ndarray, spp: int, seed: int, rough: np.ndarray, ior: np.ndarray,
                 sigma: np.ndarray, alb: np.ndarray, base: int, b_rough: np.ndarray, b_r0: np.ndarray,
-                b_f82: np.ndarray, b_ior: np.ndarray, b_alb: np.ndarray, rr_depth: int, max_depth: int, forced: bool) -> WalkParams:
+                b_f82: np.ndarray, b_ior: np.ndarray, b_alb: np.ndarray, rr_depth: int, max_depth: int, forced: bool,
+                rough_y: np.ndarray | None = None, b_rough_y: np.ndarray | None = None) -> WalkParams:
     """The record for N pairs (arrays made contiguous float64, the seed
-    folded to 63 bits) with this module's tuning constants, read when called."""
+    folded to 63 bits) with this module's tuning constants, read when called;
+    ``rough_y`` / ``b_rough_y`` None: isotropic (alpha_y = alpha_x)."""
     f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)
+    rough_y = rough if rough_y is None else rough_y
+    b_rough_y = b_rough if b_rough_y is None else b_rough_y
     return WalkParams(f64(wi), f64(wo), f64(rough), f64(ior), f64(sigma), f64(alb), f64(b_rough), f64(b_r0),
-                      f64(b_f82), f64(b_ior), f64(b_alb), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, int(base), int(rr_depth),
+                      f64(b_f82), f64(b_ior), f64(b_alb), f64(rough_y), f64(b_rough_y), int(spp), int(seed) & 0x7FFFFFFFFFFFFFFF, int(base), int(rr_depth),
                       int(max_depth), bool(forced), float(RR_WEIGHT), float(WIDE_ROUGHNESS), float(GUIDE_LAM),
                       float(WIDE_LAM), float(WIDE_GUIDE_ROUGHNESS), int(SPLIT_MAX), int(SPLIT_STEP),
                       float(SPLIT_FLOOR), int(BLOCK))

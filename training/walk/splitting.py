@@ -30,7 +30,7 @@ def split_guide(T, a_wide):
     mirrored exit lobe toward wo, I's peak the floor's reference."""
     gsx, gsy = T.ox / T.e0, T.oy / T.e0
     gsz = -math.sqrt(max(1.0 - gsx * gsx - gsy * gsy, 0.0))
-    i_peak, _ = top_eval(-gsx, -gsy, gsz, gsx, gsy, gsz, T.a0, T.e0, 1.0, False, a_wide, T.ox, T.oy, T.oz)
+    i_peak, _ = top_eval(-gsx, -gsy, gsz, gsx, gsy, gsz, T.a0, T.ay0, T.e0, 1.0, False, a_wide, T.ox, T.oy, T.oz)
     return gsx, gsy, gsz, i_peak
 
 
@@ -42,7 +42,7 @@ def split_at_top(wx, wy, wz, T, guide, a_wide, kmax, kstep, ifloor, bounces, sta
     this vertex before its reflection. Returns the new split state."""
     gsx, gsy, gsz, i_peak = guide
     kscale, lref, ntot, nstk = state
-    iv, _ = top_eval(wx, wy, wz, gsx, gsy, gsz, T.a0, T.e0, 1.0, False, a_wide, T.ox, T.oy, T.oz)
+    iv, _ = top_eval(wx, wy, wz, gsx, gsy, gsz, T.a0, T.ay0, T.e0, 1.0, False, a_wide, T.ox, T.oy, T.oz)
     C = beta.shape[0]
     bmax = 0.0
     for c in range(C):

@@ -108,7 +108,7 @@ def top_vertex(q, T, M, b_r0, b_f82, wx, wy, wz, pdf_last, C4, seg_in, seg, scat
     density, counter, the new C4); beta is left for the caller (splitting
     comes first)."""
     C = out.shape[0]
-    g1w = g1_dir(wx, wy, wz, T.a0)
+    g1w = g1_dir(wx, wy, wz, T.a0, T.ay0)
     if not resume:
         tu = survival(T.tau0, 1.0, wz) if M.conn and not scat_prev else 1.0  # the walk's flight up (its density)
         k = top_exit(wx, wy, wz, T, g1w, pdf_last, C4, tu, seg_in, M.mirror, seg[0], seg[1], seg[2], seg[3], seg[4])
@@ -117,10 +117,10 @@ def top_vertex(q, T, M, b_r0, b_f82, wx, wy, wz, pdf_last, C4, seg_in, seg, scat
                 out[c] += beta[c] * k
     u0, u1, u2 = uniform(key, ctr + TOP_SAMPLE), uniform(key, ctr + TOP_SAMPLE + 1), uniform(key, ctr + TOP_SAMPLE + 2)
     if not M.forced:
-        nx, ny, nz, wgt, p = diel_sample(wx, wy, wz, T.a0, T.e0, u0, u1, u2)
+        nx, ny, nz, wgt, p = diel_sample(wx, wy, wz, T.a0, T.ay0, T.e0, u0, u1, u2)
         return nx, ny, nz, wgt, p, ctr + TOP_DIMS, C4
-    nx, ny, nz, wgt, p, lm, wide = top_reflection(wx, wy, wz, T.a0, T.e0, T.tau0, M.conn, M.lam, M.lam_w, M.a_wide,
-                                                  g1w, T.ox, T.oy, T.oz, u0, u1, u2)
+    nx, ny, nz, wgt, p, lm, wide = top_reflection(wx, wy, wz, T.a0, T.ay0, T.e0, T.tau0, M.conn, M.lam, M.lam_w,
+                                                  M.a_wide, g1w, T.ox, T.oy, T.oz, u0, u1, u2)
     if not M.conn:
         return nx, ny, nz, wgt, p, ctr + TOP_DIMS, C4
     if not resume:
@@ -132,13 +132,13 @@ def top_vertex(q, T, M, b_r0, b_f82, wx, wy, wz, pdf_last, C4, seg_in, seg, scat
         for c in range(C):
             r0, b = b_r0[q, c], b_f82[q, c]
             out[c] += beta[c] * (k * conductor_f(x, r0, b) + kd * conductor_f(xd, r0, b))
-    C4 = connection_densities(T.a0, T.e0, M.agw, T.tau0, T.ox, T.oy, T.oz, p, nx, ny, nz)
+    C4 = connection_densities(T.a0, T.ay0, T.e0, M.agw, T.tau0, T.ox, T.oy, T.oz, p, nx, ny, nz)
     return nx, ny, nz, wgt, p, ctr + TOP_DIMS_CONNECTION, C4
 
 
 @njit(**JIT_INLINE)
-def interior_vertex(T, k_if, a, e, wx, wy, wz, dz, z0, pdf_last, chain, key, ctr, out, beta):
-    """Interface ``k_if`` (> 0; roughness a, index e), reached along d (dz) from depth z0: next-event
+def interior_vertex(T, k_if, a, ay, e, wx, wy, wz, dz, z0, pdf_last, chain, key, ctr, out, beta):
+    """Interface ``k_if`` (> 0; roughness (a, ay), index e), reached along d (dz) from depth z0: next-event
     estimation through the top (interface 1) and the interface's sample.
     Returns (n, weight factor, density, t1, counter); t1: the survival of the
     walk's flight from slab 1 (the chain's segment starts with it)."""
@@ -146,12 +146,12 @@ def interior_vertex(T, k_if, a, e, wx, wy, wz, dz, z0, pdf_last, chain, key, ctr
     t1 = 1.0
     if k_if == 1:
         t1 = survival(T.tau1, z0 - 1.0, dz) if below else 1.0
-        k = interior_nee(wx, wy, wz, T, a, e, pdf_last, below, t1, uniform(key, ctr + INTERIOR_NEE),
+        k = interior_nee(wx, wy, wz, T, a, ay, e, pdf_last, below, t1, uniform(key, ctr + INTERIOR_NEE),
                          uniform(key, ctr + INTERIOR_NEE + 1))
         if k != 0.0:
             for c in range(out.shape[0]):
                 out[c] += beta[c] * k
-    nx, ny, nz, wgt, p = diel_sample(wx, wy, wz, a, e, uniform(key, ctr + INTERIOR_SAMPLE),
+    nx, ny, nz, wgt, p = diel_sample(wx, wy, wz, a, ay, e, uniform(key, ctr + INTERIOR_SAMPLE),
                                      uniform(key, ctr + INTERIOR_SAMPLE + 1), uniform(key, ctr + INTERIOR_SAMPLE + 2))
     return nx, ny, nz, wgt, p, t1, ctr + INTERIOR_DIMS
 
@@ -163,12 +163,12 @@ def base_vertex(q, T, M, b_r0, b_f82, b_alb, L, wx, wy, wz, depth, pdf_last, C4,
     sample with its weight into beta. Returns (n, density, alive, whether the
     walk's segment by way of the base starts here, counter)."""
     C = out.shape[0]
-    base, ba, be = M.base, T.ba, T.be
+    base, ba, bay, be = M.base, T.ba, T.bay, T.be
     sc = pn = vx = vy = vz = 0.0
     if L == 1:
-        vx, vy, vz, sc, pn = nee(1.0, T.sx, T.sy, T.sz, T.g1o, T.ox, T.oy, T.oz, T.a0, T.e0, T.tau0,
+        vx, vy, vz, sc, pn = nee(1.0, T.sx, T.sy, T.sz, T.g1o, T.ox, T.oy, T.oz, T.a0, T.ay0, T.e0, T.tau0,
                                  uniform(key, ctr + BASE_NEE), uniform(key, ctr + BASE_NEE + 1))
-    g1w = g1_dir(wx, wy, wz, ba) if base == CONDUCTOR else 0.0
+    g1w = g1_dir(wx, wy, wz, ba, bay) if base == CONDUCTOR else 0.0
     if M.chain and wz > 0.0:
         k, x = base_chain(base, wx, wy, wz, depth, T, g1w, uniform(key, ctr + BASE_CHAIN), uniform(key, ctr + BASE_CHAIN + 1),
                           uniform(key, ctr + BASE_CHAIN + 2), uniform(key, ctr + BASE_CHAIN + 3))
@@ -180,7 +180,7 @@ def base_vertex(q, T, M, b_r0, b_f82, b_alb, L, wx, wy, wz, depth, pdf_last, C4,
         ctr += BASE_CHAIN_DIMS
     seg = base == CONDUCTOR and M.mirror and scat_prev and wz > 0.0  # the chain made this segment too
     if sc > 0.0:
-        k, x = base_nee(base, wx, wy, wz, vx, vy, vz, sc, pn, ba, be, g1w, pdf_last, seg, C4, M.conn, T.tau0)
+        k, x = base_nee(base, wx, wy, wz, vx, vy, vz, sc, pn, ba, bay, be, g1w, pdf_last, seg, C4, M.conn, T.tau0)
         if k != 0.0:
             for c in range(C):
                 if base == CONDUCTOR:
@@ -191,7 +191,7 @@ def base_vertex(q, T, M, b_r0, b_f82, b_alb, L, wx, wy, wz, depth, pdf_last, C4,
                     out[c] += beta[c] * k
     u0, u1 = uniform(key, ctr + BASE_SAMPLE), uniform(key, ctr + BASE_SAMPLE + 1)
     if base == CONDUCTOR:
-        nx, ny, nz, wgt, p, x = cond_sample(wx, wy, wz, ba, g1w, u0, u1)
+        nx, ny, nz, wgt, p, x = cond_sample(wx, wy, wz, ba, bay, g1w, u0, u1)
         alive = p > 0.0 and wgt > 0.0
         for c in range(C):
             beta[c] *= wgt * conductor_f(x, b_r0[q, c], b_f82[q, c])
@@ -201,7 +201,7 @@ def base_vertex(q, T, M, b_r0, b_f82, b_alb, L, wx, wy, wz, depth, pdf_last, C4,
         for c in range(C):
             beta[c] *= b_alb[q, c] if alive else 0.0
     else:
-        nx, ny, nz, wgt, p = diel_sample(wx, wy, wz, ba, be, u0, u1, uniform(key, ctr + BASE_SAMPLE + 2))
+        nx, ny, nz, wgt, p = diel_sample(wx, wy, wz, ba, bay, be, u0, u1, uniform(key, ctr + BASE_SAMPLE + 2))
         alive = p > 0.0 and nz > 0.0 and wgt > 0.0  # what is transmitted leaves the stack
         for c in range(C):
             beta[c] *= wgt if alive else 0.0

@@ -3,6 +3,7 @@
 analytic layering approximation."""
 from __future__ import annotations
 
+from nbrdf.neural.anisotropy import require_isotropic
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIFFUSE
 from nbrdf.neural.material import Material
@@ -24,6 +25,7 @@ def analytic_uniforms(m: Material) -> dict:
         raise NbrdfError(f"layers: the analytic shader takes at most {MAX_INTERFACES} interfaces above the base")
     if m.base.type not in GLSL_BASES:
         raise NbrdfError(f"layers[{len(m.layers) - 1}]: a {m.base.type} base needs the neural renderer")
+    require_isotropic(m, "the closed-form GLSL shader")
     s = material_stack(m)
     L = s.layers
     pad = lambda xs, v: [*xs, *[v] * (MAX_INTERFACES - L)]

@@ -175,7 +175,7 @@ class Panels(MaterialWidgets):
                         ld.set_base_type(BASE_TYPES[k])
             # every parameter of the kind, optional ones a file left out at their defaults (a conductor's F82 tint)
             defaults = KINDS[kind].new_layer() if kind in KINDS else {}
-            shown = {**{p.name: defaults[p.name] for p in KINDS[kind].params if p.optional}, **layer} \
+            shown = {**{p.name: defaults[p.name] for p in KINDS[kind].params if p.optional and p.live}, **layer} \
                 if kind in KINDS else layer
             for key, value in shown.items():
                 if key in ("type", "path"):
