@@ -4,8 +4,9 @@ A stack made here (scattering media, several coats, a dielectric base under a cl
 inputs of its own. This finds the inputs whose stack (``neural.openpbr``) looks most like it on SPEC section 9's
 lit sphere: the target is the stack's Monte Carlo reference; each candidate is rendered through the neural path
 (milliseconds, so a derivative-free search can afford hundreds of them) for the four OpenPBR structures (metal
-or dielectric base, coated or not), searched by Nelder-Mead from the structural guess; the winner's own Monte
-Carlo reference is then scored against the target with HDR-FLIP, the figure the exported document carries.
+or dielectric base, coated or not), searched by Nelder-Mead from the structural guess on a probe of pixels, then
+polished on the whole sphere's HDR-FLIP; the winner's own Monte Carlo reference is then scored against the target
+with HDR-FLIP, the figure the exported document carries.
 """
 from __future__ import annotations
 
@@ -37,6 +38,9 @@ class FitConfig:
     """neural renders per searched structure"""
     structures: int = 2
     """OpenPBR structures searched (metal or dielectric base, coated or not), the structural guess's first"""
+    polish: int = 80
+    """neural renders of the whole sphere scored by HDR-FLIP itself, searched from the best probe point (the
+    probe's x / (1 + x) error weighs the dark half less than FLIP does); 0: none"""
     seed: int = 0
     """seed of the references"""
 
@@ -216,10 +220,20 @@ def fit_openpbr(m: Material, model=None, cfg: FitConfig | None = None, progress:
 
         x, val = _nelder_mead(objective, _to_point(base, space), cfg.evaluations)
         if best is None or val < best[0]:
-            best = (val, _to_inputs(base, space, x))
+            best = (val, x, base, space)
     bar.close()
     assert best is not None
-    inputs = best[1]
+    _, x, base, space = best
+    if cfg.polish > 0:  # the last stretch on the figure itself: HDR-FLIP of the whole neural sphere
+        def flip_of(y: np.ndarray) -> float:
+            try:
+                with torch.no_grad():
+                    return flip(target, _neural_image(_to_inputs(base, space, y), geo, model))[0]
+            except NbrdfError:
+                return math.inf
+
+        x, _ = _nelder_mead(flip_of, x, cfg.polish, step=0.15)
+    inputs = _to_inputs(base, space, x)
     stack, notes = _stack_of(inputs, m.name or "fit")
     with torch.no_grad():
         neural = _neural_image(inputs, geo, model)

@@ -2,6 +2,8 @@
 reads an OpenPBR-shaped stack back, and a fitted stack scores its own reference with HDR-FLIP."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -36,3 +38,14 @@ def test_a_fit_of_a_bare_metal_scores_low_against_its_reference():
     fit = fit_openpbr(m, cfg=FitConfig(size=24, spp=16, evaluations=40, structures=1, pixels=128), progress=False)
     assert fit.inputs.base_metalness == 1.0 and fit.flip < 0.08, fit
     assert 0.0 <= fit.neural_flip < 1.0
+
+
+def test_the_flip_polish_never_loses_what_the_probe_search_found():
+    """The polishing stage starts its simplex at the probe search's winner, so the neural sphere's HDR-FLIP
+    after it is at most what it was without it (tiny settings)."""
+    m = parse_material({"format": "nbrdf-material/1", "name": "plastic", "layers": [
+        {"type": "dielectric", "roughness": 0.1, "ior": 1.5}, {"type": "diffuse", "albedo": [0.6, 0.2, 0.1]}]})
+    cfg = FitConfig(size=24, spp=16, evaluations=30, structures=1, pixels=96, polish=0)
+    plain = fit_openpbr(m, cfg=cfg, progress=False)
+    polished = fit_openpbr(m, cfg=replace(cfg, polish=12), progress=False)
+    assert polished.neural_flip <= plain.neural_flip + 1e-9, (polished.neural_flip, plain.neural_flip)
