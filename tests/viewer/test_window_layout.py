@@ -24,14 +24,17 @@ SCRIPT = textwrap.dedent("""
     from nbrdf.viewer.options import ViewOptions
     out = {}
     clipped = set()
+    labels = set()
     def spy_widget(name):  # an item that ends beyond its side bar's work area is clipped
         real = getattr(imgui, name)
         def wrapped(*a, **k):
             r = real(*a, **k)
             window = imgui.internal.get_current_window()
             right = window.work_rect.max.x
+            label = a[0] if a and isinstance(a[0], str) else name
+            if window.name == "Material":
+                labels.add(label.split('##')[0])
             if imgui.get_item_rect_max().x > right + 0.5 and window.name in ("Material", "Scene and view"):
-                label = a[0] if a and isinstance(a[0], str) else name
                 clipped.add(f"{name}: {label.split('##')[0]}")
             return r
         setattr(imgui, name, wrapped)
@@ -53,6 +56,7 @@ SCRIPT = textwrap.dedent("""
         for _ in range(2):
             app.step()
         out["clipped"] = sorted(clipped)
+        out["labels"] = sorted(labels)
         out["window"] = list(glfw.get_window_size(app.window))
         out["viewport"] = list(app.viewport())
         out["rects"] = {k: list(v) for k, v in rects.items()}
@@ -116,6 +120,13 @@ def test_no_panel_label_is_clipped_at_1280x800(layout):
 
 def test_no_panel_label_is_clipped_at_1920x1080(layout_1920):
     assert layout_1920["clipped"] == []
+
+
+def test_the_stack_panel_offers_only_what_the_live_path_takes(layout):
+    """Every live parameter of the default material's layers has its control (a conductor's optional F82 tint
+    too), and none is offered for anisotropy, which only the ground truth takes until the retrain (``Param.live``)."""
+    assert {"roughness", "ior", "f82_tint"} <= set(layout["labels"]), layout["labels"]
+    assert "anisotropy" not in layout["labels"]
 
 
 def test_window_opens_at_80_percent_of_the_screen_and_remembers(layout):
