@@ -483,14 +483,17 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
     if not cfg.energy_weight >= 0:
         raise NbrdfError(f"--energy-weight: {cfg.energy_weight} is negative")
 
-    def loss_on(data: _StackData, idx: Tensor, pairs: int, fit_mean: bool = cfg.loss == "mean",
-                energy: float = cfg.energy_weight) -> Tensor:
+    def losses(data: _StackData, idx: Tensor, pairs: int, fit_mean: bool,
+               energy: bool) -> tuple[Tensor, Tensor | None]:
+        """The pairs' loss and (``energy``) the energy error of one batch, from one decoding."""
         params, feats, cos_o, target, body, scale, (weight, band, total) = data.batch(idx, pairs, g)
         y = model.decoder.log_f(stack_latents(model, params, net)[:, None, :], feats)
-        loss = _pair_loss(y, cos_o, target, scale, body if fit_mean else None)
-        if energy > 0:
-            loss = loss + energy * energy_error(torch.exp(y.clamp(max=30.0)), body, total, weight, band)
-        return loss
+        pair = _pair_loss(y, cos_o, target, scale, body if fit_mean else None)
+        return pair, energy_error(torch.exp(y.clamp(max=30.0)), body, total, weight, band) if energy else None
+
+    def loss_on(data: _StackData, idx: Tensor, pairs: int) -> Tensor:
+        pair, e = losses(data, idx, pairs, cfg.loss == "mean", cfg.energy_weight > 0)
+        return pair if e is None else pair + cfg.energy_weight * e
 
     def pick(rows: Tensor, k: int) -> Tensor:
         return rows[torch.randint(0, rows.numel(), (k,), generator=g)]
@@ -504,20 +507,16 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
             return loss_on(train, torch.cat(parts + ([pick(deep, n_deep)] if n_deep else [])), cfg.pairs)
         return loss_on(train, pick(two, cfg.batch), cfg.pairs)
 
-    def _val_energy(idx: Tensor) -> float:
-        params, feats, _c, _t, body, _s, (weight, band, total) = val.batch(idx, val.feats.shape[1], g)
-        z = stack_latents(model, params, net)
-        f_dec = torch.exp(model.decoder.log_f(z[:, None, :], feats).clamp(max=30.0))
-        return energy_error(f_dec, body, total, weight, band).item()
-
     def validate() -> dict:
         out = {}
         for name in ("two_layer", "diffuse_base") + THREE_LAYERED + DEEP:
             idx = val.index_of(name)
             if idx.numel():
-                out[name] = loss_on(val, idx, val.feats.shape[1], fit_mean=False, energy=0.0).item()  # comparable
-                if cfg.energy_weight > 0:  # the energy error alone, per class
-                    out[f"{name}_energy"] = _val_energy(idx)
+                # the log loss, comparable across runs; with the energy term, its error alone beside it
+                pair, e = losses(val, idx, val.feats.shape[1], False, cfg.energy_weight > 0)
+                out[name] = pair.item()
+                if e is not None:
+                    out[f"{name}_energy"] = e.item()
         return out
 
     t0 = time.perf_counter()
