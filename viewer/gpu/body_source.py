@@ -13,7 +13,7 @@ decoder. The choice is made once at start from the decoder's measured speed
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import moderngl
@@ -23,6 +23,7 @@ import torch
 from nbrdf.neural.body_table import TableSize
 from nbrdf.viewer.gpu import shaders
 from nbrdf.viewer.gpu.body_table_gpu import INTERACTIVE, STILL, BodyTables
+from nbrdf.viewer.gpu.env_prefilter import PrefilterSettings
 from nbrdf.viewer.gpu.lit_sampling import LitSampling
 from nbrdf.viewer.gpu.neural_gpu import GpuDecoder, probe_fragment
 from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf
@@ -47,6 +48,9 @@ class BodySettings:
     this per pixel (4 decoder evaluations; 10 ns: a 1080p pass in about 20 ms)."""
     probe_pairs: int = 8192
     """Decoder evaluations timed at start (8 times more, up to 2^20, while the probe takes under 20 ms)."""
+    prefilter: PrefilterSettings | None = field(default_factory=PrefilterSettings)
+    """With tables: the still view's body environment pre-integrated over the sphere's normals
+    (viewer/gpu/env_prefilter.py; None: every still pass samples the body)."""
 
 
 class BodySource:
@@ -105,6 +109,10 @@ class BodySource:
                        if self.use_tables else
                        f"decoder {self.ns_per_pixel:.1f} ns per pixel and pass: the decoder in every frame")
         return self.notice
+
+    def prefilter(self) -> PrefilterSettings | None:
+        """The still view's body environment map settings (``LitSettings.prefilter``): with tables only."""
+        return self.settings.prefilter if self.use_tables else None
 
     def sampling(self, base: LitSampling) -> LitSampling:
         """The lit estimator of frames shaded from tables (``table_sampling``); ``base``

@@ -23,6 +23,8 @@ from nbrdf.imaging.environment import GpuEnvironment
 from nbrdf.viewer.gpu.body_guide import BodyGuides
 from nbrdf.viewer.gpu.body_table_gpu import TABLE_UNIT
 from nbrdf.viewer.gpu.draw_kit import DrawKit
+from nbrdf.viewer.gpu.env_prefilter import DEFINE as ENV_TABLE_DEFINE
+from nbrdf.viewer.gpu.env_prefilter import EnvPrefilter, PrefilterSettings
 from nbrdf.viewer.gpu.gl_state import accumulating, depth_tested, masked
 from nbrdf.viewer.gpu.lit_sampling import LitSampling
 from nbrdf.viewer.gpu.neural_gpu import SHARE_UNIT
@@ -60,6 +62,9 @@ class LitSettings:
     choice, viewer/gpu/body_source.py ``BodySource.sampling``)."""
     quick: bool = False
     """True: passes use ``sampling.quick()`` (the window's interactive frames, viewer/ui/refinement.py)."""
+    prefilter: PrefilterSettings | None = None
+    """The still view's body environment pre-integrated over the sphere's normals where it applies
+    (viewer/gpu/env_prefilter.py; None: off, every pass samples the body)."""
 
     def for_brdf(self, brdf: GpuBrdf | None) -> LitSampling:
         """The sampling of a draw shaded with ``brdf``."""
@@ -77,6 +82,43 @@ class LitPasses:
         """The G-buffer of each (slot, w, h), a few sizes per slot (viewer/gpu/size_cache.py)."""
         self.guides = BodyGuides(kit.ctx)
         """The decoder's resampling-target tables, one per uniform latent drawn (viewer/gpu/body_guide.py)."""
+        self.sphere_radius: float | None = None
+        """The mesh's radius when it is a sphere about the origin (the renderer sets it; None: not one)."""
+        self._prefilter: EnvPrefilter | None = None
+
+    def prefilter(self) -> EnvPrefilter | None:
+        """The body environment map's baker under the current settings (None: off)."""
+        s = self.settings.prefilter
+        if s is None:
+            return None
+        if self._prefilter is None or self._prefilter.settings != s:
+            if self._prefilter is not None:
+                self._prefilter.release()
+            self._prefilter = EnvPrefilter(self.kit, s)
+        return self._prefilter
+
+    def prefiltered(self, state: ViewState, brdf: GpuBrdf | None) -> bool:
+        """Whether draws of ``brdf`` read the body environment map (its bake still to finish or not)."""
+        pf = self.prefilter()
+        return pf is not None and pf.applies(brdf, state, self.sphere_radius, True, self.settings.quick)
+
+    def prefilter_key(self, state: ViewState, brdf: GpuBrdf, env: GpuEnvironment) -> tuple | None:
+        """The key of the body environment map ``brdf``'s draws read (None: they read none)."""
+        if not self.prefiltered(state, brdf):
+            return None
+        return self._prefilter.key(state, brdf, env, self.settings.for_brdf(brdf), self.sphere_radius or 1.0)
+
+    def prefilter_rows(self, key: tuple | None) -> int | None:
+        """Rows of the body environment map of ``key`` baked so far (None: no map is read)."""
+        return None if key is None or self._prefilter is None else self._prefilter.rows_done(key)
+
+    def bake_prefilter(self, state: ViewState, brdf: GpuBrdf, env: GpuEnvironment, rows: int | None = None) -> bool:
+        """Bakes ``rows`` more rows of the body environment map of ``brdf``'s draws (None: the
+        rest); True when it is complete (or does not apply)."""
+        if not self.prefiltered(state, brdf):
+            return True
+        return self._prefilter.bake_rows(state, brdf, env, self.settings.for_brdf(brdf),
+                                         self.sphere_radius or 1.0, rows)
 
     def view_compute(self, view: View, state: ViewState, w: int, h: int, brdf: GpuBrdf,
                      tex: moderngl.Texture) -> None:
@@ -134,9 +176,14 @@ class LitPasses:
         y0, y1 = rows if rows is not None else (0, h)
         tex = target[1] if into is None else into
         for part, (_, _, b) in enumerate(draws):
-            c = kit.compute_program(b)
+            table = self.prefiltered(state, b)
+            if table:
+                self.bake_prefilter(state, b, env)  # the rest of its bake (the window bakes in bands first)
+            c = kit.compute_program(b, defines=ENV_TABLE_DEFINE if table else None)
             kit.bind_brdf(c, b, compute=True)
             self.lit_uniforms(c, state, env, b)
+            if table:
+                self._prefilter.bind(c, state, self.prefilter_key(state, b, env))
             c["u_eye"].value = tuple(state.camera.eye())
             if "u_material_id" in c:  # -1: every covered pixel (one material)
                 c["u_material_id"].value = part if len(draws) > 1 else -1
@@ -154,6 +201,11 @@ class LitPasses:
                 self.ctx.memory_barrier()
         kit.unbind_textures(*GBUFFER_UNITS)
         return vp
+
+    def release(self) -> None:
+        if self._prefilter is not None:
+            self._prefilter.release()
+            self._prefilter = None
 
     def fragment(self, state: ViewState, w: int, h: int, first: int, passes: int, draws: Draws,
                  fbo: moderngl.Framebuffer, env: GpuEnvironment, rows: Rows | None = None,

@@ -50,6 +50,7 @@ from nbrdf.imaging.environment import EnvironmentMap, GpuEnvironment, default_en
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
 from nbrdf.viewer.gpu.draw_kit import DrawKit
+from nbrdf.viewer.gpu.env_prefilter import sphere_radius
 from nbrdf.viewer.gpu.gl import use_compute
 from nbrdf.viewer.gpu.gl_state import accumulating, added, depth_tested, flat, masked
 from nbrdf.viewer.gpu.lit_passes import LitPasses, LitSettings, Rows, incidence
@@ -162,6 +163,7 @@ class Renderer:
         """A new mesh; every draw range is shaded with the draw call's BRDF until ``set_part_brdfs``."""
         m = named_mesh(mesh) if isinstance(mesh, str) else mesh
         self.mesh = m
+        self.lit.sphere_radius = sphere_radius(m)
         self.part_brdfs = [None] * len(m.draw_ranges)
         self.kit.set_mesh(m)
 

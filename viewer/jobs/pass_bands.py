@@ -31,6 +31,7 @@ from typing import Callable, Hashable, Sequence
 import moderngl
 import numpy as np
 
+from nbrdf.viewer.gpu.env_prefilter import baked_per_row
 from nbrdf.viewer.gpu.lit_passes import LIT_GROUP
 from nbrdf.viewer.gpu.pipeline import GpuBrdf
 from nbrdf.viewer.gpu.renderer import Renderer
@@ -39,6 +40,9 @@ from nbrdf.viewer.view_settings import ViewState
 #: Pixels on the object the first band ever shades, its cost unknown (its time then sizes the
 #: next bands; a new estimator or body starts from twice the cost last measured).
 PROBE_PIXELS = 4096
+#: Nodes of the body environment map (viewer/gpu/env_prefilter.py) the first bake band ever
+#: bakes, its cost unknown.
+PROBE_NODES = 256
 #: What a pixel off the object weighs against one on it (lit.comp reads its coverage and returns;
 #: measured on llvmpipe, 1280 x 800, the still estimator: about a tenth).
 OFF_OBJECT_WEIGHT = 1.0 / 8.0
@@ -146,15 +150,20 @@ class PassBands:
         self._coverage: tuple[tuple, np.ndarray] | None = None  # (size and slot, pixels per row)
         self.ms = 0.0
         """The last ``advance``'s milliseconds (GPU work waited for)."""
+        self.bake_ms_per_node: float | None = None
+        """The body environment map's bake, milliseconds per node baked (None: not measured; a
+        rising cost taken at once, a falling one a step at a time)."""
+        self._bake_rows: tuple[tuple, np.ndarray] | None = None  # (map key, nodes baked per row)
+        self._baking = False  # the last advance baked the map
 
     def reset(self) -> None:
         """Drops the pass in progress (the accumulation was started over or shaded whole)."""
-        self._pass, self._coverage = None, None
+        self._pass, self._coverage, self._baking = None, None, False
 
     @property
     def in_progress(self) -> bool:
-        """Whether a pass has bands shaded but is not complete."""
-        return self._pass is not None and self._pass.row > 0
+        """Whether a pass has bands shaded but is not complete, or its body environment map is baking."""
+        return self._baking or (self._pass is not None and self._pass.row > 0)
 
     @staticmethod
     def weights(coverage: np.ndarray, w: int) -> np.ndarray:
@@ -179,6 +188,10 @@ class PassBands:
         (each slot's accumulation then holds it)."""
         self.ctx.finish()  # the frame's earlier GL work is not this band's
         t0 = time.perf_counter()
+        self._baking = self._bake(renderer, state, shaded, budget_ms)
+        if self._baking:
+            self.ms = (time.perf_counter() - t0) * 1000.0
+            return False
         key = (w, h, tuple((s, id(b)) for s, b in shaded), cost_key, index)
         p = self._pass
         spent = 0.0
@@ -205,6 +218,33 @@ class PassBands:
             self._pass = None
         self.ms = (time.perf_counter() - t0) * 1000.0
         return done
+
+    def _bake(self, renderer: Renderer, state: ViewState, shaded: Sequence[tuple[str, GpuBrdf]],
+              budget_ms: float) -> bool:
+        """Bakes rows of the body environment map (viewer/gpu/env_prefilter.py) within
+        ``budget_ms`` while a shaded BRDF reads one that is not complete; True when this frame
+        went to it (the pass waits for the map)."""
+        lit = renderer.lit
+        for _, b in shaded:
+            key = lit.prefilter_key(state, b, renderer.env)
+            before = lit.prefilter_rows(key)
+            size = lit.prefilter().size if key is not None else 0
+            if before is None or before >= size:
+                continue
+            if self._bake_rows is None or self._bake_rows[0] != key:
+                self._bake_rows = (key, baked_per_row(state, size, lit.sphere_radius or 1.0))
+            nodes = np.cumsum(self._bake_rows[1][before:])
+            per_node = self.bake_ms_per_node
+            rows = (int(np.searchsorted(nodes, PROBE_NODES, side="right")) if per_node is None
+                    else int(np.searchsorted(nodes, budget_ms / per_node, side="right")))
+            t0 = time.perf_counter()
+            lit.bake_prefilter(state, b, renderer.env, max(rows, 1))
+            done = int(nodes[min(lit.prefilter_rows(key) - before, len(nodes)) - 1])
+            ms = (time.perf_counter() - t0) * 1000.0  # bake_rows waited for the GPU
+            if done > 0:
+                self.bake_ms_per_node = BandCost._learn(per_node, ms / done)
+            return True
+        return False
 
     @staticmethod
     def _rows(row: int, weights: np.ndarray, line: tuple[float, float] | None, budget_ms: float,

@@ -165,9 +165,10 @@ class ViewFrames:
         blank = False
         if budget_ms is not None and view == View.OBJECT and not frame.comparing and self.passes < MAX_PASSES:
             shaded = [(slots[0], body)] + ([(slots[1], frame.other_brdf)] if frame.blending else [])
+            # a band's cost: the estimator, the body, the BRDFs shaded, the body environment map read
+            cost_key = (stage.renderer.quick, body.kind, len(shaded), stage.renderer.lit.prefiltered(frame.state, body))
             if self.bands.advance(stage.renderer, replace(frame.state, background=False), w, h, self.passes,
-                                  shaded, budget_ms, (stage.renderer.quick, body.kind, len(shaded)),
-                                  end_extra_ms=self._compose_ms):
+                                  shaded, budget_ms, cost_key, end_extra_ms=self._compose_ms):
                 self.passes += 1
             self.accum_ms = self.bands.ms
             last = (w, h, *self._held) if self._held is not None else self._shown_for(size, frame)

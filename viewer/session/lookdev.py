@@ -408,6 +408,7 @@ class LookDev(SessionEdits, Captures):
         (per pixel or from baked tables, viewer/gpu/body_source.py); a change is said in ``notice``."""
         body_notice = self.bodies.calibrate(self.brdf) if self.brdf is not None else ""
         self.renderer.table_sampling = self.bodies.sampling(self.renderer.sampling)
+        self.renderer.settings.prefilter = self.bodies.prefilter()
         if body_notice:
             self.notice = "; ".join(x for x in (self.notice, body_notice) if x)
 

@@ -189,6 +189,15 @@ vec3 every_body_samples(mat3 tbn, vec3 wo, uvec2 px, uint draw, int m, int n_lob
     return sum;
 }
 
+#ifdef NB_ENV_TABLE
+// The body's environment light pre-integrated over the object's normals
+// (env_table.glsl): u_env_table_on 1 reads it at the shading normal instead of
+// sampling the body; the lights, the coat (its own samples alone) stay per pass.
+//@INCLUDE env_table.glsl
+uniform sampler2D u_env_table;
+uniform int u_env_table_on;
+#endif
+
 // ``tbn``: the shading frame (columns tangent, bitangent, normal; world);
 // ``view``: unit vector to the eye; ``world``: the surface point.
 vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
@@ -202,6 +211,13 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
     int n_lobe = every ? min(u_body_every, u_ris_candidates - 1) : ris && u_ris_lobe > 0 ? min(u_ris_lobe, m - 1) : 0;
     if (every) m = u_ris_candidates;
     int count = u_env_on == 0 ? 1 : ris ? 1 + u_ris_samples : u_one_sample != 0 ? 2 : u_strategies;
+#ifdef NB_ENV_TABLE
+    bool table = u_env_table_on != 0 && u_env_on != 0;
+    if (table) {  // the loop below shades the lights alone
+        count = 1;
+        ris = every = false;
+    }
+#endif
     bool cosine = u_strategies > 3 || u_one_sample != 0;
 #ifdef NB_SPLIT_COAT
     vec2 coat = coat_code();
@@ -214,6 +230,9 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
                 : ris ? vec3(float(m / 2 * u_ris_samples), float(m / 2 * u_ris_samples), float(coat_n))
                       : vec3(u_one_sample != 0 ? 1.0 / 3.0 : 1.0, 0.0, float(coat_n));
     coat_pass = coated ? coat : vec2(0.05, 1.0);
+#ifdef NB_ENV_TABLE
+    if (table) coat_counts = vec3(0.0, 0.0, float(coat_n));  // no environment or body candidates
+#endif
 #endif
     vec3 coat_sum = vec3(0.0);
     // One-sample MIS: the strategy of the single environment sample, chosen uniformly.
@@ -276,6 +295,9 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
             color += clamp_contribution(coat_eval(l, wo, coat) * l.z * env_radiance(lw) * u_env_intensity / pc);
     }
     if ((u_terms & TERM_ENV_COAT) != 0) color += coat_sum;
+#endif
+#ifdef NB_ENV_TABLE
+    if (table && (u_terms & TERM_ENV_BODY) != 0) color += textureLod(u_env_table, env_table_uv(tbn[2]), 0.0).rgb;
 #endif
     return color;
 }
