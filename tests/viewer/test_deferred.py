@@ -50,6 +50,31 @@ def test_compute_and_fragment_paths_give_the_same_image(gl_ctx, pipeline, materi
     assert np.quantile(err, 0.99) < 1e-3 and np.abs(comp - frag).mean() / np.abs(frag).mean() < 1e-3
 
 
+def test_the_every_candidate_program_is_the_fragment_paths_estimator(gl_ctx, pipeline):
+    # The compute path shades the baked table's estimator (the body at every candidate) with a
+    # program of its own (lit_shade.glsl shade_lit_every); the fragment path with shade_lit.
+    from nbrdf.viewer.gpu.body_source import table_sampling
+    from nbrdf.viewer.gpu.body_table_gpu import STILL, BodyTables
+
+    tables = BodyTables(gl_ctx)
+    brdf = tables.brdf(pipeline.build(load_material(DEFAULT_MATERIAL), "neural"), STILL)
+    state = ViewState(point_light=(1.5, -1.0, 2.0))
+    imgs = []
+    for compute in (True, False):
+        r = Renderer(gl_ctx, brdf=brdf, compute=compute)
+        r.sampling = table_sampling(r.sampling)
+        if compute:
+            assert r.lit.specialised(brdf) is not None
+        tex = r.accumulate(state, 24, 24, 0, 2, slot="t")
+        imgs.append(np.frombuffer(tex.read(), np.float32).reshape(24, 24, 4).copy())
+    comp, frag = imgs
+    assert (frag[..., 3] > 0).mean() > 0.2
+    np.testing.assert_array_equal(comp[..., 3], frag[..., 3])
+    err = np.abs(comp[..., :3] - frag[..., :3]) / (1e-2 + np.abs(frag[..., :3]))
+    assert np.quantile(err, 0.99) < 1e-3 and np.abs(comp - frag).mean() / np.abs(frag).mean() < 1e-3
+    tables.release()
+
+
 def test_fallback_when_forced_prints_one_notice(gl_ctx, pipeline, monkeypatch, capsys):
     monkeypatch.setenv(gl.FRAGMENT_ENV, "1")
     monkeypatch.setattr(gl, "_noticed", set())

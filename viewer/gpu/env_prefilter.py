@@ -55,9 +55,10 @@ class PrefilterSettings:
     draws: int = 48
     """Draws of the body estimator per node, each the table sampling's candidates (16 from the
     environment's CDF, 2 from the body's lobe): 48 draws are 864 body evaluations a node."""
-    coat_samples: int = 12
+    coat_samples: int = 16
     """Coat visible-normal samples per pass where the map is read: the pass is then the lights,
-    the coat and one fetch, so the coat (left as the noise) can take more samples."""
+    the coat and one fetch, so the coat (the noise left beside the map's) takes the most
+    samples a pass allows (each costs about a tenth of the pass's fixed cost on llvmpipe)."""
 
     def check(self) -> "PrefilterSettings":
         if not (16 <= self.size <= 512 and 1 <= self.draws <= 1024 and 0 <= self.coat_samples <= 16):
@@ -225,16 +226,17 @@ class EnvPrefilter:
             self.bake_ms = m.ms
         return y1 >= self.size
 
-    def bind(self, prog, state: ViewState, key: tuple | None) -> None:
-        """The lit program's map uniforms: the complete map of ``key`` on its unit, or off
-        (None, or a map not complete)."""
-        if "u_env_table_on" not in prog:
-            return
-        on = key is not None and self.ready(key)
-        prog["u_env_table_on"].value = int(on)
-        if on:
+    def bind(self, prog, state: ViewState, key: tuple) -> None:
+        """The lit program's map uniforms (a program compiled with ``DEFINE``): the complete map
+        of ``key`` on its unit."""
+        if not self.ready(key):
+            raise NbrdfError("environment prefilter: the map is read before its bake is complete")
+        if "u_coat_samples" in prog:
             prog["u_coat_samples"].value = int(self.settings.coat_samples)
+        if "u_env_table" in prog:
             self._maps[key].texture.use(ENV_TABLE_UNIT)
+            prog["u_env_table"].value = ENV_TABLE_UNIT
+            prog["u_env_table_basis"].write(map_basis(state).T.astype("f4").tobytes())
             prog["u_env_table"].value = ENV_TABLE_UNIT
             prog["u_env_table_basis"].write(map_basis(state).T.astype("f4").tobytes())
 

@@ -37,6 +37,7 @@ from nbrdf.viewer.view_settings import ViewState, bind_uniforms
 GBUFFER_UNITS = (10, 11, 12)  # texture units of the G-buffer in the compute lit pass
 LIT_GROUP = 8     # lit.comp's work group is LIT_GROUP x LIT_GROUP pixels
 LIT_CHUNK = 8     # passes per compute dispatch (bounds one dispatch's duration)
+EVERY_DEFINE = {"NB_EVERY_CANDIDATE": 1}  # lit.comp's program of the every-candidate estimator
 
 
 def incidence(theta_deg: float) -> tuple[float, float, float]:
@@ -101,6 +102,14 @@ class LitPasses:
         """Whether draws of ``brdf`` read the body environment map (its bake still to finish or not)."""
         pf = self.prefilter()
         return pf is not None and pf.applies(brdf, state, self.sphere_radius, True, self.settings.quick)
+
+    def specialised(self, brdf: GpuBrdf | None) -> dict | None:
+        """The define of lit.comp's program of its own for the estimator of ``brdf``'s draws
+        (lit_shade.glsl ``shade_lit_every``: the body at every candidate, the table's; llvmpipe
+        runs every branch's straight-line code under a mask, so what the estimator does not use
+        is compiled out), or None (``shade_lit``, every strategy behind uniforms)."""
+        sampling = self.settings.for_brdf(brdf)
+        return EVERY_DEFINE if sampling.every_candidate and sampling.ris_samples > 0 else None
 
     def prefilter_key(self, state: ViewState, brdf: GpuBrdf, env: GpuEnvironment) -> tuple | None:
         """The key of the body environment map ``brdf``'s draws read (None: they read none)."""
@@ -179,7 +188,7 @@ class LitPasses:
             table = self.prefiltered(state, b)
             if table:
                 self.bake_prefilter(state, b, env)  # the rest of its bake (the window bakes in bands first)
-            c = kit.compute_program(b, defines=ENV_TABLE_DEFINE if table else None)
+            c = kit.compute_program(b, defines=ENV_TABLE_DEFINE if table else self.specialised(b))
             kit.bind_brdf(c, b, compute=True)
             self.lit_uniforms(c, state, env, b)
             if table:

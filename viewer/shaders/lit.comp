@@ -44,6 +44,12 @@ void main() {
     nb_load_share(texelFetch(u_gb_uv, px, 0).xy);
 #endif
     vec3 sum = vec3(0.0);
+#if defined(NB_ENV_TABLE)
+    for (int k = 0; k < u_passes; ++k) sum += shade_lit_mapped(tbn, view, world.xyz, uvec2(px), u_first_pass + uint(k));
+#elif defined(NB_EVERY_CANDIDATE)
+    for (int k = 0; k < u_passes; ++k) sum += shade_lit_every(tbn, view, world.xyz, uvec2(px), u_first_pass + uint(k));
+#else
     for (int k = 0; k < u_passes; ++k) sum += shade_lit(tbn, view, world.xyz, uvec2(px), u_first_pass + uint(k));
+#endif
     imageStore(u_accum, px, imageLoad(u_accum, px) + vec4(sum, float(u_passes)));
 }

@@ -189,15 +189,6 @@ vec3 every_body_samples(mat3 tbn, vec3 wo, uvec2 px, uint draw, int m, int n_lob
     return sum;
 }
 
-#ifdef NB_ENV_TABLE
-// The body's environment light pre-integrated over the object's normals
-// (env_table.glsl): u_env_table_on 1 reads it at the shading normal instead of
-// sampling the body; the lights, the coat (its own samples alone) stay per pass.
-//@INCLUDE env_table.glsl
-uniform sampler2D u_env_table;
-uniform int u_env_table_on;
-#endif
-
 // ``tbn``: the shading frame (columns tangent, bitangent, normal; world);
 // ``view``: unit vector to the eye; ``world``: the surface point.
 vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
@@ -211,13 +202,6 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
     int n_lobe = every ? min(u_body_every, u_ris_candidates - 1) : ris && u_ris_lobe > 0 ? min(u_ris_lobe, m - 1) : 0;
     if (every) m = u_ris_candidates;
     int count = u_env_on == 0 ? 1 : ris ? 1 + u_ris_samples : u_one_sample != 0 ? 2 : u_strategies;
-#ifdef NB_ENV_TABLE
-    bool table = u_env_table_on != 0 && u_env_on != 0;
-    if (table) {  // the loop below shades the lights alone
-        count = 1;
-        ris = every = false;
-    }
-#endif
     bool cosine = u_strategies > 3 || u_one_sample != 0;
 #ifdef NB_SPLIT_COAT
     vec2 coat = coat_code();
@@ -230,9 +214,6 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
                 : ris ? vec3(float(m / 2 * u_ris_samples), float(m / 2 * u_ris_samples), float(coat_n))
                       : vec3(u_one_sample != 0 ? 1.0 / 3.0 : 1.0, 0.0, float(coat_n));
     coat_pass = coated ? coat : vec2(0.05, 1.0);
-#ifdef NB_ENV_TABLE
-    if (table) coat_counts = vec3(0.0, 0.0, float(coat_n));  // no environment or body candidates
-#endif
 #endif
     vec3 coat_sum = vec3(0.0);
     // One-sample MIS: the strategy of the single environment sample, chosen uniformly.
@@ -296,8 +277,108 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
     }
     if ((u_terms & TERM_ENV_COAT) != 0) color += coat_sum;
 #endif
+    return color;
+}
+
 #ifdef NB_ENV_TABLE
-    if (table && (u_terms & TERM_ENV_BODY) != 0) color += textureLod(u_env_table, env_table_uv(tbn[2]), 0.0).rgb;
+// The still view where the body's environment light is pre-integrated over the
+// object's normals (env_table.glsl, viewer/gpu/env_prefilter.py): the lights (the
+// whole BRDF), the body's environment light from the map at the shading normal
+// (one fetch), and the clear coat's environment light from its own visible-normal
+// samples (u_coat_samples), nothing else. A program of its own: llvmpipe runs the
+// straight-line code of every branch under a mask, so the sampling strategies this
+// pass does not use are compiled out, not skipped.
+//@INCLUDE env_table.glsl
+uniform sampler2D u_env_table;
+
+vec3 shade_lit_mapped(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
+    mat3 to_local = transpose(tbn);
+    vec3 wo = to_local * view;
+    vec3 color = vec3(0.0);
+    if ((u_terms & TERM_LIGHT) != 0) {
+        vec3 l = to_local * normalize(u_light_dir);
+        if (l.z > 0.0) color += brdf(l, wo) * l.z * u_light_radiance;
+        if (u_point_on != 0) {
+            vec3 to_point = u_point_pos - world;
+            l = to_local * normalize(to_point);
+            if (l.z > 0.0) color += brdf(l, wo) * l.z * u_point_intensity / max(dot(to_point, to_point), 1e-8);
+        }
+    }
+    if (u_env_on == 0) return color;
+    if ((u_terms & TERM_ENV_BODY) != 0) color += textureLod(u_env_table, env_table_uv(tbn[2]), 0.0).rgb;
+#ifdef NB_SPLIT_COAT
+    vec2 coat = coat_code();
+    int n = coat_params(coat).y > 1.0 + 1e-4 && (u_terms & TERM_LOBE_COAT) != 0 ? max(u_coat_samples, 0) : 0;
+    for (int j = 0; j < n; ++j) {
+        vec3 l = coat_sample(wo, rand3(px, pass_index * uint(n) + uint(j), STREAM_COAT, u_seed).xy, coat);
+        if (l.z <= 0.0) continue;
+        float pc = float(n) * coat_pdf(wo, l, coat);
+        if (pc > 0.0)
+            color += clamp_contribution(coat_eval(l, wo, coat) * l.z * env_radiance(tbn * l) * u_env_intensity / pc);
+    }
 #endif
     return color;
 }
+#endif
+
+#ifdef NB_EVERY_CANDIDATE
+// shade_lit with the body evaluated at every candidate (u_body_every > 0, u_ris_samples
+// draws; the baked table's estimator, LitSampling.every_candidate) and nothing else: the
+// same estimator, random numbers and order of sums, in a program of its own, since
+// llvmpipe runs the straight-line code of every branch of shade_lit under a mask (the
+// strategies this estimator does not use cost about half its pass).
+vec3 shade_lit_every(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
+    mat3 to_local = transpose(tbn);
+    vec3 wo = to_local * view;
+    vec3 color = vec3(0.0);
+    int m = u_ris_candidates;
+    int n_lobe = min(u_body_every, u_ris_candidates - 1);
+#ifdef NB_SPLIT_COAT
+    vec2 coat = coat_code();
+    bool coated = u_env_on != 0 && coat_params(coat).y > 1.0 + 1e-4;
+    coat_n = coated ? max(u_coat_samples, 0) : 0;
+    coat_counts = vec3(float((m - n_lobe) * u_ris_samples), float(n_lobe * u_ris_samples), float(coat_n));
+    coat_pass = coated ? coat : vec2(0.05, 1.0);
+#endif
+    vec3 coat_sum = vec3(0.0);
+    if ((u_terms & TERM_LIGHT) != 0) {  // as shade_lit: the point light, then the directional one
+        if (u_point_on != 0) {
+            vec3 to_point = u_point_pos - world;
+            vec3 l = to_local * normalize(to_point);
+            if (l.z > 0.0) {
+                vec3 f = body_brdf(l, wo);
+#ifdef NB_SPLIT_COAT
+                f += vec3(coat_eval(l, wo, coat));
+#endif
+                color += f * l.z * (u_point_intensity / max(dot(to_point, to_point), 1e-8));
+            }
+        }
+        vec3 l = to_local * normalize(u_light_dir);
+        if (l.z > 0.0) {
+            vec3 f = body_brdf(l, wo);
+#ifdef NB_SPLIT_COAT
+            f += vec3(coat_eval(l, wo, coat));
+#endif
+            color += f * l.z * u_light_radiance;
+        }
+    }
+    if (u_env_on == 0) return color;
+    for (int k = 1; k <= u_ris_samples; ++k) {
+        vec3 e = every_body_samples(tbn, wo, px, pass_index * uint(u_ris_samples) + uint(k - 1), m, n_lobe, coat_sum);
+        if ((u_terms & TERM_ENV_BODY) != 0) color += e / float(u_ris_samples);
+    }
+#ifdef NB_SPLIT_COAT
+    int coat_own = (u_terms & TERM_LOBE_COAT) != 0 ? coat_n : 0;
+    for (int j = 0; j < coat_own; ++j) {
+        vec3 l = coat_sample(wo, rand3(px, pass_index * uint(coat_n) + uint(j), STREAM_COAT, u_seed).xy, coat);
+        if (l.z <= 0.0) continue;
+        vec3 lw = tbn * l;
+        float pc = coat_mis_pdf(wo, l, pdf_env(lw), pdf_body(wo, l));
+        if (pc > 0.0)
+            color += clamp_contribution(coat_eval(l, wo, coat) * l.z * env_radiance(lw) * u_env_intensity / pc);
+    }
+    if ((u_terms & TERM_ENV_COAT) != 0) color += coat_sum;
+#endif
+    return color;
+}
+#endif
