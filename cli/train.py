@@ -73,6 +73,27 @@ def cmd_train_operation(a: argparse.Namespace) -> int:
     return 0
 
 
+@dataclass
+class RouteDepthArgs:
+    """A bundle whose deep stacks (3 interfaces or more) take another run's layering network
+    (``training.train_operations.route_depth``, docs/decisions/112)."""
+
+    base: str
+    """the bundle kept for the shallow stacks (and its sampler)"""
+    deep: str
+    """a layering fine-tune of --base (same decoder and leaf encoders) whose layering network takes the deep stacks"""
+    out: str
+    """the bundle written"""
+
+
+def cmd_route_depth(a: argparse.Namespace) -> int:
+    from nbrdf.training import train_operations as to  # late: torch costs ~1 s, --help needs none
+
+    r: RouteDepthArgs = build(RouteDepthArgs, a)
+    print(f"bundle written: {to.route_depth(r.base, r.deep, r.out)}")
+    return 0
+
+
 def _representation_flags(p: Parser) -> None:
     decoder, tr = _representation()
     p.description = tr.TrainConfig.__doc__
@@ -103,7 +124,7 @@ TRAINERS = {
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    """Adds ``train`` and its four subcommands to the ``nbrdf`` subcommands."""
+    """Adds ``train``, its four training subcommands and ``route-depth`` to the ``nbrdf`` subcommands."""
     t = sub.add_parser("train", help="train networks")
     tsub = t.add_subparsers(dest="what", required=True, parser_class=Parser)
     tr = tsub.add_parser("representation", help="auto-decoder: the shared decoder and training latents",
@@ -112,3 +133,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     for what, help_ in TRAINERS.items():
         to = tsub.add_parser(what, help=help_, populate=_operation_flags(what))
         to.set_defaults(fn=cmd_train_operation)
+    rd = tsub.add_parser("route-depth", help="a bundle whose deep stacks (3 interfaces or more) take another "
+                         "run's layering network (docs/decisions/112)",
+                         populate=lambda p: add_arguments(p, RouteDepthArgs))
+    rd.set_defaults(fn=cmd_route_depth)

@@ -261,8 +261,8 @@ def save_decoder(dec: Decoder, path: str | Path, trained_on: dict | None = None,
     """Writes safetensors + JSON metadata; returns the weights id.
     ``extra`` tensors (other networks of the bundle) travel in the same file."""
     tensors = {f"decoder.{k}": v.detach().float().contiguous() for k, v in dec.state_dict().items()}
-    for k, v in (extra or {}).items():
-        tensors[k] = v.detach().float().contiguous()
+    for k, v in (extra or {}).items():  # half precision kept where a part is stored so (neural.model STORED)
+        tensors[k] = (v if v.dtype == torch.float16 else v.float()).detach().contiguous()
     wid = dec.weights_id()
     meta = {"format": FORMAT, "architecture": json.dumps(asdict(dec.spec)), "latent_size": str(dec.spec.latent),
             "weights_id": wid, "trained_on": json.dumps(trained_on or {}), "accuracy": json.dumps(accuracy or {})}

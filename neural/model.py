@@ -31,7 +31,14 @@ from nbrdf.neural.stack import uniform_values as stack_uniform_values
 
 Tensor = torch.Tensor
 OPS_FORMAT = "nbrdf-operations/2"  # /2: codes under the coat split (neural.coat)
-PARTS = ("leaf", "layering", "sampler")
+PARTS = ("leaf", "layering", "layering_deep", "sampler")
+#: Stacks of this many interfaces or more (four layers and deeper, the base counted) are layered by the bundle's
+#: ``layering_deep`` network where it has one: a network trained with deep stacks keeps its error flat to six layers
+#: but costs the shallow stacks render-space fidelity, so each depth gets the network that is best at it
+#: (docs/decisions/112-depth-routed-layering.md).
+DEEP_INTERFACES = 3
+#: How a part's tensors are stored: the deep layering network in half precision (the bundle stays a few MB).
+STORED = {"layering_deep": torch.float16}
 #: How the neural path names itself when it refuses an anisotropic material (issue 39: retrained later).
 NEURAL_PATH = "the neural leaf encoders and layering network"
 
@@ -41,6 +48,8 @@ class NeuralModel:
     decoder: Decoder
     leaf: LeafEncoders | None = None
     layering: LayeringNet | None = None
+    layering_deep: LayeringNet | None = None
+    """The layering of stacks of ``DEEP_INTERFACES`` interfaces or more (None: ``layering`` for every depth)."""
     sampler: SamplerNet | None = None
     trained_on: dict = field(default_factory=dict)  # per operation part
     source: str = ""
@@ -51,6 +60,12 @@ class NeuralModel:
             raise NbrdfError(f"{self.source or 'the weights'}: no {part} network in this bundle "
                              f"(train it with `nbrdf train {part}`)")
         return net
+
+    def layering_for(self, interfaces: int) -> LayeringNet:
+        """The layering network of a stack of ``interfaces`` interfaces (``DEEP_INTERFACES``)."""
+        if interfaces >= DEEP_INTERFACES and self.layering_deep is not None:
+            return self.layering_deep
+        return self.require("layering")
 
     @functools.cached_property
     def decoder_id(self) -> str:
@@ -78,7 +93,7 @@ class NeuralModel:
         if stack.base == LATENT and stack.base_path is not None:
             z_base = load_latent(stack.base_path, self.decoder_id).z[None]
         leaf = self.require("leaf") if z_base is None or stack.layers else None
-        layering = self.require("layering") if stack.layers else None
+        layering = self.layering_for(stack.layers) if stack.layers else None
         with torch.no_grad():
             return layered_latents(leaf, layering, stack, z_base)
 
@@ -145,6 +160,8 @@ def _specs(model: NeuralModel) -> dict:
         out["leaf"] = {k: asdict(s) for k, s in model.leaf.specs.items()}
     if model.layering is not None:
         out["layering"] = asdict(model.layering.spec)
+    if model.layering_deep is not None:
+        out["layering_deep"] = asdict(model.layering_deep.spec)
     if model.sampler is not None:
         out["sampler"] = asdict(model.sampler.spec)
     return out
@@ -162,7 +179,7 @@ def save_model(model: NeuralModel, path: str | Path, like: str | Path | None = N
     for part in PARTS:
         net = getattr(model, part)
         if net is not None:
-            extra.update(prefixed(net, part))
+            extra.update(prefixed(net, part, STORED.get(part, torch.float32)))
     ops = {"format": OPS_FORMAT, "decoder_id": model.decoder.weights_id(), "specs": _specs(model),
            "trained_on": model.trained_on}
     return save_decoder(model.decoder, path, trained_on=trained, accuracy=accuracy, extra=extra,
@@ -191,6 +208,9 @@ def load_model(path: str | Path | None = None) -> NeuralModel:
         if "layering" in specs:
             model.layering = LayeringNet(LayeringSpec(**specs["layering"]))
             load_state(model.layering, tensors, "layering", str(path))
+        if "layering_deep" in specs:
+            model.layering_deep = LayeringNet(LayeringSpec(**specs["layering_deep"]))
+            load_state(model.layering_deep, tensors, "layering_deep", str(path))
         if "sampler" in specs:
             model.sampler = SamplerNet(MLPSpec(**specs["sampler"]))
             load_state(model.sampler, tensors, "sampler", str(path))

@@ -67,5 +67,6 @@ def load_state(module: nn.Module, tensors: dict[str, Tensor], prefix: str, sourc
         p.requires_grad_(False)
 
 
-def prefixed(module: nn.Module, prefix: str) -> dict[str, Tensor]:
-    return {f"{prefix}.{k}": v.detach().float().contiguous() for k, v in module.state_dict().items()}
+def prefixed(module: nn.Module, prefix: str, dtype: torch.dtype = torch.float32) -> dict[str, Tensor]:
+    """``module``'s tensors named ``prefix.*``, stored as ``dtype`` (loading casts them back to the module's)."""
+    return {f"{prefix}.{k}": v.detach().to(dtype).contiguous() for k, v in module.state_dict().items()}

@@ -316,8 +316,8 @@ def train_leaf(cfg: OpsConfig, progress: bool = True) -> Path:
     t0 = time.perf_counter()
     history = _run_loop("leaf", cfg, {"leaf": leaf}, cfg.steps, step, validate, progress, rng=g)
     model.leaf = leaf
-    model.layering = model.sampler = None  # trained on the old leaf latents: retrain them on these
-    for stale in ("layering", "sampler"):
+    model.layering = model.layering_deep = model.sampler = None  # trained on the old leaf latents: retrain them
+    for stale in ("layering", "layering_deep", "sampler"):
         model.trained_on.pop(stale, None)
     return _finish("leaf", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
                                                  "val_loss": history["val"][-1]})
@@ -523,11 +523,32 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
     history = _run_loop("layering", cfg, {"layering": net}, cfg.steps, step, validate, progress, rng=g,
                         scaled=scaled)
     model.layering = net
+    model.layering_deep = None  # the new network layers every depth until a bundle routes them (route_depth)
     model.sampler = None  # trained on the old layered latents: retrain it on these
-    model.trained_on.pop("sampler", None)
+    for stale in ("layering_deep", "sampler"):
+        model.trained_on.pop(stale, None)
     return _finish("layering", cfg, model, history, {
         "seconds_this_run": round(time.perf_counter() - t0, 1), "val_loss": history["val"][-1],
         "data_preset": ",".join(str(m.get("preset")) for m in manifests), "train_stacks": int(two.numel() + three.numel())})
+
+
+def route_depth(base: str | Path, deep: str | Path, out: str | Path) -> str:
+    """The bundle ``base`` with the layering network of ``deep`` for stacks of
+    ``DEEP_INTERFACES`` interfaces or more (``NeuralModel.layering_deep``): both bundles
+    must share the decoder and the leaf encoders (a layering fine-tune of the other), so
+    their codes are one space; the shallow stacks keep ``base``'s network, its sampler
+    included. Returns the path written."""
+    b, d = load_model(base), load_model(deep)
+    if b.decoder_id != d.decoder_id:
+        raise NbrdfError(f"{deep}: another decoder ({d.decoder_id}) than {base}'s ({b.decoder_id})")
+    lb, ld_ = b.require("leaf").state_dict(), d.require("leaf").state_dict()
+    if lb.keys() != ld_.keys() or any(not torch.equal(lb[k], ld_[k]) for k in lb):
+        raise NbrdfError(f"{deep}: its leaf encoders differ from {base}'s: its codes are another space")
+    b.require("layering")
+    b.layering_deep = d.require("layering")
+    b.trained_on["layering_deep"] = {**d.trained_on.get("layering", {}), "bundle": str(deep)}
+    save_model(b, out, like=base)
+    return str(out)
 
 
 # --- sampler --------------------------------------------------------------------------------

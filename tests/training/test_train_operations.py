@@ -267,3 +267,17 @@ def test_deep_stacks_join_the_recursion_and_the_energy_term_trains(bundles):
     assert all(math.isfinite(v) for v in val.values())
     with pytest.raises(NbrdfError, match="--energy-weight"):
         train_layering(replace(cfg, out=str(root / "lay_neg_e"), energy_weight=-1.0), progress=False)
+
+
+def test_a_new_layering_network_takes_every_depth(bundles):
+    # A layering run from a depth-routed bundle (route_depth) layers every depth with its new
+    # network: the old deep network was trained beside the old one, not beside this one.
+    from nbrdf.training.train_operations import route_depth
+
+    root, _, lay, _ = bundles
+    routed = route_depth(lay, lay, root / "routed.safetensors")
+    assert load_model(routed).layering_deep is not None
+    cfg = OpsConfig(decoder=str(routed), out=str(root / "lay_from_routed"), steps=4, batch=4, pairs=16,
+                    data=str(root / "data"), recursion_steps=0, width=32)
+    m = load_model(train_layering(cfg, progress=False))
+    assert m.layering is not None and m.layering_deep is None and "layering_deep" not in m.trained_on
