@@ -36,6 +36,10 @@ VIEW_SLOTS = ("main", "other")
 MAIN_SLOTS = ("main", "main_b")
 #: Passes of a handed-over code over which the image it replaces fades out (or fewer: that image's own passes).
 HANDOVER_PASSES = 8
+#: While passes accumulate, a new pass is composited on screen once the last composite is this many seconds old
+#: (``ViewFrames._more_passes_only``): on software OpenGL a composite makes its frame a slow one (40-120 ms), so
+#: at most one frame a second is (the first pass of a new image is shown at once).
+COMPOSE_INTERVAL_S = 1.0
 
 
 class ViewFrames:
@@ -64,6 +68,7 @@ class ViewFrames:
         self._copy: tuple[moderngl.Framebuffer, moderngl.Texture] | None = None  # a banded frame's composite
         self._copy_key: tuple | None = None  # what it shows
         self._compose_ms = 0.0  # the last composite into the copy (a completed pass's frame costs it too)
+        self._composed_at = 0.0  # when (perf_counter seconds)
 
     def restart(self) -> None:
         """Starts the accumulation over on the next frame (an edit, a view change)."""
@@ -88,6 +93,27 @@ class ViewFrames:
         self.passes = 0
         self.bands.reset()
 
+    @property
+    def shown_passes(self) -> int:
+        """Passes of the accumulation in the image on screen: ``passes``, or fewer while a banded
+        view's kept copy waits to be composited again (``_more_passes_only``)."""
+        key = self._copy_key
+        if key is None or len(key[1]) < 4:  # the whole-pass path composites every frame
+            return self.passes
+        return min(self.passes, int(key[1][3]))
+
+    def _more_passes_only(self, key: tuple, now: float) -> bool:
+        """Whether the kept copy may stay on screen for ``key``: it differs from the copy's only by
+        more passes of the same image (``shown``'s count, below ``MAX_PASSES``) and the copy is
+        younger than ``COMPOSE_INTERVAL_S``. The composite of a full view costs a software GPU about
+        100 ms at 1080p; where passes are cheap (the body environment map,
+        viewer/gpu/env_prefilter.py) composing each one would make every few frames a slow one."""
+        old = self._copy_key
+        if old is None or len(old[1]) < 4 or len(key[1]) < 4 or key[1][3] >= MAX_PASSES:
+            return False
+        same = old[0] == key[0] and old[2:] == key[2:] and old[1][:3] == key[1][:3] and old[1][4:] == key[1][4:]
+        return same and now - self._composed_at < COMPOSE_INTERVAL_S
+
     def _kept(self, frame: Frame, target: moderngl.Framebuffer, size: tuple[int, int], shown: tuple,
               draw: Callable[[moderngl.Framebuffer], object]) -> None:
         """Draws the composite of a banded frame into ``target`` through a kept copy: composited
@@ -105,14 +131,14 @@ class ViewFrames:
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
             self._copy, self._copy_key = (ctx.framebuffer([tex]), tex), None
         fbo, tex = self._copy
-        if key != self._copy_key:
-            t0 = time.perf_counter()
+        now = time.perf_counter()
+        if key != self._copy_key and not self._more_passes_only(key, now):
             fbo.use()
             fbo.clear(0.0, 0.0, 0.0, 1.0)
             draw(fbo)
             ctx.finish()
-            self._compose_ms = (time.perf_counter() - t0) * 1000.0
-            self._copy_key = key
+            self._compose_ms = (time.perf_counter() - now) * 1000.0
+            self._copy_key, self._composed_at = key, now
         renderer = self.stage.renderer
         p = renderer.programs.get(ProgramKey("image_copy.frag"))
         target.use()

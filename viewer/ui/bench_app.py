@@ -15,6 +15,11 @@ from nbrdf.viewer.gpu.noise import per_pixel_noise
 from nbrdf.viewer.options import DEFAULT_MATERIAL, ViewOptions
 from nbrdf.viewer.ui.app import App
 
+#: The interface's frames are timed over at least this many seconds of the still view accumulating after an edit
+#: (the issue's ten seconds to a converged view): the refinement's first code swaps and the body environment map's
+#: bake fall in it, as do enough passes whatever a pass costs.
+UI_WINDOW_S = 10.0
+
 
 def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int = 3,
               noise_target: float = 0.01, noise_renders: int = 4, noise_spp: int = 4,
@@ -50,8 +55,9 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
       threads (llvmpipe's included): what a pass needs of the machine, whatever else runs on it;
     - ``ui_frame_ms_p95`` (and ``_median``, ``_max``, over ``ui_frames`` frames): the interface's frame
       time while the still view accumulates -- the wall time between consecutive imgui frames on
-      screen, from the first full-resolution frame until ``still_passes`` more passes are complete
-      (the window reads input only between frames: this is how long a click may wait; target <= 50),
+      screen, from the first full-resolution frame until ``still_passes`` more passes are complete and
+      ``UI_WINDOW_S`` seconds have passed (the window reads input only between frames: this is how long
+      a click may wait; target <= 50),
       with the pointer moving over the window each frame, as a person's hand does (hands off for
       ``RefinementSettings.idle_after_s``, still frames take the longer idle budget: the view converges
       faster and the first event after it waits one such frame);
@@ -91,7 +97,8 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
         _until_full_resolution(app)
         full_res_s = time.perf_counter() - t_edit
         built = len(app.warmup.built)
-        ui, passes, cpu = _still_frames(app, still_passes)  # the still view accumulating at full resolution
+        # the still view accumulating at full resolution, for UI_WINDOW_S at least (passes are fast with the map)
+        ui, passes, cpu = _still_frames(app, still_passes, min_s=UI_WINDOW_S)
         compiles = len(app.warmup.built) - built
         latencies, frames_to_show = _click_latency(app, clicks)
         _, idle_passes, _ = _still_frames(app, still_passes, hover=False)  # hands off: the idle budget
@@ -160,14 +167,14 @@ def _until_full_resolution(app, frames: int = 2000) -> None:
 
 
 def _converged_after_edit(app, layer: int, passes: int, limit_s: float = 180.0) -> float:
-    """Seconds from a base-roughness edit until the still view's accumulation holds ``passes``
-    passes of the full estimator, the window stepped hands off (no input after the edit)."""
+    """Seconds from a base-roughness edit until the image on screen holds ``passes`` passes of the
+    still view's full estimator, the window stepped hands off (no input after the edit)."""
     ld = app.lookdev
     t0 = time.perf_counter()
     ld.set_param(layer, "roughness", 0.33)
     while time.perf_counter() - t0 < limit_s:
         app.step()
-        if not app.interactive and not app.quick and app.scale >= 1.0 and ld.passes >= passes:
+        if not app.interactive and not app.quick and app.scale >= 1.0 and ld.frames.shown_passes >= passes:
             return time.perf_counter() - t0
     raise RuntimeError(f"bench app: the still view did not reach {passes} passes in {limit_s} s")
 
@@ -177,9 +184,10 @@ def _p95(values: list[float]) -> float:
     return float(np.percentile(np.asarray(values, dtype=float), 95))
 
 
-def _still_frames(app, passes: int, limit_s: float = 120.0, hover: bool = True
+def _still_frames(app, passes: int, limit_s: float = 120.0, hover: bool = True, min_s: float = 0.0
                   ) -> tuple[list[float], list[float], list[float]]:
-    """Steps the still window until ``passes`` more passes are complete (at most ``limit_s``):
+    """Steps the still window until ``passes`` more passes are complete and ``min_s`` seconds have
+    passed (at most ``limit_s``):
     the wall milliseconds between consecutive frames on screen, and the wall and CPU
     milliseconds from one completed pass to the next. ``hover``: a pointer move before every
     frame (a person's hand on the mouse); False: hands off (the idle budget after a second)."""
@@ -190,7 +198,7 @@ def _still_frames(app, passes: int, limit_s: float = 120.0, hover: bool = True
     c_pass = time.process_time()
     start = ld.passes
     done = 0
-    while done < passes and time.perf_counter() - t0 < limit_s:
+    while (done < passes or time.perf_counter() - t0 < min_s) and time.perf_counter() - t0 < limit_s:
         before = ld.passes
         if hover:
             app._on_cursor(app.window, w * 0.5 + (len(frames) % 7), h * 0.5)  # a hand on the mouse: not idle
