@@ -10,7 +10,9 @@ pass and seed, so every figure here is reproducible.
 ``python -m nbrdf.viewer.gpu.noise`` prints the default render's figures as JSON
 (``--size``, ``--spp``, ``--renders``, ``--terms``, ``--coat-samples``, ``--clamp``),
 ``--material`` another material's, ``--brdf`` another BRDF (belcour), ``--target proxy`` with the decoder resampled
-by the proxy target instead of the body's table (``LitSampling.table_target``).
+by the proxy target instead of the body's table (``LitSampling.table_target``), ``--still-window map|no-map`` the
+window's still view on software OpenGL (``--against N``: the error of its first render against N passes without
+the map).
 """
 from __future__ import annotations
 
@@ -25,6 +27,9 @@ from tqdm import tqdm
 
 from nbrdf.imaging.environment import LUMA
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.gpu.body_source import table_sampling
+from nbrdf.viewer.gpu.body_table_gpu import STILL, BodyTables
+from nbrdf.viewer.gpu.env_prefilter import PrefilterSettings
 from nbrdf.viewer.gpu.gl import offscreen_context
 from nbrdf.viewer.gpu.lit_sampling import Term
 from nbrdf.viewer.gpu.renderer import make_renderer
@@ -187,11 +192,26 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--target", choices=("table", "proxy"), default=None,
                     help="the decoder's resampling target: the body's baked table or the proxy pdf "
                          "(default: the renderer's)")
+    ap.add_argument("--still-window", choices=("map", "no-map"), default=None,
+                    help="the window's still view on software OpenGL: the body baked into the still table, the "
+                         "table's sampling, with or without the body environment map (viewer/gpu/env_prefilter.py)")
+    ap.add_argument("--against", type=int, default=0,
+                    help="also the mean relative error and bias of the first render against this many passes "
+                         "of the still view without the map (with --still-window)")
     args = ap.parse_args(argv)
     try:
-        r, state = default_setup(offscreen_context(), args.material, args.brdf)
+        ctx = offscreen_context()
+        r, state = default_setup(ctx, args.material, args.brdf)
+        if args.still_window is not None:
+            r.brdf = BodyTables(ctx).brdf(r.brdf, STILL)
+            r.sampling = table_sampling(r.sampling)
     except (NbrdfError, OSError) as e:
         ap.exit(2, f"{ap.prog}: {e}\n")
+    reference = None
+    if args.still_window is not None and args.against > 0:
+        reference = r.render_linear(state, (args.size, args.size), args.against)
+    if args.still_window == "map":
+        r.settings.prefilter = PrefilterSettings()
     if args.target is not None:
         r.sampling.table_target = args.target == "table"
     if args.coat_samples is not None:
@@ -211,6 +231,14 @@ def main(argv: list[str] | None = None) -> int:
                coat_samples=r.sampling.coat_samples, clamp=r.sampling.clamp, strategies=r.sampling.strategies,
                target="table" if r.sampling.table_target else "proxy",
                material=str(args.material) if args.material else "default", brdf=args.brdf)
+    if args.still_window is not None:
+        out["still_window"] = args.still_window
+    if reference is not None:
+        img = r.render_linear(state, (args.size, args.size), args.spp)
+        on = reference.sum(-1) > 0
+        out["against_passes"] = args.against
+        out["mean_relative_error"] = float(np.abs(img - reference)[on].sum() / reference[on].sum())
+        out["bias"] = float(img[on].sum() / reference[on].sum() - 1.0)
     if args.bias:
         out["clamp_bias"] = clamp_bias(r, state, r.sampling.clamp, (args.size, args.size), args.spp, progress=True)
     print(json.dumps(out))
