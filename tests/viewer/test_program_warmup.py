@@ -37,10 +37,17 @@ def kinds(gl_ctx):
     return pipe, out
 
 
-@pytest.mark.parametrize("compute", [True, False], ids=["deferred", "fragment"])
-def test_after_the_warmup_no_view_builds_a_program(gl_ctx, kinds, compute):
+@pytest.mark.parametrize("compute,window", [(True, False), (False, False), (True, True)],
+                         ids=["deferred", "fragment", "window-settings"])
+def test_after_the_warmup_no_view_builds_a_program(gl_ctx, kinds, compute, window):
+    from nbrdf.viewer.gpu.body_source import table_sampling
+    from nbrdf.viewer.gpu.env_prefilter import PrefilterSettings
+
     pipe, brdfs = kinds
     r = Renderer(gl_ctx, mesh="sphere", compute=compute)
+    if window:  # the window's still view on software OpenGL: the table's estimator and the body map
+        r.table_sampling = table_sampling(r.sampling)
+        r.settings.prefilter = PrefilterSettings(size=16, draws=1)
     warm = ProgramWarmup(r, lambda: reachable(r, pipe.loaded_decoder, True, brdfs[0].material,
                                               pipe.belcour_loaded), WarmupSettings(idle_s=0.0))
     while warm.frame(False) is not None:

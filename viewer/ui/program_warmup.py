@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
 from nbrdf.neural.errors import NbrdfError
+from nbrdf.viewer.gpu.env_prefilter import DEFINE as ENV_TABLE_DEFINE
 from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf
 from nbrdf.viewer.gpu.programs import GLSL_430, ProgramKey
 
@@ -60,7 +61,13 @@ def reachable(renderer: "Renderer", decoder: "GpuDecoder | None", tables: bool,
     out: list[tuple[ProgramKey, GpuBrdf | None]] = []
     if renderer.deferred:
         out.append((ProgramKey("gbuffer_lit.frag", "object.vert", version=GLSL_430), None))
-        out += [(ProgramKey.of("lit.comp", b, vertex=None), b) for b in brdfs.values()]
+        # the lit pass's program as the passes pick it (a program of its own per estimator, lit_passes.py)
+        out += [(ProgramKey.of("lit.comp", b, vertex=None, defines=renderer.lit.specialised(b)), b)
+                for b in brdfs.values()]
+        if BrdfKind.TABLE in brdfs and renderer.settings.prefilter is not None:  # the still view's body map
+            b = brdfs[BrdfKind.TABLE]
+            out += [(ProgramKey.of(name, b, vertex=None, defines=ENV_TABLE_DEFINE), b)
+                    for name in ("env_prefilter.comp", "lit.comp")]
         for k in VIEW_KINDS:
             if k in brdfs:
                 for defines in ({"VIEW_IS_LOBE": 1}, None):
