@@ -131,7 +131,12 @@ def _shown(fbo) -> np.ndarray:
     return np.frombuffer(fbo.read(components=3), np.uint8).reshape(SIZE[1], SIZE[0], 3).astype(int)
 
 
-def test_the_view_in_bands_counts_whole_passes_and_shows_the_unsliced_image(session):
+def test_the_view_in_bands_counts_whole_passes_and_shows_the_unsliced_image(session, monkeypatch):
+    from nbrdf.viewer.jobs import view_frames
+
+    # every complete pass on screen at once (the window composites more passes of one image at most once a
+    # second: tests/viewer/test_compose_throttle.py)
+    monkeypatch.setattr(view_frames, "COMPOSE_INTERVAL_S", 0.0)
     ld, fbo = session
     tiny = 1e-6  # every band the least: one row
     frames = []
