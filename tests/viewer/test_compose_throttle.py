@@ -9,7 +9,7 @@ from nbrdf.viewer.jobs.view_frames import COMPOSE_INTERVAL_S, MAX_PASSES, ViewFr
 
 def _frames(copy_key, composed_at: float, passes: int) -> ViewFrames:
     vf = object.__new__(ViewFrames)  # the throttle's state alone: no GL stage needed
-    vf._copy_key, vf._composed_at, vf.passes = copy_key, composed_at, passes
+    vf._copy_key, vf._composed_at, vf.passes, vf.cap = copy_key, composed_at, passes, MAX_PASSES
     return vf
 
 

@@ -162,3 +162,31 @@ def test_a_restarted_view_shows_its_last_image_until_a_pass_is_complete(session)
     ld.render(fbo, SIZE, budget_ms=1e-6)
     assert ld.passes == 0 and not ld.restarted  # a band shaded: drawing goes on, no change seen
     assert np.array_equal(_shown(fbo), before)  # not black, not a partial pass
+
+
+def test_a_mapped_still_view_stops_at_its_cap(session):
+    # The still view that reads the body environment map (viewer/gpu/env_prefilter.py) stops at
+    # MAPPED_MAX_PASSES: later frames draw the kept image again and shade nothing.
+    from nbrdf.viewer.gpu.env_prefilter import PrefilterSettings
+    from nbrdf.viewer.jobs.view_frames import MAPPED_MAX_PASSES
+
+    ld, fbo = session
+    ld.bodies.use_tables = True  # frames shaded from baked tables, as on software OpenGL
+    ld.renderer.table_sampling = ld.bodies.sampling(ld.renderer.sampling)
+    ld.renderer.settings.prefilter = PrefilterSettings(size=16, draws=1)
+    try:
+        ld.invalidate()
+        for _ in range(2000):
+            ld.render(fbo, SIZE, budget_ms=1000.0)
+            if ld.passes >= MAPPED_MAX_PASSES:
+                break
+        assert ld.passes == MAPPED_MAX_PASSES and ld.frames.cap == MAPPED_MAX_PASSES
+        shown = _shown(fbo)
+        for _ in range(3):
+            ld.render(fbo, SIZE, budget_ms=1000.0)
+            assert ld.passes == MAPPED_MAX_PASSES and ld.frames.accum_ms == 0.0  # nothing shaded
+        assert np.array_equal(_shown(fbo), shown)  # the same image on screen
+    finally:
+        ld.renderer.settings.prefilter = None
+        ld.renderer.table_sampling = None
+        ld.bodies.use_tables = None

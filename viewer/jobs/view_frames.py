@@ -30,6 +30,10 @@ from nbrdf.viewer.modes import CompareMode, View
 from nbrdf.viewer.view_settings import ViewState
 
 MAX_PASSES = 1024
+#: The still view's passes where the body's environment light is read from its map (viewer/gpu/env_prefilter.py):
+#: the map's noise (0.7 %) does not fall with passes, the coat's is 0.17 % at 16, so the view stops there and
+#: leaves the machine to the rest (the refinement's worker, other work).
+MAPPED_MAX_PASSES = 16
 #: The accumulation slots of the window's view: the image, the second image of a BRDF blend.
 VIEW_SLOTS = ("main", "other")
 #: The two slots the window's image alternates between when a code is handed over (``ViewFrames.handover``).
@@ -63,6 +67,8 @@ class ViewFrames:
         self._shown: tuple | None = None  # (w, h, slot, passes, what it shows): the last complete image
         self.restarted = True
         """Whether the accumulation was started over and has had nothing drawn since (a change)."""
+        self.cap = MAX_PASSES
+        """The passes the view accumulates at most (``MAPPED_MAX_PASSES`` where the still view reads the map)."""
         self.accum_ms = 0.0
         """The last ``render``'s accumulation work, waited for when banded (``PassBands.ms``)."""
         self._copy: tuple[moderngl.Framebuffer, moderngl.Texture] | None = None  # a banded frame's composite
@@ -104,12 +110,12 @@ class ViewFrames:
 
     def _more_passes_only(self, key: tuple, now: float) -> bool:
         """Whether the kept copy may stay on screen for ``key``: it differs from the copy's only by
-        more passes of the same image (``shown``'s count, below ``MAX_PASSES``) and the copy is
+        more passes of the same image (``shown``'s count, below ``cap``) and the copy is
         younger than ``COMPOSE_INTERVAL_S``. The composite of a full view costs a software GPU about
         100 ms at 1080p; where passes are cheap (the body environment map,
         viewer/gpu/env_prefilter.py) composing each one would make every few frames a slow one."""
         old = self._copy_key
-        if old is None or len(old[1]) < 4 or len(key[1]) < 4 or key[1][3] >= MAX_PASSES:
+        if old is None or len(old[1]) < 4 or len(key[1]) < 4 or key[1][3] >= self.cap:
             return False
         same = old[0] == key[0] and old[2:] == key[2:] and old[1][:3] == key[1][:3] and old[1][4:] == key[1][4:]
         return same and now - self._composed_at < COMPOSE_INTERVAL_S
@@ -189,14 +195,19 @@ class ViewFrames:
         before = self.passes
         slots = (self._slot, VIEW_SLOTS[1])
         blank = False
-        if budget_ms is not None and view == View.OBJECT and not frame.comparing and self.passes < MAX_PASSES:
+        # the body environment map's noise stays what its bake left: past MAPPED_MAX_PASSES passes add nothing seen
+        self.cap = (MAPPED_MAX_PASSES if view == View.OBJECT and not frame.blending
+                    and stage.renderer.lit.prefiltered(frame.state, body) else MAX_PASSES)
+        capped = self.cap < MAX_PASSES and self.passes >= self.cap  # the kept image, drawn again: no pass shaded
+        if budget_ms is not None and view == View.OBJECT and not frame.comparing and (self.passes < self.cap or capped):
             shaded = [(slots[0], body)] + ([(slots[1], frame.other_brdf)] if frame.blending else [])
             # a band's cost: the estimator, the body, the BRDFs shaded, the body environment map read
             cost_key = (stage.renderer.quick, body.kind, len(shaded), stage.renderer.lit.prefiltered(frame.state, body))
-            if self.bands.advance(stage.renderer, replace(frame.state, background=False), w, h, self.passes,
-                                  shaded, budget_ms, cost_key, end_extra_ms=self._compose_ms):
+            if not capped and self.bands.advance(stage.renderer, replace(frame.state, background=False), w, h,
+                                                 self.passes, shaded, budget_ms, cost_key,
+                                                 end_extra_ms=self._compose_ms):
                 self.passes += 1
-            self.accum_ms = self.bands.ms
+            self.accum_ms = 0.0 if capped else self.bands.ms
             last = (w, h, *self._held) if self._held is not None else self._shown_for(size, frame)
             if self.passes > 0:
                 self._kept(frame, target, size, (w, h, slots, self.passes, self._held), lambda t: self.draw(

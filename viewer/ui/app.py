@@ -46,7 +46,6 @@ import moderngl
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.gpu.gl import check_version
-from nbrdf.viewer.jobs.view_frames import MAX_PASSES
 from nbrdf.viewer.session.autosave import WindowAutosave
 from nbrdf.viewer.session.document import WindowPrefs
 from nbrdf.viewer.session.lookdev import LookDev
@@ -432,7 +431,7 @@ class App:
         try:
             while not glfw.window_should_close(self.window):
                 self.step()
-                if self.lookdev.passes >= MAX_PASSES and not self.dragging:
+                if self.lookdev.passes >= self.lookdev.frames.cap and not self.dragging:
                     time.sleep(0.01)
         except GlContextLost:
             self.close(abnormal=True)
