@@ -94,6 +94,24 @@ vec3 coat_candidate(vec3 wo, vec3 l, vec3 radiance, float pe, float pb) {
 }
 #endif
 
+#ifdef NB_SPLIT_COAT
+// The coat's own samples added to ``color``: its visible normals, ``coat_n`` per pass (no decoder),
+// balance heuristic with every strategy's sample counts (``coat_mis_pdf``); each added in turn, as
+// the sums of shade_lit and shade_lit_every must be the same.
+vec3 coat_own_samples(mat3 tbn, vec3 wo, uvec2 px, uint pass_index, vec2 coat, vec3 color) {
+    int n = (u_terms & TERM_LOBE_COAT) != 0 ? coat_n : 0;
+    for (int j = 0; j < n; ++j) {
+        vec3 l = coat_sample(wo, rand3(px, pass_index * uint(coat_n) + uint(j), STREAM_COAT, u_seed).xy, coat);
+        if (l.z <= 0.0) continue;
+        vec3 lw = tbn * l;
+        float pc = coat_mis_pdf(wo, l, pdf_env(lw), pdf_body(wo, l));
+        if (pc > 0.0)
+            color += clamp_contribution(coat_eval(l, wo, coat) * l.z * env_radiance(lw) * u_env_intensity / pc);
+    }
+    return color;
+}
+#endif
+
 // Resampled importance sampling of the body (Talbot et al. 2005): ``m`` cheap
 // candidates, half from the environment's CDF and half from the body's lobe,
 // weighted by a target without the decoder; one is kept with probability
@@ -265,20 +283,34 @@ vec3 shade_lit(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
         if (p > 0.0) color += s <= 0 ? f * l.z * radiance : clamp_contribution(f * l.z * radiance / p);
     }
 #ifdef NB_SPLIT_COAT
-    // The coat's own samples: its visible normals, several per pass (no decoder).
-    int coat_own = (u_terms & TERM_LOBE_COAT) != 0 ? coat_n : 0;
-    for (int j = 0; j < coat_own; ++j) {
-        vec3 l = coat_sample(wo, rand3(px, pass_index * uint(coat_n) + uint(j), STREAM_COAT, u_seed).xy, coat);
-        if (l.z <= 0.0) continue;
-        vec3 lw = tbn * l;
-        float pc = coat_mis_pdf(wo, l, pdf_env(lw), pdf_body(wo, l));
-        if (pc > 0.0)
-            color += clamp_contribution(coat_eval(l, wo, coat) * l.z * env_radiance(lw) * u_env_intensity / pc);
-    }
+    color = coat_own_samples(tbn, wo, px, pass_index, coat, color);
     if ((u_terms & TERM_ENV_COAT) != 0) color += coat_sum;
 #endif
     return color;
 }
+
+#if defined(NB_EVERY_CANDIDATE) || defined(NB_ENV_TABLE)
+// The lights added to ``color`` as shade_lit adds them (the point light, then the directional one;
+// the whole BRDF, the coat included where it is split), for the programs of their own below.
+vec3 light_term(vec3 l, vec3 wo, vec3 radiance) {
+    vec3 f = body_brdf(l, wo);
+#ifdef NB_SPLIT_COAT
+    f += vec3(coat_eval(l, wo, coat_code()));
+#endif
+    return f * l.z * radiance;
+}
+
+vec3 add_lights(mat3 to_local, vec3 wo, vec3 world, vec3 color) {
+    if (u_point_on != 0) {
+        vec3 to_point = u_point_pos - world;
+        vec3 l = to_local * normalize(to_point);
+        if (l.z > 0.0) color += light_term(l, wo, u_point_intensity / max(dot(to_point, to_point), 1e-8));
+    }
+    vec3 l = to_local * normalize(u_light_dir);
+    if (l.z > 0.0) color += light_term(l, wo, u_light_radiance);
+    return color;
+}
+#endif
 
 #ifdef NB_ENV_TABLE
 // The still view where the body's environment light is pre-integrated over the
@@ -295,15 +327,7 @@ vec3 shade_lit_mapped(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index
     mat3 to_local = transpose(tbn);
     vec3 wo = to_local * view;
     vec3 color = vec3(0.0);
-    if ((u_terms & TERM_LIGHT) != 0) {
-        vec3 l = to_local * normalize(u_light_dir);
-        if (l.z > 0.0) color += brdf(l, wo) * l.z * u_light_radiance;
-        if (u_point_on != 0) {
-            vec3 to_point = u_point_pos - world;
-            l = to_local * normalize(to_point);
-            if (l.z > 0.0) color += brdf(l, wo) * l.z * u_point_intensity / max(dot(to_point, to_point), 1e-8);
-        }
-    }
+    if ((u_terms & TERM_LIGHT) != 0) color = add_lights(to_local, wo, world, color);
     if (u_env_on == 0) return color;
     if ((u_terms & TERM_ENV_BODY) != 0) color += textureLod(u_env_table, env_table_uv(tbn[2]), 0.0).rgb;
 #ifdef NB_SPLIT_COAT
@@ -341,42 +365,14 @@ vec3 shade_lit_every(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index)
     coat_pass = coated ? coat : vec2(0.05, 1.0);
 #endif
     vec3 coat_sum = vec3(0.0);
-    if ((u_terms & TERM_LIGHT) != 0) {  // as shade_lit: the point light, then the directional one
-        if (u_point_on != 0) {
-            vec3 to_point = u_point_pos - world;
-            vec3 l = to_local * normalize(to_point);
-            if (l.z > 0.0) {
-                vec3 f = body_brdf(l, wo);
-#ifdef NB_SPLIT_COAT
-                f += vec3(coat_eval(l, wo, coat));
-#endif
-                color += f * l.z * (u_point_intensity / max(dot(to_point, to_point), 1e-8));
-            }
-        }
-        vec3 l = to_local * normalize(u_light_dir);
-        if (l.z > 0.0) {
-            vec3 f = body_brdf(l, wo);
-#ifdef NB_SPLIT_COAT
-            f += vec3(coat_eval(l, wo, coat));
-#endif
-            color += f * l.z * u_light_radiance;
-        }
-    }
+    if ((u_terms & TERM_LIGHT) != 0) color = add_lights(to_local, wo, world, color);
     if (u_env_on == 0) return color;
     for (int k = 1; k <= u_ris_samples; ++k) {
         vec3 e = every_body_samples(tbn, wo, px, pass_index * uint(u_ris_samples) + uint(k - 1), m, n_lobe, coat_sum);
         if ((u_terms & TERM_ENV_BODY) != 0) color += e / float(u_ris_samples);
     }
 #ifdef NB_SPLIT_COAT
-    int coat_own = (u_terms & TERM_LOBE_COAT) != 0 ? coat_n : 0;
-    for (int j = 0; j < coat_own; ++j) {
-        vec3 l = coat_sample(wo, rand3(px, pass_index * uint(coat_n) + uint(j), STREAM_COAT, u_seed).xy, coat);
-        if (l.z <= 0.0) continue;
-        vec3 lw = tbn * l;
-        float pc = coat_mis_pdf(wo, l, pdf_env(lw), pdf_body(wo, l));
-        if (pc > 0.0)
-            color += clamp_contribution(coat_eval(l, wo, coat) * l.z * env_radiance(lw) * u_env_intensity / pc);
-    }
+    color = coat_own_samples(tbn, wo, px, pass_index, coat, color);
     if ((u_terms & TERM_ENV_COAT) != 0) color += coat_sum;
 #endif
     return color;
