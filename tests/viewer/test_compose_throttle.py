@@ -4,7 +4,7 @@ slow frame), anything else that changes what is shown at once, and ``shown_passe
 passes the image on screen holds."""
 from __future__ import annotations
 
-from nbrdf.viewer.jobs.view_frames import COMPOSE_INTERVAL_S, MAX_PASSES, ViewFrames
+from nbrdf.viewer.jobs.view_frames import COMPOSE_AT_ONCE, COMPOSE_INTERVAL_S, MAX_PASSES, ViewFrames
 
 
 def _frames(copy_key, composed_at: float, passes: int) -> ViewFrames:
@@ -32,4 +32,5 @@ def test_anything_else_is_shown_at_once():
     assert not vf._more_passes_only(_key(5, exposure=1.0), now)  # a setting of the frame
     assert not vf._more_passes_only(_key(MAX_PASSES), now)  # the last pass: the accumulation stops
     assert not _frames(None, 0.0, 1)._more_passes_only(_key(1), now)  # nothing kept yet
+    assert not _frames(_key(1), 100.0, 2)._more_passes_only(_key(COMPOSE_AT_ONCE), now)  # an image's first passes
     assert _frames(None, 0.0, 4).shown_passes == 4

@@ -42,8 +42,10 @@ MAIN_SLOTS = ("main", "main_b")
 HANDOVER_PASSES = 8
 #: While passes accumulate, a new pass is composited on screen once the last composite is this many seconds old
 #: (``ViewFrames._more_passes_only``): on software OpenGL a composite makes its frame a slow one (40-120 ms), so
-#: at most one frame a second is (the first pass of a new image is shown at once).
-COMPOSE_INTERVAL_S = 1.0
+#: at most one frame in two seconds is; the first ``COMPOSE_AT_ONCE`` passes of an image are shown at once (with
+#: the body environment map the image is converged by then).
+COMPOSE_INTERVAL_S = 2.0
+COMPOSE_AT_ONCE = 2
 
 
 class ViewFrames:
@@ -110,12 +112,12 @@ class ViewFrames:
 
     def _more_passes_only(self, key: tuple, now: float) -> bool:
         """Whether the kept copy may stay on screen for ``key``: it differs from the copy's only by
-        more passes of the same image (``shown``'s count, below ``cap``) and the copy is
-        younger than ``COMPOSE_INTERVAL_S``. The composite of a full view costs a software GPU about
+        more passes of the same image (``shown``'s count, past ``COMPOSE_AT_ONCE`` and below ``cap``) and
+        the copy is younger than ``COMPOSE_INTERVAL_S``. The composite of a full view costs a software GPU about
         100 ms at 1080p; where passes are cheap (the body environment map,
         viewer/gpu/env_prefilter.py) composing each one would make every few frames a slow one."""
         old = self._copy_key
-        if old is None or len(old[1]) < 4 or len(key[1]) < 4 or key[1][3] >= self.cap:
+        if old is None or len(old[1]) < 4 or len(key[1]) < 4 or key[1][3] >= self.cap or key[1][3] <= COMPOSE_AT_ONCE:
             return False
         same = old[0] == key[0] and old[2:] == key[2:] and old[1][:3] == key[1][:3] and old[1][4:] == key[1][4:]
         return same and now - self._composed_at < COMPOSE_INTERVAL_S
