@@ -108,6 +108,9 @@ def test_where_the_map_applies(setup, gl_ctx):
         r.quick = True
         assert not r.lit.prefiltered(state, body)  # interactive frames sample
         r.quick = False
+        fragment = Renderer(gl_ctx, brdf=body, mesh="sphere", compute=False)
+        fragment.settings.prefilter = SMALL
+        assert not fragment.lit.prefiltered(state, body)  # the fragment path reads no map (and bakes none)
         r.set_mesh("testmesh")
         assert not r.lit.prefiltered(state, body)  # one normal, many views
     finally:

@@ -237,8 +237,6 @@ class EnvPrefilter:
             self._maps[key].texture.use(ENV_TABLE_UNIT)
             prog["u_env_table"].value = ENV_TABLE_UNIT
             prog["u_env_table_basis"].write(map_basis(state).T.astype("f4").tobytes())
-            prog["u_env_table"].value = ENV_TABLE_UNIT
-            prog["u_env_table_basis"].write(map_basis(state).T.astype("f4").tobytes())
 
     def release(self) -> None:
         for m in self._maps.values():

@@ -77,8 +77,10 @@ class LitSettings:
 class LitPasses:
     """The lit passes of one renderer; keeps the G-buffer of each accumulation slot."""
 
-    def __init__(self, kit: DrawKit, settings: LitSettings):
-        self.kit, self.ctx, self.settings = kit, kit.ctx, settings
+    def __init__(self, kit: DrawKit, settings: LitSettings, compute: bool):
+        """``compute``: the renderer's object view is the deferred compute path (the only one that reads
+        the body environment map)."""
+        self.kit, self.ctx, self.settings, self.compute = kit, kit.ctx, settings, compute
         self.gbuffers: SizeCache[tuple[moderngl.Framebuffer, list[moderngl.Texture]]] = SizeCache(release_all)
         """The G-buffer of each (slot, w, h), a few sizes per slot (viewer/gpu/size_cache.py)."""
         self.guides = BodyGuides(kit.ctx)
@@ -101,7 +103,7 @@ class LitPasses:
     def prefiltered(self, state: ViewState, brdf: GpuBrdf | None) -> bool:
         """Whether draws of ``brdf`` read the body environment map (its bake still to finish or not)."""
         pf = self.prefilter()
-        return pf is not None and pf.applies(brdf, state, self.sphere_radius, True, self.settings.quick)
+        return pf is not None and pf.applies(brdf, state, self.sphere_radius, self.compute, self.settings.quick)
 
     def specialised(self, brdf: GpuBrdf | None) -> dict | None:
         """The define of lit.comp's program of its own for the estimator of ``brdf``'s draws

@@ -84,7 +84,7 @@ class Renderer:
         self.programs = self.kit.programs
         self.settings = LitSettings()
         """The lit passes' sampling (``sampling``, ``table_sampling``, ``quick`` below)."""
-        self.lit = LitPasses(self.kit, self.settings)
+        self.lit = LitPasses(self.kit, self.settings, self.deferred)
         """The lit passes of the object view (deferred compute or fragment) and the compute lobe / slice."""
         self._pending: SizeCache[tuple[moderngl.Framebuffer, moderngl.Texture]] = SizeCache(
             lambda t: release_all(t[0], t[1]))

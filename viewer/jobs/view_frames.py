@@ -198,13 +198,13 @@ class ViewFrames:
         slots = (self._slot, VIEW_SLOTS[1])
         blank = False
         # the body environment map's noise stays what its bake left: past MAPPED_MAX_PASSES passes add nothing seen
-        self.cap = (MAPPED_MAX_PASSES if view == View.OBJECT and not frame.blending
-                    and stage.renderer.lit.prefiltered(frame.state, body) else MAX_PASSES)
+        mapped = view == View.OBJECT and stage.renderer.lit.prefiltered(frame.state, body)
+        self.cap = MAPPED_MAX_PASSES if mapped and not frame.blending else MAX_PASSES
         capped = self.cap < MAX_PASSES and self.passes >= self.cap  # the kept image, drawn again: no pass shaded
         if budget_ms is not None and view == View.OBJECT and not frame.comparing and (self.passes < self.cap or capped):
             shaded = [(slots[0], body)] + ([(slots[1], frame.other_brdf)] if frame.blending else [])
             # a band's cost: the estimator, the body, the BRDFs shaded, the body environment map read
-            cost_key = (stage.renderer.quick, body.kind, len(shaded), stage.renderer.lit.prefiltered(frame.state, body))
+            cost_key = (stage.renderer.quick, body.kind, len(shaded), mapped)
             if not capped and self.bands.advance(stage.renderer, replace(frame.state, background=False), w, h,
                                                  self.passes, shaded, budget_ms, cost_key,
                                                  end_extra_ms=self._compose_ms):
