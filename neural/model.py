@@ -18,6 +18,7 @@ import torch
 from nbrdf.neural.anisotropy import require_isotropic
 from nbrdf.neural.coat import with_coat
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bundle, save_decoder
+from nbrdf.neural.energy import EnergySettings, conserve
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent import load_latent
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, LATENT
@@ -53,6 +54,9 @@ class NeuralModel:
     sampler: SamplerNet | None = None
     trained_on: dict = field(default_factory=dict)  # per operation part
     source: str = ""
+    energy: EnergySettings | None = field(default_factory=EnergySettings)
+    """How a uniform material's code is kept from reflecting more light than arrives (``neural.energy``;
+    None: the networks' code as it comes). Needs the sampler network (its proxy draws the estimate)."""
 
     def require(self, part: str):
         net = getattr(self, part)
@@ -73,9 +77,19 @@ class NeuralModel:
         return self.decoder.weights_id()
 
     # -- the full path ---------------------------------------------------------------------
-    def material_latent(self, material: Material) -> Tensor:
-        """(3, 34) code of a uniform material of any number of layers (``neural.coat``)."""
-        return self.stack_latents(material)[0]
+    def material_latent(self, material: Material, conserve: bool = True) -> Tensor:
+        """(3, 34) code of a uniform material of any number of layers (``neural.coat``), its albedo
+        bounded (``conserved``; ``conserve`` False: the networks' code, which the window shows while a
+        slider moves and bounds once it stops)."""
+        z = self.stack_latents(material)[0]
+        return self.conserved(z) if conserve else z
+
+    def conserved(self, code: Tensor) -> Tensor:
+        """``code`` (3, 34) with its directional albedo at most ``energy.bound`` at every incidence
+        (``neural.energy.conserve``; unchanged without ``energy`` or a sampler network)."""
+        if self.energy is None or self.sampler is None:
+            return code
+        return conserve(self.decoder, code, *self.proxy(code), self.energy)
 
     def stack_latents(self, material: Material, values: ParamValues | None = None) -> Tensor:
         """(P, 3, 34) codes of a material whose parameters ``values`` turns

@@ -78,7 +78,8 @@ def test_white_furnace_of_an_energy_conserving_stack(mi, materials):
     (the walk's albedo is 1; ``test_mitsuba_reference`` renders it). The
     neural material's furnace image must equal its own directional albedo
     (sampler and eval agree inside Mitsuba); the representation itself is
-    measured 5-9 % too bright on this stack, bounded here at 12 %."""
+    bounded (neural/energy.py): its code reflected up to 6 % more than arrives, now at most 1 at every
+    incidence (measured 0.948-0.988 at the furnace report's incidences)."""
     import torch
 
     from nbrdf.neural.material import load_material
@@ -105,7 +106,8 @@ def test_white_furnace_of_an_energy_conserving_stack(mi, materials):
     # pixel noise: 64 independent spp of a weight in [0, 1.3]; the mean over ~300 pixels has sd < 2e-3
     assert abs(got.mean() - want.mean()) < 5e-3, (got.mean(), want.mean())
     assert np.all(np.abs(img[inside] - img[inside].mean(1, keepdims=True)) < 1e-5)  # grey stays grey
-    assert abs(np.mean(albedo) - 1) < 0.12
+    # never more than arrives (the noise of 2^14 samples: about 0.3 %), and not far below the stack's 1
+    assert max(albedo) <= 1.0 and np.mean(albedo) > 0.93, albedo
 
 
 @pytest.mark.slow

@@ -87,3 +87,31 @@ def test_bad_settings_are_one_line_errors():
         BackdropSettings("checker")
     with pytest.raises(NbrdfError, match="colour"):
         BackdropSettings("flat", (1.0, float("nan"), 0.0))
+
+
+def test_the_background_is_kept_across_an_edits_frames_and_drawn_again_when_what_it_shows_changes(scene, gl_ctx):
+    r, backdrop, brdf, state = scene
+    size = (32, 24)
+    settings = BackdropSettings("env", ground=True)
+
+    def fresh(s):  # a backdrop of its own: its background drawn for this state alone
+        other = Backdrop(gl_ctx, r)
+        try:
+            return other.render_linear(s, size, 1, brdf, settings)
+        finally:
+            other.release()
+
+    first = backdrop.render_linear(state, size, 1, brdf, settings)
+    kept = backdrop._bg_keys[("linear", *size)]
+    np.testing.assert_array_equal(backdrop.render_linear(state, size, 1, brdf, settings), first)
+    assert backdrop._bg_keys[("linear", *size)] is kept  # not drawn again
+    turned = replace(state, env_rotation=120.0)
+    np.testing.assert_array_equal(backdrop.render_linear(turned, size, 1, brdf, settings), fresh(turned))
+    moved = replace(state, camera=replace(state.camera))
+    backdrop.render_linear(moved, size, 1, brdf, settings)
+    moved.camera.yaw += 40.0  # the same camera changed in place, as the window's orbit does
+    np.testing.assert_array_equal(backdrop.render_linear(moved, size, 1, brdf, settings), fresh(moved))
+    flat = BackdropSettings("flat", (0.2, 0.3, 0.4), ground=False)
+    mask = r.gbuffer(state, size, brdf)[2]
+    img = backdrop.render_linear(state, size, 1, brdf, flat)
+    np.testing.assert_allclose(img[~mask], np.broadcast_to([0.2, 0.3, 0.4], img[~mask].shape), atol=1e-6)

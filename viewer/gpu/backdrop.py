@@ -19,7 +19,7 @@ extent fits all.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import astuple, dataclass, replace
 
 import moderngl
 import numpy as np
@@ -137,12 +137,18 @@ class Backdrop:
         self.ctx, self.renderer = ctx, renderer
         defines = {f"BACKGROUND_{m.name}": m.code for m in Background}
         try:
-            self.prog = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
-                                    fragment_shader=shaders.source("backdrop.frag", defines=defines))
+            self.prog, self.bg_prog = (
+                ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
+                            fragment_shader=shaders.source("backdrop.frag", defines={**defines, **extra}))
+                for extra in ({}, {"NB_BACKGROUND_ONLY": 1}))
         except moderngl.Error as e:
             raise NbrdfError(f"backdrop shader build failed: {str(e).splitlines()[0]}") from None
         self.vao = ctx.vertex_array(self.prog, [])
+        self.bg_vao = ctx.vertex_array(self.bg_prog, [])
         self._targets: SizeCache[tuple[moderngl.Framebuffer, moderngl.Texture]] = SizeCache(release_all)
+        self._backgrounds: SizeCache[tuple[moderngl.Framebuffer, moderngl.Texture]] = SizeCache(release_all)
+        """The background alone per (slot, w, h), drawn again when its key changes (``_background``)."""
+        self._bg_keys: dict[tuple, tuple] = {}
         self._blur: tuple[int, moderngl.Texture] | None = None
         self._shadow: tuple[int, moderngl.Texture, float] | None = None
 
@@ -183,33 +189,58 @@ class Backdrop:
         """The object's accumulation (sum of ``passes``) over the backdrop of
         ``state``'s camera: a (w, h) float texture holding one linear image."""
         w, h = accum.size
+        bg = self._background(w, h, state, settings, slot)
         fbo, tex = self._target(w, h, slot)
         p = self.prog
+        accum.use(0)
+        bg.use(1)
+        p["u_accum"].value, p["u_background"].value = 0, 1
+        p["u_passes"].value = float(passes)
+        fbo.use()
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        self.vao.render(moderngl.TRIANGLES, vertices=3)
+        self.renderer.unbind_textures(0, 1)
+        return tex
+
+    def _background(self, w: int, h: int, state, settings: BackdropSettings, slot: str) -> moderngl.Texture:
+        """The background alone at (w, h) -- the environment, its blurred copy or a flat colour along
+        each pixel's view ray, the contact shadow on the ground -- drawn when what it shows changed
+        (the camera, the environment, its rotation and intensity, the settings); an edit's frames reuse it."""
         cam = state.camera
-        vp = cam.projection(w / h) @ cam.view()
         mode = settings.mode if state.background else Background.NONE
         env = self.renderer.env
         bg_tex = self._blurred() if mode == Background.BLUR else env.radiance
         shadow, z0 = self._shadow_map()
-        accum.use(0)
+        ground = int(settings.ground and View.parse(state.view) == View.OBJECT)
+        fbo, tex = self._backgrounds.get((slot, w, h), lambda: self._float_target(w, h))
+        key = (fbo, astuple(cam), Background.parse(mode).code, bg_tex, float(state.env_rotation),
+               float(state.env_intensity), tuple(settings.flat_colour), ground, shadow, z0)
+        if self._bg_keys.get((slot, w, h)) == key:
+            return tex
+        p = self.bg_prog
+        vp = cam.projection(w / h) @ cam.view()
         bg_tex.use(1)
         shadow.use(2)
-        p["u_accum"].value, p["u_bg_env"].value, p["u_shadow"].value = 0, 1, 2
-        p["u_passes"].value = float(passes)
+        p["u_bg_env"].value, p["u_shadow"].value = 1, 2
         p["u_mode"].value = Background.parse(mode).code
         p["u_bg_rotation"].value = math.radians(state.env_rotation)
         p["u_bg_intensity"].value = state.env_intensity
         p["u_flat"].value = tuple(settings.flat_colour)
-        p["u_ground"].value = int(settings.ground and View.parse(state.view) == View.OBJECT)
+        p["u_ground"].value = ground
         p["u_extent"].value = SHADOW_EXTENT
         p["u_ground_z"].value = z0
         p["u_inv_view_proj"].write(np.linalg.inv(vp).T.astype("f4").tobytes())
         p["u_eye"].value = tuple(cam.eye())
         fbo.use()
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
-        self.vao.render(moderngl.TRIANGLES, vertices=3)
-        self.renderer.unbind_textures(0, 1, 2)
+        self.bg_vao.render(moderngl.TRIANGLES, vertices=3)
+        self.renderer.unbind_textures(1, 2)
+        self._bg_keys[(slot, w, h)] = key
         return tex
+
+    def _float_target(self, w: int, h: int) -> tuple[moderngl.Framebuffer, moderngl.Texture]:
+        tex = self.ctx.texture((w, h), 4, dtype="f4")
+        return self.ctx.framebuffer([tex]), tex
 
     def render_linear(self, state, size: tuple[int, int], spp: int, brdf, settings: BackdropSettings) -> np.ndarray:
         """The object view as a linear float32 (H, W, 3) image, row 0 on top: the
@@ -222,6 +253,8 @@ class Backdrop:
 
     def release(self) -> None:
         self._targets.clear()
+        self._backgrounds.clear()
+        self._bg_keys.clear()
         for res in (self._blur, self._shadow):
             if res is not None:
                 res[1].release()

@@ -23,7 +23,7 @@ import torch
 from nbrdf.neural.body_table import TableSize
 from nbrdf.viewer.gpu import shaders
 from nbrdf.viewer.gpu.body_table_gpu import INTERACTIVE, STILL, BodyTables
-from nbrdf.viewer.gpu.env_prefilter import PrefilterSettings
+from nbrdf.viewer.gpu.env_prefilter import QUICK_PREFILTER, PrefilterSettings
 from nbrdf.viewer.gpu.lit_sampling import LitSampling
 from nbrdf.viewer.gpu.neural_gpu import GpuDecoder, probe_fragment
 from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf
@@ -51,6 +51,9 @@ class BodySettings:
     prefilter: PrefilterSettings | None = field(default_factory=PrefilterSettings)
     """With tables: the still view's body environment pre-integrated over the sphere's normals
     (viewer/gpu/env_prefilter.py; None: every still pass samples the body)."""
+    quick_prefilter: PrefilterSettings | None = field(default_factory=lambda: QUICK_PREFILTER)
+    """With tables: the interactive frames' coarse map, baked whole in the edit's frame (None: the
+    quick estimator samples the body)."""
 
 
 class BodySource:
@@ -113,6 +116,10 @@ class BodySource:
     def prefilter(self) -> PrefilterSettings | None:
         """The still view's body environment map settings (``LitSettings.prefilter``): with tables only."""
         return self.settings.prefilter if self.use_tables else None
+
+    def quick_prefilter(self) -> PrefilterSettings | None:
+        """The interactive frames' map settings (``LitSettings.quick_prefilter``): with tables only."""
+        return self.settings.quick_prefilter if self.use_tables else None
 
     def sampling(self, base: LitSampling) -> LitSampling:
         """The lit estimator of frames shaded from tables (``table_sampling``); ``base``

@@ -67,6 +67,11 @@ class PrefilterSettings:
         return self
 
 
+#: The interactive frames' map (``LitSettings.quick_prefilter``): baked whole within the edit's
+#: frame, so coarse (nodes about 6 degrees apart) and few draws (docs/decisions/113).
+QUICK_PREFILTER = PrefilterSettings(size=32, draws=8, coat_samples=1)
+
+
 def sphere_radius(mesh: Mesh, tol: float = 2e-3) -> float | None:
     """The radius when ``mesh`` is a sphere about the origin with outward radial normals (the
     built-in sphere, or a normalised imported one: then one view per normal), else None."""
@@ -152,11 +157,10 @@ class EnvPrefilter:
         m = self._maps.get(key)
         return 0 if m is None else m.rows
 
-    def applies(self, brdf: GpuBrdf | None, state: ViewState, radius: float | None, deferred: bool,
-                quick: bool) -> bool:
+    def applies(self, brdf: GpuBrdf | None, state: ViewState, radius: float | None, deferred: bool) -> bool:
         """Whether a draw of ``brdf`` in ``state`` on a mesh of sphere radius ``radius`` (None: not a
         sphere) reads the map (see the module's docstring)."""
-        return (deferred and radius is not None and not quick and brdf is not None and brdf.kind == BrdfKind.TABLE
+        return (deferred and radius is not None and brdf is not None and brdf.kind == BrdfKind.TABLE
                 and brdf.normal_map is None and brdf.body_table is not None and bool(state.env_on))
 
     def key(self, state: ViewState, brdf: GpuBrdf, env, sampling: LitSampling, radius: float = 1.0) -> tuple:

@@ -14,7 +14,7 @@ window's still view shades a pass over several frames, viewer/jobs/pass_bands.py
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import astuple, dataclass, field, replace
 
 import moderngl
 import numpy as np
@@ -46,6 +46,40 @@ def incidence(theta_deg: float) -> tuple[float, float, float]:
     return (math.sin(t), 0.0, math.cos(t))
 
 
+def gbuffer_key(draws: "Draws") -> ProgramKey:
+    """The G-buffer pass's program for ``draws``: one of its own where no draw has a normal map or a
+    latent texture (gbuffer_lit.frag ``NB_PLAIN_SURFACE``)."""
+    plain = all(b.normal_map is None and b.latent_texture is None for _, _, b in draws)
+    return ProgramKey("gbuffer_lit.frag", "object.vert", defines=(("NB_PLAIN_SURFACE", 1),) if plain else (),
+                      version=GLSL_430)
+
+
+def screen_box(sphere: tuple[np.ndarray, float] | None, view: np.ndarray, proj: np.ndarray, w: int,
+               h: int) -> tuple[int, int, int, int]:
+    """The pixels (x0, x1, y0, y1; GL's rows, bottom up; ends exclusive) that may show a mesh inside
+    the ball ``sphere`` (centre, radius; world) under ``view`` and the symmetric perspective ``proj``
+    in a w x h target: per image axis, the exact extent of the projected ball (the ball's
+    projection onto that axis's plane through the eye is a disc: its two tangents from the eye),
+    a pixel wider each side. The whole axis where the eye is in the ball or a tangent is behind it."""
+    if sphere is None:
+        return 0, w, 0, h
+    centre, radius = sphere
+    c = np.asarray(view, np.float64) @ np.append(np.asarray(centre, np.float64), 1.0)
+    depth = -c[2]
+    out = []
+    for axis, size in ((0, w), (1, h)):
+        dist = math.hypot(c[axis], depth)
+        lo, hi = 0, size
+        if dist > radius * (1.0 + 1e-6):
+            theta, alpha = math.atan2(c[axis], depth), math.asin(radius / dist)
+            if -math.pi / 2 < theta - alpha and theta + alpha < math.pi / 2:
+                ndc = [proj[axis, axis] * math.tan(a) for a in (theta - alpha, theta + alpha)]
+                px = [(v * 0.5 + 0.5) * size for v in ndc]
+                lo, hi = max(0, int(math.floor(px[0])) - 1), min(size, int(math.ceil(px[1])) + 1)
+        out.append((lo, max(lo, hi)))
+    return out[0][0], out[0][1], out[1][0], out[1][1]
+
+
 #: (first index, index count, BRDF) of each draw of the mesh (``Renderer.draws``).
 Draws = list[tuple[int, int, GpuBrdf]]
 #: A band of a target's rows, [first, end), counted as GL does (from the bottom).
@@ -66,6 +100,13 @@ class LitSettings:
     prefilter: PrefilterSettings | None = None
     """The still view's body environment pre-integrated over the sphere's normals where it applies
     (viewer/gpu/env_prefilter.py; None: off, every pass samples the body)."""
+    quick_prefilter: PrefilterSettings | None = None
+    """The same for the interactive frames (``quick``): a coarse map baked whole in the edit's own
+    frame, then one fetch per pixel instead of the quick estimator's body samples (None: off)."""
+
+    def prefilter_settings(self) -> PrefilterSettings | None:
+        """The body environment map of the frames ``quick`` says (None: they read none)."""
+        return self.quick_prefilter if self.quick else self.prefilter
 
     def for_brdf(self, brdf: GpuBrdf | None) -> LitSampling:
         """The sampling of a draw shaded with ``brdf``."""
@@ -87,23 +128,36 @@ class LitPasses:
         """The decoder's resampling-target tables, one per uniform latent drawn (viewer/gpu/body_guide.py)."""
         self.sphere_radius: float | None = None
         """The mesh's radius when it is a sphere about the origin (the renderer sets it; None: not one)."""
-        self._prefilter: EnvPrefilter | None = None
+        self.mesh_serial = 0
+        """Counts the renderer's meshes (``set_mesh``): a G-buffer of another mesh is not reused."""
+        self._surfaces: dict[tuple[str, int, int], tuple] = {}
+        """What each (slot, w, h) G-buffer holds (its framebuffer, the camera, the mesh, the draws)."""
+        self.bounds: tuple[np.ndarray, float] | None = None
+        """The mesh's bounding ball (centre, radius; world; the renderer sets it): the compute pass
+        covers its box on screen only (``screen_box``; None: the whole target)."""
+        self._prefilters: dict[bool, EnvPrefilter] = {}
+        """The body environment map's baker of the still view (False) and of the interactive frames (True)."""
+
+    @property
+    def _prefilter(self) -> EnvPrefilter | None:
+        return self._prefilters.get(self.settings.quick)
 
     def prefilter(self) -> EnvPrefilter | None:
-        """The body environment map's baker under the current settings (None: off)."""
-        s = self.settings.prefilter
+        """The body environment map's baker of the frames the settings say (still or quick; None: off)."""
+        s, quick = self.settings.prefilter_settings(), self.settings.quick
+        pf = self._prefilters.get(quick)
         if s is None:
             return None
-        if self._prefilter is None or self._prefilter.settings != s:
-            if self._prefilter is not None:
-                self._prefilter.release()
-            self._prefilter = EnvPrefilter(self.kit, s)
-        return self._prefilter
+        if pf is None or pf.settings != s:
+            if pf is not None:
+                pf.release()
+            pf = self._prefilters[quick] = EnvPrefilter(self.kit, s)
+        return pf
 
     def prefiltered(self, state: ViewState, brdf: GpuBrdf | None) -> bool:
         """Whether draws of ``brdf`` read the body environment map (its bake still to finish or not)."""
         pf = self.prefilter()
-        return pf is not None and pf.applies(brdf, state, self.sphere_radius, self.compute, self.settings.quick)
+        return pf is not None and pf.applies(brdf, state, self.sphere_radius, self.compute)
 
     def specialised(self, brdf: GpuBrdf | None) -> dict | None:
         """The define of lit.comp's program of its own for the estimator of ``brdf``'s draws
@@ -113,11 +167,16 @@ class LitPasses:
         sampling = self.settings.for_brdf(brdf)
         return EVERY_DEFINE if sampling.every_candidate and sampling.ris_samples > 0 else None
 
+    def _bake_sampling(self, brdf: GpuBrdf) -> LitSampling:
+        """The estimator a map is baked with: the still view's, for the interactive frames' map too
+        (its candidates per draw amortise a draw's fixed cost; the quick estimator's are fewer)."""
+        return replace(self.settings, quick=False).for_brdf(brdf)
+
     def prefilter_key(self, state: ViewState, brdf: GpuBrdf, env: GpuEnvironment) -> tuple | None:
         """The key of the body environment map ``brdf``'s draws read (None: they read none)."""
         if not self.prefiltered(state, brdf):
             return None
-        return self._prefilter.key(state, brdf, env, self.settings.for_brdf(brdf), self.sphere_radius or 1.0)
+        return self._prefilter.key(state, brdf, env, self._bake_sampling(brdf), self.sphere_radius or 1.0)
 
     def prefilter_rows(self, key: tuple | None) -> int | None:
         """Rows of the body environment map of ``key`` baked so far (None: no map is read)."""
@@ -128,7 +187,7 @@ class LitPasses:
         rest); True when it is complete (or does not apply)."""
         if not self.prefiltered(state, brdf):
             return True
-        return self._prefilter.bake_rows(state, brdf, env, self.settings.for_brdf(brdf),
+        return self._prefilter.bake_rows(state, brdf, env, self._bake_sampling(brdf),
                                          self.sphere_radius or 1.0, rows)
 
     def view_compute(self, view: View, state: ViewState, w: int, h: int, brdf: GpuBrdf,
@@ -159,18 +218,25 @@ class LitPasses:
                  slot: str, rows: Rows | None = None, raster: bool | None = None,
                  into: moderngl.Texture | None = None) -> np.ndarray:
         """The deferred lit path: on a slot's first pass (``raster``), rasterise its G-buffer
-        (gbuffer_lit.frag); then ``passes`` passes of lit.comp over it, over ``rows`` only
+        (gbuffer_lit.frag; ``raster`` None: not where it holds the same surface already and nothing
+        reads the depth, the slider's frames); then ``passes`` passes of lit.comp over it, over ``rows`` only
         (GL's rows, bottom up; None: all), added into ``into`` (default: the slot's
         accumulation image ``target``). Returns the view-projection matrix."""
         kit = self.kit
         gfbo, gtex = self.gbuffer_target(w, h, slot, target[0].depth_attachment)
-        g = kit.programs.get(ProgramKey("gbuffer_lit.frag", "object.vert", version=GLSL_430))
+        g = kit.programs.get(gbuffer_key(draws))
         vp = kit.surface_uniforms(g, state, w, h, draws[0][2].normal_map)
+        surface = (gfbo, astuple(state.camera), self.mesh_serial, [(start, count, b.normal_map, b.latent_texture)
+                                                          for start, count, b in draws])
+        if raster is None and first == 0 and not state.background and self._surfaces.get((slot, w, h)) == surface:
+            raster = False  # an edit's frame: the G-buffer holds this surface (the depth is read by none)
         if first == 0 if raster is None else raster:
+            self._surfaces[(slot, w, h)] = surface
             gfbo.use()
             gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             # A sampler array on unit 0 beside the normal map's 2D sampler would void the draw.
-            g["u_nb_share_tex"].value = SHARE_UNIT
+            if "u_nb_share_tex" in g:
+                g["u_nb_share_tex"].value = SHARE_UNIT
             with depth_tested(self.ctx):
                 for part, (start, count, b) in enumerate(draws):
                     if part:
@@ -178,13 +244,18 @@ class LitPasses:
                     textured = b.latent_texture is not None
                     if textured:
                         b.latent_texture.bind(g)
-                    g["u_textured"].value = int(textured)
+                    if "u_textured" in g:
+                        g["u_textured"].value = int(textured)
                     if "u_material_id" in g:
                         g["u_material_id"].value = part
                     kit.mesh_vao(g).render(moderngl.TRIANGLES, vertices=count, first=start)
         if passes <= 0:
             return vp
         y0, y1 = rows if rows is not None else (0, h)
+        x0, x1, by0, by1 = screen_box(self.bounds, state.camera.view(), state.camera.projection(w / h), w, h)
+        y0, y1 = max(y0, by0), min(y1, by1)
+        if x1 <= x0 or y1 <= y0:
+            return vp  # the object is off this band
         tex = target[1] if into is None else into
         for part, (_, _, b) in enumerate(draws):
             table = self.prefiltered(state, b)
@@ -199,6 +270,7 @@ class LitPasses:
             if "u_material_id" in c:  # -1: every covered pixel (one material)
                 c["u_material_id"].value = part if len(draws) > 1 else -1
             c["u_row0"].value, c["u_row_end"].value = y0, y1
+            c["u_col0"].value, c["u_col_end"].value = x0, x1
             for t, unit, name in zip(gtex, GBUFFER_UNITS, ("u_gb_normal", "u_gb_world", "u_gb_uv")):
                 t.use(unit)
                 if name in c:
@@ -208,15 +280,15 @@ class LitPasses:
             for k in range(first, first + passes, LIT_CHUNK):
                 c["u_first_pass"].value = k
                 c["u_passes"].value = min(LIT_CHUNK, first + passes - k)
-                c.run(-(-w // LIT_GROUP), -(-(y1 - y0) // LIT_GROUP))
+                c.run(-(-(x1 - x0) // LIT_GROUP), -(-(y1 - y0) // LIT_GROUP))
                 self.ctx.memory_barrier()
         kit.unbind_textures(*GBUFFER_UNITS)
         return vp
 
     def release(self) -> None:
-        if self._prefilter is not None:
-            self._prefilter.release()
-            self._prefilter = None
+        for pf in self._prefilters.values():
+            pf.release()
+        self._prefilters.clear()
 
     def fragment(self, state: ViewState, w: int, h: int, first: int, passes: int, draws: Draws,
                  fbo: moderngl.Framebuffer, env: GpuEnvironment, rows: Rows | None = None,

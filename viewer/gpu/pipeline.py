@@ -218,12 +218,17 @@ class MaterialPipeline:
                              "(use --brdf neural)")
         return mode
 
-    def latent(self, material: Material, mode: BrdfMode | str = BrdfMode.NEURAL) -> torch.Tensor:
+    def latent(self, material: Material, mode: BrdfMode | str = BrdfMode.NEURAL, conserve: bool = True) -> torch.Tensor:
         """The (3, 32) latent of a uniform material: leaf encoders and layering
-        (neural), or fitted to the material's reference (projected)."""
+        (neural; ``conserve``: its albedo bounded, ``neural.energy``), or fitted to the material's
+        reference (projected)."""
         if BrdfMode.parse(mode) == BrdfMode.PROJECTED:
             return fit(self.model.decoder, material_samples(material))
-        return self.model.material_latent(material)
+        return self.model.material_latent(material, conserve)
+
+    def conserved(self, code: torch.Tensor) -> torch.Tensor:
+        """``code`` with its albedo bounded (``NeuralModel.conserved``)."""
+        return self.model.conserved(code)
 
     def proxy(self, z: torch.Tensor) -> tuple[float, float] | None:
         """The sampler network's proxy pdf (sigma, w) of a latent (None without a sampler)."""

@@ -164,6 +164,9 @@ class Renderer:
         m = named_mesh(mesh) if isinstance(mesh, str) else mesh
         self.mesh = m
         self.lit.sphere_radius = sphere_radius(m)
+        self.lit.mesh_serial += 1
+        p = np.asarray(m.positions, np.float64)
+        self.lit.bounds = (np.zeros(3), float(np.linalg.norm(p, axis=1).max())) if len(p) else None
         self.part_brdfs = [None] * len(m.draw_ranges)
         self.kit.set_mesh(m)
 

@@ -84,9 +84,9 @@ class Compare:
     def __init__(self, ctx: moderngl.Context, renderer: Renderer, worker: ReferenceWorker | None = None):
         self.ctx, self.renderer = ctx, renderer
         self.worker = worker or ReferenceWorker()
-        self.compositor = ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
-                                      fragment_shader=shaders.source("compare.frag"))
-        self._vao = ctx.vertex_array(self.compositor, [])
+        self._compositors: dict[tuple[bool, int], tuple[moderngl.Program, moderngl.VertexArray]] = {}
+        """The compositor's programs by (A alone, tone mapper): one of its own per case
+        (compare.frag NB_PLAIN, NB_TONEMAP_OP; llvmpipe runs every branch under a mask)."""
         self._tex: moderngl.Texture | None = None
         self._tex_key: tuple | None = None
         self._job: str | None = None      # the key of the Monte Carlo job the view shows
@@ -410,11 +410,20 @@ class Compare:
         ``blend`` (a weight) draws (1 - blend) A + blend B instead; ``placeholder``
         (words; the reference's ``placeholder``): B has no image, its side shows the
         hatch with these words, labels off or on."""
-        p = self.compositor
+        code = ToneMap.parse(tonemap).code
+        pending = placeholder is not None and blend is None
+        plain = CompareMode.parse(mode) == CompareMode.OFF and blend is None and not pending
+        p, vao = self.compositor(plain, code)
         target.use()
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
         a.use(0)
         b.use(1)
+        if plain:
+            p["u_a"].value, p["u_passes_a"].value, p["u_exposure"].value = 0, pa, exposure
+            vao.render(moderngl.TRIANGLES, vertices=3)
+            self.renderer.unbind_textures(0, 1)
+            self.labels.draw(target, self.label_list(mode, wipe) if self.show_labels else [])
+            return
         p["u_a"].value, p["u_b"].value = 0, 1
         flip = CompareMode.parse(mode) == CompareMode.FLIP and blend is None
         if flip and self._flip_tex is not None and self._flip_key is not None:
@@ -428,16 +437,25 @@ class Compare:
         p["u_wipe"].value = blend if blend is not None else wipe
         p["u_err_scale"].value = error_scale
         p["u_exposure"].value = exposure
-        p["u_tonemap"].value = ToneMap.parse(tonemap).code
-        pending = placeholder is not None and blend is None
         p["u_pending"].value = int(pending)
         p["u_hatch"].value = PLACEHOLDER_GREYS
-        self._vao.render(moderngl.TRIANGLES, vertices=3)
+        vao.render(moderngl.TRIANGLES, vertices=3)
         self.renderer.unbind_textures(0, 1, 2)
         labels = self.label_list(mode, wipe) if self.show_labels and blend is None else []
         if pending:
             labels.append(self.placeholder_label(placeholder, mode, wipe))
         self.labels.draw(target, labels)
+
+    def compositor(self, plain: bool, tonemap: int) -> tuple[moderngl.Program, moderngl.VertexArray]:
+        """The compositor's program (and its vertex array) for A alone (``plain``) or every mode,
+        with the tone mapper of code ``tonemap`` compiled in (built on first use, a few ms)."""
+        key = (plain, int(tonemap))
+        if key not in self._compositors:
+            defines = {"NB_TONEMAP_OP": key[1], **({"NB_PLAIN": 1} if plain else {})}
+            p = self.ctx.program(vertex_shader=shaders.source("fullscreen.vert"),
+                                 fragment_shader=shaders.source("compare.frag", defines=defines))
+            self._compositors[key] = (p, self.ctx.vertex_array(p, []))
+        return self._compositors[key]
 
     @staticmethod
     def placeholder_label(text: str, mode: CompareMode | str, wipe: float) -> Label:
@@ -452,6 +470,10 @@ class Compare:
             if tex is not None:
                 tex.release()
         self._tex = self._flip_tex = self._sum = None
+        for prog, vao in self._compositors.values():
+            vao.release()
+            prog.release()
+        self._compositors.clear()
         self.labels.release()
         if self._env_file is not None:
             _remove(self._env_file[2])

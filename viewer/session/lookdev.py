@@ -67,6 +67,9 @@ from nbrdf.viewer.session.material_parts import MaterialParts, PartMaterial
 from nbrdf.viewer.session.stack_editor import StackEditor
 from nbrdf.viewer.view_settings import ViewState
 
+#: Seconds without an edit after which the code on screen gets its albedo bounded (``neural.energy``).
+CONSERVE_AFTER_S = 0.2
+
 if TYPE_CHECKING:
     from nbrdf.viewer.options import ViewOptions
     from nbrdf.viewer.scene.gltf_import import MaterialGroup
@@ -108,6 +111,7 @@ class LookDev(SessionEdits, Captures):
         self.pipeline = MaterialPipeline(ctx)
         self.timings = Timings()
         self.brdf: GpuBrdf | None = None        # the neural image's BRDF (None: a latent texture is building)
+        self._conserve_due: tuple[torch.Tensor, float] | None = None  # (the networks' code shown, since when)
         self.ref_brdf: GpuBrdf | None = None    # the closed form of a single layer (the reference)
         self.other_brdf: GpuBrdf | None = None  # the second material of a BRDF blend
         self._edit_t0: float | None = None
@@ -267,12 +271,13 @@ class LookDev(SessionEdits, Captures):
         self.shots.restart()
 
     # --- material -> latents -> GPU -------------------------------------------------------
-    def latent(self) -> torch.Tensor:
-        """The (3, 34) code the shader shows (the latent blend when interpolating)."""
-        z = self.pipeline.latent(self.material)
+    def latent(self, conserve: bool = True) -> torch.Tensor:
+        """The (3, 34) code the shader shows (the latent blend when interpolating); ``conserve``
+        False: the networks' code before its albedo is bounded (``neural.energy``)."""
+        z = self.pipeline.latent(self.material, conserve=conserve)
         other = self.interp.other_material()
         if other is not None and self.interp.mode == "latent":
-            z = blend([z, self.pipeline.latent(other)], [1 - self.interp.t, self.interp.t])
+            z = blend([z, self.pipeline.latent(other, conserve=conserve)], [1 - self.interp.t, self.interp.t])
         return z
 
     def _apply_material(self) -> None:
@@ -297,9 +302,14 @@ class LookDev(SessionEdits, Captures):
                             self.pipeline.normal_maps)
             self.idle_refine.edited(None, None)
         elif mode == BrdfMode.NEURAL:
-            z = self.latent()
+            # the networks' code now, its albedo bounded once the edits pause (``update``): the bound's
+            # estimate costs several ms, a slider's frame has none to spare
+            z = self.latent(conserve=False)
             refined = self.idle_refine.edited(None if self.interp.active else m, z)  # a cached refined code
+            if refined is not None:
+                refined = self.pipeline.conserved(refined)
             brdf = self.pipeline.build(m, BrdfMode.NEURAL, latent=z if refined is None else refined)
+            self._conserve_due = (z, time.monotonic()) if refined is None else None
         else:
             self.idle_refine.edited(None, None)
             brdf = self.pipeline.build(m, mode)
@@ -340,8 +350,16 @@ class LookDev(SessionEdits, Captures):
             if not self.guarded(self._apply_material):
                 self._keep_shown_material()
             self.notice = ""
+        due = self._conserve_due
+        if due is not None and time.monotonic() - due[1] >= CONSERVE_AFTER_S:
+            self._conserve_due = None
+            z = self.pipeline.conserved(due[0])
+            if not torch.equal(z, due[0]):  # the code reflected more light than arrives: bounded
+                self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=z))
         refined = self.idle_refine.poll()
         if refined is not None:  # a code that beats the network's on the material's own simulation
+            self._conserve_due = None
+            refined = self.pipeline.conserved(refined)
             self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=refined))
         if self.turntables.capture is not None and self.brdf is not None:
             self.guarded(self._turntable_step)
@@ -409,6 +427,7 @@ class LookDev(SessionEdits, Captures):
         body_notice = self.bodies.calibrate(self.brdf) if self.brdf is not None else ""
         self.renderer.table_sampling = self.bodies.sampling(self.renderer.sampling)
         self.renderer.settings.prefilter = self.bodies.prefilter()
+        self.renderer.settings.quick_prefilter = self.bodies.quick_prefilter()
         if body_notice:
             self.notice = "; ".join(x for x in (self.notice, body_notice) if x)
 

@@ -5,6 +5,9 @@
 // darkened on the ground plane under the object by the contact shadow (a
 // shadow catcher: the ground is the background itself, so it never changes
 // how the object is lit). Linear radiance out, one image (passes = 1).
+// Two programs: NB_BACKGROUND_ONLY draws the background alone (kept while the camera,
+// environment and settings stay: viewer/gpu/backdrop.py), and the default one puts the
+// object's accumulation over that image (u_background) -- the same values as one pass.
 //@INCLUDE common.glsl
 
 in vec2 v_uv;
@@ -34,10 +37,16 @@ vec3 background(vec3 d) {
     return texture(u_bg_env, uv).rgb * u_bg_intensity;
 }
 
+#ifndef NB_BACKGROUND_ONLY
+uniform sampler2D u_background;  // NB_BACKGROUND_ONLY's image, the target's size
 void main() {
     vec4 acc = texture(u_accum, v_uv);
     float passes = max(u_passes, 1.0);
     float cover = clamp(acc.a / passes, 0.0, 1.0);
+    frag = vec4(acc.rgb / passes + (1.0 - cover) * texelFetch(u_background, ivec2(gl_FragCoord.xy), 0).rgb, 1.0);
+}
+#else
+void main() {
     vec4 far = u_inv_view_proj * vec4(v_uv * 2.0 - 1.0, 1.0, 1.0);
     vec3 d = normalize(far.xyz / far.w - u_eye);
     vec3 bg = background(d);
@@ -47,5 +56,6 @@ void main() {
         if (all(greaterThanEqual(st, vec2(0.0))) && all(lessThanEqual(st, vec2(1.0))))
             bg *= 1.0 - texture(u_shadow, st).r;
     }
-    frag = vec4(acc.rgb / passes + (1.0 - cover) * bg, 1.0);
+    frag = vec4(bg, 1.0);
 }
+#endif

@@ -4,6 +4,8 @@
 // on the CPU by viewer/reference/compare.py) in magma, or the linear blend of A and B
 // (interpolation of BRDF values). Exposure, tone mapping and sRGB: tonemap_common.glsl.
 // While B has no image yet (u_pending), what would show B shows a grey hatch instead.
+// NB_PLAIN: a program of its own for A alone (no compare, no blend, nothing pending),
+// the window's every frame; llvmpipe runs every branch's straight-line code under a mask.
 //@INCLUDE tonemap_common.glsl
 uniform sampler2D u_a;
 uniform sampler2D u_b;
@@ -45,6 +47,11 @@ vec3 hatch() {
     return vec3(mod(floor((gl_FragCoord.x + gl_FragCoord.y) / 8.0), 2.0) < 1.0 ? u_hatch.x : u_hatch.y);
 }
 
+#ifdef NB_PLAIN
+void main() {
+    frag = vec4(display(texture(u_a, v_uv).rgb / max(u_passes_a, 1.0)), 1.0);
+}
+#else
 void main() {
     if (u_pending == 1 && u_blend == 0) {
         bool on_b = u_mode == COMPARE_SIDE ? v_uv.x >= 0.5
@@ -72,3 +79,4 @@ void main() {
     }
     frag = vec4(display(a), 1.0);
 }
+#endif

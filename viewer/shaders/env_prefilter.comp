@@ -37,18 +37,20 @@ void main() {
     mat3 tbn = frame_from_normal(n);
     vec3 wo = transpose(tbn) * view;
     vec3 sum = vec3(0.0);
-    if (wo.z > -u_margin && u_env_on != 0) {
-        wo = normalize(vec3(wo.xy, max(wo.z, GRAZING)));
+    // A node the camera does not see draws nothing: a loop's count per invocation, not a branch
+    // around the loop (llvmpipe runs a branch's code under a mask; a loop ends for a group of
+    // invocations once every one of them is done).
+    int draws = wo.z > -u_margin && u_env_on != 0 ? u_draws : 0;
+    wo = normalize(vec3(wo.xy, max(wo.z, GRAZING)));
 #ifdef NB_SPLIT_COAT
-        coat_pass = vec2(0.05, 1.0);  // the coat is not baked: its candidates add nothing
-        coat_n = 0;
-        coat_counts = vec3(0.0);
+    coat_pass = vec2(0.05, 1.0);  // the coat is not baked: its candidates add nothing
+    coat_n = 0;
+    coat_counts = vec3(0.0);
 #endif
-        int m = u_ris_candidates;
-        int n_lobe = clamp(u_body_every, 1, m - 1);
-        vec3 unused = vec3(0.0);
-        for (int k = 0; k < u_draws; ++k) sum += every_body_samples(tbn, wo, uvec2(t), uint(k), m, n_lobe, unused);
-        sum /= float(max(u_draws, 1));
-    }
+    int m = u_ris_candidates;
+    int n_lobe = clamp(u_body_every, 1, m - 1);
+    vec3 unused = vec3(0.0);
+    for (int k = 0; k < draws; ++k) sum += every_body_samples(tbn, wo, uvec2(t), uint(k), m, n_lobe, unused);
+    sum /= float(max(draws, 1));
     imageStore(u_table, t, vec4(sum, 1.0));
 }

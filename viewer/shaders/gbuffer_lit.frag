@@ -4,6 +4,7 @@
 // (what texture() would pick here; the compute pass has no derivatives), and
 // the uv with the draw range's (material's) index in z, which lit.comp
 // shades with that material. The shading frame is frame_from_normal of that normal in both paths.
+// NB_PLAIN_SURFACE: a program of its own for draws without a normal map or a latent texture.
 //@INCLUDE common.glsl
 //@INCLUDE shading_frame.glsl
 uniform sampler2DArray u_nb_share_tex;  // a textured neural material's share (mip level only)
@@ -15,7 +16,11 @@ layout(location = 2) out vec4 out_uv;
 void main() {
     vec3 view;
     mat3 tbn = shading_frame(view);
+#ifdef NB_PLAIN_SURFACE
+    float lod = 0.0;
+#else
     float lod = u_textured != 0 ? textureQueryLod(u_nb_share_tex, v_uv).x : 0.0;
+#endif
     out_normal = vec4(tbn[2], 1.0);
     out_world = vec4(v_world, lod);
     out_uv = vec4(v_uv, float(u_material_id), 0.0);

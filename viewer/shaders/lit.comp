@@ -5,7 +5,9 @@
 // image (alpha counts the passes, as the fragment path's blending does).
 // A mesh of several materials runs it once per material (u_material_id).
 // A dispatch may cover a band of rows only (u_row0 .. u_row_end - 1): the
-// window's still view shades a pass over several frames (viewer/gpu/renderer.py).
+// window's still view shades a pass over several frames (viewer/gpu/renderer.py), and
+// covers the object's box on screen only (u_col0 .. u_col_end - 1 too): llvmpipe runs
+// an invocation's code under a mask whether it returns at once or not.
 //@INCLUDE common.glsl
 // No derivatives in a compute shader: the latent texture is read at the mip
 // level the G-buffer pass found (textureQueryLod), which is what texture()
@@ -29,10 +31,12 @@ uniform uint u_first_pass;
 uniform int u_passes;
 uniform int u_row0;             // the dispatch's first row (invocation y 0)
 uniform int u_row_end;          // rows from here on are another dispatch's
+uniform int u_col0;             // the dispatch's first column (invocation x 0): the object's screen box
+uniform int u_col_end;          // columns from here on are off the object
 
 void main() {
-    ivec2 px = ivec2(gl_GlobalInvocationID.xy) + ivec2(0, u_row0);
-    if (any(greaterThanEqual(px, imageSize(u_accum))) || px.y >= u_row_end) return;
+    ivec2 px = ivec2(gl_GlobalInvocationID.xy) + ivec2(u_col0, u_row0);
+    if (any(greaterThanEqual(px, imageSize(u_accum))) || px.y >= u_row_end || px.x >= u_col_end) return;
     vec4 n = texelFetch(u_gb_normal, px, 0);
     if (n.w < 0.5) return;
     if (u_material_id >= 0 && int(texelFetch(u_gb_uv, px, 0).z + 0.5) != u_material_id) return;

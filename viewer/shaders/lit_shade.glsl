@@ -300,14 +300,15 @@ vec3 light_term(vec3 l, vec3 wo, vec3 radiance) {
     return f * l.z * radiance;
 }
 
+// A loop over the lights that are on, not a branch per light: llvmpipe runs a branch's code under
+// a mask whether or not it is taken, and a loop's trip count (uniform here) skips what is off.
 vec3 add_lights(mat3 to_local, vec3 wo, vec3 world, vec3 color) {
-    if (u_point_on != 0) {
+    for (int i = u_point_on != 0 ? 0 : 1; i < 2; ++i) {
         vec3 to_point = u_point_pos - world;
-        vec3 l = to_local * normalize(to_point);
-        if (l.z > 0.0) color += light_term(l, wo, u_point_intensity / max(dot(to_point, to_point), 1e-8));
+        vec3 l = to_local * normalize(i == 0 ? to_point : u_light_dir);
+        vec3 radiance = i == 0 ? u_point_intensity / max(dot(to_point, to_point), 1e-8) : u_light_radiance;
+        if (l.z > 0.0) color += light_term(l, wo, radiance);
     }
-    vec3 l = to_local * normalize(u_light_dir);
-    if (l.z > 0.0) color += light_term(l, wo, u_light_radiance);
     return color;
 }
 #endif

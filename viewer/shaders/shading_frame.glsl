@@ -15,6 +15,7 @@ mat3 shading_frame(out vec3 view) {
     vec3 n = normalize(v_normal);
     view = normalize(u_eye - v_world);
     if (dot(n, view) < 0.0) n = -n;  // two-sided
+#ifndef NB_PLAIN_SURFACE  // (a program without a normal map: its code compiled out, not masked)
     if (u_has_normal_map != 0) {
         vec3 t = v_tangent.xyz - n * dot(n, v_tangent.xyz);
         t = dot(t, t) > 1e-12 ? normalize(t) : frame_from_normal(n)[0];
@@ -24,5 +25,6 @@ mat3 shading_frame(out vec3 view) {
         float nv = dot(n, view);  // a bent normal facing away: pull it back to the silhouette
         if (nv < 1e-3) n = normalize(n + view * (1e-3 - nv));
     }
+#endif
     return frame_from_normal(n);
 }

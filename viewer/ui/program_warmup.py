@@ -60,11 +60,13 @@ def reachable(renderer: "Renderer", decoder: "GpuDecoder | None", tables: bool,
     brdfs = {k: GpuBrdf(material, k, decoder=decoder if k in NEURAL_KINDS else None) for k in kinds}
     out: list[tuple[ProgramKey, GpuBrdf | None]] = []
     if renderer.deferred:
-        out.append((ProgramKey("gbuffer_lit.frag", "object.vert", version=GLSL_430), None))
+        # the G-buffer's program, and its own for plain surfaces (no normal map, no latent texture)
+        out += [(ProgramKey("gbuffer_lit.frag", "object.vert", defines=d, version=GLSL_430), None)
+                for d in ((), (("NB_PLAIN_SURFACE", 1),))]
         # the lit pass's program as the passes pick it (a program of its own per estimator, lit_passes.py)
         out += [(ProgramKey.of("lit.comp", b, vertex=None, defines=renderer.lit.specialised(b)), b)
                 for b in brdfs.values()]
-        if BrdfKind.TABLE in brdfs and renderer.settings.prefilter is not None:  # the still view's body map
+        if BrdfKind.TABLE in brdfs and (renderer.settings.prefilter or renderer.settings.quick_prefilter):  # body maps
             b = brdfs[BrdfKind.TABLE]
             out += [(ProgramKey.of(name, b, vertex=None, defines=ENV_TABLE_DEFINE), b)
                     for name in ("env_prefilter.comp", "lit.comp")]

@@ -1,0 +1,158 @@
+"""Energy conservation of a material code, on the code alone.
+
+The networks are fitted to BRDF values, not to the energy they reflect: a code
+of a lossless stack can reflect a few per cent more light than arrives at some
+incidences (the white furnace, docs/RESULTS.md section 15), which a path tracer
+turns into glowing interreflections. ``conserve`` bounds a code's directional
+albedo: it estimates the albedo of the code's whole BRDF (decoded body plus the
+closed-form coat) at ``EnergySettings.thetas`` with the code's own importance
+sampler (fixed scrambled Sobol points, so a code always gets the same answer),
+and where any incidence of any channel exceeds ``bound`` it moves that channel's
+body latent to the nearest latent (in log BRDF over the same samples) whose
+albedo is within the bound. Codes within the bound (every absorbing stack) are
+returned unchanged; the coat is closed form and never changed.
+
+Every consumer of a uniform material's code -- the window, the Mitsuba plugins,
+the GLSL export, the command line -- gets it from ``NeuralModel.material_latent``,
+which applies this: one place, the same code everywhere.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from nbrdf.neural.coat import coat_of
+from nbrdf.neural.decoder import Decoder
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.geometry import incidence
+from nbrdf.neural.sampling import coated_sample
+
+Tensor = torch.Tensor
+
+
+@dataclass(frozen=True)
+class EnergySettings:
+    """How a code's albedo is bounded."""
+
+    thetas: tuple[float, ...] = (0.0, 15.0, 30.0, 45.0, 55.0, 65.0, 75.0, 80.0, 85.0)
+    """Incidences (degrees) where the albedo is checked: the furnace report's and 80."""
+    samples: int = 256
+    """Directions per incidence, from the code's own sampler (coat lobe and body proxy)."""
+    bound: float = 0.985
+    """The largest directional albedo a code keeps: 1 less a margin for this estimate's noise
+    (about 0.5 % at 256 samples on the furnace set's lossless stacks), so an independent
+    estimate stays at or below 1."""
+    screen_samples: int = 32
+    """A first look with this many directions per incidence: a code whose estimate stays under
+    ``screen_bound`` there is returned at once (every absorbing stack; the window edits at this cost)."""
+    screen_bound: float = 0.85
+    """The first look's threshold: far enough under ``bound`` that its noise (a few per cent at 32
+    directions) cannot hide an albedo above it."""
+    steps: int = 60
+    """Gradient steps of the projection at most (Adam)."""
+    lr: float = 0.02
+    """Its step size, in latent units."""
+    seed: int = 11
+    """The scramble of the Sobol points (fixed: a code always maps to the same code)."""
+
+    def check(self) -> "EnergySettings":
+        if not (self.thetas and all(0.0 <= t < 90.0 for t in self.thetas) and 16 <= self.samples <= 1 << 16
+                and 0.5 <= self.bound <= 1.0 and 0 <= self.steps <= 10_000 and self.lr > 0
+                and 1 <= self.screen_samples and 0.0 < self.screen_bound <= self.bound):
+            raise NbrdfError(f"energy: incidences in [0, 90), samples 16..65536, bound 0.5..1, steps >= 0 "
+                             f"(got {self.thetas}, {self.samples}, {self.bound}, {self.steps})")
+        return self
+
+
+def _directions(code: Tensor, decoder: Decoder, sigma: float, w: float, s: EnergySettings,
+                n: int | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """(wi, wo, weight (N,), coat term (N,)) of the fixed sample set (``n`` per incidence, default
+    ``s.samples``): the code's sampler's directions, cos / pdf per pair (0 where a draw failed) and
+    the coat's value there (the same in every channel)."""
+    n = n or s.samples
+    wi = torch.stack([incidence(t) for t in s.thetas]).float().repeat_interleave(n, 0)
+    u = torch.quasirandom.SobolEngine(3, scramble=True, seed=s.seed).draw(n).float().repeat(len(s.thetas), 1)
+    spec = decoder.spec
+    coat = coat_of(code[:1], spec.latent)[0].float() if spec.coat and code.shape[-1] == spec.code else None
+    with torch.no_grad():
+        wo, pdf = coated_sample(wi, u, coat, torch.tensor(float(sigma)), torch.tensor(float(w)))
+        ok = (wo[:, 2] > 0) & (pdf > 0) & torch.isfinite(pdf)
+        weight = torch.where(ok, wo[:, 2].clamp_min(0) / torch.where(ok, pdf, torch.ones_like(pdf)),
+                             torch.zeros_like(pdf))
+        c = decoder.coat(code[:1], wi, wo)
+        coat_f = torch.zeros_like(weight) if c is None else c.float()
+    return wi, wo, weight, coat_f
+
+
+def albedo(decoder: Decoder, code: Tensor, sigma: float, w: float,
+           settings: EnergySettings | None = None) -> Tensor:
+    """The directional albedo (3, T) of a code (3, code) at ``settings.thetas`` (its own sampler)."""
+    s = (settings or EnergySettings()).check()
+    wi, wo, weight, coat_f = _directions(code, decoder, sigma, w, s)
+    with torch.no_grad():
+        body = _body(decoder, code[:, : decoder.spec.latent].float(), decoder.encode(wi, wo), wi, wo)
+    return ((body + coat_f) * weight).reshape(3, len(s.thetas), s.samples).mean(-1)
+
+
+def _body(decoder: Decoder, latent: Tensor, feats: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
+    """The decoded body (3, N) of latents (3, L) at N pairs (zero below the horizon)."""
+    y = decoder.log_f_from_share(decoder.latent_share(latent)[:, None, :], feats[None])
+    up = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    return torch.where(up[None], torch.exp(y.clamp(max=80.0)), torch.zeros_like(y))
+
+
+def conserve(decoder: Decoder, code: Tensor, sigma: float, w: float,
+             settings: EnergySettings | None = None) -> Tensor:
+    """``code`` (3, code) with its albedo at most ``settings.bound`` at every incidence and channel
+    (module docstring); unchanged when it already is."""
+    s = (settings or EnergySettings()).check()
+    if code.dim() != 2 or code.shape[0] != 3 or not torch.isfinite(code).all():
+        raise NbrdfError(f"energy: a finite material code (3, {decoder.spec.code}) is needed, "
+                         f"got {tuple(code.shape)}")
+    L, T, n = decoder.spec.latent, len(s.thetas), s.samples
+    if s.screen_samples < n:
+        wi, wo, weight, coat_f = _directions(code, decoder, sigma, w, s, s.screen_samples)
+        with torch.no_grad():
+            body = _body(decoder, code[:, :L].float(), decoder.encode(wi, wo), wi, wo)
+        if float(((body + coat_f) * weight).reshape(3, T, -1).mean(-1).max()) < s.screen_bound:
+            return code
+    wi, wo, weight, coat_f = _directions(code, decoder, sigma, w, s)
+    feats = decoder.encode(wi, wo)
+    z0 = code[:, :L].float()
+    with torch.no_grad():
+        f0 = _body(decoder, z0, feats, wi, wo)
+        a0 = ((f0 + coat_f) * weight).reshape(3, T, n).mean(-1)
+    over = (a0 > s.bound).any(-1)  # the channels to move
+    if not over.any() or s.steps == 0:
+        return code
+    log0 = torch.log(f0 + 1e-8)
+    target = a0.clamp(max=s.bound - 0.002)
+    z = z0.clone().requires_grad_(True)
+    opt = torch.optim.Adam([z], lr=s.lr)
+    best = z0.clone()
+    for _ in range(s.steps):
+        f = _body(decoder, z, feats, wi, wo)
+        a = ((f + coat_f) * weight).reshape(3, T, n).mean(-1)
+        # each incidence toward its own albedo or the bound, whichever is less (a little inside it): above
+        # it strongly, below it enough that the incidences within the bound keep their energy
+        gap = a - target
+        fit = (1e4 * torch.relu(gap).pow(2) + 1e3 * torch.relu(-gap).pow(2)).sum(-1)
+        shape = (torch.log(f + 1e-8) - log0).pow(2).mean(-1)
+        loss = (fit + shape)[over].sum()
+        with torch.no_grad():
+            done = (a.detach() <= s.bound).all(-1)
+            best = torch.where((done & over)[:, None], z.detach(), best)
+            if bool(done[over].all()):
+                break
+        opt.zero_grad()
+        loss.backward()
+        assert z.grad is not None
+        z.grad[~over] = 0.0
+        opt.step()
+    with torch.no_grad():  # a channel never within the bound keeps its last (lowest-albedo) latent
+        stuck = over & (best == z0).all(-1)
+        best = torch.where(stuck[:, None], z.detach(), best)
+    out = code.clone()
+    out[:, :L] = best.to(code.dtype)
+    return out
