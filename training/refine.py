@@ -557,14 +557,15 @@ def refined_code(dec: Decoder, material: Material, network_code: Tensor, cfg: Re
 
 
 def refined_brdf(material: Material, model=None, budget: float | None = None, seed: int = 0, cache: bool = True):
-    """``brdf_for(material, Method.REFINED)``: the decoder at the refined code plus
-    its coat, sampled like the full neural path; ``.refinement`` tells how the
+    """``brdf_for(material, Method.REFINED)``: the decoder at the refined code (its albedo
+    bounded, ``neural.energy``) plus its coat, sampled like the full neural path; ``.refinement`` tells how the
     code was made (a ``RefineState``, or the ``CachedCode`` it came from)."""
     cfg = RefineConfig(budget=DEFAULT_BUDGET if budget is None else float(budget), seed=seed)
     cfg.check()
     check_refinable(material)
     model = model or default_model()
     code, how = refined_code(model.decoder, material, model.material_latent(material), cfg, cache=cache)
+    code = model.conserved(code)  # as the window shows a refined code: its albedo bounded (neural.energy)
     brdf = latent_brdf(model.decoder, code, material, model.sampler)
     brdf.refinement = how
     return brdf

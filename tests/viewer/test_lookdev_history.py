@@ -125,3 +125,21 @@ def test_frame_clock_counts_presented_frames():
     for k in range(25):
         c.presented(t=0.1 * k)  # 10 frames a second
     assert c.fps == pytest.approx(10.0) and c.frame_ms == pytest.approx(100.0)
+
+
+def test_a_rename_keeps_the_view_accumulating_and_is_one_undo_step(ld):
+    ld.render(ld.ctx.simple_framebuffer((48, 40)), (48, 40), passes=3)
+    passes, latent = ld.passes, ld.brdf.latent
+    assert passes == 3
+
+    def reference_key():  # the compare view's Monte Carlo reference: the same job after a rename
+        return ld.stage.compare.job_key(ld.material, ld.state, (48, 40), "sphere")
+    before = reference_key()
+    assert ld.set_name("copper, renamed"), ld.error
+    assert reference_key() == before
+    assert ld.brdf.material.name == "copper, renamed" and ld.material.name == "copper, renamed"
+    assert ld.brdf.latent is latent and ld.passes == passes  # nothing rebuilt, nothing restarted
+    ld.render(ld.ctx.simple_framebuffer((48, 40)), (48, 40), passes=1)
+    assert ld.passes == passes + 1
+    assert ld.undo() and ld.material.name != "copper, renamed"
+    assert ld.set_param(2, "roughness", 0.5) and ld.passes == 0  # an edit still starts the view over

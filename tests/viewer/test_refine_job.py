@@ -165,7 +165,8 @@ def _lookdev(gl_ctx, monkeypatch, tmp_path, config=TINY):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))  # before the worker process starts
     ld = LookDev(gl_ctx, load_material(BLACK))
     ld.idle_refine.settings = IdleRefineSettings(enabled=True, still_seconds=0.0, config=config)
-    ld.set_name("car paint black")  # an edit under these settings (the first was made before them)
+    ld.set_param(0, "roughness", ld.material.layers[0].roughness)  # an edit under these settings (the first
+    # was made before them)
     return ld
 
 
@@ -196,8 +197,8 @@ def test_lookdev_swaps_the_refined_code_in_and_reopening_shows_it_at_once(gl_ctx
         r = ld.worker.result(job_key(ld.material, ld.model.decoder.weights_id()))
         assert r.done and r.heldout < r.network_error
         assert list((tmp_path / "cache" / "nbrdf" / "refined").glob("*.json"))
-        # Reopening the material: the cached code at once, no job.
-        ld.set_name("a renamed copy")
+        # Opening the material again: the cached code at once, no job.
+        ld.open_material(BLACK)
         assert torch.equal(ld.brdf.latent, shown) and ld.idle_refine.status.startswith("refined, ")
         assert ld.worker.current is None
     finally:

@@ -130,7 +130,7 @@ class Compare:
         decides the pairs (incidence; size; camera, lights, environment and mesh)
         -- not the compare mode, nor the render scale."""
         view = View.parse(state.view)
-        doc = json.dumps(material_to_dict(material), sort_keys=True)
+        doc = _content(material)
         extra = {View.LOBE: f"{state.theta_i:.3f}", View.SLICE: f"{size}", View.OBJECT: f"{size}"}[view]
         cam = asdict(state.camera) if view == View.OBJECT else {}
         light = ()
@@ -375,7 +375,7 @@ class Compare:
     def plane_curve(self, material: Material, theta_i: float, wi: torch.Tensor, wo: torch.Tensor,
                     n: int) -> np.ndarray | None:
         """f cos(theta_o) RGB at n plane-of-incidence pairs from the worker (None until ready)."""
-        key = hashlib.sha1(f"{json.dumps(material_to_dict(material), sort_keys=True)}|plane|{theta_i}"
+        key = hashlib.sha1(f"{_content(material)}|plane|{theta_i}"
                            .encode()).hexdigest()
         r = self.worker.cached(key)
         if (r is None or not (r.done or r.error)) and self.worker.computing != key:
@@ -478,6 +478,13 @@ class Compare:
         if self._env_file is not None:
             _remove(self._env_file[2])
             self._env_file = None
+
+
+def _content(material: Material) -> str:
+    """What a reference of ``material`` depends on: its document less the name (a rename keeps it)."""
+    d = material_to_dict(material)
+    d.pop("name", None)
+    return json.dumps(d, sort_keys=True)
 
 
 def _remove(path: str) -> None:

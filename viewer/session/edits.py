@@ -91,6 +91,10 @@ class SessionEdits(ABC):
         """Builds the edited material's GPU resources (a bad material: ``NbrdfError``)."""
 
     @abstractmethod
+    def _renamed(self) -> None:
+        """After a rename (the name alone changed): what is shown takes the new name, nothing restarts."""
+
+    @abstractmethod
     def invalidate(self) -> None:
         """Starts what is shown over (an edit changed the image)."""
 
@@ -205,8 +209,9 @@ class SessionEdits(ABC):
         return self._stack_edit(lambda e: e.set_base_type(kind))
 
     def set_name(self, name: str) -> bool:
-        """Renames the material."""
-        return self._stack_edit(lambda e: e.set_name(name))
+        """Renames the material. A name changes nothing the view shows: the shown BRDFs take the new
+        name and the view goes on accumulating (``_renamed``), where an edit would start it over."""
+        return self.guarded(lambda: (self.editor.set_name(name), self._renamed()))
 
     def set_openpbr(self, name: str, value) -> bool:
         """Sets one OpenPBR input of a material made from OpenPBR; its stack is rebuilt from the inputs (the same

@@ -43,7 +43,7 @@ import torch
 from nbrdf.imaging.env_presets import resolve_environment
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent_texture import blend
-from nbrdf.neural.material import Material
+from nbrdf.neural.material import Material, material_to_dict
 from nbrdf.neural.model import NeuralModel
 from nbrdf.viewer.gpu.backdrop import Backdrop, BackdropSettings
 from nbrdf.viewer.gpu.body_source import BodySource
@@ -322,6 +322,19 @@ class LookDev(SessionEdits, Captures):
         self.timings.latent_ms = (time.perf_counter() - t0) * 1000.0
         self._edit_t0 = t0
         self.invalidate()
+
+    def _renamed(self) -> None:
+        """After a rename: the BRDFs on screen carry the material's new name; nothing is rebuilt and the
+        accumulation goes on (anything else that differs, or nothing shown yet: a full ``_apply_material``)."""
+        m, b = self.material, self.brdf
+        unnamed = lambda x: {k: v for k, v in material_to_dict(x).items() if k != "name"}  # noqa: E731
+        if b is None or unnamed(b.material) != unnamed(m):
+            self._apply_material()
+            return
+        # in place: the frames know a BRDF by identity (a new object would be a new body, baked again)
+        for shown in (b, self.ref_brdf):
+            if shown is not None:
+                shown.material = m
 
     def set_brdf_mode(self, mode: BrdfMode | str) -> bool:
         """How the materials are shaded (the panel's BRDF: neural or belcour on the same
