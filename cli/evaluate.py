@@ -160,6 +160,11 @@ def cmd_sample(a: argparse.Namespace) -> int:
         raise NbrdfError(f"--theta-i: {c.theta_i} must lie in [0, 90)")
     model = model_or_default(c.model)
     material = load_material(c.material)
+    from nbrdf.neural.mix import material_mix  # late: torch costs ~1 s, --help needs none
+
+    if len(material_mix(material)) > 1:
+        raise NbrdfError(f"{c.material}: an OpenPBR mix has one code per component, not one sampler's "
+                         "(`nbrdf eval` and `nbrdf lobe` hold the mix)")
     z = model.material_latent(material)
     brdf = neural_brdf.latent_brdf(model.decoder, z, material, model.require("sampler"))
     s = brdf.sample_at(c.theta_i, c.n, c.seed)  # the coat's lobe mixed with the body's proxy; pdf 0 below the horizon

@@ -8,9 +8,10 @@ albedo: it estimates the albedo of the code's whole BRDF (decoded body plus the
 closed-form coat) at ``EnergySettings.thetas`` with the code's own importance
 sampler (fixed scrambled Sobol points, so a code always gets the same answer),
 and where any incidence of any channel exceeds ``bound`` it moves that channel's
-body latent to the nearest latent (in log BRDF over the same samples) whose
-albedo is within the bound. Codes within the bound (every absorbing stack) are
-returned unchanged; the coat is closed form and never changed.
+body latent by Newton steps on its worst incidence (the smallest move of the
+latent that brings it just inside the bound, to first order) until every
+incidence is within it. Codes within the bound (most stacks) are returned
+unchanged; the coat is closed form and never changed.
 
 Every consumer of a uniform material's code -- the window, the Mitsuba plugins,
 the GLSL export, the command line -- gets it from ``NeuralModel.material_latent``,
@@ -49,16 +50,14 @@ class EnergySettings:
     screen_bound: float = 0.85
     """The first look's threshold: far enough under ``bound`` that its noise (a few per cent at 32
     directions) cannot hide an albedo above it."""
-    steps: int = 60
-    """Gradient steps of the projection at most (Adam)."""
-    lr: float = 0.02
-    """Its step size, in latent units."""
+    steps: int = 8
+    """Newton steps of the projection at most (each: the albedo and its gradient once)."""
     seed: int = 11
     """The scramble of the Sobol points (fixed: a code always maps to the same code)."""
 
     def check(self) -> "EnergySettings":
         if not (self.thetas and all(0.0 <= t < 90.0 for t in self.thetas) and 16 <= self.samples <= 1 << 16
-                and 0.5 <= self.bound <= 1.0 and 0 <= self.steps <= 10_000 and self.lr > 0
+                and 0.5 <= self.bound <= 1.0 and 0 <= self.steps <= 10_000
                 and 1 <= self.screen_samples and 0.0 < self.screen_bound <= self.bound):
             raise NbrdfError(f"energy: incidences in [0, 90), samples 16..65536, bound 0.5..1, steps >= 0 "
                              f"(got {self.thetas}, {self.samples}, {self.bound}, {self.steps})")
@@ -126,33 +125,23 @@ def conserve(decoder: Decoder, code: Tensor, sigma: float, w: float,
     over = (a0 > s.bound).any(-1)  # the channels to move
     if not over.any() or s.steps == 0:
         return code
-    log0 = torch.log(f0 + 1e-8)
-    target = a0.clamp(max=s.bound - 0.002)
-    z = z0.clone().requires_grad_(True)
-    opt = torch.optim.Adam([z], lr=s.lr)
-    best = z0.clone()
+    # Newton steps on the worst incidence: the smallest move of the latent (its norm) that brings that
+    # incidence's albedo, to first order, to just inside the bound; again from there while any incidence
+    # is above it (the albedo is smooth in the latent: two or three steps)
+    goal = s.bound - 0.002
+    z = z0.clone()
     for _ in range(s.steps):
-        f = _body(decoder, z, feats, wi, wo)
-        a = ((f + coat_f) * weight).reshape(3, T, n).mean(-1)
-        # each incidence toward its own albedo or the bound, whichever is less (a little inside it): above
-        # it strongly, below it enough that the incidences within the bound keep their energy
-        gap = a - target
-        fit = (1e4 * torch.relu(gap).pow(2) + 1e3 * torch.relu(-gap).pow(2)).sum(-1)
-        shape = (torch.log(f + 1e-8) - log0).pow(2).mean(-1)
-        loss = (fit + shape)[over].sum()
+        zz = z.clone().requires_grad_(True)
+        a = ((_body(decoder, zz, feats, wi, wo) + coat_f) * weight).reshape(3, T, n).mean(-1)
+        worst, k = a.max(-1)  # (3,)
+        move = (worst > s.bound) & over
+        if not bool(move.any()):
+            break
+        (g,) = torch.autograd.grad(worst[move].sum(), zz)  # the rows are independent: each channel's gradient
         with torch.no_grad():
-            done = (a.detach() <= s.bound).all(-1)
-            best = torch.where((done & over)[:, None], z.detach(), best)
-            if bool(done[over].all()):
-                break
-        opt.zero_grad()
-        loss.backward()
-        assert z.grad is not None
-        z.grad[~over] = 0.0
-        opt.step()
-    with torch.no_grad():  # a channel never within the bound keeps its last (lowest-albedo) latent
-        stuck = over & (best == z0).all(-1)
-        best = torch.where(stuck[:, None], z.detach(), best)
+            step = (worst - goal).clamp_min(0.0) / g.pow(2).sum(-1).clamp_min(1e-12)
+            z = torch.where(move[:, None], z - step[:, None] * g, z)
+    best = z.detach()
     out = code.clone()
     out[:, :L] = best.to(code.dtype)
     return out

@@ -421,22 +421,25 @@ def openpbr_components(p: OpenPbr) -> list[tuple[float, dict, list[str]]]:
 
 def openpbr_to_material(p: OpenPbr, name: str) -> tuple[dict, list[str]]:
     """The material JSON dict (with the "openpbr" record of ``p``) and the notes: one line per input the
-    stack cannot hold or had to clamp. A fractional base_metalness or coat_weight (a mix the schema
-    cannot hold yet) uses the component of largest weight, with a note saying so. Refuses
+    stack cannot hold or had to clamp. A fractional base_metalness or coat_weight is OpenPBR's mix: the
+    record keeps it (``neural.mix`` sums the components where a BRDF is made on the CPU), the layers
+    are the component of largest weight (what the GPU paths show), with a note saying so. Refuses
     (``NbrdfError``, one line) a material whose look is mostly transmission, subsurface, fuzz or
     transparency."""
     notes: list[str] = []
     q = _checked(p, notes)
     _, metal, coated, layers, own = max(_components(q), key=lambda c: c[0])  # ties: the first (metal, coated)
     notes += own + unsupported_notes(q)
+    held = ("the command line's reference and neural path hold the mix (neural.mix); the window, the Mitsuba "
+            "plugins and the GLSL export show")
     if 0.0 < q.base_metalness < 1.0:
         m = q.base_metalness
-        notes.append(f"base_metalness {_g(m)}: a mix of metal ({_g(m)}) and dielectric ({_g(1 - m)}) bases is not "
-                     f"supported yet; the {'metal' if metal else 'dielectric'} base alone is used")
+        notes.append(f"base_metalness {_g(m)}: a mix of metal ({_g(m)}) and dielectric ({_g(1 - m)}) bases; {held} "
+                     f"the {'metal' if metal else 'dielectric'} base alone")
     if 0.0 < q.coat_weight < 1.0:
         c = q.coat_weight
-        notes.append(f"coat_weight {_g(c)}: a partial coat (a mix of coated {_g(c)} and uncoated {_g(1 - c)}) is not "
-                     f"supported yet; the {'coated' if coated else 'uncoated'} stack alone is used")
+        notes.append(f"coat_weight {_g(c)}: a partial coat (a mix of coated {_g(c)} and uncoated {_g(1 - c)}); {held} "
+                     f"the {'coated' if coated else 'uncoated'} stack alone")
     return {"format": FORMAT, "name": name, "layers": layers, "openpbr": openpbr_record(p)}, notes
 
 

@@ -16,7 +16,8 @@ sigma(a) = a^1.1 / (1 - a^1.1). The atoms are:
 - a medium slab: Beer-Lambert along the refracted mean, exp(-sigma_t / mu)
   (the paper's absorption operator; the mean and the variance pass
   unchanged);
-- a conductor base (Schlick FGD table, linear in r0) or a lone dielectric
+- a conductor base (OpenPBR's F82-tint Fresnel; its FGD table linear in r0 and the tint's
+  coefficient) or a lone dielectric
   base (its reflection; what it transmits is lost).
 
 Two things the paper leaves open for this project's stacks are made
@@ -60,8 +61,9 @@ from nbrdf.neural.anisotropy import require_isotropic
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, Material, Medium
 from nbrdf.neural.microfacet import (
+    f82_coefficient,
     fresnel_dielectric,
-    fresnel_schlick,
+    fresnel_f82,
     ggx_d,
     smith_g1,
 )
@@ -101,6 +103,8 @@ class Atom:
     """r0 (conductor) or albedo (medium, diffuse)"""
     sigma_t: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """optical depth along the normal per channel (medium)"""
+    f82: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """OpenPBR's F82-tint coefficient b per channel (conductor; 0: Schlick's Fresnel)"""
 
 
 def atoms_of(material: Material) -> list[Atom]:
@@ -116,7 +120,9 @@ def atoms_of(material: Material) -> list[Atom]:
         elif isinstance(layer, Medium):
             out.append(Atom("medium", color=Material.rgb(layer.albedo), sigma_t=Material.rgb(layer.sigma_t)))
         elif isinstance(layer, Conductor):
-            out.append(Atom("conductor", float(layer.roughness), color=Material.rgb(layer.r0)))
+            r0, tint = Material.rgb(layer.r0), Material.rgb(layer.f82_tint)
+            out.append(Atom("conductor", float(layer.roughness), color=r0,
+                            f82=tuple(float(f82_coefficient(r, t)) for r, t in zip(r0, tint))))
         elif isinstance(layer, Diffuse):
             out.append(Atom("diffuse", color=Material.rgb(layer.albedo)))
         else:
@@ -166,7 +172,7 @@ def _atom_stats(atom: Atom, cti: Tensor, tables: BelcourTables) -> _Stats:
         return _Stats(cti, z3, T, z3, T, z, z, z, z, one, one)
     a = torch.full_like(cti, atom.roughness)
     if atom.kind == "conductor":
-        R = tables.conductor(cti[:, None], a[:, None], col[None, :])
+        R = tables.conductor(cti[:, None], a[:, None], col[None, :], torch.tensor(atom.f82, dtype=cti.dtype)[None, :])
     elif atom.kind == "dielectric":
         R = tables.dielectric(cti, a, torch.full_like(cti, atom.ior), down=True)[0][:, None].expand(-1, 3)
     else:
@@ -308,8 +314,8 @@ def _hemi_rt(atom: Atom, tables: BelcourTables) -> tuple[Tensor, Tensor, Tensor,
         t = _hemi(lambda m: _beer(atom, m)) + 0.5 * s
         return 0.5 * s, t, 0.5 * s, t
     if atom.kind == "conductor":
-        col = torch.tensor(atom.color, dtype=torch.float64)
-        r = _hemi(lambda m: tables.conductor(m[:, None], torch.full_like(m, atom.roughness)[:, None], col[None, :]))
+        col, b = (torch.tensor(v, dtype=torch.float64)[None, :] for v in (atom.color, atom.f82))
+        r = _hemi(lambda m: tables.conductor(m[:, None], torch.full_like(m, atom.roughness)[:, None], col, b))
     elif atom.kind == "dielectric":
         r = _hemi(lambda m: tables.dielectric(m, torch.full_like(m, atom.roughness),
                                               torch.full_like(m, atom.ior))[0][:, None].expand(-1, 3))
@@ -385,12 +391,14 @@ def _lobe_shape(atom: Atom, wi: Tensor, wo: Tensor, alpha: Tensor, tables: Belco
         if atom.kind in ("interface", "dielectric"):
             return tables.dielectric(mu, a, torch.full_like(mu, atom.ior), down=True)[0][:, None].expand(-1, 3)
         if atom.kind == "conductor":
-            return tables.conductor(mu[:, None], a[:, None], torch.tensor(atom.color, dtype=mu.dtype)[None, :])
+            return tables.conductor(mu[:, None], a[:, None], torch.tensor(atom.color, dtype=mu.dtype)[None, :],
+                                    torch.tensor(atom.f82, dtype=mu.dtype)[None, :])
         raise ValueError(f"a {atom.kind} atom has no reflection lobe")
 
     norm = (albedo(wi[:, 2]) * albedo(wo[:, 2])).sqrt() if reciprocal else albedo(wi[:, 2])
     if atom.kind == "conductor":
-        F = fresnel_schlick(cos_h[:, None], torch.tensor(atom.color, dtype=wi.dtype)[None, :])
+        F = fresnel_f82(cos_h[:, None], torch.tensor(atom.color, dtype=wi.dtype)[None, :],
+                        torch.tensor(atom.f82, dtype=wi.dtype)[None, :])
     else:
         F = fresnel_dielectric(cos_h, torch.full_like(cos_h, atom.ior))[:, None]
     return _safe_div(F * dg[:, None], norm)

@@ -32,6 +32,7 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured
 from nbrdf.neural.methods import METHODS, Method
+from nbrdf.neural.mix import MixedBRDF, material_mix
 from nbrdf.neural.neural_brdf import latent_brdf, neural_brdf
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
 from nbrdf.training.analytic_layering import analytic_layered_eval, check_analytic
@@ -177,11 +178,16 @@ def brdf_for(material: Material, method: Method, spp: int = 256, seed: int = 0, 
     Carlo reference; ``seed`` also the projection's samples
     (``projection_pairs`` reference values of ``projection_spp`` paths each)
     and the refinement's; ``budget``: the refinement's seconds (None: its
-    default); ``model`` is the neural bundle (default: the shipped one)."""
+    default); ``model`` is the neural bundle (default: the shipped one). A material with OpenPBR's
+    fractional mixes is the weighted sum of its components' BRDFs (``neural.mix``)."""
     if method not in METHODS:
         raise NbrdfError(f"unknown method {method!r} (one of {', '.join(METHODS)})")
     if spp < 1:
         raise NbrdfError(f"spp: {spp} must be at least 1")
+    parts = material_mix(material)
+    if len(parts) > 1:  # OpenPBR's linear mixes: each component by the same method, weighted (neural.mix)
+        return MixedBRDF([(w, brdf_for(m, method, spp, seed, model, projection_pairs, projection_spp, budget))
+                          for w, m in parts])
     match method:
         case Method.REFERENCE:
             return ReferenceBRDF(material, spp=spp, seed=seed)

@@ -203,11 +203,11 @@ def test_mixes_are_weighted_pure_components():
     assert [c[1]["name"] for c in openpbr_components(OpenPbr(base_metalness=1.0))] == ["metal"]
 
 
-def test_a_mix_uses_its_largest_component_and_says_so():
+def test_a_mix_keeps_its_largest_component_as_the_layers_and_says_where_the_mix_is_held():
     m, notes = openpbr_to_material(OpenPbr(base_metalness=0.3, coat_weight=0.6, coat_roughness=0.3), "t")
     assert [layer["type"] for layer in m["layers"]] == ["dielectric", "dielectric", "diffuse"]
-    assert any(n.startswith("base_metalness 0.3:") and "not supported yet" in n for n in notes)
-    assert any(n.startswith("coat_weight 0.6:") and "not supported yet" in n for n in notes)
+    assert any(n.startswith("base_metalness 0.3:") and "hold the mix" in n and "window" in n for n in notes)
+    assert any(n.startswith("coat_weight 0.6:") and "hold the mix" in n for n in notes)
 
 
 def test_record_holds_every_input_and_rebuilds():

@@ -40,6 +40,8 @@ def pairs(n=3000, seed=5):
 SINGLES = [
     {"type": "conductor", "roughness": 0.3, "r0": [0.9, 0.5, 0.2]},
     {"type": "conductor", "roughness": 0.05, "r0": 0.04},
+    # OpenPBR's F82 tint (a copper-like edge): the conductor's third table term C and the tinted Fresnel
+    {"type": "conductor", "roughness": 0.2, "r0": [0.95, 0.64, 0.54], "f82_tint": [0.9, 0.5, 0.3]},
     {"type": "dielectric", "roughness": 0.4, "ior": 1.7},
     {"type": "dielectric", "roughness": 0.02, "ior": 1.5},
     {"type": "diffuse", "albedo": [0.2, 0.4, 0.8]},
@@ -229,6 +231,7 @@ def test_the_shipped_tables_load_without_generating_and_hold_the_generators_valu
     assert np.allclose(shipped["T_down"][i_eta].numpy()[sub], d["T"].numpy(), atol=1e-6)
     assert np.allclose(shipped["A"].numpy()[sub], c["A"].numpy(), atol=1e-6)
     assert np.allclose(shipped["B"].numpy()[sub], c["B"].numpy(), atol=1e-6)
+    assert np.allclose(shipped["C"].numpy()[sub], c["C"].numpy(), atol=1e-6)
     # A damaged shipped file is not used: the tables come from the generator instead.
     bad = tmp_path / "bad.npz"
     np.savez(bad, A=np.zeros((2, 2)))

@@ -34,7 +34,7 @@ def doc(*layers) -> dict:
 
 
 #: The stacks checked: the four classes the brief names, a scattering medium over a
-#: diffuse and over a dielectric base (the slab machinery), and a single layer.
+#: diffuse and over a dielectric base (the slab machinery), a single layer and an F82-tinted metal.
 STACKS = {
     "two_layer": lambda: parse_material(doc(COAT, GOLD)),
     "car_paint_three_layer": lambda: load_material(ASSETS / "car_paint.json"),
@@ -45,6 +45,8 @@ STACKS = {
                                                    {"type": "medium", "albedo": [0.9, 0.6, 0.3], "sigma_t": 1.2},
                                                    {"type": "dielectric", "roughness": 0.4, "ior": 1.8})),
     "single_conductor": lambda: parse_material(doc(GOLD)),
+    # OpenPBR's F82 tint under a coat: the conductor's third table term and the tinted Fresnel
+    "coated_tinted_metal": lambda: parse_material(doc(COAT, {**GOLD, "f82_tint": [0.8, 0.4, 0.2]})),
 }
 
 

@@ -27,7 +27,7 @@ MAX_ATOMS = 9
 #: Atom kinds in the order of their shader constants (``BC_<KIND>``).
 ATOM_KINDS = ("interface", "medium", "conductor", "dielectric", "diffuse")
 DIELECTRIC_UNIT = 14  # texture unit of the dielectric table (R_down, T_down, R_up, T_up)
-SCHLICK_UNIT = 15     # texture unit of the conductor's Schlick terms (A, B)
+SCHLICK_UNIT = 15     # texture unit of the conductor's terms (A, B, C)
 #: The largest ior coat.glsl holds (coat_params); a steeper top interface stays in the body.
 COAT_IOR_MAX = 3.0
 
@@ -96,6 +96,7 @@ def belcour_uniforms(material: Material, tables: BelcourTables | None = None) ->
         "u_bc_ior": pad([float(a.ior) for a in atoms], 1.0),
         "u_bc_color": pad([tuple(float(c) for c in a.color) for a in atoms], (0.0, 0.0, 0.0)),
         "u_bc_sigma_t": pad([tuple(float(c) for c in a.sigma_t) for a in atoms], (0.0, 0.0, 0.0)),
+        "u_bc_f82": pad([tuple(float(c) for c in a.f82) for a in atoms], (0.0, 0.0, 0.0)),
         "u_bc_slab": slab,
         "u_bc_r_above": r_above,
         "u_bc_r_below": r_below,
@@ -152,16 +153,16 @@ def table_uniforms(material: Material, uniforms: dict | None = None) -> dict:
 
 class BelcourTextures:
     """The model's tables as textures of one context: the dielectric table
-    (mu, alpha, eta) as RGBA = R_down, T_down, R_up, T_up and the Schlick terms
-    (mu, alpha) as RG = A, B, both float32 and fetched texel by texel."""
+    (mu, alpha, eta) as RGBA = R_down, T_down, R_up, T_up and the conductor's terms
+    (mu, alpha) as RGB = A, B, C (Schlick's two, the F82 tint's), both float32 and fetched texel by texel."""
 
     def __init__(self, ctx: moderngl.Context, tables: BelcourTables | None = None):
         t = {k: v.numpy().astype(np.float32) for k, v in (tables or default_tables()).t.items()}
         n_eta, n_alpha, n_mu = t["R_down"].shape
         rt = np.ascontiguousarray(np.stack([t["R_down"], t["T_down"], t["R_up"], t["T_up"]], -1))
-        ab = np.ascontiguousarray(np.stack([t["A"], t["B"]], -1))
+        abc = np.ascontiguousarray(np.stack([t["A"], t["B"], t["C"]], -1))
         self.dielectric = ctx.texture3d((n_mu, n_alpha, n_eta), 4, rt.tobytes(), dtype="f4")
-        self.schlick = ctx.texture((n_mu, n_alpha), 2, ab.tobytes(), dtype="f4")
+        self.schlick = ctx.texture((n_mu, n_alpha), 3, abc.tobytes(), dtype="f4")
         for tex in (self.dielectric, self.schlick):
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
             tex.repeat_x = tex.repeat_y = False

@@ -6,8 +6,8 @@
 // The stack comes as atoms, top to bottom (u_bc_kind: BC_INTERFACE, BC_MEDIUM,
 // BC_CONDUCTOR, BC_DIELECTRIC or BC_DIFFUSE, constants the code fills in), and
 // the project's tables as textures: u_bc_dielectric (mu, alpha, eta) holds
-// R_down, T_down, R_up, T_up; u_bc_schlick (mu, alpha) the conductor's Schlick
-// terms A, B. Lookups interpolate by hand between texel fetches, as the
+// R_down, T_down, R_up, T_up; u_bc_schlick (mu, alpha) the conductor's terms
+// A, B, C (FGD = r0 A + (1 - r0) B - b C, b OpenPBR's F82-tint coefficient). Lookups interpolate by hand between texel fetches, as the
 // Python's grid_sample (align_corners) does, at float precision whatever the
 // GPU's filtering hardware. What depends on the material alone -- each diffuse
 // slab's hemispherical reflectances above and below and its ior -- is computed
@@ -23,6 +23,7 @@ uniform float u_bc_roughness[BC_MAX_ATOMS];
 uniform float u_bc_ior[BC_MAX_ATOMS];      // relative ior below over above (interfaces, dielectric base)
 uniform vec3 u_bc_color[BC_MAX_ATOMS];     // r0 (conductor) or albedo (medium, diffuse)
 uniform vec3 u_bc_sigma_t[BC_MAX_ATOMS];   // optical depth along the normal per channel (medium)
+uniform vec3 u_bc_f82[BC_MAX_ATOMS];       // OpenPBR's F82-tint coefficient b (conductor; 0: Schlick)
 uniform int u_bc_slab[BC_MAX_ATOMS];       // 1: the atom is a diffuse slab (a scattering medium, the diffuse base)
 uniform vec3 u_bc_r_above[BC_MAX_ATOMS];   // a slab's hemispherical reflectance of the stack above it
 uniform vec3 u_bc_r_below[BC_MAX_ATOMS];   // ... of it and the stack below it
@@ -88,20 +89,20 @@ vec4 bc_dielectric(float mu, float a, float eta) {
     return mix(mix(c00, c10, t.y), mix(c01, c11, t.y), t.z);
 }
 
-// Bilinear lookup of the Schlick table: (A, B).
-vec2 bc_schlick(float mu, float a) {
+// Bilinear lookup of the conductor's table: (A, B, C).
+vec3 bc_schlick(float mu, float a) {
     ivec2 n = textureSize(u_bc_schlick, 0);
     vec2 t;
     ivec2 i = ivec2(bc_node(bc_cmu(mu, n.x), n.x, t.x), bc_node(bc_calpha(a, n.y), n.y, t.y));
-    vec2 c0 = mix(texelFetch(u_bc_schlick, i, 0).xy, texelFetch(u_bc_schlick, i + ivec2(1, 0), 0).xy, t.x);
-    vec2 c1 = mix(texelFetch(u_bc_schlick, i + ivec2(0, 1), 0).xy,
-                  texelFetch(u_bc_schlick, i + ivec2(1, 1), 0).xy, t.x);
+    vec3 c0 = mix(texelFetch(u_bc_schlick, i, 0).xyz, texelFetch(u_bc_schlick, i + ivec2(1, 0), 0).xyz, t.x);
+    vec3 c1 = mix(texelFetch(u_bc_schlick, i + ivec2(0, 1), 0).xyz,
+                  texelFetch(u_bc_schlick, i + ivec2(1, 1), 0).xyz, t.x);
     return mix(c0, c1, t.y);
 }
 
-vec3 bc_conductor_albedo(float mu, float a, vec3 r0) {
-    vec2 ab = bc_schlick(mu, a);
-    return r0 * ab.x + (1.0 - r0) * ab.y;
+vec3 bc_conductor_albedo(float mu, float a, vec3 r0, vec3 b) {
+    vec3 abc = bc_schlick(mu, a);
+    return max(r0 * abc.x + (1.0 - r0) * abc.y - b * abc.z, 0.0);
 }
 
 // What atom k does to a lobe arriving at cosine cti.
@@ -138,7 +139,8 @@ BcStats bc_atom_stats(int k, float cti) {
     } else if (kind == BC_MEDIUM) {  // Beer-Lambert along the mean
         s.T12 = s.T21 = exp(-u_bc_sigma_t[k] / max(cti, 1e-8));
     } else {  // a reflecting base
-        s.R12 = kind == BC_CONDUCTOR ? bc_conductor_albedo(cti, a, u_bc_color[k]) : vec3(bc_dielectric(cti, a, eta).x);
+        s.R12 = kind == BC_CONDUCTOR ? bc_conductor_albedo(cti, a, u_bc_color[k], u_bc_f82[k])
+                                     : vec3(bc_dielectric(cti, a, eta).x);
         s.s_r12 = s.s_r21 = bc_r2v(a);
     }
     return s;
@@ -210,9 +212,10 @@ vec3 bc_lobe_shape(int k, vec3 wi, vec3 wo, float a) {
     float cos_h = dot(wi, h);
     int kind = u_bc_kind[k];
     if (kind == BC_CONDUCTOR) {
-        vec3 r0 = u_bc_color[k];
-        vec3 F = r0 + (1.0 - r0) * pow(1.0 - min(abs(cos_h), 1.0), 5.0);
-        return bc_div(F * dg, bc_conductor_albedo(wi.z, a, r0));
+        vec3 r0 = u_bc_color[k], b = u_bc_f82[k];
+        float c = min(abs(cos_h), 1.0), m = 1.0 - c;
+        vec3 F = clamp(r0 + (1.0 - r0) * pow(m, 5.0) - b * (c * pow(m, 6.0)), 0.0, 1.0);  // F82 tint
+        return bc_div(F * dg, bc_conductor_albedo(wi.z, a, r0, b));
     }
     float eta = u_bc_ior[k];
     return vec3(bc_div(fresnel_dielectric(cos_h, eta) * dg, bc_dielectric(wi.z, a, eta).x));

@@ -1,0 +1,103 @@
+"""OpenPBR's linear mixes as one BRDF: a material whose OpenPBR record has a fractional
+base_metalness or coat_weight is the weighted sum of up to four pure stacks (metal or
+dielectric base, coated or not; ``neural.openpbr.openpbr_components``), and so is its BRDF.
+
+``material_mix`` turns a material into its weighted components (itself alone when it is
+no mix); ``MixedBRDF`` sums any RGB BRDFs of one method -- the Monte Carlo reference, the
+neural path, Belcour's model -- with their weights: ``eval`` the weighted sum (and the
+standard errors combined), ``sample`` picks a component by weight and draws from it (the
+first uniform rescaled to stay uniform), its pdf the mixture's (one-sample MIS with the
+balance heuristic: unbiased whatever each component's sampler).
+
+The material's own ``layers`` hold its largest component: what shows it where a mix is not
+held (the window, the Mitsuba plugins, the GLSL export; each says so in one line).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+
+from nbrdf.neural.brdf import RGBBRDF, Sample
+from nbrdf.neural.errors import NbrdfError
+from nbrdf.neural.material import Material, parse_material
+from nbrdf.neural.openpbr import openpbr_components, openpbr_from_record
+
+Tensor = torch.Tensor
+
+
+def material_mix(material: Material) -> list[tuple[float, Material]]:
+    """The material's components with their weights (summing to 1): OpenPBR's mixes where its
+    record has a fractional base_metalness or coat_weight, else [(1, material)]."""
+    if material.openpbr is None:
+        return [(1.0, material)]
+    comps = openpbr_components(openpbr_from_record(material.openpbr))
+    if len(comps) <= 1:
+        return [(1.0, material)]
+    return [(w, parse_material({**d, "name": f"{material.name} ({d['name']})"}, material.base_dir))
+            for w, d, _ in comps]
+
+
+def mix_note(material: Material, where: str) -> str | None:
+    """One line saying that ``where`` (e.g. "the window") shows the largest component of a mix
+    (None: no mix)."""
+    parts = material_mix(material)
+    if len(parts) <= 1:
+        return None
+    shown = ", ".join(f"{m.name.rsplit('(', 1)[-1].rstrip(')')} {w:.2g}" for w, m in parts)
+    return (f"OpenPBR mix ({shown}): {where} shows the stack of the largest weight; the command line's "
+            "reference and neural path hold the mix")
+
+
+@dataclass
+class MixedBRDF:
+    """The weighted sum of RGB BRDFs (weights > 0 summing to 1; module docstring)."""
+
+    parts: list[tuple[float, RGBBRDF]]
+
+    def __post_init__(self) -> None:
+        w = [float(p[0]) for p in self.parts]
+        if not self.parts or min(w) <= 0.0 or not math.isclose(sum(w), 1.0, abs_tol=1e-6):
+            raise NbrdfError(f"a mix needs positive weights summing to 1 (got {w})")
+
+    def eval_with_error(self, wi: Tensor, wo: Tensor) -> tuple[Tensor, Tensor | None]:
+        total, var, exact = None, None, True
+        for w, b in self.parts:
+            f, e = b.eval_with_error(wi, wo)
+            total = w * f if total is None else total + w * f
+            if e is None:
+                continue
+            exact = False
+            var = (w * e) ** 2 if var is None else var + (w * e) ** 2
+        assert total is not None
+        return total, None if exact or var is None else var.sqrt()
+
+    def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
+        return self.eval_with_error(wi, wo)[0]
+
+    def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
+        out = None
+        for weight, b in self.parts:
+            p = weight * b.pdf(w, w_other)
+            out = p if out is None else out + p.to(out.dtype)
+        assert out is not None
+        return out
+
+    def sample(self, w: Tensor, u: Tensor) -> Sample:
+        weights = torch.tensor([float(p[0]) for p in self.parts], dtype=u.dtype)
+        edges = torch.cumsum(weights, 0)
+        edges[-1] = 1.0
+        k = torch.searchsorted(edges, u[:, 0].contiguous(), right=True).clamp(max=len(self.parts) - 1)
+        lo = torch.cat([torch.zeros(1, dtype=u.dtype), edges[:-1]])[k]
+        u_k = torch.cat([((u[:, :1] - lo[:, None]) / weights[k][:, None]).clamp(0.0, 1.0 - 1e-7), u[:, 1:]], 1)
+        wo = torch.zeros_like(w)
+        for j, (_, b) in enumerate(self.parts):
+            sel = k == j
+            if bool(sel.any()):
+                wo[sel] = b.sample(w[sel], u_k[sel]).w.to(wo.dtype)
+        pdf = self.pdf(w, wo)
+        ok = (pdf > 0) & (wo[:, 2] > 0)
+        f = self.eval(w, torch.where(ok[:, None], wo, w))
+        return Sample(wo, torch.where(ok[:, None], f.to(pdf.dtype), torch.zeros(1, dtype=pdf.dtype)),
+                      torch.where(ok, pdf, torch.zeros_like(pdf)))
