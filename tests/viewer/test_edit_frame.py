@@ -9,18 +9,15 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from gpu_brdfs import table_renderer as make_table_renderer
 
 from nbrdf.imaging.tonemap import ToneMap
-from nbrdf.neural.material import load_material
 from nbrdf.viewer.gpu import gl
-from nbrdf.viewer.gpu.body_source import table_sampling
-from nbrdf.viewer.gpu.body_table_gpu import INTERACTIVE, BodyTables
+from nbrdf.viewer.gpu.body_table_gpu import INTERACTIVE
 from nbrdf.viewer.gpu.env_prefilter import QUICK_PREFILTER
 from nbrdf.viewer.gpu.lit_passes import screen_box
-from nbrdf.viewer.gpu.pipeline import MaterialPipeline
 from nbrdf.viewer.gpu.renderer import Renderer, ViewState
 from nbrdf.viewer.modes import CompareMode
-from nbrdf.viewer.options import DEFAULT_MATERIAL
 from nbrdf.viewer.reference.compare import Compare
 from nbrdf.viewer.scene.camera import OrbitCamera
 
@@ -33,11 +30,7 @@ SIZE = 48
 def table_renderer(gl_ctx):
     if gl_ctx.version_code < gl.COMPUTE_VERSION:
         pytest.skip("no OpenGL 4.3 here: a compute path")
-    brdf = MaterialPipeline(gl_ctx).build(load_material(DEFAULT_MATERIAL), "neural")
-    tables = BodyTables(gl_ctx)
-    body = tables.brdf(brdf, INTERACTIVE)
-    r = Renderer(gl_ctx, brdf=body, mesh="sphere")
-    r.sampling = table_sampling(r.sampling)
+    r, body, tables = make_table_renderer(gl_ctx, INTERACTIVE)
     yield r, body
     tables.release()
 

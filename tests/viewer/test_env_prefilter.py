@@ -9,11 +9,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from gpu_brdfs import table_renderer
 
 from nbrdf.neural.material import load_material
 from nbrdf.viewer.gpu import gl
-from nbrdf.viewer.gpu.body_source import table_sampling
-from nbrdf.viewer.gpu.body_table_gpu import STILL, BodyTables
+from nbrdf.viewer.gpu.body_table_gpu import STILL
 from nbrdf.viewer.gpu.env_prefilter import PrefilterSettings, baked_per_row, map_basis, map_directions, sphere_radius
 from nbrdf.viewer.gpu.noise import NoiseConfig, measure_noise
 from nbrdf.viewer.gpu.pipeline import MaterialPipeline
@@ -33,11 +33,7 @@ TOLERANCE = 0.015  # mean relative error of the map's image against the accumula
 def setup(gl_ctx):
     if gl_ctx.version_code < gl.COMPUTE_VERSION:
         pytest.skip("no OpenGL 4.3 here: the map is a compute path")
-    brdf = MaterialPipeline(gl_ctx).build(load_material(DEFAULT_MATERIAL), "neural")
-    tables = BodyTables(gl_ctx)
-    body = tables.brdf(brdf, STILL)
-    r = Renderer(gl_ctx, brdf=body, mesh="sphere")
-    r.sampling = table_sampling(r.sampling)
+    r, body, tables = table_renderer(gl_ctx, STILL)
     state = ViewState(background=False)
     state.camera.distance = 2.6
     # the accumulated estimator, converged: the map's target
