@@ -131,13 +131,14 @@ def conserve(decoder: Decoder, code: Tensor, sigma: float, w: float,
     goal = s.bound - 0.002
     z = z0.clone()
     for _ in range(s.steps):
-        zz = z.clone().requires_grad_(True)
-        a = ((_body(decoder, zz, feats, wi, wo) + coat_f) * weight).reshape(3, T, n).mean(-1)
-        worst, k = a.max(-1)  # (3,)
-        move = (worst > s.bound) & over
-        if not bool(move.any()):
-            break
-        (g,) = torch.autograd.grad(worst[move].sum(), zz)  # the rows are independent: each channel's gradient
+        with torch.enable_grad():  # callers may hold no_grad (the window's plots): the gradient is this step's own
+            zz = z.clone().requires_grad_(True)
+            a = ((_body(decoder, zz, feats, wi, wo) + coat_f) * weight).reshape(3, T, n).mean(-1)
+            worst, _ = a.max(-1)  # (3,)
+            move = (worst > s.bound) & over
+            if not bool(move.any()):
+                break
+            (g,) = torch.autograd.grad(worst[move].sum(), zz)  # the rows are independent: each channel's gradient
         with torch.no_grad():
             step = (worst - goal).clamp_min(0.0) / g.pow(2).sum(-1).clamp_min(1e-12)
             z = torch.where(move[:, None], z - step[:, None] * g, z)
