@@ -31,6 +31,7 @@ from nbrdf.neural.layer_kinds import (
     RANGES,
     ROTATION_RANGE,
 )
+from nbrdf.neural.openpbr import mix_summary
 
 
 def _plain_default(v: Any) -> Any:
@@ -406,7 +407,15 @@ def load_material(path: str | Path, notes: list[str] | None = None) -> Material:
         raise NbrdfError(f"{path}: {e}") from None
     except RecursionError:
         raise NbrdfError(f"{path}: nested too deeply") from None
-    return parse_material(data, p.parent, source=str(path))
+    material = parse_material(data, p.parent, source=str(path))
+    if material.openpbr is not None:  # an OpenPBR mix saved as JSON: said as the .mtlx reader says it
+        note = mix_summary(material.openpbr, "the window, the Mitsuba plugins and the GLSL export")
+        if note is not None:
+            if notes is None:
+                print(f"{path}: {note}", file=sys.stderr)
+            else:
+                notes.append(f"{path}: {note}")
+    return material
 
 
 # --- writing ---------------------------------------------------------------------------

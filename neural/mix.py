@@ -22,7 +22,7 @@ import torch
 from nbrdf.neural.brdf import RGBBRDF, Sample
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material, parse_material
-from nbrdf.neural.openpbr import openpbr_components, openpbr_from_record
+from nbrdf.neural.openpbr import mix_summary, openpbr_components, openpbr_from_record
 
 Tensor = torch.Tensor
 
@@ -40,14 +40,9 @@ def material_mix(material: Material) -> list[tuple[float, Material]]:
 
 
 def mix_note(material: Material, where: str) -> str | None:
-    """One line saying that ``where`` (e.g. "the window") shows the largest component of a mix
-    (None: no mix)."""
-    parts = material_mix(material)
-    if len(parts) <= 1:
-        return None
-    shown = ", ".join(f"{m.name.rsplit('(', 1)[-1].rstrip(')')} {w:.2g}" for w, m in parts)
-    return (f"OpenPBR mix ({shown}): {where} shows the stack of the largest weight; the command line's "
-            "reference and neural path hold the mix")
+    """One line saying that the largest component of a mix stands for it in ``where`` (e.g. "the
+    window"; None: no mix)."""
+    return None if material.openpbr is None else mix_summary(material.openpbr, where)
 
 
 @dataclass

@@ -419,6 +419,17 @@ def openpbr_components(p: OpenPbr) -> list[tuple[float, dict, list[str]]]:
             for w, metal, coated, layers, notes in _components(q)]
 
 
+def mix_summary(record: Mapping[str, Any] | Iterable[tuple[str, Any]], where: str) -> str | None:
+    """One line saying that the largest component of the OpenPBR mix ``record`` holds stands for it in
+    ``where`` (e.g. "the window"); None when the record is no mix (``neural.mix`` sums the components)."""
+    comps = openpbr_components(openpbr_from_record(record))
+    if len(comps) <= 1:
+        return None
+    shown = ", ".join(f"{d['name']} {w:.2g}" for w, d, _ in comps)
+    return (f"OpenPBR mix ({shown}): the stack of the largest weight stands for it in {where}; the command "
+            "line's reference and neural path hold the mix")
+
+
 def openpbr_to_material(p: OpenPbr, name: str) -> tuple[dict, list[str]]:
     """The material JSON dict (with the "openpbr" record of ``p``) and the notes: one line per input the
     stack cannot hold or had to clamp. A fractional base_metalness or coat_weight is OpenPBR's mix: the

@@ -77,6 +77,20 @@ def test_no_mix_is_the_material_itself_and_the_note_names_the_components():
     assert note is not None and note.startswith("OpenPBR mix (metal, coated 0.18") and "the window" in note
 
 
+def test_a_mix_saved_as_json_says_so_when_loaded(tmp_path):
+    import json
+
+    from nbrdf.neural.material import load_material
+
+    for p, expected in ((MIXED, 1), (OpenPbr(base_metalness=1.0, coat_weight=1.0), 0)):
+        d, _ = openpbr_to_material(p, "t")
+        path = tmp_path / "m.json"
+        path.write_text(json.dumps(d))
+        notes: list[str] = []
+        load_material(path, notes)
+        assert len(notes) == expected and all(n.startswith(f"{path}: OpenPBR mix (") for n in notes), notes
+
+
 def test_bad_weights_are_one_line():
     with pytest.raises(NbrdfError, match="weights"):
         MixedBRDF([(0.5, None), (0.6, None)])  # type: ignore[list-item]
