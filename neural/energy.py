@@ -90,15 +90,18 @@ def albedo(decoder: Decoder, code: Tensor, sigma: float, w: float,
     s = (settings or EnergySettings()).check()
     wi, wo, weight, coat_f = _directions(code, decoder, sigma, w, s)
     with torch.no_grad():
-        body = _body(decoder, code[:, : decoder.spec.latent].float(), decoder.encode(wi, wo), wi, wo)
-    return ((body + coat_f) * weight).reshape(3, len(s.thetas), s.samples).mean(-1)
+        return _estimate(decoder, code[:, : decoder.spec.latent].float(), decoder.encode(wi, wo), wi, wo, weight,
+                         coat_f, len(s.thetas))
 
 
-def _body(decoder: Decoder, latent: Tensor, feats: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
-    """The decoded body (3, N) of latents (3, L) at N pairs (zero below the horizon)."""
+def _estimate(decoder: Decoder, latent: Tensor, feats: Tensor, wi: Tensor, wo: Tensor, weight: Tensor,
+              coat_f: Tensor, incidences: int) -> Tensor:
+    """The albedo (3, T) of body latents (3, L) plus the coat over a sample set of ``_directions``: the
+    decoded body (zero below the horizon) and the coat's value, times cos / pdf, averaged per incidence."""
     y = decoder.log_f_from_share(decoder.latent_share(latent)[:, None, :], feats[None])
     up = (wi[:, 2] > 0) & (wo[:, 2] > 0)
-    return torch.where(up[None], torch.exp(y.clamp(max=80.0)), torch.zeros_like(y))
+    body = torch.where(up[None], torch.exp(y.clamp(max=80.0)), torch.zeros_like(y))
+    return ((body + coat_f) * weight).reshape(3, incidences, -1).mean(-1)
 
 
 def conserve(decoder: Decoder, code: Tensor, sigma: float, w: float,
@@ -109,40 +112,34 @@ def conserve(decoder: Decoder, code: Tensor, sigma: float, w: float,
     if code.dim() != 2 or code.shape[0] != 3 or not torch.isfinite(code).all():
         raise NbrdfError(f"energy: a finite material code (3, {decoder.spec.code}) is needed, "
                          f"got {tuple(code.shape)}")
-    L, T, n = decoder.spec.latent, len(s.thetas), s.samples
-    if s.screen_samples < n:
+    L, T = decoder.spec.latent, len(s.thetas)
+    z = code[:, :L].float()
+    if s.screen_samples < s.samples:
         wi, wo, weight, coat_f = _directions(code, decoder, sigma, w, s, s.screen_samples)
         with torch.no_grad():
-            body = _body(decoder, code[:, :L].float(), decoder.encode(wi, wo), wi, wo)
-        if float(((body + coat_f) * weight).reshape(3, T, -1).mean(-1).max()) < s.screen_bound:
-            return code
+            if float(_estimate(decoder, z, decoder.encode(wi, wo), wi, wo, weight, coat_f, T).max()) < s.screen_bound:
+                return code
     wi, wo, weight, coat_f = _directions(code, decoder, sigma, w, s)
     feats = decoder.encode(wi, wo)
-    z0 = code[:, :L].float()
-    with torch.no_grad():
-        f0 = _body(decoder, z0, feats, wi, wo)
-        a0 = ((f0 + coat_f) * weight).reshape(3, T, n).mean(-1)
-    over = (a0 > s.bound).any(-1)  # the channels to move
-    if not over.any() or s.steps == 0:
-        return code
-    # Newton steps on the worst incidence: the smallest move of the latent (its norm) that brings that
-    # incidence's albedo, to first order, to just inside the bound; again from there while any incidence
-    # is above it (the albedo is smooth in the latent: two or three steps)
+    # Newton steps on each channel's worst incidence: the smallest move of the latent (its norm) that brings
+    # that incidence's albedo, to first order, to just inside the bound; again from there while any incidence
+    # is above it (the albedo is smooth in the latent: two or three steps). Channels within it never move.
     goal = s.bound - 0.002
-    z = z0.clone()
+    moved = False
     for _ in range(s.steps):
         with torch.enable_grad():  # callers may hold no_grad (the window's plots): the gradient is this step's own
             zz = z.clone().requires_grad_(True)
-            a = ((_body(decoder, zz, feats, wi, wo) + coat_f) * weight).reshape(3, T, n).mean(-1)
-            worst, _ = a.max(-1)  # (3,)
-            move = (worst > s.bound) & over
+            worst, _ = _estimate(decoder, zz, feats, wi, wo, weight, coat_f, T).max(-1)  # (3,)
+            move = worst > s.bound
             if not bool(move.any()):
                 break
             (g,) = torch.autograd.grad(worst[move].sum(), zz)  # the rows are independent: each channel's gradient
         with torch.no_grad():
             step = (worst - goal).clamp_min(0.0) / g.pow(2).sum(-1).clamp_min(1e-12)
             z = torch.where(move[:, None], z - step[:, None] * g, z)
-    best = z.detach()
+        moved = True
+    if not moved:
+        return code
     out = code.clone()
-    out[:, :L] = best.to(code.dtype)
+    out[:, :L] = z.to(code.dtype)
     return out

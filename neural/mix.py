@@ -10,7 +10,8 @@ first uniform rescaled to stay uniform), its pdf the mixture's (one-sample MIS w
 balance heuristic: unbiased whatever each component's sampler).
 
 The material's own ``layers`` hold its largest component: what shows it where a mix is not
-held (the window, the Mitsuba plugins, the GLSL export; each says so in one line).
+held (the window, the Mitsuba plugins, the GLSL export; loading says so in one line,
+``neural.openpbr.mix_summary``).
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ import torch
 from nbrdf.neural.brdf import RGBBRDF, Sample
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material, parse_material
-from nbrdf.neural.openpbr import mix_summary, openpbr_components, openpbr_from_record
+from nbrdf.neural.openpbr import openpbr_components, openpbr_from_record
 
 Tensor = torch.Tensor
 
@@ -37,12 +38,6 @@ def material_mix(material: Material) -> list[tuple[float, Material]]:
         return [(1.0, material)]
     return [(w, parse_material({**d, "name": f"{material.name} ({d['name']})"}, material.base_dir))
             for w, d, _ in comps]
-
-
-def mix_note(material: Material, where: str) -> str | None:
-    """One line saying that the largest component of a mix stands for it in ``where`` (e.g. "the
-    window"; None: no mix)."""
-    return None if material.openpbr is None else mix_summary(material.openpbr, where)
 
 
 @dataclass

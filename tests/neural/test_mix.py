@@ -9,8 +9,8 @@ import torch
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import parse_material
-from nbrdf.neural.mix import MixedBRDF, material_mix, mix_note
-from nbrdf.neural.openpbr import OpenPbr, openpbr_to_material
+from nbrdf.neural.mix import MixedBRDF, material_mix
+from nbrdf.neural.openpbr import OpenPbr, mix_summary, openpbr_to_material
 from nbrdf.training.brdfs import brdf_for
 
 MIXED = OpenPbr(base_color=(0.8, 0.5, 0.3), base_metalness=0.3, coat_weight=0.6, coat_roughness=0.3)
@@ -72,8 +72,8 @@ def test_the_reference_of_a_mix_is_its_components_references():
 
 def test_no_mix_is_the_material_itself_and_the_note_names_the_components():
     m = _material(OpenPbr(base_metalness=1.0, coat_weight=1.0))
-    assert material_mix(m) == [(1.0, m)] and mix_note(m, "the window") is None
-    note = mix_note(_material(MIXED), "the window")
+    assert material_mix(m) == [(1.0, m)] and mix_summary(m.openpbr, "the window") is None
+    note = mix_summary(_material(MIXED).openpbr, "the window")
     assert note is not None and note.startswith("OpenPBR mix (metal, coated 0.18") and "the window" in note
 
 

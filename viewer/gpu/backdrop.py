@@ -178,10 +178,7 @@ class Backdrop:
         return self._shadow[1], self._shadow[2]
 
     def _target(self, w: int, h: int, slot: str):
-        def make():
-            tex = self.ctx.texture((w, h), 4, dtype="f4")
-            return self.ctx.framebuffer([tex]), tex
-        return self._targets.get((slot, w, h), make)
+        return self._targets.get((slot, w, h), lambda: self._float_target(w, h))
 
     # --- the pass ------------------------------------------------------------------------------
     def apply(self, accum: moderngl.Texture, passes: float, state, settings: BackdropSettings,
@@ -239,6 +236,7 @@ class Backdrop:
         return tex
 
     def _float_target(self, w: int, h: int) -> tuple[moderngl.Framebuffer, moderngl.Texture]:
+        """A (w, h) float RGBA texture and its framebuffer (a slot's image, or its background)."""
         tex = self.ctx.texture((w, h), 4, dtype="f4")
         return self.ctx.framebuffer([tex]), tex
 

@@ -21,7 +21,6 @@ and labels each side on the image (viewer/gpu/labels.py).
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import os
 import tempfile
@@ -34,7 +33,8 @@ import torch
 
 from nbrdf.imaging.tonemap import ToneMap
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import Conductor, Dielectric, Material, material_to_dict
+from nbrdf.neural.material import Conductor, Dielectric, Material
+from nbrdf.training.refine import material_hash
 from nbrdf.training.render_report import flip  # the evaluation of `nbrdf report render`
 from nbrdf.viewer.gpu import shaders
 from nbrdf.viewer.gpu.labels import Label, Labels
@@ -130,7 +130,7 @@ class Compare:
         decides the pairs (incidence; size; camera, lights, environment and mesh)
         -- not the compare mode, nor the render scale."""
         view = View.parse(state.view)
-        doc = _content(material)
+        doc = material_hash(material)  # the content (and a file layer's folder), not the name: a rename keeps it
         extra = {View.LOBE: f"{state.theta_i:.3f}", View.SLICE: f"{size}", View.OBJECT: f"{size}"}[view]
         cam = asdict(state.camera) if view == View.OBJECT else {}
         light = ()
@@ -375,7 +375,7 @@ class Compare:
     def plane_curve(self, material: Material, theta_i: float, wi: torch.Tensor, wo: torch.Tensor,
                     n: int) -> np.ndarray | None:
         """f cos(theta_o) RGB at n plane-of-incidence pairs from the worker (None until ready)."""
-        key = hashlib.sha1(f"{_content(material)}|plane|{theta_i}"
+        key = hashlib.sha1(f"{material_hash(material)}|plane|{theta_i}"
                            .encode()).hexdigest()
         r = self.worker.cached(key)
         if (r is None or not (r.done or r.error)) and self.worker.computing != key:
@@ -478,13 +478,6 @@ class Compare:
         if self._env_file is not None:
             _remove(self._env_file[2])
             self._env_file = None
-
-
-def _content(material: Material) -> str:
-    """What a reference of ``material`` depends on: its document less the name (a rename keeps it)."""
-    d = material_to_dict(material)
-    d.pop("name", None)
-    return json.dumps(d, sort_keys=True)
 
 
 def _remove(path: str) -> None:

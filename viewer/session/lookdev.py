@@ -43,8 +43,9 @@ import torch
 from nbrdf.imaging.env_presets import resolve_environment
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent_texture import blend
-from nbrdf.neural.material import Material, material_to_dict
+from nbrdf.neural.material import Material
 from nbrdf.neural.model import NeuralModel
+from nbrdf.training.refine import material_hash
 from nbrdf.viewer.gpu.backdrop import Backdrop, BackdropSettings
 from nbrdf.viewer.gpu.body_source import BodySource
 from nbrdf.viewer.gpu.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, fallback_note, gpu_brdf, material_key
@@ -327,8 +328,7 @@ class LookDev(SessionEdits, Captures):
         """After a rename: the BRDFs on screen carry the material's new name; nothing is rebuilt and the
         accumulation goes on (anything else that differs, or nothing shown yet: a full ``_apply_material``)."""
         m, b = self.material, self.brdf
-        unnamed = lambda x: {k: v for k, v in material_to_dict(x).items() if k != "name"}  # noqa: E731
-        if b is None or unnamed(b.material) != unnamed(m):
+        if b is None or material_hash(b.material) != material_hash(m):
             self._apply_material()
             return
         # in place: the frames know a BRDF by identity (a new object would be a new body, baked again)
