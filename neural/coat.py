@@ -10,7 +10,8 @@ gives the decoder only the body:
 
 A *material code* is therefore, per colour channel, the decoder's 32-float
 body latent followed by the coat's two parameters (GGX roughness, relative
-ior), identical in the three channels. A material without a coat (a bare
+ior), identical in the three channels (and, for an anisotropic material, the
+tail of ``neural.anisotropy``: the coat's and the body's anisotropy vectors). A material without a coat (a bare
 conductor, a diffuse base, a measured table) has ``NO_COAT``: ior 1 reflects
 nothing. Codes interpolate, blend and mip-map as vectors, so the coat's
 parameters follow the latents in every latent operation.
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import torch
 
+from nbrdf.neural.anisotropy import FRAME_PARAMS, coat_alphas, from_tangent_frame, in_frame
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.microfacet import fresnel_dielectric, ggx_d, reflect, sample_vndf, smith_g1, vndf_pdf
 
@@ -51,20 +53,32 @@ def with_coat(z_body: Tensor, coat: Tensor | tuple[float, float] | None) -> Tens
 
 
 def coat_of(code: Tensor, latent: int) -> Tensor:
-    """The coat (..., 2) of codes (..., latent + 2), clamped to the legal range."""
-    if code.shape[-1] != latent + COAT_PARAMS:
-        raise NbrdfError(f"a material code has {latent + COAT_PARAMS} floats per channel, got {code.shape[-1]}")
+    """The coat of codes, clamped to the legal range: (..., 2) (roughness, ior) of codes (..., latent + 2);
+    (..., 4), the coat's anisotropy vector after them (``neural.anisotropy``), of codes with an
+    anisotropic tail (..., latent + 2 + FRAME_PARAMS)."""
+    if code.shape[-1] not in (latent + COAT_PARAMS, latent + COAT_PARAMS + FRAME_PARAMS):
+        raise NbrdfError(f"a material code has {latent + COAT_PARAMS} (or {latent + COAT_PARAMS + FRAME_PARAMS} "
+                         f"with anisotropy) floats per channel, got {code.shape[-1]}")
     c = code[..., latent:]
-    return torch.stack([c[..., 0].clamp(*ROUGHNESS_RANGE), c[..., 1].clamp(*IOR_RANGE)], -1)
+    rough_ior = [c[..., 0].clamp(*ROUGHNESS_RANGE), c[..., 1].clamp(*IOR_RANGE)]
+    if code.shape[-1] == latent + COAT_PARAMS:
+        return torch.stack(rough_ior, -1)
+    return torch.stack(rough_ior + [c[..., 2], c[..., 3]], -1)
+
+
+def has_coat(spec, z: Tensor) -> bool:
+    """Whether ``z`` (..., n) is a whole material code of a decoder of ``spec`` (a ``DecoderSpec``) with
+    the coat split, isotropic or with its anisotropic tail; False for a bare latent."""
+    return bool(spec.coat) and z.shape[-1] in (spec.code, spec.code + FRAME_PARAMS)
 
 
 def code_coat(spec, z: Tensor) -> tuple[float, float]:
     """The clear coat (roughness, ior) of one material's code (3, 34) for a
     decoder of ``spec`` (a ``DecoderSpec``): ``NO_COAT`` for a bare latent or
     a decoder without the coat split. What the GPU's ``u_coat`` receives."""
-    if not spec.coat or z.shape[-1] != spec.code:
+    if not has_coat(spec, z):
         return NO_COAT
-    r, ior = coat_of(z.reshape(-1, z.shape[-1])[0], spec.latent).tolist()
+    r, ior = coat_of(z.reshape(-1, z.shape[-1])[0], spec.latent).tolist()[:2]
     return float(r), float(ior)
 
 
@@ -82,15 +96,27 @@ def _bcast(coat: Tensor, like: Tensor) -> tuple[Tensor, Tensor]:
     return coat[..., 0].clamp(*ROUGHNESS_RANGE), coat[..., 1].clamp(*IOR_RANGE)
 
 
+def _frame(coat: Tensor, like: Tensor, a: Tensor, *ws: Tensor) -> tuple[Tensor, Tensor | None, list[Tensor]]:
+    """(alpha_x, alpha_y or None, directions in the coat's tangent frame) of a coat: an isotropic coat
+    (2 floats) keeps its alpha and the directions as they are."""
+    coat = torch.as_tensor(coat, dtype=like.dtype, device=like.device)
+    if coat.shape[-1] == COAT_PARAMS:
+        return a, None, list(ws)
+    ax, ay, c, s = coat_alphas(a, coat[..., 2:4])
+    return ax, ay, [in_frame(w, c, s) for w in ws]
+
+
 def coat_eval(coat: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
     """The coat's reflection (...,) in 1/sr (no cosine) at pairs (..., 3);
     coat (..., 2) broadcast against the pairs' batch. Zero unless both
     directions lie above the surface."""
     a, eta = _bcast(coat, wi)
+    a, ay, (wi, wo) = _frame(coat, wi, a, wi, wo)
     h = wi + wo
     h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-30)
     F = fresnel_dielectric((wi * h).sum(-1), eta)
-    f = F * ggx_d(h, a) * smith_g1(wi, h, a) * smith_g1(wo, h, a) / (4.0 * wi[..., 2] * wo[..., 2]).clamp_min(1e-30)
+    f = (F * ggx_d(h, a, ay) * smith_g1(wi, h, a, ay) * smith_g1(wo, h, a, ay)
+         / (4.0 * wi[..., 2] * wo[..., 2]).clamp_min(1e-30))
     up = (wi[..., 2] > 0) & (wo[..., 2] > 0) & (eta > 1.0)
     return torch.where(up, f, torch.zeros_like(f))
 
@@ -98,10 +124,11 @@ def coat_eval(coat: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
 def coat_pdf(coat: Tensor, w: Tensor, w_other: Tensor) -> Tensor:
     """Solid-angle density of ``coat_sample(w)`` returning ``w_other``."""
     a, _ = _bcast(coat, w)
+    a, ay, (w, w_other) = _frame(coat, w, a, w, w_other)
     h = w + w_other
     h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-30)
     d = (w * h).sum(-1).abs().clamp_min(1e-30)
-    p = vndf_pdf(w, h, a) / (4.0 * d)
+    p = vndf_pdf(w, h, a, ay) / (4.0 * d)
     ok = (w[..., 2] > 0) & (w_other[..., 2] > 0)
     return torch.where(ok, p, torch.zeros_like(p))
 
@@ -110,7 +137,12 @@ def coat_sample(coat: Tensor, w: Tensor, u1: Tensor, u2: Tensor) -> Tensor:
     """A direction drawn from the coat's visible-normal reflection lobe
     around ``w`` (may fall below the horizon: a failed sample)."""
     a, _ = _bcast(coat, w)
-    return reflect(w, sample_vndf(w, a, u1, u2))
+    coat = torch.as_tensor(coat, dtype=w.dtype, device=w.device)
+    if coat.shape[-1] == COAT_PARAMS:
+        return reflect(w, sample_vndf(w, a, u1, u2))
+    ax, ay, c, s = coat_alphas(a, coat[..., 2:4])
+    wf = in_frame(w, c, s)
+    return from_tangent_frame(reflect(wf, sample_vndf(wf, ax, u1, u2, ay)), c, s)
 
 
 def coat_probability(coat: Tensor, w: Tensor) -> Tensor:

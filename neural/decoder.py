@@ -25,7 +25,8 @@ from safetensors import safe_open
 from safetensors.torch import save_file
 from torch import nn
 
-from nbrdf.neural.coat import coat_eval, coat_of, code_size
+from nbrdf.neural.anisotropy import body_pair, body_tail
+from nbrdf.neural.coat import coat_eval, coat_of, code_size, has_coat
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.nets import load_state
 
@@ -180,7 +181,7 @@ class Decoder(nn.Module):
     def coat(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor | None:
         """The coat term of material codes z at pairs (broadcast), or None
         when z is a bare latent (a body alone, or a decoder without coats)."""
-        if not self.spec.coat or z.shape[-1] == self.spec.latent:
+        if not has_coat(self.spec, z):
             return None
         return coat_eval(coat_of(z, self.spec.latent), wi, wo)
 
@@ -196,20 +197,34 @@ class Decoder(nn.Module):
         (..., 32 or code) and features (..., K), broadcast."""
         return self.log_f_from_share(self.latent_share(z), feats)
 
+    def body_pair(self, z: Tensor, wi: Tensor, wo: Tensor) -> tuple[Tensor, Tensor, Tensor | None]:
+        """The pair the body is decoded at and the factor it takes: (wi, wo, None) for an isotropic code,
+        the warp of ``neural.anisotropy.body_pair`` for a code with an anisotropic tail."""
+        tail = body_tail(z, self.spec.code) if self.spec.coat else None
+        if tail is None:
+            return wi, wo, None
+        return body_pair(tail.to(wi.dtype), wi, wo, coat_of(z, self.spec.latent)[..., 1].to(wi.dtype))
+
     def forward(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
         """f >= 0 (...,) for one channel: the decoded body, plus the coat when
         z is a material code; directions below the horizon give 0."""
-        f = torch.exp(self.log_f(z, self.encode(wi, wo)).clamp(max=80.0))
+        bi, bo, jac = self.body_pair(z, wi, wo)
+        f = torch.exp(self.log_f(z, self.encode(bi, bo)).clamp(max=80.0))
+        if jac is not None:
+            f = f * jac.to(f.dtype)
         f = torch.where((wi[..., 2] > 0) & (wo[..., 2] > 0), f, torch.zeros_like(f))
         c = self.coat(z, wi, wo)
         return f if c is None else f + c.to(f.dtype)
 
     def eval_rgb(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
         """RGB values (N, 3) of a material code (or bare latents) z (3, code) at N pairs."""
-        feats = self.encode(wi, wo)
+        bi, bo, jac = self.body_pair(z[:1], wi, wo)  # the tail is the same in the three channels
+        feats = self.encode(bi, bo)
         share = self.latent_share(z.to(feats.dtype))  # (3, W)
         y = self.log_f_from_share(share[None, :, :], feats[:, None, :])
         f = torch.exp(y.clamp(max=80.0))
+        if jac is not None:
+            f = f * jac.to(f.dtype)[:, None]
         up = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
         f = torch.where(up, f, torch.zeros_like(f))
         c = self.coat(z[:1], wi, wo)  # the coat is the same in the three channels

@@ -19,11 +19,13 @@ which applies this: one place, the same code everywhere.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
 
-from nbrdf.neural.coat import coat_of
+from nbrdf.neural.anisotropy import body_tail
+from nbrdf.neural.coat import coat_of, has_coat
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.geometry import incidence
@@ -64,43 +66,89 @@ class EnergySettings:
         return self
 
 
+def _tangent_turn(decoder: Decoder, code: Tensor) -> Tensor | None:
+    """The turn rho of a code's tangent (its body's anisotropy vector, else its coat's); None for a code
+    without an anisotropic tail."""
+    tail = body_tail(code, decoder.spec.code) if decoder.spec.coat else None
+    if tail is None:
+        return None
+    v = tail[0, :2].float()
+    if float(v.norm()) == 0.0:
+        v = coat_of(code[:1].float(), decoder.spec.latent)[0, 2:4]
+    return 0.5 * torch.atan2(v[1], v[0])
+
+
+def _turn(w: Tensor, t: Tensor | float) -> Tensor:
+    """Directions (N, 3) turned by t about z, counter-clockwise."""
+    t = torch.as_tensor(t, dtype=w.dtype)
+    c, sn = torch.cos(t), torch.sin(t)
+    return torch.stack([c * w[:, 0] - sn * w[:, 1], sn * w[:, 0] + c * w[:, 1], w[:, 2]], -1)
+
+
+def incidence_count(decoder: Decoder, code: Tensor, s: EnergySettings) -> int:
+    """How many incidences the albedo is taken at: ``s.thetas``; twice as many for a code with an
+    anisotropic tail (in the plane of its tangent and across it)."""
+    return len(s.thetas) * (1 if _tangent_turn(decoder, code) is None else 2)
+
+
 def _directions(code: Tensor, decoder: Decoder, sigma: float, w: float, s: EnergySettings,
-                n: int | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-    """(wi, wo, weight (N,), coat term (N,)) of the fixed sample set (``n`` per incidence, default
-    ``s.samples``): the code's sampler's directions, cos / pdf per pair (0 where a draw failed) and
-    the coat's value there (the same in every channel)."""
+                n: int | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor]:
+    """(wi, wo, weight (N,), coat term (N,), features (N, K), body factor (N,)) of the fixed sample set
+    (``n`` per incidence, default ``s.samples``): the code's sampler's directions, cos / pdf per pair (0
+    where a draw failed), the coat's value there (the same in every channel), and the decoder's
+    features and factor of the body at them (``Decoder.body_pair``: 1 for an isotropic code).
+
+    A code with an anisotropic tail is measured in its tangent's frame: the incidences lie in the plane
+    of the tangent and across it, and the whole set is drawn for the code turned back to rho = 0 and
+    then turned by rho (the proxy is symmetric about the normal, the coat's pdf turns with it), so the
+    bound of a turned material is the turned bound, not a different Monte Carlo draw."""
     n = n or s.samples
-    wi = torch.stack([incidence(t) for t in s.thetas]).float().repeat_interleave(n, 0)
-    u = torch.quasirandom.SobolEngine(3, scramble=True, seed=s.seed).draw(n).float().repeat(len(s.thetas), 1)
+    rho = _tangent_turn(decoder, code)
+    base = torch.stack([incidence(t) for t in s.thetas]).float()
     spec = decoder.spec
-    coat = coat_of(code[:1], spec.latent)[0].float() if spec.coat and code.shape[-1] == spec.code else None
+    code0 = code
+    if rho is not None:
+        base = torch.cat([base, _turn(base, 0.5 * math.pi)])
+        code0 = code.clone()
+        c2, s2 = math.cos(-2.0 * float(rho)), math.sin(-2.0 * float(rho))
+        for i in (spec.code, spec.code + 2):  # the coat's and the body's vectors turned by -rho (angle doubled)
+            x, y = code[:, i].clone(), code[:, i + 1].clone()
+            code0[:, i], code0[:, i + 1] = c2 * x - s2 * y, s2 * x + c2 * y
+    wi = base.repeat_interleave(n, 0)
+    u = torch.quasirandom.SobolEngine(3, scramble=True, seed=s.seed).draw(n).float().repeat(base.shape[0], 1)
+    coat = coat_of(code0[:1], spec.latent)[0].float() if has_coat(spec, code0) else None
     with torch.no_grad():
         wo, pdf = coated_sample(wi, u, coat, torch.tensor(float(sigma)), torch.tensor(float(w)))
         ok = (wo[:, 2] > 0) & (pdf > 0) & torch.isfinite(pdf)
         weight = torch.where(ok, wo[:, 2].clamp_min(0) / torch.where(ok, pdf, torch.ones_like(pdf)),
                              torch.zeros_like(pdf))
+        if rho is not None:
+            wi, wo = _turn(wi, rho), _turn(wo, rho)
         c = decoder.coat(code[:1], wi, wo)
         coat_f = torch.zeros_like(weight) if c is None else c.float()
-    return wi, wo, weight, coat_f
+        bi, bo, jac = decoder.body_pair(code[:1].float(), wi, wo)
+        feats = decoder.encode(bi, bo)
+    return wi, wo, weight, coat_f, feats, torch.ones_like(weight) if jac is None else jac.float()
 
 
 def albedo(decoder: Decoder, code: Tensor, sigma: float, w: float,
            settings: EnergySettings | None = None) -> Tensor:
     """The directional albedo (3, T) of a code (3, code) at ``settings.thetas`` (its own sampler)."""
     s = (settings or EnergySettings()).check()
-    wi, wo, weight, coat_f = _directions(code, decoder, sigma, w, s)
+    wi, wo, weight, coat_f, feats, jac = _directions(code, decoder, sigma, w, s)
     with torch.no_grad():
-        return _estimate(decoder, code[:, : decoder.spec.latent].float(), decoder.encode(wi, wo), wi, wo, weight,
-                         coat_f, len(s.thetas))
+        return _estimate(decoder, code[:, : decoder.spec.latent].float(), feats, wi, wo, weight, coat_f, jac,
+                         incidence_count(decoder, code, s))
 
 
 def _estimate(decoder: Decoder, latent: Tensor, feats: Tensor, wi: Tensor, wo: Tensor, weight: Tensor,
-              coat_f: Tensor, incidences: int) -> Tensor:
+              coat_f: Tensor, jac: Tensor, incidences: int) -> Tensor:
     """The albedo (3, T) of body latents (3, L) plus the coat over a sample set of ``_directions``: the
-    decoded body (zero below the horizon) and the coat's value, times cos / pdf, averaged per incidence."""
+    decoded body (zero below the horizon, times its factor ``jac``) and the coat's value, times cos / pdf,
+    averaged per incidence."""
     y = decoder.log_f_from_share(decoder.latent_share(latent)[:, None, :], feats[None])
     up = (wi[:, 2] > 0) & (wo[:, 2] > 0)
-    body = torch.where(up[None], torch.exp(y.clamp(max=80.0)), torch.zeros_like(y))
+    body = torch.where(up[None], torch.exp(y.clamp(max=80.0)) * jac[None], torch.zeros_like(y))
     return ((body + coat_f) * weight).reshape(3, incidences, -1).mean(-1)
 
 
@@ -112,15 +160,14 @@ def conserve(decoder: Decoder, code: Tensor, sigma: float, w: float,
     if code.dim() != 2 or code.shape[0] != 3 or not torch.isfinite(code).all():
         raise NbrdfError(f"energy: a finite material code (3, {decoder.spec.code}) is needed, "
                          f"got {tuple(code.shape)}")
-    L, T = decoder.spec.latent, len(s.thetas)
+    L, T = decoder.spec.latent, incidence_count(decoder, code, s)
     z = code[:, :L].float()
     if s.screen_samples < s.samples:
-        wi, wo, weight, coat_f = _directions(code, decoder, sigma, w, s, s.screen_samples)
+        wi, wo, weight, coat_f, feats, jac = _directions(code, decoder, sigma, w, s, s.screen_samples)
         with torch.no_grad():
-            if float(_estimate(decoder, z, decoder.encode(wi, wo), wi, wo, weight, coat_f, T).max()) < s.screen_bound:
+            if float(_estimate(decoder, z, feats, wi, wo, weight, coat_f, jac, T).max()) < s.screen_bound:
                 return code
-    wi, wo, weight, coat_f = _directions(code, decoder, sigma, w, s)
-    feats = decoder.encode(wi, wo)
+    wi, wo, weight, coat_f, feats, jac = _directions(code, decoder, sigma, w, s)
     # Newton steps on each channel's worst incidence: the smallest move of the latent (its norm) that brings
     # that incidence's albedo, to first order, to just inside the bound; again from there while any incidence
     # is above it (the albedo is smooth in the latent: two or three steps). Channels within it never move.
@@ -129,7 +176,7 @@ def conserve(decoder: Decoder, code: Tensor, sigma: float, w: float,
     for _ in range(s.steps):
         with torch.enable_grad():  # callers may hold no_grad (the window's plots): the gradient is this step's own
             zz = z.clone().requires_grad_(True)
-            worst, _ = _estimate(decoder, zz, feats, wi, wo, weight, coat_f, T).max(-1)  # (3,)
+            worst, _ = _estimate(decoder, zz, feats, wi, wo, weight, coat_f, jac, T).max(-1)  # (3,)
             move = worst > s.bound
             if not bool(move.any()):
                 break

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import torch
 
-from nbrdf.neural.anisotropy import require_isotropic
+from nbrdf.neural.anisotropy import with_frame
 from nbrdf.neural.coat import with_coat
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bundle, save_decoder
 from nbrdf.neural.energy import EnergySettings, conserve
@@ -95,7 +95,6 @@ class NeuralModel:
         """(P, 3, 34) codes of a material whose parameters ``values`` turns
         into (P, 3) tensors (P = 1 for a uniform material, texels for a
         textured one): ``layered_latents`` of its stack."""
-        require_isotropic(material, NEURAL_PATH)
         if isinstance(material.base, Measured):
             raise NbrdfError(f"layers[{len(material.layers) - 1}]: a measured base has no leaf encoder; project it "
                              "first (`nbrdf project --merl FILE --out Z.safetensors`) and use it as a latent base")
@@ -125,8 +124,11 @@ def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, sta
     C, 34)), then the layering network over each interface and its medium,
     bottom up. Differentiable in both networks; the one place leaves meet
     layering."""
-    if stack.is_anisotropic:
-        raise NbrdfError(f"anisotropy is not yet supported by {NEURAL_PATH}")
+    if stack.is_anisotropic:  # the networks see the isotropic equivalent; the code's tail stretches it back
+        iso, coat_v, body = stack.isotropic_equivalent()
+        z = layered_latents(leaf, layering, iso, z_base)
+        return with_frame(z, coat_v[:, None, :].to(z.dtype), body[:, None, :2].to(z.dtype),
+                          body[:, None, 2:].to(z.dtype))
     n, C = stack.n, stack.channels
     chan = lambda t: t[:, None].expand(n, C).reshape(-1)  # shared parameter, per channel
     if z_base is not None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import torch
 
 from nbrdf.neural.brdf import ExactRGB, Sample
-from nbrdf.neural.coat import coat_of
+from nbrdf.neural.coat import coat_of, has_coat
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.geometry import incidence
 from nbrdf.neural.material import Diffuse, Material
@@ -32,7 +32,7 @@ class _CodeSampler:
 
     def _coat(self, like: Tensor) -> Tensor | None:
         spec = self.decoder.spec
-        if not spec.coat or self.z.shape[-1] != spec.code:
+        if not has_coat(spec, self.z):
             return None
         return coat_of(self.z[:1], spec.latent)[0].to(like.dtype)
 

@@ -19,6 +19,7 @@ from typing import Any, Callable
 
 import torch
 
+from nbrdf.neural.anisotropy import anisotropy_vector, geometric_alpha
 from nbrdf.neural.coat import NO_COAT
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, MEDIUM
@@ -91,6 +92,38 @@ class Stack:
     def is_anisotropic(self) -> bool:
         """Whether any interface or the base has a non-zero anisotropy (the rotation alone changes nothing)."""
         return any(t is not None and bool((t != 0).any()) for t in (self.anisotropy, self.base_anisotropy))
+
+    def isotropic_equivalent(self) -> tuple["Stack", Tensor, Tensor]:
+        """(stack, coat vectors (N, 2), body tails (N, 3)): this stack with each anisotropic alpha replaced
+        by its geometric mean (what the leaf encoders and the layering network see), and the anisotropy
+        vectors of a code's tail (``neural.anisotropy``): the coat's (the top interface's, as ``coat``) and
+        the body's, that of the highest anisotropic interface below the coat (a documented
+        approximation, docs/decisions/116), with that interface's geometric-mean alpha (its masking)."""
+        n, dtype = self.n, self.roughness.dtype
+        rot = self.rotation if self.rotation is not None else torch.zeros(n, dtype=dtype)
+        a_l = self.anisotropy if self.anisotropy is not None else torch.zeros_like(self.roughness)
+        a_b = self.base_anisotropy if self.base_anisotropy is not None else torch.zeros(n, dtype=dtype)
+        changes: dict[str, Any] = {"roughness": geometric_alpha(self.roughness, a_l),
+                                   "anisotropy": torch.zeros_like(a_l), "base_anisotropy": torch.zeros_like(a_b)}
+        if self.base_roughness is not None:
+            changes["base_roughness"] = geometric_alpha(self.base_roughness, a_b)
+        below = [a_l[:, j] for j in range(1, self.layers)] + [a_b]  # under the coat, top down
+        if self.layers:
+            coat_a = a_l[:, 0]
+        else:  # a bare dielectric is all coat; any other base is all body
+            coat_a = a_b if self.base == DIELECTRIC else torch.zeros(n, dtype=dtype)
+            below = [torch.zeros(n, dtype=dtype)] if self.base == DIELECTRIC else [a_b]
+        r_l = changes["roughness"]
+        alphas_below = [r_l[:, j] for j in range(1, self.layers)] + [changes.get("base_roughness", NO_COAT[0] * torch.ones(n, dtype=dtype))]
+        if not self.layers:
+            alphas_below = alphas_below[-1:]
+        body_a = torch.zeros(n, dtype=dtype)
+        body_alpha = torch.full((n,), NO_COAT[0], dtype=dtype)
+        for col, alpha in zip(reversed(below), reversed(alphas_below)):  # the highest non-zero one wins
+            body_a = torch.where(col != 0, col, body_a)
+            body_alpha = torch.where(col != 0, alpha.to(dtype), body_alpha)
+        return (replace(self, **changes), anisotropy_vector(coat_a, rot).to(dtype),
+                torch.cat([anisotropy_vector(body_a, rot).to(dtype), body_alpha[:, None]], -1))
 
     @property
     def n(self) -> int:

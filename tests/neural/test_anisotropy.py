@@ -1,7 +1,7 @@
 """Anisotropic interfaces in the material schema, the stack and the paths that refuse them (SPEC section 10):
 ``anisotropy`` on dielectric and conductor layers, the material's ``anisotropy_rotation``, their one-line
 errors, the files an isotropic material writes (unchanged), and the one-line refusal of every consumer that
-cannot take anisotropy yet (the neural leaf encoders and layering, the projection and refinement onto the
+cannot take anisotropy yet (the projection and refinement onto the
 decoder's isotropic latents, the closed-form GLSL shader, Belcour, the analytic layering, the Mitsuba plugin)."""
 from __future__ import annotations
 
@@ -105,16 +105,11 @@ def test_the_reference_takes_anisotropy_where_the_others_refuse_it_in_one_line()
                        (check_refinable, "the refinement of a neural code")):
         with pytest.raises(NbrdfError, match=rf"^layers\[2\]\.anisotropy: anisotropy is not yet supported by {path}$"):
             call(coated)
-    with pytest.raises(NbrdfError, match="^anisotropy is not yet supported by the neural leaf encoders and layering"):
-        layered_latents(None, None, material_stack(coated))
+    with pytest.raises(NbrdfError, match="^a conductor base needs the leaf encoders$"):
+        layered_latents(None, None, material_stack(coated))  # the neural path takes it (its isotropic equivalent)
 
 
-def test_the_neural_model_and_the_mitsuba_plugin_refuse_an_anisotropic_material(tmp_path):
-    from nbrdf.neural.model import NEURAL_PATH, NeuralModel
-
-    coated = parse_material(_doc(dict(COAT, anisotropy=0.4), MEDIUM, METAL))
-    with pytest.raises(NbrdfError, match=rf"^layers\[0\]\.anisotropy: anisotropy is not yet supported by {NEURAL_PATH}$"):
-        NeuralModel.stack_latents(None, coated)  # refused before any network is needed
+def test_the_mitsuba_plugin_refuses_an_anisotropic_material(tmp_path):
     mitsuba = pytest.importorskip("nbrdf.mitsuba.materials", exc_type=ImportError)
     path = tmp_path / "m.json"
     path.write_text(json.dumps(_doc(COAT, MEDIUM, dict(METAL, anisotropy=0.4))))
