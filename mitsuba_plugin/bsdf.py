@@ -9,6 +9,12 @@ through numpy, so it needs Dr.Jit's evaluated mode (``wavefront_mode``).
 Mitsuba's conventions: ``si.wi`` is the project's ``wo`` (toward the
 viewer), the queried direction is the project's ``wi`` (toward the light);
 ``eval`` returns f(wi, wo) cos(theta_i). Both are one-sided reflection BSDFs.
+The directions are in the hit's shading frame ``si.sh_frame``, which is SPEC
+section 10's frame: its normal is z and its tangent ``s`` the material's x
+axis, which an anisotropic material's ``anisotropy_rotation`` turns
+counter-clockwise about the normal. Mitsuba's ``s`` is dp/du on a shape with
+a uv parameterisation (a brush stroke follows u there), an arbitrary tangent
+on a mesh without uvs.
 
 What a material file builds (the kernel, the normal map, the walk) comes
 from ``materials``, which needs torch: it loads with the first material.
@@ -43,7 +49,9 @@ class NbrdfBSDF(mi.BSDF):
     not depend on the body). ``pixel_angle`` (texture-mapped materials) is the camera's angle per pixel,
     whose ray cone picks the latent texture's (and the normal map's) mip level
     per hit (0: the finest). A material JSON's ``normal_map`` bends the shading
-    frame per hit (``normal_map.py``)."""
+    frame per hit (``normal_map.py``). A uniform material may be anisotropic,
+    its x axis ``si.sh_frame.s`` (module docstring); a texture-mapped one may
+    not (one line)."""
 
     def __init__(self, props):
         from nbrdf.mitsuba.materials import code_kernel, material_normal_map  # start-up: torch loads with a material
@@ -116,8 +124,9 @@ class NbrdfBSDF(mi.BSDF):
             return (f"NbrdfBSDF[material={self.path!r}, latent texture {self.kernel.texture.size}, "
                     f"pixel_angle {self.kernel.pixel_angle:g}, proxy=(sigma {p.sigma:g}, w {p.w:g})]")
         nmap = "" if self.normal_map is None else f", normal_map={self.normal_map.path!r}"
+        aniso = "" if c.stretch is None else ", anisotropic"
         return (f"NbrdfBSDF[material={self.path!r}, body={self.body}, coat=(roughness {c.roughness:g}, ior {c.ior:g}), "
-                f"proxy=(sigma {p.sigma:g}, w {p.w:g}){nmap}]")
+                f"proxy=(sigma {p.sigma:g}, w {p.w:g}){aniso}{nmap}]")
 
 
 # --- the Monte Carlo reference ------------------------------------------------------------
@@ -154,7 +163,8 @@ class NbrdfReferenceBSDF(mi.BSDF):
     A texture-mapped material gets its layer stack per hit from its maps at
     the hit's uv (``textures.ParamMaps``); a ``normal_map`` bends the shading
     frame per hit as in ``nbrdf`` (its finest level: the ground truth is not
-    filtered)."""
+    filtered). A uniform material may be anisotropic, in the frame ``nbrdf``
+    uses (module docstring)."""
 
     def __init__(self, props):
         from nbrdf.mitsuba.materials import ReferenceWalk, material_normal_map  # start-up: torch loads with a material

@@ -1,11 +1,16 @@
 """A material code's BRDF in Dr.Jit: the same arithmetic as the torch path
-(``neural.coat``, ``neural.microfacet``, ``neural.decoder``, ``neural.sampling``),
-written over Dr.Jit arrays so it runs inside Mitsuba's rendering kernel.
+(``neural.coat``, ``neural.microfacet``, ``neural.decoder``, ``neural.sampling``,
+``neural.anisotropy``), written over Dr.Jit arrays so it runs inside Mitsuba's
+rendering kernel.
 
 The decoder runs through ``drjit.nn`` (cooperative vectors: vectorised on the
 CPU, tensor cores on NVIDIA GPUs); the latent's share of the first layer is a
 per-channel bias computed once per material. Directions are in the local
-frame (z the normal); ``wi`` and ``wo`` are the project's (light, viewer).
+frame (z the normal, x the material's tangent before its ``anisotropy_rotation``);
+``wi`` and ``wo`` are the project's (light, viewer). A code with an anisotropic
+tail has an anisotropic coat (``Coat.stretch``) and a body read at the warped
+pair times its factor J (``BodyWarp``); an isotropic code runs the isotropic
+arithmetic unchanged.
 Every function reads the array types of the Mitsuba variant in force.
 No torch here: ``materials`` builds these kernels from the torch network.
 """
@@ -45,6 +50,11 @@ def _sq(x):
     return x * x
 
 
+def _turn(w, c: float, s: float):
+    """w in the frame turned by (cos, sin) about z (``neural.anisotropy.in_frame``); (c, -s) turns back."""
+    return mi.Vector3f(c * w.x + s * w.y, c * w.y - s * w.x, w.z)
+
+
 # --- GGX and Fresnel (neural.microfacet) --------------------------------------------------
 def fresnel_dielectric(cos_i, eta: float):
     """Exact unpolarised Fresnel reflectance; 1 under total internal reflection."""
@@ -56,25 +66,33 @@ def fresnel_dielectric(cos_i, eta: float):
     return dr.select(sin2_t >= 1.0, 1.0, 0.5 * (rs * rs + rp * rp))
 
 
-def ggx_d(m, alpha: float):
+def ggx_d(m, alpha: float, alpha_y: float | None = None):
+    """GGX's D; with ``alpha_y`` the anisotropic D of alpha along x and alpha_y along y."""
+    if alpha_y is not None:
+        s = _sq(m.x) / (alpha * alpha) + _sq(m.y) / (alpha_y * alpha_y) + _sq(m.z)
+        return dr.select(m.z > 0, 1.0 / (math.pi * alpha * alpha_y * s * s), 0.0)
     a2 = alpha * alpha
     denom = _sq(m.x) + _sq(m.y) + _sq(m.z) * a2
     return dr.select(m.z > 0, a2 / (math.pi * denom * denom), 0.0)
 
 
-def _g1_dir(w, alpha: float):
+def _g1_dir(w, alpha: float, alpha_y: float | None = None):
+    if alpha_y is not None:
+        a2_tan2 = (alpha * alpha * _sq(w.x) + alpha_y * alpha_y * _sq(w.y)) / dr.maximum(_sq(w.z), 1e-30)
+        return 2.0 / (1.0 + dr.sqrt(1.0 + a2_tan2))
     tan2 = (_sq(w.x) + _sq(w.y)) / dr.maximum(_sq(w.z), 1e-30)
     return 2.0 / (1.0 + dr.sqrt(1.0 + alpha * alpha * tan2))
 
 
-def smith_g1(w, m, alpha: float):
-    return dr.select(dr.dot(w, m) * w.z > 0, _g1_dir(w, alpha), 0.0)
+def smith_g1(w, m, alpha: float, alpha_y: float | None = None):
+    return dr.select(dr.dot(w, m) * w.z > 0, _g1_dir(w, alpha, alpha_y), 0.0)
 
 
-def sample_vndf(w, alpha: float, u1, u2):
-    """Heitz 2018's visible-normal sample, w mirrored to the upper hemisphere."""
+def sample_vndf(w, alpha: float, u1, u2, alpha_y: float | None = None):
+    """Heitz 2018's visible-normal sample, w mirrored to the upper hemisphere; ``alpha_y``: anisotropic."""
     sgn = dr.select(w.z < 0, -1.0, 1.0)
-    v = _normalize(mi.Vector3f(alpha * w.x * sgn, alpha * w.y * sgn, w.z * sgn), 1e-15)
+    ay = alpha if alpha_y is None else alpha_y
+    v = _normalize(mi.Vector3f(alpha * w.x * sgn, ay * w.y * sgn, w.z * sgn), 1e-15)
     lensq = _sq(v.x) + _sq(v.y)
     safe = lensq > 1e-14
     il = dr.rsqrt(dr.select(safe, lensq, 1.0))
@@ -87,15 +105,16 @@ def sample_vndf(w, alpha: float, u1, u2):
     s = 0.5 * (1.0 + v.z)
     p2 = (1.0 - s) * dr.sqrt(dr.maximum(1.0 - p1 * p1, 0.0)) + s * p2
     p3 = dr.sqrt(dr.maximum(1.0 - p1 * p1 - p2 * p2, 0.0))
-    m = mi.Vector3f(alpha * (p1 * t1x + p2 * t2x + p3 * v.x), alpha * (p1 * t1y + p2 * t2y + p3 * v.y),
+    m = mi.Vector3f(alpha * (p1 * t1x + p2 * t2x + p3 * v.x), ay * (p1 * t1y + p2 * t2y + p3 * v.y),
                     dr.maximum(p2 * t2z + p3 * v.z, 1e-12))
     return dr.normalize(m)
 
 
-def vndf_pdf(w, m, alpha: float):
+def vndf_pdf(w, m, alpha: float, alpha_y: float | None = None):
     wu = w * dr.select(w.z < 0, -1.0, 1.0)
     wm = dr.dot(wu, m)
-    pdf = _g1_dir(wu, alpha) * dr.maximum(wm, 0.0) * ggx_d(m, alpha) / dr.maximum(dr.abs(wu.z), 1e-30)
+    pdf = (_g1_dir(wu, alpha, alpha_y) * dr.maximum(wm, 0.0) * ggx_d(m, alpha, alpha_y)
+           / dr.maximum(dr.abs(wu.z), 1e-30))
     return dr.select(wm > 0, pdf, 0.0)
 
 
@@ -107,31 +126,53 @@ def reflect(w, m):
 @dataclass(frozen=True)
 class Coat:
     """A code's clear coat, already clamped to its legal range; ior 1: none.
-    Floats for a uniform material, per-lane arrays for a textured one."""
+    Floats for a uniform material, per-lane arrays for a textured one.
+    ``stretch``: (k, cos rho, sin rho) of the coat's anisotropy vector, a code
+    with an anisotropic tail's (``neural.anisotropy.stretch``): anisotropic GGX
+    of alpha_x = roughness / k, alpha_y = roughness k in the tangent frame
+    turned by rho (``neural.coat``); None: the isotropic coat."""
 
     roughness: float
     ior: float
+    stretch: tuple[float, float, float] | None = None
 
     @property
     def present(self) -> bool:
         """Whether any lane may have a coat (per-lane arrays: always)."""
         return self.ior > 1.0 + 1e-4 if isinstance(self.ior, (int, float)) else True
 
+    def _frame(self) -> tuple[float, float | None, float, float]:
+        """(alpha_x, alpha_y or None, cos rho, sin rho): an isotropic coat keeps its alpha and frame."""
+        if self.stretch is None:
+            return self.roughness, None, 1.0, 0.0
+        k, c, s = self.stretch
+        return self.roughness / k, self.roughness * k, c, s
+
     def eval(self, wi, wo):
         """The coat's reflection in 1/sr (no cosine)."""
-        a, eta = self.roughness, self.ior
+        a, ay, c, s = self._frame()
+        if ay is not None:
+            wi, wo = _turn(wi, c, s), _turn(wo, c, s)
+        eta = self.ior
         h = _normalize(wi + wo, 1e-30)
-        f = (fresnel_dielectric(dr.dot(wi, h), eta) * ggx_d(h, a) * smith_g1(wi, h, a) * smith_g1(wo, h, a)
-             / dr.maximum(4.0 * wi.z * wo.z, 1e-30))
+        f = (fresnel_dielectric(dr.dot(wi, h), eta) * ggx_d(h, a, ay) * smith_g1(wi, h, a, ay)
+             * smith_g1(wo, h, a, ay) / dr.maximum(4.0 * wi.z * wo.z, 1e-30))
         return dr.select((wi.z > 0) & (wo.z > 0) & (eta > 1.0), f, 0.0)
 
     def pdf(self, w, w_other):
+        a, ay, c, s = self._frame()
+        if ay is not None:
+            w, w_other = _turn(w, c, s), _turn(w_other, c, s)
         h = _normalize(w + w_other, 1e-30)
-        p = vndf_pdf(w, h, self.roughness) / (4.0 * dr.maximum(dr.abs(dr.dot(w, h)), 1e-30))
+        p = vndf_pdf(w, h, a, ay) / (4.0 * dr.maximum(dr.abs(dr.dot(w, h)), 1e-30))
         return dr.select((w.z > 0) & (w_other.z > 0), p, 0.0)
 
     def sample(self, w, u1, u2):
-        return reflect(w, sample_vndf(w, self.roughness, u1, u2))
+        a, ay, c, s = self._frame()
+        if ay is None:
+            return reflect(w, sample_vndf(w, a, u1, u2))
+        wf = _turn(w, c, s)
+        return _turn(reflect(wf, sample_vndf(wf, a, u1, u2, ay)), c, -s)
 
     def probability(self, w):
         """Share of samples given to the coat at incidence w (``neural.coat.coat_probability``)."""
@@ -139,6 +180,61 @@ class Coat:
             return mi.Float(0.0)
         p = dr.clip(dr.sqrt(fresnel_dielectric(dr.clip(w.z, 0.0, 1.0), self.ior)), 0.05, 0.95)
         return p if isinstance(self.ior, (int, float)) else dr.select(self.ior > 1.0 + 1e-4, p, 0.0)
+
+
+# --- an anisotropic body (neural.anisotropy) ---------------------------------------------
+def _inside(w, eta: float):
+    """w refracted through a smooth interface of relative ior ``eta`` (the coat's)."""
+    tx, ty = w.x / eta, w.y / eta
+    return mi.Vector3f(tx, ty, dr.sqrt(dr.maximum(1.0 - tx * tx - ty * ty, 0.0)))
+
+
+@dataclass(frozen=True)
+class BodyWarp:
+    """The body's part of an anisotropic code's tail: the decoder (or its table) reads the body at the
+    warped pair (``neural.anisotropy.warp_pair``) and its value takes the factor J
+    (``neural.anisotropy.body_pair``), the same arithmetic in Dr.Jit. For a body with anisotropy only
+    (k < 1): at k = 1 the torch path leaves the pair unchanged and J = 1 exactly, as no warp does."""
+
+    stretch: tuple[float, float, float]
+    """(k, cos rho, sin rho) of the body's anisotropy vector (``neural.anisotropy.stretch``)"""
+    alpha: float
+    """the body's masking alpha, clamped to [0.005, 1] as ``body_pair`` does"""
+    eta: float
+    """the code's coat ior, at least 1 (1: no coat)"""
+
+    def warp(self, wi, wo) -> tuple:
+        """The pair turned about its half vector's plane so that h becomes the stretched h'."""
+        k, c, s = self.stretch
+        h = _normalize(wi + wo, 1e-30)
+        hf = _turn(h, c, s)  # h in the tangent frame
+        hp = _normalize(_turn(mi.Vector3f(k * hf.x, hf.y / k, hf.z), c, -s), 1e-30)
+        n = dr.cross(h, hp)  # |n| = sin of the turn
+        cos = dr.dot(h, hp)
+
+        def rot(w):
+            return w * cos + dr.cross(n, w) + n * dr.dot(n, w) / dr.maximum(1.0 + cos, 1e-12)
+
+        return rot(wi), rot(wo)
+
+    def pair(self, wi, wo) -> tuple:
+        """(wi', wo', J): the warped pair and the factor the body's value takes there; J is 0 where
+        the warp turns a direction below the horizon."""
+        wi2, wo2 = self.warp(wi, wo)
+        h, hp = wi + wo, wi2 + wo2
+        hz = h.z / dr.maximum(dr.norm(h), 1e-30)
+        hpz = hp.z / dr.maximum(dr.norm(hp), 1e-30)
+        r = hpz / dr.maximum(hz, 1e-12)
+        cc = dr.maximum(wi2.z * wo2.z, 0.0) / dr.maximum(wi.z * wo.z, 1e-12)
+        j = (r * r) * (r * r) * cc
+        k, c, s = self.stretch
+        a0, eta = self.alpha, self.eta
+        ax, ay = a0 / k, a0 * k
+        aniso = (_g1_dir(_turn(_inside(wi, eta), c, s), ax, ay)
+                 * _g1_dir(_turn(_inside(wo, eta), c, s), ax, ay))
+        iso = _g1_dir(_inside(wi2, eta), a0) * _g1_dir(_inside(wo2, eta), a0)
+        j = j * aniso / dr.maximum(iso, 1e-12)
+        return wi2, wo2, dr.select((wi2.z > 0) & (wo2.z > 0), j, 0.0)
 
 
 # --- the body's proxy pdf (neural.sampling) ----------------------------------------------
@@ -321,9 +417,18 @@ class CodeKernel:
     #: Whether the body varies over the surface (looked up per hit by uv).
     textured = False
 
-    def __init__(self, decoder: "DecoderKernel | TableBody", coat: Coat, proxy: Proxy):
-        """``decoder``: what gives the body (``DecoderKernel`` or ``TableBody``)."""
-        self.decoder, self.coat, self.proxy = decoder, coat, proxy
+    def __init__(self, decoder: "DecoderKernel | TableBody", coat: Coat, proxy: Proxy, warp: BodyWarp | None = None):
+        """``decoder``: what gives the body (``DecoderKernel`` or ``TableBody``); ``warp``: an
+        anisotropic body's (``BodyWarp``), which either body is read through; None: isotropic."""
+        self.decoder, self.coat, self.proxy, self.warp = decoder, coat, proxy, warp
+
+    def body(self, wi, wo, shares: list | None) -> list:
+        """[f_r, f_g, f_b] of the body (1/sr), at the warped pair times J for an anisotropic one."""
+        if self.warp is None:
+            return self.decoder.body(wi, wo, shares)
+        bi, bo, j = self.warp.pair(wi, wo)
+        up = (wi.z > 0) & (wo.z > 0)
+        return [dr.select(up, f * j, 0.0) for f in self.decoder.body(bi, bo, shares)]
 
     def at(self, si) -> tuple[list | None, Coat]:
         """(per-lane latent shares or None, the coat) at the hit ``si``."""
@@ -332,7 +437,7 @@ class CodeKernel:
     def eval(self, wi, wo, si=None):
         """RGB f(wi, wo) as a ``mi.Color3f`` (no cosine)."""
         shares, coat = self.at(si)
-        r, g, b = self.decoder.body(wi, wo, shares)
+        r, g, b = self.body(wi, wo, shares)
         if coat.present:
             c = coat.eval(wi, wo)
             r, g, b = r + c, g + c, b + c

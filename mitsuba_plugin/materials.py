@@ -16,13 +16,13 @@ import numpy as np
 import torch
 
 from nbrdf.mitsuba.errors import PluginError
-from nbrdf.mitsuba.kernel import Body, Coat, CodeKernel, DecoderKernel, Proxy, TableBody, TexturedCodeKernel
+from nbrdf.mitsuba.kernel import Body, BodyWarp, Coat, CodeKernel, DecoderKernel, Proxy, TableBody, TexturedCodeKernel
 from nbrdf.mitsuba.normal_map import NormalMapKernel
 from nbrdf.mitsuba.param_table import param_table_kernel
 from nbrdf.mitsuba.textures import LatentTextureKernel, ParamMaps, sharpest_top_roughness
-from nbrdf.neural.anisotropy import require_isotropic
+from nbrdf.neural.anisotropy import body_tail, require_isotropic, stretch
 from nbrdf.neural.body_table import TableSize, bake_body
-from nbrdf.neural.coat import IOR_RANGE, NO_COAT, ROUGHNESS_RANGE
+from nbrdf.neural.coat import IOR_RANGE, NO_COAT, ROUGHNESS_RANGE, coat_of
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import LatentBase, Measured, is_material_file, load_material
 from nbrdf.neural.material_code import code_parts, load_code
@@ -55,9 +55,32 @@ def table_body(decoder, code, size: TableSize = BODY_TABLE_SIZE) -> TableBody:
     return TableBody(bake_body(decoder, code, size).numpy())
 
 
-#: How the plugin names itself when it refuses an anisotropic material (Mitsuba's shading frame is not
-#: SPEC section 10's tangent frame yet).
-PLUGIN_PATH = "the Mitsuba plugin"
+#: How the plugins name what refuses an anisotropic material: a texture-mapped one (its latent texture, its
+#: parametric table and its per-hit walk keep isotropic layers; a uniform material takes anisotropy).
+TEXTURED_PATH = "the Mitsuba plugins' texture-mapped materials"
+
+
+def _stretch(v: torch.Tensor) -> tuple[float, float, float]:
+    """(k, cos rho, sin rho) of an anisotropy vector (2,) (``neural.anisotropy.stretch``) as floats."""
+    k, c, s = stretch(v)
+    return float(k), float(c), float(s)
+
+
+def _code_terms(model, code: torch.Tensor) -> tuple[Coat, Proxy, BodyWarp | None]:
+    """(coat, proxy, body warp) of a uniform material's code (3, 34), or (3, 39) with an anisotropic tail
+    (``neural.anisotropy``): its coat anisotropic GGX, its body read through a ``BodyWarp`` unless the
+    body's anisotropy is 0 (None, as for an isotropic code: the torch path's pair and J = 1 exactly)."""
+    spec = model.decoder.spec
+    tail = body_tail(code, spec.code) if spec.coat else None
+    (r, ior), (sigma, w) = code_parts(model, code if tail is None else code[:, :spec.code])
+    proxy = Proxy(float(sigma), float(w))
+    if tail is None:
+        return Coat(float(r), float(ior)), proxy, None
+    coat = coat_of(code[0], spec.latent)  # roughness, ior, the coat's anisotropy vector
+    body = _stretch(tail[0, :2])
+    warp = None if body[0] == 1.0 else BodyWarp(body, float(tail[0, 2].clamp(0.005, 1.0)),
+                                                float(coat[1].clamp_min(1.0)))
+    return Coat(float(r), float(ior), _stretch(coat[2:4])), proxy, warp
 
 
 def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 0.0,
@@ -68,24 +91,26 @@ def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 
     ``body`` (a ``Body`` word): ``"decoder"`` (the decoder per query) or
     ``"table"`` (the body baked once into a table: ``TableBody`` for a
     uniform material, a parametric table over its (at most two) mapped
-    albedos for a texture-mapped one, ``param_table``)."""
+    albedos for a texture-mapped one, ``param_table``). A uniform material
+    may be anisotropic (SPEC section 10: its tangent is the local frame's x,
+    ``_code_terms``); a texture-mapped one may not (one line)."""
     if body not in Body.words():
         raise PluginError(f'nbrdf: body {body!r} is not one of {", ".join(map(repr, Body.words()))}')
     try:
         if is_material_file(material):
             m = load_material(material)
-            require_isotropic(m, PLUGIN_PATH)
             if m.is_textured:
+                require_isotropic(m, TEXTURED_PATH)
                 model = load_model(weights) if weights else default_model()
                 if body == Body.TABLE:
                     return param_table_kernel(m, model, pixel_angle)
                 return _textured_kernel(m, model, pixel_angle)
         model, code = load_code(material, weights)
-        (r, ior), (sigma, w) = code_parts(model, code)
+        coat, proxy, warp = _code_terms(model, code)
         decoder = table_body(model.decoder, code) if body == Body.TABLE else decoder_kernel(model.decoder, code)
     except (NbrdfError, ValueError) as e:
         raise PluginError(f"nbrdf: {e}") from None
-    return CodeKernel(decoder, Coat(float(r), float(ior)), Proxy(float(sigma), float(w)))
+    return CodeKernel(decoder, coat, proxy, warp)
 
 
 def _textured_kernel(material, model, pixel_angle: float) -> TexturedCodeKernel:
@@ -128,14 +153,17 @@ class ReferenceWalk:
     project's directions, (N, 3) float32): a fresh estimate of f per call
     (``spp`` walk paths per lane, a new seed each call) and the walk's
     sampler. A texture-mapped material gets its layer stack per hit from its
-    maps at the hits' uv (``textures.ParamMaps``)."""
+    maps at the hits' uv (``textures.ParamMaps``). A uniform material may be
+    anisotropic (the walk takes it in the local frame, x its tangent; the
+    defensive sampler stays isotropic, and unbiased); a texture-mapped one may
+    not (``TEXTURED_PATH``)."""
 
     def __init__(self, path: str, spp: int, seed: int = 0):
         """Loads the material (``PluginError``: one line, unusable)."""
         try:
             self.material = load_material(path)
-            require_isotropic(self.material, PLUGIN_PATH)
             if self.material.is_textured:
+                require_isotropic(self.material, TEXTURED_PATH)
                 self.maps, self.sampler = _texture_reference(self.material)
             else:
                 self.maps, self.sampler = None, ReferenceBRDF(self.material, spp=spp).sampler

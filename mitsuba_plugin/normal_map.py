@@ -55,10 +55,10 @@ class NormalMapKernel:
         return dr.select(nv < MIN_COS, pulled, n)
 
     def frame(self, si, pixel_angle: float = 0.0) -> mi.Frame3f:
-        """The bent shading frame, in ``si``'s local coordinates. The BSDFs are
-        isotropic, so any tangent would do; Mitsuba's ``normalmap`` takes the
-        unperturbed tangent made perpendicular, and so does this (the same
-        random numbers then sample the same directions)."""
+        """The bent shading frame, in ``si``'s local coordinates: its tangent is
+        the unperturbed one made perpendicular to the bent normal (an anisotropic
+        material's x axis), as Mitsuba's ``normalmap`` takes it (the same random
+        numbers then sample the same directions)."""
         n = self.normal(si, pixel_angle)
         s = dr.normalize(mi.Vector3f(1.0 - n.x * n.x, -n.x * n.y, -n.x * n.z))
         return mi.Frame3f(s, dr.cross(n, s), n)

@@ -111,6 +111,15 @@ def body_tail(code: Tensor, iso_size: int) -> Tensor | None:
     return code[..., iso_size + 2:iso_size + 5]
 
 
+def code_tail(code: Tensor, iso_size: int) -> dict[str, object]:
+    """The GPU's uniforms of a code's tail (one material code (3, n)): ``u_aniso`` (the coat's and the
+    body's anisotropy vectors) and ``u_body_alpha``; empty for a code without a tail."""
+    if code.shape[-1] != iso_size + FRAME_PARAMS:
+        return {}
+    t = [float(x) for x in code.reshape(-1, code.shape[-1])[0, iso_size:iso_size + FRAME_PARAMS]]
+    return {"u_aniso": tuple(t[:4]), "u_body_alpha": t[4]}
+
+
 def warp_pair(v: Tensor, wi: Tensor, wo: Tensor) -> tuple[Tensor, Tensor]:
     """The pair (wi, wo) turned about their half vector's plane so that h becomes the stretched h'
     (module docstring): what the isotropic decoder sees of an anisotropic body. v (..., 2) broadcasts

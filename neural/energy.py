@@ -118,7 +118,9 @@ def _directions(code: Tensor, decoder: Decoder, sigma: float, w: float, s: Energ
     u = torch.quasirandom.SobolEngine(3, scramble=True, seed=s.seed).draw(n).float().repeat(base.shape[0], 1)
     coat = coat_of(code0[:1], spec.latent)[0].float() if has_coat(spec, code0) else None
     with torch.no_grad():
-        wo, pdf = coated_sample(wi, u, coat, torch.tensor(float(sigma)), torch.tensor(float(w)))
+        tail0 = body_tail(code0[:1].float(), spec.code) if spec.coat else None
+        wo, pdf = coated_sample(wi, u, coat, torch.tensor(float(sigma)), torch.tensor(float(w)),
+                                None if tail0 is None else tail0[0, :2])
         ok = (wo[:, 2] > 0) & (pdf > 0) & torch.isfinite(pdf)
         weight = torch.where(ok, wo[:, 2].clamp_min(0) / torch.where(ok, pdf, torch.ones_like(pdf)),
                              torch.zeros_like(pdf))

@@ -22,6 +22,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from nbrdf.neural.anisotropy import FRAME_PARAMS
 from nbrdf.neural.decoder import ENCODINGS, LOBE_ALPHAS, LOBE_IOR, Decoder, DecoderSpec
 from nbrdf.neural.errors import NbrdfError
 
@@ -183,8 +184,9 @@ def pack(dec: Decoder) -> PackedDecoder:
 def latent_share(dec: Decoder, z: torch.Tensor) -> np.ndarray:
     """The per-material share of layer 1 for a (3, 34) code (or a bare (3, 32)
     latent), laid out as the shader reads it: float32 (width, 3), unit-major,
-    channels RGB. The code's coat goes to ``u_coat``, not here."""
-    if z.dim() != 2 or z.shape[0] != 3 or z.shape[1] not in (dec.spec.latent, dec.spec.code):
+    channels RGB. The code's coat goes to ``u_coat`` and its anisotropic tail to ``u_aniso``, not here."""
+    if z.dim() != 2 or z.shape[0] != 3 or z.shape[1] not in (dec.spec.latent, dec.spec.code,
+                                                               dec.spec.code + FRAME_PARAMS):
         raise NbrdfError(f"a material code must have shape (3, {dec.spec.code}), got {tuple(z.shape)}")
     with torch.no_grad():
         return dec.latent_share(z.float()).T.contiguous().numpy().astype(np.float32)

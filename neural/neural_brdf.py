@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import torch
 
+from nbrdf.neural.anisotropy import body_tail
 from nbrdf.neural.brdf import ExactRGB, Sample
 from nbrdf.neural.coat import coat_of, has_coat
 from nbrdf.neural.decoder import Decoder
@@ -36,14 +37,19 @@ class _CodeSampler:
             return None
         return coat_of(self.z[:1], spec.latent)[0].to(like.dtype)
 
+    def _body_vector(self, like: Tensor) -> Tensor | None:
+        """An anisotropic body's vector (its proxy is stretched with it), None for an isotropic code."""
+        tail = body_tail(self.z[:1], self.decoder.spec.code) if self.decoder.spec.coat else None
+        return None if tail is None else tail[0, :2].to(like.dtype)
+
     def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
         s, lam = torch.tensor(self.sigma, dtype=w.dtype), torch.tensor(self.w, dtype=w.dtype)
-        p = coated_pdf(w, w_other, self._coat(w), s, lam)
+        p = coated_pdf(w, w_other, self._coat(w), s, lam, self._body_vector(w))
         return torch.where((w[:, 2] > 0) & (w_other[:, 2] > 0), p, torch.zeros_like(p))
 
     def _draw(self, w: Tensor, u: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         s, lam = torch.tensor(self.sigma, dtype=w.dtype), torch.tensor(self.w, dtype=w.dtype)
-        wo, pdf = coated_sample(w, u, self._coat(w), s, lam)
+        wo, pdf = coated_sample(w, u, self._coat(w), s, lam, self._body_vector(w))
         ok = (wo[:, 2] > 0) & (w[:, 2] > 0)
         return wo, torch.where(ok, pdf, torch.zeros_like(pdf)), ok
 

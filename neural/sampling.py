@@ -19,6 +19,7 @@ import math
 import torch
 from torch import nn
 
+from nbrdf.neural.anisotropy import from_tangent_frame, in_frame, stretch
 from nbrdf.neural.coat import coat_pdf, coat_probability, coat_sample
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.nets import MLP, MLPSpec
@@ -61,28 +62,48 @@ def _disk_norm(sigma: Tensor) -> Tensor:
     return 2 * math.pi * sigma * sigma * -torch.expm1(-0.5 / (sigma * sigma))
 
 
-def gaussian_pdf(wi: Tensor, wo: Tensor, sigma: Tensor) -> Tensor:
-    """Solid-angle pdf of wo under the half-vector Gaussian, over the sphere."""
+def _stretched(h: Tensor, v: Tensor, inverse: bool = False) -> Tensor:
+    """Unit half vectors stretched as an anisotropic body's (``neural.anisotropy``: h' ~ (k h_x, h_y / k, h_z)
+    in the tangent frame of the anisotropy vector v); ``inverse``: the stretch undone."""
+    k, c, s = stretch(v.to(h.dtype))
+    if inverse:
+        k = 1.0 / k
+    hf = in_frame(h, c, s)
+    out = from_tangent_frame(torch.stack([k * hf[..., 0], hf[..., 1] / k, hf[..., 2]], -1), c, s)
+    return out / out.norm(dim=-1, keepdim=True).clamp_min(1e-30)
+
+
+def gaussian_pdf(wi: Tensor, wo: Tensor, sigma: Tensor, v: Tensor | None = None) -> Tensor:
+    """Solid-angle pdf of wo under the half-vector Gaussian, over the sphere. ``v``: an anisotropic
+    body's vector; the Gaussian is then over the stretched half vector h' (the body's lobe is round
+    there), times the Jacobian (h'_z / h_z)^3 of the stretch on the sphere."""
     h = wi + wo
     h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     h = torch.where(h[..., 2:3] < 0, -h, h)
-    r2 = h[..., 0] ** 2 + h[..., 1] ** 2
+    q, jac = h, None
+    if v is not None:
+        q = _stretched(h, v)
+        r = q[..., 2] / h[..., 2].clamp_min(1e-12)
+        jac = r * r * r
+    r2 = q[..., 0] ** 2 + q[..., 1] ** 2
     p_disk = torch.exp(-0.5 * r2 / (sigma * sigma)) / _disk_norm(sigma)
-    return p_disk * h[..., 2] / (4 * (wi * h).sum(-1).abs().clamp_min(1e-12))
+    p = p_disk * q[..., 2] / (4 * (wi * h).sum(-1).abs().clamp_min(1e-12))
+    return p if jac is None else p * jac
 
 
 def lambert_pdf(wo: Tensor) -> Tensor:
     return wo[..., 2].clamp_min(0) / math.pi
 
 
-def proxy_pdf(wi: Tensor, wo: Tensor, sigma: Tensor, w: Tensor) -> Tensor:
-    """The proxy's solid-angle pdf of wo given wi; sigma and w broadcast."""
-    return (1 - w) * gaussian_pdf(wi, wo, sigma) + w * lambert_pdf(wo)
+def proxy_pdf(wi: Tensor, wo: Tensor, sigma: Tensor, w: Tensor, v: Tensor | None = None) -> Tensor:
+    """The proxy's solid-angle pdf of wo given wi; sigma and w broadcast (``v``: ``gaussian_pdf``)."""
+    return (1 - w) * gaussian_pdf(wi, wo, sigma, v) + w * lambert_pdf(wo)
 
 
-def proxy_sample(wi: Tensor, u: Tensor, sigma: Tensor, w: Tensor) -> tuple[Tensor, Tensor]:
+def proxy_sample(wi: Tensor, u: Tensor, sigma: Tensor, w: Tensor, v: Tensor | None = None) -> tuple[Tensor, Tensor]:
     """wo (N, 3) drawn from the proxy with uniforms u (N, 3), and its pdf.
-    wo may point below the horizon (a failed sample for a BRDF)."""
+    wo may point below the horizon (a failed sample for a BRDF). ``v``: an anisotropic body's vector
+    (the Gaussian's half vector is drawn stretched, then unstretched)."""
     sigma = torch.as_tensor(sigma, dtype=wi.dtype).expand(wi.shape[0])
     w = torch.as_tensor(w, dtype=wi.dtype).expand(wi.shape[0])
     u0, u1, u2 = u[:, 0], u[:, 1], u[:, 2]
@@ -91,16 +112,20 @@ def proxy_sample(wi: Tensor, u: Tensor, sigma: Tensor, w: Tensor) -> tuple[Tenso
     trunc = -torch.expm1(-0.5 / (sigma * sigma))
     r = (sigma * torch.sqrt(-2 * torch.log1p(-u1 * trunc))).clamp(max=1.0)
     h = torch.stack([r * phi.cos(), r * phi.sin(), (1 - r * r).clamp_min(0).sqrt()], -1)
+    if v is not None:
+        h = _stretched(h, v, inverse=True)
     wo_g = 2 * (wi * h).sum(-1, keepdim=True) * h - wi
     wo = torch.where((u0 < w)[:, None], cosine_hemisphere(u1, u2), wo_g)
     wo = wo / wo.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    return wo, proxy_pdf(wi, wo, sigma, w)
+    return wo, proxy_pdf(wi, wo, sigma, w, v)
 
 
-def coated_pdf(wi: Tensor, wo: Tensor, coat: Tensor | None, sigma: Tensor, w: Tensor) -> Tensor:
+def coated_pdf(wi: Tensor, wo: Tensor, coat: Tensor | None, sigma: Tensor, w: Tensor,
+               v: Tensor | None = None) -> Tensor:
     """pdf of ``coated_sample``: the coat's visible-normal lobe with
-    probability ``neural.coat.coat_probability``, the body's proxy otherwise."""
-    p = proxy_pdf(wi, wo, sigma, w)
+    probability ``neural.coat.coat_probability``, the body's proxy otherwise
+    (``v``: an anisotropic body's vector, ``proxy_pdf``)."""
+    p = proxy_pdf(wi, wo, sigma, w, v)
     if coat is None:
         return p
 
@@ -108,21 +133,23 @@ def coated_pdf(wi: Tensor, wo: Tensor, coat: Tensor | None, sigma: Tensor, w: Te
     return pc * coat_pdf(coat, wi, wo) + (1 - pc) * p
 
 
-def coated_sample(wi: Tensor, u: Tensor, coat: Tensor | None, sigma: Tensor, w: Tensor) -> tuple[Tensor, Tensor]:
+def coated_sample(wi: Tensor, u: Tensor, coat: Tensor | None, sigma: Tensor, w: Tensor,
+                  v: Tensor | None = None) -> tuple[Tensor, Tensor]:
     """wo (N, 3) and its pdf for a material code: u[:, 0] picks the coat
     (below its probability) or the body's proxy, and is rescaled to stay
-    uniform for the proxy's own choice; u[:, 1:] draw the direction."""
+    uniform for the proxy's own choice; u[:, 1:] draw the direction
+    (``v``: an anisotropic body's vector, ``proxy_sample``)."""
     if coat is None:
-        return proxy_sample(wi, u, sigma, w)
+        return proxy_sample(wi, u, sigma, w, v)
 
     pc = coat_probability(coat, wi)
     on_coat = u[:, 0] < pc
     u_proxy = torch.cat([((u[:, :1] - pc[:, None]) / (1 - pc[:, None]).clamp_min(1e-6)).clamp(0, 1 - 1e-7),
                          u[:, 1:]], -1)
-    wo_p, _ = proxy_sample(wi, u_proxy, sigma, w)
+    wo_p, _ = proxy_sample(wi, u_proxy, sigma, w, v)
     wo_c = coat_sample(coat, wi, u[:, 1], u[:, 2])
     wo = torch.where(on_coat[:, None], wo_c, wo_p)
-    return wo, coated_pdf(wi, wo, coat, sigma, w)
+    return wo, coated_pdf(wi, wo, coat, sigma, w, v)
 
 
 def gndf(fn, n: int = 64, n_wi: int = 64, seed: int = 0) -> Tensor:

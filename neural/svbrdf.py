@@ -18,6 +18,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from nbrdf.neural.anisotropy import require_isotropic
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent_texture import LatentTexture
 from nbrdf.neural.material import Material, TextureRef
@@ -120,6 +121,7 @@ def latent_texture(model, material: Material, size: tuple[int, int] | None = Non
     coat roughness or ior becomes a texture channel of the codes), with its
     mip chain; the networks run ``chunk`` texels at a time (``progress(done, total)``
     after each)."""
+    require_isotropic(material, "latent textures")
     values = TextureValues(material, size)
     h, w = values.size
     out = torch.empty(values.count, 3, model.decoder.spec.code)

@@ -1,19 +1,20 @@
 """A GPU BRDF evaluated at given direction pairs (shaders/brdf_probe.frag):
-what the shaders compute for a ``GpuBrdf`` of a closed-form kind, pair by
-pair, to hold beside its Python model -- and its lit-pass lobe strategy."""
+what the shaders compute for a ``GpuBrdf`` of a uniform material (closed form,
+Belcour, the neural code's decoder or baked table), pair by pair, to hold beside
+its Python model -- and its lit-pass lobe strategy."""
 from __future__ import annotations
 
 import numpy as np
 
 from nbrdf.viewer.gpu.neural_gpu import probe_pass
-from nbrdf.viewer.gpu.pipeline import GpuBrdf
+from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf
 from nbrdf.viewer.gpu.programs import ProgramKey
 from nbrdf.viewer.gpu.renderer import Renderer
 
 
 def _run(renderer: Renderer, brdf: GpuBrdf, a: np.ndarray, b: np.ndarray, defines: dict | None) -> np.ndarray:
-    if brdf.neural:
-        raise ValueError("the BRDF probe takes closed-form kinds; the decoder has neural_gpu.probe_fragment")
+    if brdf.kind == BrdfKind.TEXTURED:
+        raise ValueError("the BRDF probe takes uniform materials; a latent texture has neural_gpu.probe_fragment")
     a, b = np.asarray(a, np.float32), np.asarray(b, np.float32)
     if a.shape != b.shape or a.ndim != 2 or a.shape[1] != 3:
         raise ValueError(f"the probe's inputs must both be (N, 3), got {a.shape} and {b.shape}")
@@ -24,7 +25,7 @@ def _run(renderer: Renderer, brdf: GpuBrdf, a: np.ndarray, b: np.ndarray, define
 
 
 def probe_brdf(renderer: Renderer, brdf: GpuBrdf, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-    """(N, 3) float32: the GLSL ``brdf(wi, wo)`` of ``brdf`` (not a neural kind) at N local pairs."""
+    """(N, 3) float32: the GLSL ``brdf(wi, wo)`` of ``brdf`` (a uniform material) at N local pairs."""
     return _run(renderer, brdf, wi, wo, None)[:, :3]
 
 

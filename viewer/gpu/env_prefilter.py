@@ -161,7 +161,8 @@ class EnvPrefilter:
         """Whether a draw of ``brdf`` in ``state`` on a mesh of sphere radius ``radius`` (None: not a
         sphere) reads the map (see the module's docstring)."""
         return (deferred and radius is not None and brdf is not None and brdf.kind == BrdfKind.TABLE
-                and brdf.normal_map is None and brdf.body_table is not None and bool(state.env_on))
+                and brdf.normal_map is None and brdf.body_table is not None and bool(state.env_on)
+                and not brdf.anisotropic)  # a map over normals holds an isotropic body only
 
     def key(self, state: ViewState, brdf: GpuBrdf, env, sampling: LitSampling, radius: float = 1.0) -> tuple:
         """What the map depends on: the body (its code and closed-form uniforms), the camera,

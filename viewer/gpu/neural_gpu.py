@@ -14,6 +14,7 @@ import moderngl
 import numpy as np
 import torch
 
+from nbrdf.neural.anisotropy import code_tail
 from nbrdf.neural.coat import NO_COAT, code_coat
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.errors import NbrdfError
@@ -146,6 +147,9 @@ class GpuDecoder:
             prog["u_nb_share"].write(latent_share(self.dec, z).astype("f4").tobytes())
         if "u_coat" in prog:
             prog["u_coat"].value = code_coat(self.dec.spec, z)
+        for name, value in code_tail(z, self.dec.spec.code).items():
+            if name in prog:
+                prog[name].value = value
 
 
 class GpuLatentTexture:

@@ -21,6 +21,7 @@ import moderngl
 import torch
 
 from nbrdf.imaging.image_io import read_normal_map
+from nbrdf.neural.anisotropy import code_tail
 from nbrdf.neural.coat import code_coat
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.gpu_pack import latent_share
@@ -105,6 +106,11 @@ class GpuBrdf:
     def neural(self) -> bool:
         return self.kind in (BrdfKind.NEURAL, BrdfKind.TEXTURED, BrdfKind.TABLE)
 
+    @property
+    def anisotropic(self) -> bool:
+        """Whether the code has an anisotropic tail (its programs compile NB_ANISO, anisotropy.glsl)."""
+        return self.neural and "u_aniso" in self.uniforms
+
 
 class NormalMaps:
     """Normal-map textures by file (path, modification time): read from disk once."""
@@ -160,7 +166,8 @@ def gpu_brdf(ctx: moderngl.Context, material: Material, decoder: GpuDecoder | No
     if latent is None:
         raise NbrdfError("the neural renderer needs the material's latent")
     sigma, w = proxy if proxy is not None else proxy_hint(material)
-    uniforms = {"u_proxy_sigma": float(sigma), "u_proxy_w": float(w), "u_coat": code_coat(decoder.dec.spec, latent)}
+    uniforms = {"u_proxy_sigma": float(sigma), "u_proxy_w": float(w), "u_coat": code_coat(decoder.dec.spec, latent),
+                **code_tail(latent, decoder.dec.spec.code)}
     return GpuBrdf(material, BrdfKind.TEXTURED if gtex is not None else BrdfKind.NEURAL, uniforms, decoder, latent,
                    latent_share(decoder.dec, latent).astype("f4").tobytes(), gtex, nmap)
 

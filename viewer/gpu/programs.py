@@ -14,6 +14,8 @@ from nbrdf.viewer.gpu.belcour_gpu import brdf_snippet, kinds_snippet
 from nbrdf.viewer.gpu.neural_gpu import WeightStorage
 from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf
 
+#: The define of an anisotropic code's programs (anisotropy.glsl; the shading frame follows the tangent).
+ANISO_DEFINE = "NB_ANISO"
 #: The GLSL version line of compute shaders and of the G-buffer the compute lit pass reads.
 GLSL_430 = "#version 430 core"
 
@@ -43,6 +45,8 @@ class ProgramKey:
         """The key of ``shader`` for ``brdf``'s kind (a compute shader when ``vertex`` is None)."""
         neural = brdf is not None and brdf.neural
         storage = brdf.decoder.compute_storage if neural and vertex is None else None
+        if brdf is not None and brdf.anisotropic:
+            defines = {**(defines or {}), ANISO_DEFINE: 1}
         return cls(shader, vertex, None if brdf is None else brdf.kind, id(brdf.decoder) if neural else 0,
                    storage, tuple(sorted((defines or {}).items())), version)
 

@@ -11,6 +11,14 @@ mat3 frame_from_normal(vec3 n) {
     return mat3(t, bt, n);  // columns: tangent, bitangent, normal
 }
 
+// The frame of n whose tangent is turned by psi from frame_from_normal(n)'s: columns tangent,
+// bitangent = normal x tangent (SPEC section 10), normal (an anisotropic material's shading frame).
+mat3 tangent_frame(vec3 n, float psi) {
+    mat3 f = frame_from_normal(n);
+    vec3 t = cos(psi) * f[0] + sin(psi) * f[1];
+    return mat3(t, cross(n, t), n);
+}
+
 uint pcg_hash(uint v) {
     uint state = v * 747796405u + 2891336453u;
     uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;

@@ -3,7 +3,9 @@
 // coverage in w, the world position with the latent texture's mip level in w
 // (what texture() would pick here; the compute pass has no derivatives), and
 // the uv with the draw range's (material's) index in z, which lit.comp
-// shades with that material. The shading frame is frame_from_normal of that normal in both paths.
+// shades with that material, and in w the turn of the mesh's tangent about that normal
+// (shading_frame.glsl tangent_turn: an anisotropic material's frame). The shading frame is
+// frame_from_normal of that normal in both paths, or tangent_frame under NB_ANISO.
 // NB_PLAIN_SURFACE: a program of its own for draws without a normal map or a latent texture.
 //@INCLUDE common.glsl
 //@INCLUDE shading_frame.glsl
@@ -23,5 +25,5 @@ void main() {
 #endif
     out_normal = vec4(tbn[2], 1.0);
     out_world = vec4(v_world, lod);
-    out_uv = vec4(v_uv, float(u_material_id), 0.0);
+    out_uv = vec4(v_uv, float(u_material_id), tangent_turn(tbn[2]));
 }

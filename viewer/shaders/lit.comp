@@ -41,7 +41,11 @@ void main() {
     if (n.w < 0.5) return;
     if (u_material_id >= 0 && int(texelFetch(u_gb_uv, px, 0).z + 0.5) != u_material_id) return;
     vec4 world = texelFetch(u_gb_world, px, 0);
+#ifdef NB_ANISO
+    mat3 tbn = tangent_frame(n.xyz, texelFetch(u_gb_uv, px, 0).w);
+#else
     mat3 tbn = frame_from_normal(n.xyz);
+#endif
     vec3 view = normalize(u_eye - world.xyz);
 #ifdef NB_TEXTURED
     nb_px_lod = world.w;

@@ -10,7 +10,16 @@ uniform vec3 u_eye;
 uniform sampler2D u_normal_map;
 uniform int u_has_normal_map;
 
-// Columns tangent, bitangent, normal (world); ``view`` = unit vector to the eye.
+// The turn psi of the mesh's tangent (projected on the plane of n) from frame_from_normal(n)'s x axis:
+// the deferred pass keeps one float per pixel (gbuffer_lit.frag) and rebuilds the frame (tangent_frame).
+float tangent_turn(vec3 n) {
+    mat3 f = frame_from_normal(n);
+    vec3 t = v_tangent.xyz - n * dot(n, v_tangent.xyz);
+    return dot(t, t) > 1e-12 ? atan(dot(t, f[1]), dot(t, f[0])) : 0.0;
+}
+
+// Columns tangent, bitangent, normal (world); ``view`` = unit vector to the eye. An anisotropic
+// material (NB_ANISO) is shaded in the frame of the mesh's tangent; others in any frame of the normal.
 mat3 shading_frame(out vec3 view) {
     vec3 n = normalize(v_normal);
     view = normalize(u_eye - v_world);
@@ -26,5 +35,9 @@ mat3 shading_frame(out vec3 view) {
         if (nv < 1e-3) n = normalize(n + view * (1e-3 - nv));
     }
 #endif
+#ifdef NB_ANISO
+    return tangent_frame(n, tangent_turn(n));
+#else
     return frame_from_normal(n);
+#endif
 }

@@ -1,0 +1,139 @@
+// Anisotropic material codes (neural/anisotropy.py, SPEC section 10), compiled in by NB_ANISO:
+// a code's tail holds the coat's and the body's anisotropy vectors v = a (cos 2 rho, sin 2 rho) and
+// the body's masking alpha. The coat is anisotropic GGX in closed form (alpha_x = alpha_0 / k,
+// alpha_y = alpha_0 k, k = sqrt(1 - a), in the tangent frame turned by rho); the body is the decoder
+// (or its table) at the pair turned so its half vector becomes the stretched one, times J
+// (neural/anisotropy.py body_pair: D's Jacobian, the cosines, the masking ratio). Directions are in
+// the shading frame, whose x is the surface's tangent (shading_frame.glsl under NB_ANISO).
+// Needs PI (common.glsl).
+
+// (k, cos rho, sin rho) of an anisotropy vector.
+vec3 aniso_stretch(vec2 v) {
+    float a = min(length(v), 0.95);
+    if (a <= 0.0) return vec3(1.0, 1.0, 0.0);
+    float t = 0.5 * atan(v.y, v.x);
+    return vec3(sqrt(1.0 - a), cos(t), sin(t));
+}
+
+// Directions in the frame turned by (cos, sin) about z, and back.
+vec3 aniso_turn(vec3 w, vec2 cs) { return vec3(cs.x * w.x + cs.y * w.y, cs.x * w.y - cs.y * w.x, w.z); }
+vec3 aniso_unturn(vec3 w, vec2 cs) { return aniso_turn(w, vec2(cs.x, -cs.y)); }
+
+float ggx_d_aniso(vec3 m, float ax, float ay) {
+    if (m.z <= 0.0) return 0.0;
+    float s = m.x * m.x / (ax * ax) + m.y * m.y / (ay * ay) + m.z * m.z;
+    return 1.0 / (PI * ax * ay * s * s);
+}
+
+// Smith G1 of a direction (the visible side's test left to the caller).
+float smith_g1_dir_aniso(vec3 w, float ax, float ay) {
+    float t = (ax * ax * w.x * w.x + ay * ay * w.y * w.y) / max(w.z * w.z, 1e-30);
+    return 2.0 / (1.0 + sqrt(1.0 + t));
+}
+
+// Heitz 2018's visible-normal sampling, stretched by (ax, ay).
+vec3 sample_vndf_aniso(vec3 v, float ax, float ay, vec2 u) {
+    vec3 vh = normalize(vec3(ax * v.x, ay * v.y, v.z));
+    float lensq = vh.x * vh.x + vh.y * vh.y;
+    vec3 t1 = lensq > 1e-14 ? vec3(-vh.y, vh.x, 0.0) * inversesqrt(lensq) : vec3(1.0, 0.0, 0.0);
+    vec3 t2 = cross(vh, t1);
+    float r = sqrt(u.x), phi = 2.0 * PI * u.y;
+    float p1 = r * cos(phi), p2 = r * sin(phi);
+    float s = 0.5 * (1.0 + vh.z);
+    p2 = (1.0 - s) * sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2;
+    vec3 nh = p1 * t1 + p2 * t2 + sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2)) * vh;
+    return normalize(vec3(ax * nh.x, ay * nh.y, max(1e-6, nh.z)));
+}
+
+// The anisotropic coat's reflection: (alpha_0, ior) = c (legal range), anisotropy vector v.
+float coat_reflection_aniso(vec3 wi, vec3 wo, vec2 c, vec2 v) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return 0.0;
+    vec3 k = aniso_stretch(v);
+    float ax = c.x / k.x, ay = c.x * k.x;
+    wi = aniso_turn(wi, k.yz);
+    wo = aniso_turn(wo, k.yz);
+    vec3 h = normalize(wi + wo);
+    if (dot(wi, h) <= 0.0) return 0.0;
+    float g = smith_g1_dir_aniso(wi, ax, ay) * smith_g1_dir_aniso(wo, ax, ay);
+    return fresnel_dielectric(dot(wi, h), c.y) * ggx_d_aniso(h, ax, ay) * g / max(4.0 * wi.z * wo.z, 1e-30);
+}
+
+vec3 coat_sample_aniso(vec3 w, vec2 u, vec2 c, vec2 v) {
+    vec3 k = aniso_stretch(v);
+    vec3 wf = aniso_turn(w, k.yz);
+    vec3 m = sample_vndf_aniso(wf, c.x / k.x, c.x * k.x, u);
+    return aniso_unturn(2.0 * dot(wf, m) * m - wf, k.yz);
+}
+
+float coat_pdf_aniso(vec3 w, vec3 l, vec2 c, vec2 v) {
+    if (w.z <= 0.0 || l.z <= 0.0) return 0.0;
+    vec3 k = aniso_stretch(v);
+    float ax = c.x / k.x, ay = c.x * k.x;
+    w = aniso_turn(w, k.yz);
+    l = aniso_turn(l, k.yz);
+    vec3 h = normalize(w + l);
+    float g1 = smith_g1_dir_aniso(w, ax, ay);
+    return g1 * max(dot(w, h), 0.0) * ggx_d_aniso(h, ax, ay) / w.z / (4.0 * max(dot(w, h), 1e-8));
+}
+
+// Directions refracted through a smooth interface of relative ior eta.
+vec3 aniso_inside(vec3 w, float eta) {
+    vec2 t = w.xy / eta;
+    return vec3(t, sqrt(max(1.0 - dot(t, t), 0.0)));
+}
+
+// The body's warped pair (wi2, wo2) and its factor J; tail = (body vector, masking alpha_0).
+float body_warp(vec3 wi, vec3 wo, vec3 tail, float coat_ior, out vec3 wi2, out vec3 wo2) {
+    vec3 k = aniso_stretch(tail.xy);
+    wi2 = wi;
+    wo2 = wo;
+    if (k.x >= 1.0) return 1.0;
+    vec3 h = normalize(wi + wo);
+    vec3 hf = aniso_turn(h, k.yz);
+    vec3 hp = normalize(aniso_unturn(vec3(k.x * hf.x, hf.y / k.x, hf.z), k.yz));
+    vec3 n = cross(h, hp);
+    float c = dot(h, hp);
+    float inv = 1.0 / max(1.0 + c, 1e-12);
+    wi2 = wi * c + cross(n, wi) + n * dot(n, wi) * inv;
+    wo2 = wo * c + cross(n, wo) + n * dot(n, wo) * inv;
+    if (wi2.z <= 0.0 || wo2.z <= 0.0) return 0.0;
+    float r = hp.z / max(h.z, 1e-12);
+    float j = r * r * r * r * (wi2.z * wo2.z) / max(wi.z * wo.z, 1e-12);
+    float a0 = clamp(tail.z, 0.005, 1.0);
+    float eta = max(coat_ior, 1.0);
+    float ax = a0 / k.x, ay = a0 * k.x;
+    float aniso = smith_g1_dir_aniso(aniso_turn(aniso_inside(wi, eta), k.yz), ax, ay)
+                * smith_g1_dir_aniso(aniso_turn(aniso_inside(wo, eta), k.yz), ax, ay);
+    float iso = smith_g1_dir_aniso(aniso_inside(wi2, eta), a0, a0) * smith_g1_dir_aniso(aniso_inside(wo2, eta), a0, a0);
+    return j * aniso / max(iso, 1e-12);
+}
+
+// A half vector stretched as the body's (h' ~ (k h_x, h_y / k, h_z) in the tangent frame), or unstretched.
+vec3 aniso_stretched(vec3 h, vec3 k, bool inverse) {
+    float kk = inverse ? 1.0 / k.x : k.x;
+    vec3 hf = aniso_turn(h, k.yz);
+    return normalize(aniso_unturn(vec3(kk * hf.x, hf.y / kk, hf.z), k.yz));
+}
+
+// The body's proxy of an anisotropic code (neural/sampling.py with v): the Gaussian over the stretched
+// half vector, times the stretch's Jacobian (h'_z / h_z)^3; the cosine lobe as it is.
+float pdf_proxy_aniso(vec3 v, vec3 l, float s, float w, vec2 bv) {
+    vec3 k = aniso_stretch(bv);
+    vec3 h = normalize(v + l);
+    if (h.z < 0.0) h = -h;
+    vec3 q = aniso_stretched(h, k, false);
+    float r = q.z / max(h.z, 1e-12);
+    float pg = exp(-0.5 * dot(q.xy, q.xy) / (s * s)) / proxy_disk_norm(s) * q.z / (4.0 * max(abs(dot(v, h)), 1e-12));
+    return (1.0 - w) * pg * r * r * r + w * max(l.z, 0.0) / PI;
+}
+
+vec3 sample_proxy_aniso(vec3 v, vec3 u, float s, float w, vec2 bv) {
+    float phi = 2.0 * PI * u.z;
+    if (u.x < w) {
+        float r = sqrt(u.y);
+        return vec3(r * cos(phi), r * sin(phi), sqrt(max(0.0, 1.0 - u.y)));
+    }
+    float r = min(s * sqrt(-2.0 * log(1.0 - u.y * (1.0 - exp(-0.5 / (s * s))))), 1.0);
+    vec3 h = aniso_stretched(vec3(r * cos(phi), r * sin(phi), sqrt(max(0.0, 1.0 - r * r))), aniso_stretch(bv), true);
+    return normalize(2.0 * dot(v, h) * h - v);
+}
