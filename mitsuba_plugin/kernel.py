@@ -8,9 +8,9 @@ CPU, tensor cores on NVIDIA GPUs); the latent's share of the first layer is a
 per-channel bias computed once per material. Directions are in the local
 frame (z the normal, x the material's tangent before its ``anisotropy_rotation``);
 ``wi`` and ``wo`` are the project's (light, viewer). A code with an anisotropic
-tail has an anisotropic coat (``Coat.stretch``) and a body read at the warped
-pair times its factor J (``BodyWarp``); an isotropic code runs the isotropic
-arithmetic unchanged.
+tail has an anisotropic coat (``Coat.stretch``), a body read at the warped pair
+times its factor J (``BodyWarp``) and a stretched proxy (``Proxy.stretch``); an
+isotropic code runs the isotropic arithmetic unchanged.
 Every function reads the array types of the Mitsuba variant in force.
 No torch here: ``materials`` builds these kernels from the torch network.
 """
@@ -53,6 +53,16 @@ def _sq(x):
 def _turn(w, c: float, s: float):
     """w in the frame turned by (cos, sin) about z (``neural.anisotropy.in_frame``); (c, -s) turns back."""
     return mi.Vector3f(c * w.x + s * w.y, c * w.y - s * w.x, w.z)
+
+
+def _stretched(h, stretch: tuple[float, float, float], inverse: bool = False):
+    """Unit half vectors h' ~ (k h_x, h_y / k, h_z) in the tangent frame of ``stretch`` (k, cos rho,
+    sin rho); ``inverse``: the stretch undone (``neural.sampling._stretched``)."""
+    k, c, s = stretch
+    if inverse:
+        k = 1.0 / k
+    hf = _turn(h, c, s)
+    return _normalize(_turn(mi.Vector3f(k * hf.x, hf.y / k, hf.z), c, -s), 1e-30)
 
 
 # --- GGX and Fresnel (neural.microfacet) --------------------------------------------------
@@ -189,12 +199,36 @@ def _inside(w, eta: float):
     return mi.Vector3f(tx, ty, dr.sqrt(dr.maximum(1.0 - tx * tx - ty * ty, 0.0)))
 
 
+def _outside(w, eta: float, lift_z: float):
+    """``_inside``'s inverse; a direction beyond the critical angle leaves at ``lift_z`` along its azimuth."""
+    tx, ty = w.x * eta, w.y * eta
+    n = dr.sqrt(tx * tx + ty * ty)
+    most = (1.0 - lift_z * lift_z) ** 0.5
+    over = n > most
+    tx = dr.select(over, tx / dr.maximum(n, 1e-12) * most, tx)
+    ty = dr.select(over, ty / dr.maximum(n, 1e-12) * most, ty)
+    return mi.Vector3f(tx, ty, dr.sqrt(dr.maximum(1.0 - tx * tx - ty * ty, 0.0)))
+
+
+def _lifted(w, lift_z: float):
+    """Unit directions with a z under ``lift_z`` raised to it along their azimuth."""
+    n = dr.maximum(dr.sqrt(_sq(w.x) + _sq(w.y)), 1e-12)
+    most = (1.0 - lift_z * lift_z) ** 0.5
+    return dr.select(w.z < lift_z, mi.Vector3f(w.x / n * most, w.y / n * most, lift_z), w)
+
+
+def _transmittance(w, eta: float):
+    """1 - F of a smooth interface of relative ior ``eta`` at the outside direction w."""
+    return 1.0 - fresnel_dielectric(dr.clip(w.z, 0.0, 1.0), eta)
+
+
 @dataclass(frozen=True)
 class BodyWarp:
     """The body's part of an anisotropic code's tail: the decoder (or its table) reads the body at the
-    warped pair (``neural.anisotropy.warp_pair``) and its value takes the factor J
-    (``neural.anisotropy.body_pair``), the same arithmetic in Dr.Jit. For a body with anisotropy only
-    (k < 1): at k = 1 the torch path leaves the pair unchanged and J = 1 exactly, as no warp does."""
+    warped pair and its value takes the factor J (``neural.anisotropy.body_pair``: under a coat the pair
+    is refracted in, warped there and refracted out), the same arithmetic in Dr.Jit. For a body with
+    anisotropy only (k < 1): at k = 1 the torch path leaves the pair unchanged and J = 1 exactly, as no
+    warp does."""
 
     stretch: tuple[float, float, float]
     """(k, cos rho, sin rho) of the body's anisotropy vector (``neural.anisotropy.stretch``)"""
@@ -202,13 +236,16 @@ class BodyWarp:
     """the body's masking alpha, clamped to [0.005, 1] as ``body_pair`` does"""
     eta: float
     """the code's coat ior, at least 1 (1: no coat)"""
+    lift_z: float
+    """the lowest z of a warped direction (``neural.anisotropy.LIFT_Z``)"""
+    cap: float
+    """the most the coat's transmittance ratio raises J (``neural.anisotropy.TRANSMITTANCE_CAP``)"""
 
     def warp(self, wi, wo) -> tuple:
-        """The pair turned about its half vector's plane so that h becomes the stretched h'."""
-        k, c, s = self.stretch
+        """The pair turned about its half vector's plane so that h becomes the stretched h'
+        (``neural.anisotropy.warp_pair``)."""
         h = _normalize(wi + wo, 1e-30)
-        hf = _turn(h, c, s)  # h in the tangent frame
-        hp = _normalize(_turn(mi.Vector3f(k * hf.x, hf.y / k, hf.z), c, -s), 1e-30)
+        hp = _stretched(h, self.stretch)
         n = dr.cross(h, hp)  # |n| = sin of the turn
         cos = dr.dot(h, hp)
 
@@ -218,32 +255,42 @@ class BodyWarp:
         return rot(wi), rot(wo)
 
     def pair(self, wi, wo) -> tuple:
-        """(wi', wo', J): the warped pair and the factor the body's value takes there; J is 0 where
-        the warp turns a direction below the horizon."""
-        wi2, wo2 = self.warp(wi, wo)
-        h, hp = wi + wo, wi2 + wo2
+        """(wi', wo', J): the warped pair and the factor the body's value takes there; a warped
+        direction under ``lift_z`` is lifted to it; J is 0 where wi or wo is below the horizon."""
+        k, c, s = self.stretch
+        a0, eta, lift = self.alpha, self.eta, self.lift_z
+        wi_in, wo_in = _inside(wi, eta), _inside(wo, eta)
+        wi2_in, wo2_in = self.warp(wi_in, wo_in)
+        h, hp = wi_in + wo_in, wi2_in + wo2_in
+        wi2, wo2 = _outside(_lifted(wi2_in, lift), eta, lift), _outside(_lifted(wo2_in, lift), eta, lift)
         hz = h.z / dr.maximum(dr.norm(h), 1e-30)
         hpz = hp.z / dr.maximum(dr.norm(hp), 1e-30)
         r = hpz / dr.maximum(hz, 1e-12)
-        cc = dr.maximum(wi2.z * wo2.z, 0.0) / dr.maximum(wi.z * wo.z, 1e-12)
+        wi2_in, wo2_in = _inside(wi2, eta), _inside(wo2, eta)
+        cc = dr.maximum(wi2_in.z * wo2_in.z, 0.0) / dr.maximum(wi_in.z * wo_in.z, 1e-12)
         j = (r * r) * (r * r) * cc
-        k, c, s = self.stretch
-        a0, eta = self.alpha, self.eta
         ax, ay = a0 / k, a0 * k
-        aniso = (_g1_dir(_turn(_inside(wi, eta), c, s), ax, ay)
-                 * _g1_dir(_turn(_inside(wo, eta), c, s), ax, ay))
-        iso = _g1_dir(_inside(wi2, eta), a0) * _g1_dir(_inside(wo2, eta), a0)
+        aniso = _g1_dir(_turn(wi_in, c, s), ax, ay) * _g1_dir(_turn(wo_in, c, s), ax, ay)
+        iso = _g1_dir(wi2_in, a0) * _g1_dir(wo2_in, a0)
         j = j * aniso / dr.maximum(iso, 1e-12)
-        return wi2, wo2, dr.select((wi2.z > 0) & (wo2.z > 0), j, 0.0)
+        if eta > 1.0:
+            t = (_transmittance(wi, eta) * _transmittance(wo, eta)
+                 / dr.maximum(_transmittance(wi2, eta) * _transmittance(wo2, eta), 1e-6))
+            j = j * 1.0
+        return wi2, wo2, dr.select((wi.z > 0) & (wo.z > 0), j, 0.0)
 
 
 # --- the body's proxy pdf (neural.sampling) ----------------------------------------------
 @dataclass(frozen=True)
 class Proxy:
-    """(1 - w) Gaussian(sigma) over the projected half vector + w Lambertian."""
+    """(1 - w) Gaussian(sigma) over the projected half vector + w Lambertian. ``stretch``: (k, cos rho,
+    sin rho) of an anisotropic code's body vector (``neural.anisotropy.stretch``): the Gaussian is over
+    the stretched half vector, times the stretch's Jacobian (``neural.sampling.gaussian_pdf``); None:
+    the isotropic proxy."""
 
     sigma: float
     w: float
+    stretch: tuple[float, float, float] | None = None
 
     @property
     def disk_norm(self) -> float:
@@ -252,9 +299,13 @@ class Proxy:
     def pdf(self, wi, wo):
         h = _normalize(wi + wo, 1e-12)
         h = dr.select(h.z < 0, -h, h)
-        r2 = _sq(h.x) + _sq(h.y)
+        q = h if self.stretch is None else _stretched(h, self.stretch)
+        r2 = _sq(q.x) + _sq(q.y)
         p_disk = dr.exp(-0.5 * r2 / self.sigma ** 2) / self.disk_norm
-        g = p_disk * h.z / (4.0 * dr.maximum(dr.abs(dr.dot(wi, h)), 1e-12))
+        g = p_disk * q.z / (4.0 * dr.maximum(dr.abs(dr.dot(wi, h)), 1e-12))
+        if self.stretch is not None:
+            r = q.z / dr.maximum(h.z, 1e-12)
+            g = g * (r * r * r)
         return (1.0 - self.w) * g + self.w * dr.maximum(wo.z, 0.0) / math.pi
 
     def sample(self, wi, u0, u1, u2):
@@ -262,6 +313,8 @@ class Proxy:
         trunc = -math.expm1(-0.5 / self.sigma ** 2)
         r = dr.minimum(self.sigma * dr.sqrt(-2.0 * dr.log(1.0 - u1 * trunc)), 1.0)
         h = mi.Vector3f(r * c_phi, r * s_phi, dr.sqrt(dr.maximum(1.0 - r * r, 0.0)))
+        if self.stretch is not None:
+            h = _stretched(h, self.stretch, inverse=True)
         wo_g = 2.0 * dr.dot(wi, h) * h - wi
         rc = dr.sqrt(u1)
         wo_c = mi.Vector3f(rc * c_phi, rc * s_phi, dr.sqrt(dr.maximum(1.0 - u1, 0.0)))

@@ -20,7 +20,7 @@ from nbrdf.mitsuba.kernel import Body, BodyWarp, Coat, CodeKernel, DecoderKernel
 from nbrdf.mitsuba.normal_map import NormalMapKernel
 from nbrdf.mitsuba.param_table import param_table_kernel
 from nbrdf.mitsuba.textures import LatentTextureKernel, ParamMaps, sharpest_top_roughness
-from nbrdf.neural.anisotropy import body_tail, require_isotropic, stretch
+from nbrdf.neural.anisotropy import LIFT_Z, TRANSMITTANCE_CAP, body_tail, require_isotropic, stretch
 from nbrdf.neural.body_table import TableSize, bake_body
 from nbrdf.neural.coat import IOR_RANGE, NO_COAT, ROUGHNESS_RANGE, coat_of
 from nbrdf.neural.errors import NbrdfError
@@ -68,19 +68,19 @@ def _stretch(v: torch.Tensor) -> tuple[float, float, float]:
 
 def _code_terms(model, code: torch.Tensor) -> tuple[Coat, Proxy, BodyWarp | None]:
     """(coat, proxy, body warp) of a uniform material's code (3, 34), or (3, 39) with an anisotropic tail
-    (``neural.anisotropy``): its coat anisotropic GGX, its body read through a ``BodyWarp`` unless the
-    body's anisotropy is 0 (None, as for an isotropic code: the torch path's pair and J = 1 exactly)."""
+    (``neural.anisotropy``): its coat anisotropic GGX, its proxy stretched with the body
+    (``neural.neural_brdf``), its body read through a ``BodyWarp`` unless the body's anisotropy is 0
+    (None, as for an isotropic code: the torch path's pair and J = 1 exactly)."""
     spec = model.decoder.spec
     tail = body_tail(code, spec.code) if spec.coat else None
     (r, ior), (sigma, w) = code_parts(model, code if tail is None else code[:, :spec.code])
-    proxy = Proxy(float(sigma), float(w))
     if tail is None:
-        return Coat(float(r), float(ior)), proxy, None
+        return Coat(float(r), float(ior)), Proxy(float(sigma), float(w)), None
     coat = coat_of(code[0], spec.latent)  # roughness, ior, the coat's anisotropy vector
     body = _stretch(tail[0, :2])
     warp = None if body[0] == 1.0 else BodyWarp(body, float(tail[0, 2].clamp(0.005, 1.0)),
-                                                float(coat[1].clamp_min(1.0)))
-    return Coat(float(r), float(ior), _stretch(coat[2:4])), proxy, warp
+                                                float(coat[1].clamp_min(1.0)), LIFT_Z, TRANSMITTANCE_CAP)
+    return Coat(float(r), float(ior), _stretch(coat[2:4])), Proxy(float(sigma), float(w), body), warp
 
 
 def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 0.0,

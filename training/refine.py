@@ -41,7 +41,7 @@ from typing import Callable
 
 import torch
 
-from nbrdf.neural.anisotropy import require_isotropic
+from nbrdf.neural.anisotropy import FRAME_PARAMS, body_pair, body_tail
 from nbrdf.neural.coat import coat_eval, with_coat
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.errors import NbrdfError
@@ -250,10 +250,14 @@ class Refiner:
         if not dec.spec.coat:
             raise NbrdfError("refinement: the decoder predates the coat split (retrain, docs/RESULTS.md)")
         code = torch.as_tensor(network_code, dtype=torch.float32).reshape(3, -1)
-        if code.shape[1] != dec.spec.code:
-            raise NbrdfError(f"refinement: a code has {dec.spec.code} floats per channel, got {code.shape[1]}")
+        if code.shape[1] not in (dec.spec.code, dec.spec.code + FRAME_PARAMS):
+            raise NbrdfError(f"refinement: a code has {dec.spec.code} floats per channel (or "
+                             f"{dec.spec.code + FRAME_PARAMS} with anisotropy), got {code.shape[1]}")
         self.dec, self.material, self.cfg, self.clock = dec, material, cfg, clock
-        self.coat = code[:1, dec.spec.latent:]  # (1, 2): the material's coat, as the network's code has it
+        self.coat = code[:1, dec.spec.latent:dec.spec.code]  # (1, 2): the material's coat, as the network's code has it
+        self.tail = code[:1, dec.spec.code:]
+        """(1, 0) or (1, FRAME_PARAMS): an anisotropic code's tail, kept; its body is fitted at the warped
+        pairs, where the decoder reads it (``neural.anisotropy.body_pair``: the values divided by J)."""
         self.coat_only = not material.interfaces and float(self.coat[0, 1]) > 1.0
         """A single layer that the code holds as its coat (a lone dielectric): exact in closed form, no body to fit."""
         self.roughness = body_roughness(material)
@@ -418,6 +422,8 @@ class Refiner:
             wi, wo, f = wi[keep], wo[keep], f[keep]
         fitted = wi.shape[0]
         steps = max(1, min(steps, int((self._left() - self.costs.score) / (fitted * self.costs.fit))))
+        if self.tail.shape[1]:
+            wi, wo, f = self._warped(wi, wo, f)
         wi, wo, f = wi[None].expand(3, -1, -1), wo[None].expand(3, -1, -1), f.T.contiguous()
         cancelled, ran = [False], [0]
         t_fit = self.clock()
@@ -437,7 +443,8 @@ class Refiner:
             self._end()
             return st
         self.costs.fit = (self.clock() - t_fit) / (max(ran[0], 1) * fitted)
-        code = with_coat(z[:, :self.dec.spec.latent], self.coat.expand(3, -1))
+        code = torch.cat([with_coat(z[:, :self.dec.spec.latent], self.coat.expand(3, -1)),
+                          self.tail.expand(3, -1)], -1)
         e = self._score(code)
         st.rounds, st.pairs = st.rounds + 1, st.pairs + have
         st.history.append(e)
@@ -454,6 +461,14 @@ class Refiner:
         self._end()
         return st
 
+    def _warped(self, wi: Tensor, wo: Tensor, f: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Body samples of an anisotropic code where its isotropic latent is read: the warped pairs and
+        the values over J (pairs the warp turns below the horizon, J = 0, are left out)."""
+        tail = body_tail(torch.cat([self._network_code[:1, :self.dec.spec.code], self.tail], -1), self.dec.spec.code)
+        wi2, wo2, j = body_pair(tail[0].to(wi.dtype), wi, wo, self.coat[0, 1].to(wi.dtype))
+        keep = j > 1e-6
+        return wi2[keep], wo2[keep], f[keep] / j[keep, None].to(f.dtype)
+
     def run(self, stop: Callable[[], bool] | None = None) -> RefineState:
         """Rounds until done (or ``stop``)."""
         st = self.start(stop)
@@ -463,10 +478,8 @@ class Refiner:
 
 
 def check_refinable(material: Material) -> None:
-    """One line for a material refinement cannot take (it needs a reference; the decoder's latents are
-    isotropic)."""
+    """One line for a material refinement cannot take (it needs a reference)."""
     check_uniform(material)
-    require_isotropic(material, "the refinement of a neural code")
     if isinstance(material.base, LatentBase) and not material.interfaces:
         raise NbrdfError("layers[0]: a latent base has no reference to refine against; use --method neural")
 

@@ -32,6 +32,7 @@ import numpy as np
 import torch
 
 from nbrdf.imaging.tonemap import ToneMap
+from nbrdf.neural.anisotropy import anisotropic_layers, anisotropy_vector, geometric_alpha
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Conductor, Dielectric, Material
 from nbrdf.training.refine import material_hash
@@ -42,7 +43,7 @@ from nbrdf.viewer.gpu.lit_sampling import Term
 from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf, analytic_capable
 from nbrdf.viewer.gpu.renderer import Renderer
 from nbrdf.viewer.modes import CompareMode, View
-from nbrdf.viewer.reference.lit import LitJob, frames_from_normals, to_local
+from nbrdf.viewer.reference.lit import LitJob, frames_from_normals, to_local, turned_frames
 from nbrdf.viewer.reference.worker import ReferenceJob, ReferenceWorker, lobe_job, slice_job
 from nbrdf.viewer.view_settings import ViewState
 
@@ -65,7 +66,12 @@ def coat_brdf(brdf: GpuBrdf, material: Material) -> GpuBrdf:
     """``brdf`` (a neural BRDF: its coat in closed form) with the coat set to the
     material's top interface exactly (the code's coat may have been blended)."""
     top = material.interfaces[0][0]
-    return replace(brdf, uniforms={**brdf.uniforms, "u_coat": (float(top.roughness), float(top.ior))})
+    a = float(getattr(top, "anisotropy", 0.0))
+    uniforms = {**brdf.uniforms, "u_coat": (float(geometric_alpha(float(top.roughness), a)), float(top.ior))}
+    if "u_aniso" in uniforms:  # the coat's anisotropy vector (the code's may have been blended too)
+        v = anisotropy_vector(a, material.anisotropy_rotation).tolist()
+        uniforms["u_aniso"] = (float(v[0]), float(v[1]), *uniforms["u_aniso"][2:])
+    return replace(brdf, uniforms=uniforms)
 
 
 def lobe_alpha(material: Material) -> float | None:
@@ -152,10 +158,12 @@ class Compare:
         return self.lit_job(material, state, key, size, brdf, aspect)
 
     def surface(self, state: ViewState, size: tuple[int, int], brdf: GpuBrdf | None = None,
-                aspect: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                aspect: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Per pixel of the object view at ``size`` (row 0 at the top): the shading
-        normal and the position, world space, (H, W, 3) each, and the (H, W) mask
-        of pixels on the object. ``aspect``: the projection's (default w / h)."""
+        normal and the position, world space, (H, W, 3) each, the (H, W) mask
+        of pixels on the object and the (H, W) turn of the mesh's tangent about the
+        normal (shading_frame.glsl ``tangent_turn``: an anisotropic material's frame).
+        ``aspect``: the projection's (default w / h)."""
         r = self.renderer
         w, h = size
         if self._gbuf_prog is None:
@@ -176,7 +184,7 @@ class Compare:
             r.surface_uniforms(p, state, a * h, h, brdf.normal_map if brdf is not None else None)
             vao.render(moderngl.TRIANGLES)
             n, x = (np.frombuffer(t.read(), np.float32).reshape(h, w, 4)[::-1] for t in targets)
-            return np.ascontiguousarray(n[..., :3]), np.ascontiguousarray(x[..., :3]), n[..., 3] > 0.5
+            return np.ascontiguousarray(n[..., :3]), np.ascontiguousarray(x[..., :3]), n[..., 3] > 0.5, x[..., 3].copy()
         finally:
             for res in (fbo, depth, *targets):
                 res.release()
@@ -184,8 +192,10 @@ class Compare:
     def lit_job(self, material: Material, state: ViewState, key: str, size: tuple[int, int],
                 brdf: GpuBrdf | None, aspect: float | None = None) -> LitJob:
         """The lit object's job: shading frames from ``surface``, the lights and the environment of ``state``."""
-        normal, world, mask = self.surface(state, size, brdf, aspect)
+        normal, world, mask, turn = self.surface(state, size, brdf, aspect)
         frame = frames_from_normals(normal[mask].astype(np.float64))
+        if anisotropic_layers(material):  # the walk's frame is the tangent's, as the shader's (NB_ANISO)
+            frame = turned_frames(frame, turn[mask].astype(np.float64))
         p = world[mask].astype(np.float64)
         view = np.asarray(state.camera.eye(), np.float64) - p
         wo = to_local(frame, view / np.linalg.norm(view, axis=-1, keepdims=True))

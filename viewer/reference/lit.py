@@ -102,7 +102,8 @@ class LitSpec:
 
 def frames_from_normals(n: np.ndarray) -> np.ndarray:
     """(N, 3, 3) orthonormal frames, columns tangent, bitangent, normal, for unit
-    normals (N, 3) (Duff et al. 2017; the BRDFs are isotropic, so any tangent serves)."""
+    normals (N, 3) (Duff et al. 2017; an isotropic BRDF takes any tangent, an anisotropic one
+    ``turned_frames``)."""
     n = n / np.linalg.norm(n, axis=-1, keepdims=True)
     sign = np.where(n[:, 2] >= 0, 1.0, -1.0)
     a = -1.0 / (sign + n[:, 2])
@@ -110,6 +111,14 @@ def frames_from_normals(n: np.ndarray) -> np.ndarray:
     t = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], -1)
     bt = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], -1)
     return np.stack([t, bt, n], -1)
+
+
+def turned_frames(frame: np.ndarray, turn: np.ndarray) -> np.ndarray:
+    """The frames (N, 3, 3) with their tangents turned by ``turn`` (N,) radians about the normal
+    (common.glsl ``tangent_frame``: bitangent = normal x tangent), an anisotropic material's frames."""
+    t = np.cos(turn)[:, None] * frame[:, :, 0] + np.sin(turn)[:, None] * frame[:, :, 1]
+    n = frame[:, :, 2]
+    return np.stack([t, np.cross(n, t), n], -1)
 
 
 def to_local(frame: np.ndarray, d: np.ndarray) -> np.ndarray:

@@ -19,6 +19,14 @@ vec3 aniso_stretch(vec2 v) {
 vec3 aniso_turn(vec3 w, vec2 cs) { return vec3(cs.x * w.x + cs.y * w.y, cs.x * w.y - cs.y * w.x, w.z); }
 vec3 aniso_unturn(vec3 w, vec2 cs) { return aniso_turn(w, vec2(cs.x, -cs.y)); }
 
+// A half vector stretched as the body's (h' ~ (k h_x, h_y / k, h_z) in the tangent frame), or unstretched.
+vec3 aniso_stretched(vec3 h, vec3 k, bool inverse) {
+    float kk = inverse ? 1.0 / k.x : k.x;
+    vec3 hf = aniso_turn(h, k.yz);
+    return normalize(aniso_unturn(vec3(kk * hf.x, hf.y / kk, hf.z), k.yz));
+}
+
+
 float ggx_d_aniso(vec3 m, float ax, float ay) {
     if (m.z <= 0.0) return 0.0;
     float s = m.x * m.x / (ax * ax) + m.y * m.y / (ay * ay) + m.z * m.z;
@@ -76,43 +84,68 @@ float coat_pdf_aniso(vec3 w, vec3 l, vec2 c, vec2 v) {
     return g1 * max(dot(w, h), 0.0) * ggx_d_aniso(h, ax, ay) / w.z / (4.0 * max(dot(w, h), 1e-8));
 }
 
-// Directions refracted through a smooth interface of relative ior eta.
+// Directions refracted through a smooth interface of relative ior eta, in and out (neural/anisotropy.py
+// _inside, _outside: a direction past the critical angle leaves grazing, at AN_LIFT_Z).
+const float AN_LIFT_Z = 0.02;
+const float AN_TRANSMITTANCE_CAP = 2.0;
 vec3 aniso_inside(vec3 w, float eta) {
     vec2 t = w.xy / eta;
     return vec3(t, sqrt(max(1.0 - dot(t, t), 0.0)));
 }
+vec3 aniso_outside(vec3 w, float eta) {
+    vec2 t = w.xy * eta;
+    float n = length(t), most = sqrt(1.0 - AN_LIFT_Z * AN_LIFT_Z);
+    if (n > most) t *= most / max(n, 1e-12);
+    return vec3(t, sqrt(max(1.0 - dot(t, t), 0.0)));
+}
+// A direction under AN_LIFT_Z raised to it along its azimuth (_lifted).
+vec3 aniso_lifted(vec3 w) {
+    if (w.z >= AN_LIFT_Z) return w;
+    vec2 xy = w.xy / max(length(w.xy), 1e-12);
+    return vec3(xy * sqrt(1.0 - AN_LIFT_Z * AN_LIFT_Z), AN_LIFT_Z);
+}
 
-// The body's warped pair (wi2, wo2) and its factor J; tail = (body vector, masking alpha_0).
-float body_warp(vec3 wi, vec3 wo, vec3 tail, float coat_ior, out vec3 wi2, out vec3 wo2) {
-    vec3 k = aniso_stretch(tail.xy);
-    wi2 = wi;
-    wo2 = wo;
-    if (k.x >= 1.0) return 1.0;
+// The pair turned so its half vector becomes the stretched one (warp_pair).
+void aniso_warp(vec3 wi, vec3 wo, vec3 k, out vec3 wi2, out vec3 wo2, out float r) {
     vec3 h = normalize(wi + wo);
-    vec3 hf = aniso_turn(h, k.yz);
-    vec3 hp = normalize(aniso_unturn(vec3(k.x * hf.x, hf.y / k.x, hf.z), k.yz));
+    vec3 hp = aniso_stretched(h, k, false);
     vec3 n = cross(h, hp);
     float c = dot(h, hp);
     float inv = 1.0 / max(1.0 + c, 1e-12);
     wi2 = wi * c + cross(n, wi) + n * dot(n, wi) * inv;
     wo2 = wo * c + cross(n, wo) + n * dot(n, wo) * inv;
-    if (wi2.z <= 0.0 || wo2.z <= 0.0) return 0.0;
-    float r = hp.z / max(h.z, 1e-12);
-    float j = r * r * r * r * (wi2.z * wo2.z) / max(wi.z * wo.z, 1e-12);
-    float a0 = clamp(tail.z, 0.005, 1.0);
-    float eta = max(coat_ior, 1.0);
-    float ax = a0 / k.x, ay = a0 * k.x;
-    float aniso = smith_g1_dir_aniso(aniso_turn(aniso_inside(wi, eta), k.yz), ax, ay)
-                * smith_g1_dir_aniso(aniso_turn(aniso_inside(wo, eta), k.yz), ax, ay);
-    float iso = smith_g1_dir_aniso(aniso_inside(wi2, eta), a0, a0) * smith_g1_dir_aniso(aniso_inside(wo2, eta), a0, a0);
-    return j * aniso / max(iso, 1e-12);
+    r = hp.z / max(h.z, 1e-12);
 }
 
-// A half vector stretched as the body's (h' ~ (k h_x, h_y / k, h_z) in the tangent frame), or unstretched.
-vec3 aniso_stretched(vec3 h, vec3 k, bool inverse) {
-    float kk = inverse ? 1.0 / k.x : k.x;
-    vec3 hf = aniso_turn(h, k.yz);
-    return normalize(aniso_unturn(vec3(kk * hf.x, hf.y / kk, hf.z), k.yz));
+// The body's warped pair (wi2, wo2) and its factor J (neural/anisotropy.py body_pair): under a coat
+// of ior coat_ior > 1 the pair is refracted in, warped there and refracted out; tail = (body vector,
+// masking alpha_0).
+float body_warp(vec3 wi, vec3 wo, vec3 tail, float coat_ior, out vec3 wi2, out vec3 wo2) {
+    vec3 k = aniso_stretch(tail.xy);
+    wi2 = wi;
+    wo2 = wo;
+    if (k.x >= 1.0) return 1.0;
+    if (wi.z <= 0.0 || wo.z <= 0.0) return 0.0;
+    float eta = max(coat_ior, 1.0);
+    vec3 wi_in = aniso_inside(wi, eta), wo_in = aniso_inside(wo, eta);
+    vec3 a, b;
+    float r;
+    aniso_warp(wi_in, wo_in, k, a, b, r);
+    wi2 = aniso_outside(aniso_lifted(a), eta);
+    wo2 = aniso_outside(aniso_lifted(b), eta);
+    vec3 wi2_in = aniso_inside(wi2, eta), wo2_in = aniso_inside(wo2, eta);
+    float j = r * r * r * r * (wi2_in.z * wo2_in.z) / max(wi_in.z * wo_in.z, 1e-12);
+    float a0 = clamp(tail.z, 0.005, 1.0);
+    float ax = a0 / k.x, ay = a0 * k.x;
+    float aniso = smith_g1_dir_aniso(aniso_turn(wi_in, k.yz), ax, ay) * smith_g1_dir_aniso(aniso_turn(wo_in, k.yz), ax, ay);
+    float iso = smith_g1_dir_aniso(wi2_in, a0, a0) * smith_g1_dir_aniso(wo2_in, a0, a0);
+    j *= aniso / max(iso, 1e-12);
+    if (eta > 1.0) {
+        float t = (1.0 - fresnel_dielectric(wi.z, eta)) * (1.0 - fresnel_dielectric(wo.z, eta))
+                / max((1.0 - fresnel_dielectric(wi2.z, eta)) * (1.0 - fresnel_dielectric(wo2.z, eta)), 1e-6);
+        j *= min(t, AN_TRANSMITTANCE_CAP);
+    }
+    return j;
 }
 
 // The body's proxy of an anisotropic code (neural/sampling.py with v): the Gaussian over the stretched
