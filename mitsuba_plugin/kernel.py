@@ -276,7 +276,7 @@ class BodyWarp:
         if eta > 1.0:
             t = (_transmittance(wi, eta) * _transmittance(wo, eta)
                  / dr.maximum(_transmittance(wi2, eta) * _transmittance(wo2, eta), 1e-6))
-            j = j * 1.0
+            j = j * dr.minimum(t, self.cap)
         return wi2, wo2, dr.select((wi.z > 0) & (wo.z > 0), j, 0.0)
 
 

@@ -45,8 +45,8 @@ class Param:
     optional: bool = False
     """a material file may leave it out (it then takes ``default``); written only where it differs"""
     live: bool = True
-    """the networks take it, so the previewer's live path can edit it (False: the ground truth's alone for now;
-    the window offers no control for it: anisotropy until its retrain, issue 39)"""
+    """the networks take it, so the previewer's live path can edit it (False: the ground truth's alone; the
+    window offers no control for it)"""
 
     @property
     def range(self) -> tuple[float, float] | None:
@@ -89,7 +89,7 @@ LATENT = "latent"
 KINDS: dict[str, LayerKind] = {k.name: k for k in (
     # anisotropy: SPEC section 10 (OpenPBR's alpha_x, alpha_y); 0 = isotropic, today's BRDF exactly
     LayerKind(DIELECTRIC, (Param("roughness", "scalar", 0.05), Param("ior", "scalar", 1.5),
-                           Param("anisotropy", "scalar", 0.0, optional=True, live=False)),
+                           Param("anisotropy", "scalar", 0.0, optional=True)),
               interface=True, base=True, base_code=2),
     LayerKind(MEDIUM, (Param("albedo", "rgb", (0.0, 0.0, 0.0)), Param("sigma_t", "rgb", 0.05)),  # a clear varnish;
               # sigma_t per channel: a coloured absorbing coat (OpenPBR's coat_color, SPEC section 11)
@@ -97,7 +97,7 @@ KINDS: dict[str, LayerKind] = {k.name: k for k in (
     # f82_tint: OpenPBR's F82-tint edge colour (SPEC section 11); 1 = Schlick's Fresnel, the paper's conductor
     LayerKind(CONDUCTOR, (Param("roughness", "scalar", 0.2), Param("r0", "rgb", (0.95, 0.64, 0.54)),
                           Param("f82_tint", "rgb", (1.0, 1.0, 1.0), optional=True),
-                          Param("anisotropy", "scalar", 0.0, optional=True, live=False)),
+                          Param("anisotropy", "scalar", 0.0, optional=True)),
               interface=False, base=True, base_code=0),
     LayerKind(DIFFUSE, (Param("albedo", "rgb", (0.5, 0.5, 0.5)),), interface=False, base=True, base_code=1),
     LayerKind(MEASURED, (Param("path", "path"),), interface=False, base=True),

@@ -40,8 +40,6 @@ PARTS = ("leaf", "layering", "layering_deep", "sampler")
 DEEP_INTERFACES = 3
 #: How a part's tensors are stored: the deep layering network in half precision (the bundle stays a few MB).
 STORED = {"layering_deep": torch.float16}
-#: How the neural path names itself when it refuses an anisotropic material (issue 39: retrained later).
-NEURAL_PATH = "the neural leaf encoders and layering network"
 
 
 @dataclass

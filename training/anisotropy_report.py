@@ -21,7 +21,7 @@ from tqdm import tqdm
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, MEDIUM
 from nbrdf.neural.material import FORMAT as MATERIAL_FORMAT
 from nbrdf.neural.material import Material, parse_material
-from nbrdf.neural.metrics import THETAS, lobe_image, lobe_psnr
+from nbrdf.neural.metrics import THETAS, lobe_image, lobe_psnr, noise_psnr
 from nbrdf.training import distributions as D
 from nbrdf.training.reference import converged_lobe
 
@@ -69,7 +69,6 @@ def turned(material: Material, azimuth: float) -> Material:
 def reference_lobes(material: Material, noise_target: float = 60.0, max_spp: int = 1 << 16,
                     seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Reference lobe images (A, T, 64, 64, 3) over AZIMUTHS x THETAS and their noise PSNRs (A, T)."""
-    from nbrdf.neural.metrics import noise_psnr
     lobes = np.zeros((len(AZIMUTHS), len(THETAS), 64, 64, 3), np.float32)
     noise = np.zeros((len(AZIMUTHS), len(THETAS)), np.float32)
     for a, phi in enumerate(AZIMUTHS):

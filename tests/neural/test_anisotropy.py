@@ -1,8 +1,9 @@
 """Anisotropic interfaces in the material schema, the stack and the paths that refuse them (SPEC section 10):
 ``anisotropy`` on dielectric and conductor layers, the material's ``anisotropy_rotation``, their one-line
 errors, the files an isotropic material writes (unchanged), and the one-line refusal of every consumer that
-cannot take anisotropy yet (the projection and refinement onto the
-decoder's isotropic latents, the closed-form GLSL shader, Belcour, the analytic layering, the Mitsuba plugin)."""
+cannot take anisotropy yet (the projection onto the decoder's latents, the closed-form GLSL shader, Belcour,
+the analytic layering, the Mitsuba plugins' texture-mapped materials; the neural path, the refinement and the
+uniform Mitsuba plugins take it: tests/neural/test_anisotropic_code.py)."""
 from __future__ import annotations
 
 import json
@@ -82,7 +83,8 @@ def test_the_stack_carries_anisotropy_and_rotation():
 
 def test_the_reference_takes_anisotropy_where_the_others_refuse_it_in_one_line():
     """The closed-form reference of a lone anisotropic layer differs from the isotropic one; the GLSL shader,
-    Belcour, the analytic layering and the neural path name the layer and say it is not supported yet."""
+    Belcour, the analytic layering and the projection name the layer and say it is not supported yet; the
+    refinement and the neural path take it."""
     from nbrdf.neural.model import layered_latents
     from nbrdf.training.analytic_layering import check_analytic
     from nbrdf.training.belcour import atoms_of
@@ -101,18 +103,25 @@ def test_the_reference_takes_anisotropy_where_the_others_refuse_it_in_one_line()
     coated = parse_material(_doc(COAT, MEDIUM, dict(METAL, anisotropy=0.8)))
     for call, path in ((analytic_uniforms, "the closed-form GLSL shader"), (atoms_of, "Belcour's model"),
                        (check_analytic, "the analytic layering model"),
-                       (material_samples, "the projection onto the decoder's latents"),
-                       (check_refinable, "the refinement of a neural code")):
+                       (material_samples, "the projection onto the decoder's latents")):
         with pytest.raises(NbrdfError, match=rf"^layers\[2\]\.anisotropy: anisotropy is not yet supported by {path}$"):
             call(coated)
+    check_refinable(coated)
     with pytest.raises(NbrdfError, match="^a conductor base needs the leaf encoders$"):
         layered_latents(None, None, material_stack(coated))  # the neural path takes it (its isotropic equivalent)
 
 
-def test_the_mitsuba_plugin_refuses_an_anisotropic_material(tmp_path):
+def test_the_mitsuba_plugins_take_a_uniform_anisotropic_material_and_refuse_a_mapped_one(tmp_path):
     mitsuba = pytest.importorskip("nbrdf.mitsuba.materials", exc_type=ImportError)
+    import imageio.v3 as iio
+    import numpy as np
+
     path = tmp_path / "m.json"
     path.write_text(json.dumps(_doc(COAT, MEDIUM, dict(METAL, anisotropy=0.4))))
+    mitsuba.ReferenceWalk(str(path), spp=4)  # no error
+    iio.imwrite(tmp_path / "a.png", np.full((4, 4, 3), 128, np.uint8))
+    path.write_text(json.dumps(_doc(COAT, dict(MEDIUM, albedo=[{"texture": "a.png", "channel": c, "range": [0, 1]}
+                                                              for c in "rgb"]), dict(METAL, anisotropy=0.4))))
     with pytest.raises(mitsuba.PluginError, match=r"layers\[2\]\.anisotropy: anisotropy is not yet supported by "
-                                                  r"the Mitsuba plugin"):
+                                                  r"the Mitsuba plugins' texture-mapped materials"):
         mitsuba.ReferenceWalk(str(path), spp=4)

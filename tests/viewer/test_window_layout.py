@@ -122,11 +122,11 @@ def test_no_panel_label_is_clipped_at_1920x1080(layout_1920):
     assert layout_1920["clipped"] == []
 
 
-def test_the_stack_panel_offers_only_what_the_live_path_takes(layout):
+def test_the_stack_panel_offers_what_the_live_path_takes(layout):
     """Every live parameter of the default material's layers has its control (a conductor's optional F82 tint
-    too), and none is offered for anisotropy, which only the ground truth takes until the retrain (``Param.live``)."""
-    assert {"roughness", "ior", "f82_tint"} <= set(layout["labels"]), layout["labels"]
-    assert "anisotropy" not in layout["labels"]
+    and the interfaces' anisotropy too); the brushing rotation shows only once a layer is anisotropic."""
+    assert {"roughness", "ior", "f82_tint", "anisotropy"} <= set(layout["labels"]), layout["labels"]
+    assert "brushing rotation" not in layout["labels"]
 
 
 def test_window_opens_at_80_percent_of_the_screen_and_remembers(layout):

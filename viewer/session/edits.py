@@ -184,6 +184,10 @@ class SessionEdits(ABC):
     def set_param(self, index: int, key: str, value) -> bool:
         return self.guarded(lambda: (self.editor.set_param(index, key, value), self._apply_material()))
 
+    def set_rotation(self, degrees: float) -> bool:
+        """Turns the brushing direction of the material's anisotropic interfaces (degrees about the normal)."""
+        return self.guarded(lambda: (self.editor.set_rotation(degrees), self._apply_material()))
+
     def _stack_edit(self, change: Callable[[StackEditor], Material]) -> bool:
         """One guarded edit of the layer stack through ``StackEditor`` (which validates it)."""
         return self.guarded(lambda: (change(self.editor), self._apply_material()))

@@ -76,6 +76,13 @@ class StackEditor:
         self._layer(doc, index)[key] = value
         return self._apply(doc)
 
+    def set_rotation(self, degrees: float) -> Material:
+        """The brushing direction: the material's ``anisotropy_rotation`` (SPEC section 10; 0 is not written)."""
+        doc = {k: v for k, v in copy.deepcopy(self.doc).items() if k != "anisotropy_rotation"}
+        if float(degrees) != 0.0:
+            doc["anisotropy_rotation"] = float(degrees)
+        return self._apply(doc)
+
     def set_name(self, name: str) -> Material:
         return self._apply({**copy.deepcopy(self.doc), "name": name})
 

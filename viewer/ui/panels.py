@@ -15,6 +15,7 @@ import numpy as np
 from imgui_bundle import imgui
 
 from nbrdf.imaging.env_presets import ENV_PRESETS
+from nbrdf.neural.anisotropy import anisotropic_layers
 from nbrdf.neural.layer_kinds import KINDS
 from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, View
 from nbrdf.viewer.scene.camera import FOV_RANGE
@@ -186,6 +187,7 @@ class Panels(MaterialWidgets):
                     continue
                 self._param(i, key, value)
             imgui.pop_id()
+        self._rotation()
         imgui.separator()
         hit = self._wrap_buttons(["add clear coat", "save curve"], small=False)
         if hit == "add clear coat":
@@ -203,6 +205,19 @@ class Panels(MaterialWidgets):
             ld.undo()
         elif hit:
             ld.redo()
+
+    def _rotation(self) -> None:
+        """The brushing direction (the material's ``anisotropy_rotation``), shown once a layer is anisotropic."""
+        ld = self.ld
+        if not anisotropic_layers(ld.material):
+            return
+        imgui.separator()
+        changed, v = imgui.slider_float("brushing rotation", float(ld.material.anisotropy_rotation), -180.0, 180.0,
+                                        "%.1f deg")
+        group = self._held("anisotropy_rotation")
+        if changed:
+            with ld.coalescing(group):
+                ld.set_rotation(float(v))
 
     # --- view ---------------------------------------------------------------------------------
     def _view(self) -> None:
