@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import tempfile
 from dataclasses import dataclass, field
@@ -87,8 +88,8 @@ class RenderReport:
     out: str
     """folder for render.json, render.md and the figures"""
     set: str = "lookdev,heldout"
-    """comma-separated sets: lookdev (the bundled sharp-coat set), heldout (the paper-distribution
-    held-out set), or paths of material JSON files / folders"""
+    """comma-separated sets: lookdev (the bundled sharp-coat set), brushed (brushed metals, anisotropic),
+    heldout (the paper-distribution held-out set), or paths of material JSON files / folders"""
     methods: str = "neural,projected"
     """comma-separated methods: neural (the full neural path), projected (the decoder at a fitted latent),
     refined (the network's code refined within --budget seconds), belcour (Belcour 2018's analytic layered
@@ -111,6 +112,9 @@ class RenderReport:
     """held-out materials scored per class"""
     seed: int = 0
     """seed of the references and projections"""
+    light_azimuths: str = "0"
+    """comma-separated turns of the light about the view axis in degrees (SPEC section 9's light at 0): every
+    material is scored under each, e.g. 0,120,240 for anisotropic materials"""
 
 
 @dataclass
@@ -135,6 +139,17 @@ def method_words(text: str, allowed: Iterable[Method]) -> tuple[Method, ...]:
     return tuple(Method(w) for w in words)
 
 
+def azimuth_words(text: str) -> tuple[float, ...]:
+    """The ``--light-azimuths`` words as finite degrees (one-line error otherwise)."""
+    try:
+        out = tuple(float(w) for w in text.split(",") if w.strip())
+    except ValueError:
+        out = ()
+    if not out or not all(math.isfinite(a) for a in out):
+        raise NbrdfError(f"--light-azimuths: {text!r} is not a comma-separated list of angles in degrees")
+    return out
+
+
 def cmd_report_render(ns: argparse.Namespace, cls: type = RenderReport, extra: dict | None = None) -> int:
     from nbrdf.training import render_report  # late: torch costs ~1 s, --help needs none
 
@@ -145,7 +160,7 @@ def cmd_report_render(ns: argparse.Namespace, cls: type = RenderReport, extra: d
                                            noise_target=c.noise_target,
                                            cache=Path(c.cache) if c.cache else None, model=c.model,
                                            methods=methods, heldout_per_class=c.heldout_per_class, seed=c.seed,
-                                           refine_budget=c.budget)
+                                           refine_budget=c.budget, light_azimuths=azimuth_words(c.light_azimuths))
     result = render_report.run_render_report(cfg, extra)
     print(render_report.markdown_tables(result, (*render_report.METHODS, *(extra or {}))))
     for entry in result["sets"].values():

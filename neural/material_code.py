@@ -7,6 +7,7 @@ from pathlib import Path
 
 import torch
 
+from nbrdf.neural.anisotropy import FRAME_PARAMS
 from nbrdf.neural.coat import code_coat
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent import load_latent
@@ -29,9 +30,10 @@ def load_code(path: str | Path, weights: str | Path | None = None):
 
 
 def code_parts(model, code: torch.Tensor) -> tuple[tuple[float, float], tuple[float, float]]:
-    """((coat roughness, coat ior), (proxy sigma, proxy w)) of a code (3, 34):
-    what a renderer needs besides the decoder."""
+    """((coat roughness, coat ior), (proxy sigma, proxy w)) of a code (3, 34) (or (3, 39), whose
+    anisotropic tail ``neural.anisotropy.code_tail`` gives): what a renderer needs besides the decoder."""
     spec = model.decoder.spec
-    if tuple(code.shape) != (3, spec.code):
-        raise NbrdfError(f"a material code must be (3, {spec.code}), got {tuple(code.shape)}")
+    if tuple(code.shape) not in ((3, spec.code), (3, spec.code + FRAME_PARAMS)):
+        raise NbrdfError(f"a material code must be (3, {spec.code}) (or (3, {spec.code + FRAME_PARAMS}) with "
+                         f"anisotropy), got {tuple(code.shape)}")
     return code_coat(spec, code), model.proxy(code)

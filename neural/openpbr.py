@@ -20,6 +20,7 @@ from typing import Any
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import FORMAT
+from nbrdf.neural.layer_kinds import RANGES as LAYER_RANGES
 
 Rgb = tuple[float, float, float]
 WHITE: Rgb = (1.0, 1.0, 1.0)
@@ -275,9 +276,21 @@ def _interface_ior(name: str, eta: float, notes: list[str]) -> float:
     return eta
 
 
+def _anisotropic(layer: dict, name: str, a: float, notes: list[str]) -> dict:
+    """``layer`` with OpenPBR's roughness anisotropy ``a`` (SPEC section 10 takes OpenPBR's convention as it
+    is), clamped to the stack's largest with a note; 0 leaves the layer isotropic."""
+    if a <= 0.0:
+        return layer
+    hi = LAYER_RANGES["anisotropy"][1]
+    if a > hi:
+        notes.append(f"{name} {_g(a)} is above the stack's largest anisotropy, {hi}; clamped to it")
+    return {**layer, "anisotropy": min(a, hi)}
+
+
 def _coat_layers(p: OpenPbr, notes: list[str]) -> list[dict]:
-    layers = [{"type": "dielectric", "roughness": _alpha("coat_roughness", p.coat_roughness, notes),
-               "ior": _interface_ior("coat_ior", p.coat_ior, notes)}]
+    coat = {"type": "dielectric", "roughness": _alpha("coat_roughness", p.coat_roughness, notes),
+            "ior": _interface_ior("coat_ior", p.coat_ior, notes)}
+    layers = [_anisotropic(coat, "coat_roughness_anisotropy", p.coat_roughness_anisotropy, notes)]
     if p.coat_color != WHITE:
         sigma = coat_sigma_t(p.coat_color)
         if max(sigma) > SIGMA_T_MAX:
@@ -295,6 +308,7 @@ def _metal_layers(p: OpenPbr, notes: list[str]) -> list[dict]:
                              "r0": _value(p.base_weight * c for c in p.base_color)}
     if p.specular_color != WHITE:
         layer["f82_tint"] = _value(p.specular_color)
+    layer = _anisotropic(layer, "specular_roughness_anisotropy", p.specular_roughness_anisotropy, notes)
     if p.specular_weight != 1.0:
         notes.append(f"specular_weight {_g(p.specular_weight)} on a metal base: OpenPBR scales the whole metal lobe "
                      "by it, which a stack cannot; the lobe is left at full strength")
@@ -320,8 +334,8 @@ def _dielectric_layers(p: OpenPbr, coated: bool, notes: list[str]) -> list[dict]
             notes.append(f"{where}: the base interface's relative IOR {_g(eta)} is outside the stack's range "
                          f"[{IOR_MIN}, {IOR_MAX}]; clamped to {_g(clamped)}")
             eta = clamped
-        layers.append({"type": "dielectric", "roughness": _alpha("specular_roughness", p.specular_roughness, notes),
-                       "ior": eta})
+        spec = {"type": "dielectric", "roughness": _alpha("specular_roughness", p.specular_roughness, notes), "ior": eta}
+        layers.append(_anisotropic(spec, "specular_roughness_anisotropy", p.specular_roughness_anisotropy, notes))
         if p.specular_color != WHITE:
             notes.append(f"specular_color {_show(p.specular_color)} on a dielectric base: a non-physical tint "
                          "of its reflection, which a stack cannot hold; left untinted")
@@ -356,7 +370,8 @@ def _refuse_if_dominated(p: OpenPbr) -> None:
 
 def unsupported_notes(p: OpenPbr) -> list[str]:
     """One line per input that changes the look and that no stack holds (fuzz, thin film, transmission,
-    subsurface, emission, opacity, anisotropy, diffuse roughness, thin walls, coat darkening)."""
+    subsurface, emission, opacity, diffuse roughness, thin walls, coat darkening; anisotropy is held, its
+    direction from the surface's tangent)."""
     notes: list[str] = []
     dielectric = p.base_metalness < 1.0
     coated = p.coat_weight > 0.0
@@ -366,16 +381,16 @@ def unsupported_notes(p: OpenPbr) -> list[str]:
 
     if dielectric and p.base_diffuse_roughness > 0:
         note("base_diffuse_roughness", "OpenPBR's rough (Oren-Nayar) diffuse is not held; the stack's base is Lambertian")
-    if p.specular_roughness_anisotropy > 0:
-        note("specular_roughness_anisotropy", "anisotropic roughness is not held; the base is isotropic")
+    if p.specular_roughness_anisotropy > 0 or (coated and p.coat_roughness_anisotropy > 0):
+        name = "specular_roughness_anisotropy" if p.specular_roughness_anisotropy > 0 else "coat_roughness_anisotropy"
+        note(name, "held along the surface's tangent (the stack's anisotropy_rotation 0: the mesh's tangent, "
+                   "the sphere's parallels); a geometry_tangent or rotation input is not read")
     if dielectric and p.transmission_weight > 0:
         note("transmission_weight", "transmission through the base is not held; the base is opaque")
     if dielectric and p.transmission_weight < 1 and p.subsurface_weight > 0:
         note("subsurface_weight", "subsurface scattering is not held; the base is the diffuse one")
     if p.fuzz_weight > 0:
         note("fuzz_weight", "the fuzz (sheen) layer is not held; left out")
-    if coated and p.coat_roughness_anisotropy > 0:
-        note("coat_roughness_anisotropy", "anisotropic roughness is not held; the coat is isotropic")
     if coated and p.coat_darkening != 1.0:
         note("coat_darkening", "the simulated coat always darkens the base physically (as coat_darkening 1)")
     if p.thin_film_weight > 0:

@@ -59,6 +59,8 @@ EvalFn = Callable[[Tensor, Tensor], Tensor]  # (wi (N, 3), wo (N, 3)) local -> f
 LIGHT = (-0.45, 0.55, 0.70)
 #: The package folder of the material sets.
 SETS_DIR = Path(__file__).resolve().parent / "sets"
+#: The sets of training/sets/ a report names by their folder's name.
+NAMED_SETS = ("lookdev", "openpbr", "brushed")
 #: Bumped when a change makes cached reference renders stale.
 CACHE_VERSION = 1
 #: The methods a render report scores (the reference is what they are scored against).
@@ -93,6 +95,9 @@ class RenderReportConfig:
     """Monte Carlo paths per projection sample of a stack."""
     refine_budget: float = 10.0
     """Seconds the ``refined`` method may spend per material."""
+    light_azimuths: tuple[float, ...] = (0.0,)
+    """The light's turns about the view axis in degrees (SPEC section 9's light at 0): every material is
+    scored under each (a row per material and azimuth), what an anisotropic material needs."""
     noise_target: float = 0.1
     """Refine a stack's reference (doubling its paths) while the FLIP between
     its two independent halves exceeds this (0 = a single round of ``spp``)."""
@@ -121,16 +126,27 @@ class SphereGeometry:
     """(P, 3) the light direction in the local frames."""
     wo: Tensor
     """(P, 3) the view direction (+z) in the local frames."""
+    light: tuple[float, float, float] = LIGHT
+    """The light direction (view space, before normalisation): SPEC section 9's, or it turned about the view axis."""
 
 
-def light_direction(dtype: torch.dtype = torch.float64) -> Tensor:
-    v = torch.tensor(LIGHT, dtype=dtype)
+def turned_light(azimuth: float) -> tuple[float, float, float]:
+    """SPEC section 9's light turned by ``azimuth`` degrees about the view axis (0: ``LIGHT`` itself)."""
+    if azimuth == 0:
+        return LIGHT
+    c, s = math.cos(math.radians(azimuth)), math.sin(math.radians(azimuth))
+    return (c * LIGHT[0] - s * LIGHT[1], s * LIGHT[0] + c * LIGHT[1], LIGHT[2])
+
+
+def light_direction(dtype: torch.dtype = torch.float64, light: tuple[float, float, float] = LIGHT) -> Tensor:
+    v = torch.tensor(light, dtype=dtype)
     return v / v.norm()
 
 
-def sphere_geometry(size: int) -> SphereGeometry:
+def sphere_geometry(size: int, light_azimuth: float = 0.0) -> SphereGeometry:
     """Pixel centres of an orthographic view of the unit sphere, SPEC section 9:
-    z = n, x = normalize(cross((0, 1, 0), n)), y = cross(n, x)."""
+    z = n, x = normalize(cross((0, 1, 0), n)), y = cross(n, x); the light turned by ``light_azimuth``
+    degrees about the view axis."""
     if size < 2:
         raise NbrdfError(f"size: {size} is too small for a sphere image (at least 2 pixels)")
     c = (torch.arange(size, dtype=torch.float64) + 0.5) / size * 2 - 1
@@ -144,9 +160,10 @@ def sphere_geometry(size: int) -> SphereGeometry:
     ty = torch.linalg.cross(n, tx)
     frame = torch.stack([tx, ty, n], 1)
     to_local = lambda v: frame @ v  # (P, 3, 3) @ (3,) -> (P, 3)
-    wi = to_local(light_direction())
+    light = turned_light(light_azimuth)
+    wi = to_local(light_direction(light=light))
     wo = to_local(torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64))
-    return SphereGeometry(mask, frame, wi, wo)
+    return SphereGeometry(mask, frame, wi, wo, light)
 
 
 def to_image(values: Tensor, geo: SphereGeometry) -> np.ndarray:
@@ -203,7 +220,7 @@ def load_set(spec: str, heldout_per_class: int = 3) -> list[tuple[str, Material]
                 seen[cls] = seen.get(cls, 0) + 1
                 out.append((cls, m))
         return out
-    path = SETS_DIR / spec if spec in ("lookdev", "openpbr") else Path(spec)
+    path = SETS_DIR / spec if spec in NAMED_SETS else Path(spec)
     if path.is_dir():
         files = sorted([*path.glob("*.json"), *path.glob("*.mtlx")])
         if not files:
@@ -211,7 +228,7 @@ def load_set(spec: str, heldout_per_class: int = 3) -> list[tuple[str, Material]
     elif path.is_file():
         files = [path]
     else:
-        raise NbrdfError(f"{spec}: not a set name (lookdev, heldout), a material file or a folder")
+        raise NbrdfError(f"{spec}: not a set name ({', '.join(NAMED_SETS)}, heldout), a material file or a folder")
     out = []
     for f in files:
         notes: list[str] = []
@@ -225,7 +242,7 @@ def load_set(spec: str, heldout_per_class: int = 3) -> list[tuple[str, Material]
 
 
 def set_label(spec: str) -> str:
-    return spec if spec in ("lookdev", "heldout") else Path(spec).stem
+    return spec if spec in (*NAMED_SETS, "heldout") else Path(spec).stem
 
 
 # --- references ---------------------------------------------------------------------------
@@ -240,10 +257,10 @@ class ReferenceRender:
     seconds: float
 
 
-def _cache_key(m: Material, size: int, spp: int, seed: int) -> str:
+def _cache_key(m: Material, size: int, spp: int, seed: int, light: tuple[float, float, float] = LIGHT) -> str:
     d = material_to_dict(m)
     d.pop("name", None)
-    blob = json.dumps({"m": d, "size": size, "spp": spp, "seed": seed, "light": LIGHT, "v": CACHE_VERSION},
+    blob = json.dumps({"m": d, "size": size, "spp": spp, "seed": seed, "light": light, "v": CACHE_VERSION},
                       sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
@@ -256,11 +273,12 @@ def reference_render(m: Material, geo: SphereGeometry, spp: int, seed: int = 0, 
     round is cached in ``cache`` (resumable per material and round)."""
     size = geo.mask.shape[0]
     if not m.interfaces:
-        return _cached(cache, m, size, 0, seed, lambda prev: _closed_round(m, geo))[0]
+        return _cached(cache, m, size, 0, seed, lambda prev: _closed_round(m, geo), light=geo.light)[0]
     per, prev = max(1, spp // 2), None
     while True:
         ref, prev = _cached(cache, m, size, 2 * per, seed,
-                            lambda p: _mc_round(m, geo, per if p is None else per // 2, seed, p, progress), prev)
+                            lambda p: _mc_round(m, geo, per if p is None else per // 2, seed, p, progress), prev,
+                            light=geo.light)
         if noise_target <= 0 or ref.half_flip <= noise_target or 4 * per > max(max_spp, 2 * per):
             return ref
         per *= 2
@@ -302,13 +320,13 @@ def _mc_round(m: Material, geo: SphereGeometry, n: int, seed: int, prev: dict | 
     return ref, {**halves, "n_half": n_prev + n, "round": rnd, "total_seconds": secs}
 
 
-def _cached(cache: Path | None, m: Material, size: int, spp: int, seed: int, make, prev: dict | None = None
-            ) -> tuple[ReferenceRender, dict | None]:
+def _cached(cache: Path | None, m: Material, size: int, spp: int, seed: int, make, prev: dict | None = None,
+            light: tuple[float, float, float] = LIGHT) -> tuple[ReferenceRender, dict | None]:
     """A cached round, or ``make(prev)`` saved under the key of its total spp."""
     path = None
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
-        path = cache / f"{_slug(m.name)}-{_cache_key(m, size, spp, seed)}.npz"
+        path = cache / f"{_slug(m.name)}-{_cache_key(m, size, spp, seed, light)}.npz"
         if path.is_file():
             z = dict(np.load(path))
             ref = ReferenceRender(z["image"], z["stderr"], float(z["half_flip"]), int(z["spp"]), float(z["seconds"]))
@@ -385,48 +403,27 @@ def run_render_report(config: RenderReportConfig, extra: dict[str, ExtraColumn] 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Path(config.cache) if config.cache is not None else out / "references"
-    geo = sphere_geometry(config.size)
-    mask = geo.mask.numpy()
+    if not config.light_azimuths or not all(math.isfinite(a) for a in config.light_azimuths):
+        raise NbrdfError(f"light azimuths: {config.light_azimuths} must be one or more finite angles")
+    geos = [sphere_geometry(config.size, a) for a in config.light_azimuths]
     sets = {set_label(s): load_set(s, config.heldout_per_class) for s in config.sets}
     result = {"config": {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(config).items()},
               "light": [float(x) for x in light_direction()], "machine": _machine(), "sets": {}}
+    turns = len(geos) > 1
     for label, items in sets.items():
         rows, images = [], []
         for cls, m in tqdm(items, desc=f"render {label}", unit="material", file=sys.stderr,
                            disable=not config.progress or None):
-            ref = reference_render(m, geo, config.spp, config.seed, cache, config.progress, config.noise_target,
-                                   config.max_spp)
-            row = {"name": m.name, "class": cls, "layers": len(m.layers),
-                   "reference": {"spp": ref.spp, "noise_psnr": noise_psnr(ref.image, ref.stderr, mask),
-                                 "half_flip": ref.half_flip, "seconds": round(ref.seconds, 2)}}
             t0 = time.perf_counter()
             brdfs = method_evaluators(m, model, config.methods, config.projection_pairs, config.projection_spp,
                                       config.seed, config.refine_budget)
-            imgs = {"reference": ref.image}
-            for meth, brdf in brdfs.items():
-                img = shade(brdf.eval, geo)
-                fl, fmap = flip(ref.image, img)
-                row[meth] = {"flip": fl, "flip_disk": float(fmap[mask].mean()),
-                             "psnr": compressed_psnr(img, ref.image, mask)}
-                imgs[meth], imgs[f"flip_{meth}"] = img, fmap
-                how = getattr(brdf, "refinement", None)
-                if how is not None:  # what the refinement spent (a shared machine gives it less processor time)
-                    row[meth]["refinement"] = {k: getattr(how, k) for k in ("seconds", "cpu_seconds", "rounds",
-                                                                            "pairs", "converged", "error",
-                                                                            "network_error") if hasattr(how, k)}
-            for name, render in extra.items():
-                try:
-                    img = render(m, geo)
-                except NbrdfError as e:
-                    row[f"{name}_error"] = str(e)
-                    continue
-                fl, fmap = flip(ref.image, img)
-                row[name] = {"flip": fl, "flip_disk": float(fmap[mask].mean()),
-                             "psnr": compressed_psnr(img, ref.image, mask)}
-                imgs[name], imgs[f"flip_{name}"] = img, fmap
-            row["method_seconds"] = round(time.perf_counter() - t0, 2)
-            rows.append(row)
-            images.append(imgs)
+            made = time.perf_counter() - t0  # the methods' making, counted in the material's first row
+            for az, geo in zip(config.light_azimuths, geos):
+                row, imgs = _scored_row(config, cache, cls, m, brdfs, extra, geo, az if turns else None)
+                row["method_seconds"] = round(row["method_seconds"] + made, 2)
+                made = 0.0
+                rows.append(row)
+                images.append(imgs)
         columns = (*config.methods, *extra)
         entry = {"rows": rows, "summary": summarise(rows, columns)}
         if config.figure and rows:
@@ -437,6 +434,42 @@ def run_render_report(config: RenderReportConfig, extra: dict[str, ExtraColumn] 
     (out / "render.json").write_text(json.dumps(result, indent=1, default=_json_default) + "\n")
     (out / "render.md").write_text(markdown_tables(result, (*METHODS, *extra)))
     return result
+
+
+def _scored_row(config: RenderReportConfig, cache: Path, cls: str, m: Material, brdfs: dict,
+                extra: dict[str, ExtraColumn], geo: SphereGeometry, azimuth: float | None) -> tuple[dict, dict]:
+    """One material under one light (``azimuth``: its turn, named in the row; None: the one light): the
+    reference, every method's and extra column's image, FLIP and PSNR."""
+    mask = geo.mask.numpy()
+    ref = reference_render(m, geo, config.spp, config.seed, cache, config.progress, config.noise_target,
+                           config.max_spp)
+    row = {"name": m.name if azimuth is None else f"{m.name} @ {azimuth:g} deg", "class": cls,
+           "layers": len(m.layers), "light_azimuth": 0.0 if azimuth is None else azimuth,
+           "reference": {"spp": ref.spp, "noise_psnr": noise_psnr(ref.image, ref.stderr, mask),
+                         "half_flip": ref.half_flip, "seconds": round(ref.seconds, 2)}}
+    t0 = time.perf_counter()
+    imgs = {"reference": ref.image}
+    for meth, brdf in brdfs.items():
+        img = shade(brdf.eval, geo)
+        fl, fmap = flip(ref.image, img)
+        row[meth] = {"flip": fl, "flip_disk": float(fmap[mask].mean()), "psnr": compressed_psnr(img, ref.image, mask)}
+        imgs[meth], imgs[f"flip_{meth}"] = img, fmap
+        how = getattr(brdf, "refinement", None)
+        if how is not None:  # what the refinement spent (a shared machine gives it less processor time)
+            row[meth]["refinement"] = {k: getattr(how, k) for k in ("seconds", "cpu_seconds", "rounds", "pairs",
+                                                                    "converged", "error", "network_error")
+                                       if hasattr(how, k)}
+    for name, render in extra.items():
+        try:
+            img = render(m, geo)
+        except NbrdfError as e:
+            row[f"{name}_error"] = str(e)
+            continue
+        fl, fmap = flip(ref.image, img)
+        row[name] = {"flip": fl, "flip_disk": float(fmap[mask].mean()), "psnr": compressed_psnr(img, ref.image, mask)}
+        imgs[name], imgs[f"flip_{name}"] = img, fmap
+    row["method_seconds"] = time.perf_counter() - t0
+    return row, imgs
 
 
 def markdown_tables(result: dict, columns: tuple[str, ...] = METHODS) -> str:

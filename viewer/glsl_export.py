@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from nbrdf.neural.anisotropy import code_tail
 from nbrdf.neural.gpu_pack import STORE_CONST, _glsl_float, latent_share, pack
 from nbrdf.neural.material_code import code_parts
 from nbrdf.viewer.gpu.shaders import MODE_DEFINES, source
@@ -22,7 +23,8 @@ def _f(v: float) -> str:
 
 
 def export_glsl(model, code: torch.Tensor, name: str = "material") -> str:
-    """GLSL text defining nbrdf_eval / nbrdf_sample / nbrdf_pdf for the code (3, 34)."""
+    """GLSL text defining nbrdf_eval / nbrdf_sample / nbrdf_pdf for the code (3, 34), or (3, 39) of an
+    anisotropic material (its tail as constants, the body read at its warped pair: anisotropy.glsl)."""
     (rough, ior), (sigma, w) = code_parts(model, code)
     packed = pack(model.decoder)
     share = latent_share(model.decoder, code)  # (width, 3)
@@ -36,6 +38,15 @@ def export_glsl(model, code: torch.Tensor, name: str = "material") -> str:
         f"#define NBRDF_PROXY_SIGMA {_f(sigma)}",
         f"#define NBRDF_PROXY_W {_f(w)}",
     ])
+    tail = code_tail(code, model.decoder.spec.code)
+    if tail:  # an anisotropic code: the frame's x must be the surface's tangent (export.glsl's header)
+        cx, cy, bx, by = tail["u_aniso"]
+        consts += "\n" + "\n".join([
+            "#define NB_ANISO 1",
+            f"#define NB_COAT_ANISO vec2({_f(cx)}, {_f(cy)})",
+            f"#define NB_BODY_ANISO vec2({_f(bx)}, {_f(by)})",
+            f"#define NBRDF_BODY_TAIL vec3({_f(bx)}, {_f(by)}, {_f(tail['u_body_alpha'])})",
+        ])
     snippets = {"nb_constants": consts, "nb_net": packed.unrolled_net(), "nb_hidden2": "", "nb_chain2": "",
                 "nb_layers": ""}
     text = source(TEMPLATE, snippets, version="")

@@ -138,7 +138,7 @@ def test_the_conductor_reflects_specular_color_times_schlick_at_mu_bar():
     ("subsurface_weight", 0.3, "subsurface"),
     ("emission_luminance", 10.0, "emission"),
     ("geometry_opacity", 0.8, "opaque"),
-    ("specular_roughness_anisotropy", 0.5, "isotropic"),
+    ("specular_roughness_anisotropy", 0.5, "tangent"),
     ("base_diffuse_roughness", 0.5, "Lambertian"),
     ("geometry_thin_walled", True, "thin-walled"),
 ])
@@ -148,6 +148,20 @@ def test_every_input_a_stack_cannot_hold_is_one_note(field, value, words):
     mine = [n for n in notes if n.startswith(f"{field} {shown}:")]
     assert len(mine) == 1 and words in mine[0], notes
     assert "\n" not in mine[0]
+
+
+def test_roughness_anisotropy_goes_to_its_interface():
+    """OpenPBR's specular and coat roughness anisotropy land on the base's and the coat's interface (SPEC
+    section 10 uses OpenPBR's convention as it is); 1 is clamped to the stack's 0.95 with a note."""
+    metal, _ = openpbr_to_material(OpenPbr(base_metalness=1.0, specular_roughness_anisotropy=0.6), "t")
+    assert metal["layers"][-1]["type"] == "conductor" and metal["layers"][-1]["anisotropy"] == 0.6
+    plastic, _ = openpbr_to_material(OpenPbr(specular_roughness_anisotropy=0.3, coat_weight=1.0,
+                                             coat_roughness_anisotropy=0.5), "t")
+    assert plastic["layers"][0]["anisotropy"] == 0.5 and plastic["layers"][-2]["anisotropy"] == 0.3
+    full, notes = openpbr_to_material(OpenPbr(base_metalness=1.0, specular_roughness_anisotropy=1.0), "t")
+    assert full["layers"][-1]["anisotropy"] == 0.95
+    assert any(n.startswith("specular_roughness_anisotropy 1 is above the stack's largest") for n in notes), notes
+    assert "anisotropy" not in openpbr_to_material(OpenPbr(base_metalness=1.0), "t")[0]["layers"][-1]
 
 
 def test_coat_only_inputs_are_noted_under_a_coat_only():

@@ -65,7 +65,7 @@ def _dirs(rng) -> np.ndarray:
 @pytest.mark.gl
 @pytest.mark.slow
 @pytest.mark.ci_slow
-@pytest.mark.parametrize("name", ["car_paint.json", "rough_gold.json"])
+@pytest.mark.parametrize("name", ["car_paint.json", "rough_gold.json", "brushed_steel_lacquer.json"])
 def test_exported_glsl_equals_torch(name):
     import moderngl
 

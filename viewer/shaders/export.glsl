@@ -11,7 +11,9 @@
 // f = the clear coat in closed form (GGX, exact Fresnel) + the shared neural decoder's
 // body at this material's latents; every weight is a constant below. Sampling: the coat's
 // visible normals mixed with the body's proxy pdf (docs/NEURAL.md). GLSL 3.30 / ES 3.00
-// or newer. Helper names start with nb_, coat_, sample_, pdf_ (one material per program).
+// or newer. Helper names start with nb_, coat_, sample_, pdf_, aniso_ (one material per program).
+// An anisotropic material (NB_ANISO below): the frame's x must be the surface's tangent (SPEC
+// section 10: y = z x x); the brushing direction is the material's anisotropy_rotation about z.
 #ifndef PI
 #define PI 3.14159265358979
 #endif
@@ -20,7 +22,17 @@
 //@INCLUDE neural_decoder.glsl
 //@INCLUDE coat.glsl
 
-vec3 nbrdf_eval(vec3 wi, vec3 wo) { return nb_decode(wi, wo) + vec3(coat_eval(wi, wo, NBRDF_COAT)); }
+#ifdef NB_ANISO
+vec3 nb_body(vec3 wi, vec3 wo) {
+    vec3 a, b;
+    float j = body_warp(wi, wo, NBRDF_BODY_TAIL, coat_params(NBRDF_COAT).y, a, b);
+    return j > 0.0 ? nb_decode(a, b) * j : vec3(0.0);
+}
+#else
+#define nb_body(wi, wo) nb_decode(wi, wo)
+#endif
+
+vec3 nbrdf_eval(vec3 wi, vec3 wo) { return nb_body(wi, wo) + vec3(coat_eval(wi, wo, NBRDF_COAT)); }
 
 vec3 nbrdf_sample(vec3 wo, vec3 u) { return coated_sample(wo, u, NBRDF_COAT, NBRDF_PROXY_SIGMA, NBRDF_PROXY_W); }
 
