@@ -98,7 +98,8 @@ class Stack:
         by its geometric mean (what the leaf encoders and the layering network see), and the anisotropy
         vectors of a code's tail (``neural.anisotropy``): the coat's (the top interface's, as ``coat``) and
         the body's, that of the highest anisotropic interface below the coat (a documented
-        approximation, docs/decisions/116), with that interface's geometric-mean alpha (its masking)."""
+        approximation, docs/decisions/116), lessened by the media's scattering above it (exp(-2 tau albedo), the
+        unscattered share of a round trip), with that interface's geometric-mean alpha (its masking)."""
         n, dtype = self.n, self.roughness.dtype
         rot = self.rotation if self.rotation is not None else torch.zeros(n, dtype=dtype)
         a_l = self.anisotropy if self.anisotropy is not None else torch.zeros_like(self.roughness)
@@ -119,9 +120,18 @@ class Stack:
             alphas_below = alphas_below[-1:]
         body_a = torch.zeros(n, dtype=dtype)
         body_alpha = torch.full((n,), NO_COAT[0], dtype=dtype)
-        for col, alpha in zip(reversed(below), reversed(alphas_below)):  # the highest non-zero one wins
+        # scattering above it: the optical depth times the albedo of the media over the body's interface
+        depth = [(self.albedo[:, j].mean(-1) * self.sigma_t[:, j].mean(-1)).to(dtype) for j in range(self.layers)]
+        scatter = torch.zeros(n, dtype=dtype)
+        for i in reversed(range(len(below))):  # the highest non-zero one wins
+            col, alpha = below[i], alphas_below[i]
+            over = sum(depth[:i + 1], torch.zeros(n, dtype=dtype)) if self.layers else torch.zeros(n, dtype=dtype)
             body_a = torch.where(col != 0, col, body_a)
             body_alpha = torch.where(col != 0, alpha.to(dtype), body_alpha)
+            scatter = torch.where(col != 0, over, scatter)
+        # light scattered in a medium on its way to the interface and back comes out isotropic: the body keeps the
+        # anisotropy of the unscattered share, exp(-2 tau albedo) at normal incidence (decision 116)
+        body_a = body_a * torch.exp(-2.0 * scatter)
         return (replace(self, **changes), anisotropy_vector(coat_a, rot).to(dtype),
                 torch.cat([anisotropy_vector(body_a, rot).to(dtype), body_alpha[:, None]], -1))
 

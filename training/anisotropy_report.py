@@ -110,6 +110,21 @@ def score(folder: str | Path, method: Callable[[Material], EvalFn], per_class: i
             fn = method(turned(m, phi))
             for t, th in enumerate(THETAS):
                 ps.append(lobe_psnr(lobe_image(fn, th), ref["lobes"][a, t]))
-        rows.append({"class": cls, "name": m.name, "psnr_median": float(np.median(ps)),
-                     "psnr_min": float(np.min(ps)), "psnrs": ps, "ref_noise_min": float(ref["noise"].min())})
+        noise = float(ref["noise"].min())
+        rows.append({"class": cls, "name": m.name, "psnr_median": float(np.median(ps)), "psnr_min": float(np.min(ps)),
+                     "psnrs": ps, "ref_noise_min": noise if np.isfinite(noise) else None})  # None: a closed form
     return rows
+
+
+def summary(rows: list[dict]) -> dict:
+    """Per class: materials, lobe PSNR median (of the materials' medians) and 10th percentile (of every lobe),
+    and the references' worst noise PSNR."""
+    out = {}
+    for cls in dict.fromkeys(r["class"] for r in rows):
+        sel = [r for r in rows if r["class"] == cls]
+        every = [p for r in sel for p in r["psnrs"]]
+        out[cls] = {"materials": len(sel), "psnr_median": float(np.median([r["psnr_median"] for r in sel])),
+                    "psnr_p10": float(np.percentile(every, 10)),
+                    "reference_noise_psnr_worst": min((r["ref_noise_min"] for r in sel if r["ref_noise_min"] is not None),
+                                                      default=None)}  # None: closed forms only
+    return out
