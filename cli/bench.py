@@ -45,6 +45,9 @@ class AppBench:
     """size of the window"""
     edits: int = 8
     """slider edits timed"""
+    material: str = ""
+    """the material the window opens (default: the previewer's default, varnished copper); its base's roughness
+    is the slider"""
 
 
 @dataclass
@@ -95,7 +98,7 @@ def cmd_bench_app(a: argparse.Namespace) -> int:
         raise NbrdfError("bench app: no display (run it under xvfb-run on a headless machine)")
     c: AppBench = build(AppBench, a)
     at_least("--edits", c.edits)
-    print(json.dumps(bench_app(c.size, c.edits), indent=2))
+    print(json.dumps(bench_app(c.size, c.edits, material=c.material or None), indent=2))
     return 0
 
 

@@ -15,12 +15,12 @@ def closed_form(ctx, material) -> GpuBrdf:
     return MaterialPipeline(ctx).build(material, BrdfMode.ANALYTIC)
 
 
-def table_renderer(ctx, size):
-    """(renderer, body, tables) of the default material with its body baked in a table of ``size``, shaded
-    with the window's table estimator on the sphere (compute paths only: the caller skips without 4.3);
-    release ``tables`` when done."""
+def table_renderer(ctx, size, material=DEFAULT_MATERIAL):
+    """(renderer, body, tables) of ``material`` (default: the default material) with its body baked in a table
+    of ``size``, shaded with the window's table estimator on the sphere (compute paths only: the caller skips
+    without 4.3); release ``tables`` when done."""
     tables = BodyTables(ctx)
-    body = tables.brdf(MaterialPipeline(ctx).build(load_material(DEFAULT_MATERIAL), BrdfMode.NEURAL), size)
+    body = tables.brdf(MaterialPipeline(ctx).build(load_material(material), BrdfMode.NEURAL), size)
     r = Renderer(ctx, brdf=body, mesh="sphere")
     r.sampling = table_sampling(r.sampling)
     return r, body, tables

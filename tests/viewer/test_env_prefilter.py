@@ -63,6 +63,29 @@ def test_the_map_converges_to_the_accumulated_estimator(setup):
     assert err < TOLERANCE and abs(bias) < 0.005, (err, bias)
 
 
+def test_the_map_of_a_brushed_material_converges_to_its_accumulated_estimator(gl_ctx):
+    """An anisotropic material on the sphere: the map bakes in the frame of the sphere's tangents (its
+    parallels, a function of the normal), so its image is the accumulated estimator's, as the isotropic
+    one's; on a mesh whose tangents do not run along parallels the map does not apply."""
+    if gl_ctx.version_code < gl.COMPUTE_VERSION:
+        pytest.skip("no OpenGL 4.3 here: the map is a compute path")
+    r, body, tables = table_renderer(gl_ctx, STILL, DEFAULT_MATERIAL.parent / "brushed_steel_lacquer.json")
+    try:
+        state = ViewState(background=False)
+        state.camera.distance = 2.6
+        ref = r.render_linear(state, (SIZE, SIZE), 96)
+        r.settings.prefilter = SMALL
+        assert body.anisotropic and r.lit.prefiltered(state, body)
+        img = r.render_linear(state, (SIZE, SIZE), 16)
+        err, bias = _rel_error(img, ref)
+        assert err < 2 * TOLERANCE and abs(bias) < 0.01, (err, bias)
+        r.set_mesh("testmesh")
+        assert not r.lit.prefiltered(state, body)
+    finally:
+        r.settings.prefilter = None
+        tables.release()
+
+
 def test_a_map_baked_for_other_views_is_seen(setup):
     # The same check fails when the nodes' views are wrong (the sphere taken as 20 times
     # smaller: every node seen from the eye's direction), so the test above can fail.

@@ -15,7 +15,8 @@ between nodes (measured against the accumulated estimator, docs/RESULTS.md).
 
 Where it applies (``EnvPrefilter.applies``): the deferred compute path, the body
 a baked table (a uniform latent: one fetch per candidate), the environment on,
-the mesh the sphere and no normal map (elsewhere one normal has many views),
+the mesh the sphere and no normal map (elsewhere one normal has many views; an anisotropic
+material needs the sphere's own tangents, along its parallels: a function of the normal too),
 not the interactive frames (an edit restarts the still view, which re-bakes).
 A bake runs in bands of rows (``bake_rows``) so the window can spread it over
 frames; a map is used only once complete.
@@ -83,6 +84,18 @@ def sphere_radius(mesh: Mesh, tol: float = 2e-3) -> float | None:
     n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
     radial = np.min(np.sum(n * (p / r[:, None]), axis=1)) > 1.0 - tol
     return float(r.mean()) if radial else None
+
+
+def tangents_along_parallels(mesh: Mesh, tol: float = 2e-3) -> bool:
+    """Whether every tangent of ``mesh`` is its parallel's, normalize(z x n) (the built-in sphere's): an
+    anisotropic material's frame is then a function of the normal, and the map holds it (env_prefilter.comp)."""
+    n = np.asarray(mesh.normals, np.float64)
+    t = np.asarray(mesh.tangents, np.float64)[:, :3]
+    z = np.cross(np.array([0.0, 0.0, 1.0]), n)
+    zn = np.linalg.norm(z, axis=1)
+    ok = zn > 1e-3  # the poles take any tangent
+    cos = np.sum(z[ok] / zn[ok, None] * t[ok], axis=1) / np.maximum(np.linalg.norm(t[ok], axis=1), 1e-12)
+    return bool(ok.any() and cos.min() > 1.0 - tol)
 
 
 def margin(size: int) -> float:
@@ -157,12 +170,14 @@ class EnvPrefilter:
         m = self._maps.get(key)
         return 0 if m is None else m.rows
 
-    def applies(self, brdf: GpuBrdf | None, state: ViewState, radius: float | None, deferred: bool) -> bool:
+    def applies(self, brdf: GpuBrdf | None, state: ViewState, radius: float | None, deferred: bool,
+                parallels: bool = False) -> bool:
         """Whether a draw of ``brdf`` in ``state`` on a mesh of sphere radius ``radius`` (None: not a
-        sphere) reads the map (see the module's docstring)."""
+        sphere) reads the map (see the module's docstring); an anisotropic one only where the mesh's
+        tangents run along its parallels (``parallels``: ``tangents_along_parallels``)."""
         return (deferred and radius is not None and brdf is not None and brdf.kind == BrdfKind.TABLE
                 and brdf.normal_map is None and brdf.body_table is not None and bool(state.env_on)
-                and not brdf.anisotropic)  # a map over normals holds an isotropic body only
+                and (parallels or not brdf.anisotropic))
 
     def key(self, state: ViewState, brdf: GpuBrdf, env, sampling: LitSampling, radius: float = 1.0) -> tuple:
         """What the map depends on: the body (its code and closed-form uniforms), the camera,

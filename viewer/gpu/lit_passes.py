@@ -127,6 +127,8 @@ class LitPasses:
         self.guides = BodyGuides(kit.ctx)
         """The decoder's resampling-target tables, one per uniform latent drawn (viewer/gpu/body_guide.py)."""
         self.sphere_radius: float | None = None
+        self.parallel_tangents = False
+        """Whether the mesh's tangents run along its parallels (the built-in sphere's: env_prefilter.py)."""
         """The mesh's radius when it is a sphere about the origin (the renderer sets it; None: not one)."""
         self.mesh_serial = 0
         """Counts the renderer's meshes (``set_mesh``): a G-buffer of another mesh is not reused."""
@@ -157,7 +159,7 @@ class LitPasses:
     def prefiltered(self, state: ViewState, brdf: GpuBrdf | None) -> bool:
         """Whether draws of ``brdf`` read the body environment map (its bake still to finish or not)."""
         pf = self.prefilter()
-        return pf is not None and pf.applies(brdf, state, self.sphere_radius, self.compute)
+        return pf is not None and pf.applies(brdf, state, self.sphere_radius, self.compute, self.parallel_tangents)
 
     def specialised(self, brdf: GpuBrdf | None) -> dict | None:
         """The define of lit.comp's program of its own for the estimator of ``brdf``'s draws

@@ -50,7 +50,7 @@ from nbrdf.imaging.environment import EnvironmentMap, GpuEnvironment, default_en
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
 from nbrdf.viewer.gpu.draw_kit import DrawKit
-from nbrdf.viewer.gpu.env_prefilter import sphere_radius
+from nbrdf.viewer.gpu.env_prefilter import sphere_radius, tangents_along_parallels
 from nbrdf.viewer.gpu.gl import use_compute
 from nbrdf.viewer.gpu.gl_state import accumulating, added, depth_tested, flat, masked
 from nbrdf.viewer.gpu.lit_passes import LitPasses, LitSettings, Rows, incidence
@@ -164,6 +164,7 @@ class Renderer:
         m = named_mesh(mesh) if isinstance(mesh, str) else mesh
         self.mesh = m
         self.lit.sphere_radius = sphere_radius(m)
+        self.lit.parallel_tangents = self.lit.sphere_radius is not None and tangents_along_parallels(m)
         self.lit.mesh_serial += 1
         p = np.asarray(m.positions, np.float64)
         self.lit.bounds = (np.zeros(3), float(np.linalg.norm(p, axis=1).max())) if len(p) else None

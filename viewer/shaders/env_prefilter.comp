@@ -34,7 +34,12 @@ void main() {
     if (any(greaterThanEqual(t, size)) || t.y >= u_row_end) return;
     vec3 n = env_table_dir((vec2(t) + 0.5) / vec2(size));
     vec3 view = normalize(u_eye - (u_centre + u_radius * n));
+#ifdef NB_ANISO  // the sphere's tangent runs along its parallels (viewer/scene/mesh.py uv_sphere): a function of n
+    vec3 tz = cross(vec3(0.0, 0.0, 1.0), n);
+    mat3 tbn = dot(tz, tz) > 1e-12 ? mat3(normalize(tz), cross(n, normalize(tz)), n) : frame_from_normal(n);
+#else
     mat3 tbn = frame_from_normal(n);
+#endif
     vec3 wo = transpose(tbn) * view;
     vec3 sum = vec3(0.0);
     // A node the camera does not see draws nothing: a loop's count per invocation, not a branch

@@ -23,7 +23,7 @@ UI_WINDOW_S = 10.0
 
 def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int = 3,
               noise_target: float = 0.01, noise_renders: int = 4, noise_spp: int = 4,
-              still_passes: int = 4, clicks: int = 8) -> dict:
+              still_passes: int = 4, clicks: int = 8, material: str | None = None) -> dict:
     """The look-development window (needs a display; Xvfb will do) as a user gets
     it, adaptive resolution on (viewer/ui/refinement.py):
 
@@ -71,11 +71,13 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
       at any moment of a frame and waits for the next one), so the figure is that wait plus the
       frame that shows it. ``input_latency_frames_max``: the most frames a click took to show (1:
       the next frame). A second click closes the list between clicks;
-    - the machine's load average (1 minute) before and after: other work on the machine slows every figure."""
+    - the machine's load average (1 minute) before and after: other work on the machine slows every figure.
+
+    ``material``: the file the window opens (default: the previewer's default material)."""
 
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
-    app = App(ViewOptions(material=DEFAULT_MATERIAL, size=size), size=size)
+    app = App(ViewOptions(material=material or DEFAULT_MATERIAL, size=size), size=size)
     ld = app.lookdev
     try:
         app.step()
