@@ -60,17 +60,24 @@ class PrefilterSettings:
     """Coat visible-normal samples per pass where the map is read: the pass is then the lights,
     the coat and one fetch, so the coat (the noise left beside the map's) takes the most
     samples a pass allows (each costs about a tenth of the pass's fixed cost on llvmpipe)."""
+    anisotropic_draws: int = 4
+    """How many times ``draws`` an anisotropic body's map takes: its stretched lobe leaves 1.2 % noise in the
+    still map at the isotropic count (the still view's floor, above its 1 % target), 0.5 % at four times
+    (record 116); 0: anisotropic bodies read no map (the slider's frames: its warped bake costs more than the
+    quick estimator it saves)."""
 
     def check(self) -> "PrefilterSettings":
-        if not (16 <= self.size <= 512 and 1 <= self.draws <= 1024 and 0 <= self.coat_samples <= 16):
+        if not (16 <= self.size <= 512 and 1 <= self.draws <= 1024 and 0 <= self.coat_samples <= 16
+                and 0 <= self.anisotropic_draws <= 16):
             raise NbrdfError(f"environment prefilter: size {self.size} (16..512), draws {self.draws} (1..1024), "
-                             f"coat samples {self.coat_samples} (0..16)")
+                             f"coat samples {self.coat_samples} (0..16), anisotropic draws "
+                             f"{self.anisotropic_draws} (0..16)")
         return self
 
 
 #: The interactive frames' map (``LitSettings.quick_prefilter``): baked whole within the edit's
 #: frame, so coarse (nodes about 6 degrees apart) and few draws (docs/decisions/113).
-QUICK_PREFILTER = PrefilterSettings(size=32, draws=8, coat_samples=1)
+QUICK_PREFILTER = PrefilterSettings(size=32, draws=8, coat_samples=1, anisotropic_draws=0)
 
 
 def sphere_radius(mesh: Mesh, tol: float = 2e-3) -> float | None:
@@ -177,7 +184,7 @@ class EnvPrefilter:
         tangents run along its parallels (``parallels``: ``tangents_along_parallels``)."""
         return (deferred and radius is not None and brdf is not None and brdf.kind == BrdfKind.TABLE
                 and brdf.normal_map is None and brdf.body_table is not None and bool(state.env_on)
-                and (parallels or not brdf.anisotropic))
+                and (not brdf.anisotropic or (parallels and self.settings.anisotropic_draws > 0)))
 
     def key(self, state: ViewState, brdf: GpuBrdf, env, sampling: LitSampling, radius: float = 1.0) -> tuple:
         """What the map depends on: the body (its code and closed-form uniforms), the camera,
@@ -233,7 +240,7 @@ class EnvPrefilter:
         c["u_eye"].value = tuple(float(v) for v in state.camera.eye())
         c["u_centre"].value = (0.0, 0.0, 0.0)
         c["u_radius"].value = float(radius)
-        c["u_draws"].value = int(self.settings.draws)
+        c["u_draws"].value = int(self.settings.draws) * (self.settings.anisotropic_draws if brdf.anisotropic else 1)
         c["u_margin"].value = margin(self.size)
         c["u_row0"].value, c["u_row_end"].value = y0, y1
         m.texture.bind_to_image(1, read=False, write=True)
