@@ -162,3 +162,42 @@ def test_missing_and_wrong_kind_of_file(tmp_path):
     (tmp_path / "m.obj").write_text("v 0 0 0\n")
     with pytest.raises(NbrdfError, match=r"expected a \.gltf or \.glb"):
         import_gltf(tmp_path / "m.obj")
+
+
+def _with_tangents(tmp_path: Path, tangents: np.ndarray | None) -> Path:
+    """A one-triangle .gltf (data-uri buffer) with normals, uvs and, given, a TANGENT attribute."""
+    import base64
+
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    nrm = np.array([[0, 0, 1]] * 3, np.float32)
+    uv = np.array([[0, 0], [1, 0], [0, 1]], np.float32)
+    arrays = [pos, nrm, uv] + ([tangents.astype(np.float32)] if tangents is not None else [])
+    blob = b"".join(a.tobytes() for a in arrays)
+    views, accessors, offset = [], [], 0
+    for k, a in enumerate(arrays):
+        views.append({"buffer": 0, "byteOffset": offset, "byteLength": a.nbytes})
+        accessors.append({"bufferView": k, "componentType": 5126, "count": 3, "type": f"VEC{a.shape[1]}"})
+        offset += a.nbytes
+    attrs = {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2, **({"TANGENT": 3} if tangents is not None else {})}
+    doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+           "meshes": [{"primitives": [{"attributes": attrs}]}], "accessors": accessors, "bufferViews": views,
+           "buffers": [{"byteLength": len(blob),
+                        "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()}]}
+    p = tmp_path / "tri.gltf"
+    p.write_text(json.dumps(doc))
+    return p
+
+
+def test_a_files_tangents_are_the_meshs_and_missing_ones_are_made(tmp_path):
+    """glTF's TANGENT (what an anisotropic material's brushing follows) is kept, turned into the z-up world
+    with its handedness; a file without one gets tangents from its uvs, which differ here."""
+    from nbrdf.viewer.scene.mesh import load_mesh
+
+    diagonal = np.array([[0.6, 0.8, 0.0, -1.0]] * 3)
+    own = load_mesh(_with_tangents(tmp_path, diagonal)).tangents
+    # glTF y-up -> z-up: (x, y, z) -> (x, -z, y); the file's tangent lies in its xy plane
+    np.testing.assert_allclose(own[:, :3], np.array([[0.6, 0.0, 0.8]] * 3), atol=1e-6)
+    assert (own[:, 3] == -1.0).all()
+    made = load_mesh(_with_tangents(tmp_path, None)).tangents
+    np.testing.assert_allclose(made[:, :3], np.array([[1.0, 0.0, 0.0]] * 3), atol=1e-6)  # along u
+    assert (made[:, 3] == 1.0).all()

@@ -525,6 +525,11 @@ def _primitive_mesh(gltf: _Gltf, prim: dict, world: np.ndarray, place: str):
         uv[:, 1] = 1.0 - uv[:, 1]  # trimesh's convention: origin bottom-left
         visual = trimesh.visual.TextureVisuals(uv=uv)
     mesh = trimesh.Trimesh(vertices=p, faces=faces, visual=visual, process=False, **kw)
+    if "TANGENT" in attrs:  # xyz turned like positions, w the bitangent's handedness (mirrored by a mirroring node)
+        t = gltf.accessor(attrs["TANGENT"])
+        if t.shape[0] == n and t.shape[1] >= 4:
+            w = t[:, 3:4] * (-1.0 if np.linalg.det(world[:3, :3]) < 0 else 1.0)
+            mesh.vertex_attributes["tangent"] = np.hstack([t[:, :3] @ lin.T, w])
     return mesh
 
 

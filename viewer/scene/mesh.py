@@ -149,7 +149,26 @@ def mesh_from_trimesh(tm) -> Mesh:
     if not np.isfinite(nrm).all():
         raise NbrdfError("vertex normals are not finite")
     ind = np.asarray(tm.faces, dtype=np.uint32).reshape(-1)
-    return Mesh(pos, nrm, _tangents(pos, nrm, uv, ind), uv, ind)
+    own = _file_tangents(tm, nrm)
+    return Mesh(pos, nrm, own if own is not None else _tangents(pos, nrm, uv, ind), uv, ind)
+
+
+def _file_tangents(tm, nrm: np.ndarray) -> np.ndarray | None:
+    """The file's own tangents (glTF's TANGENT, which the importer keeps as the vertex attribute
+    "tangent"; an anisotropic material's brushing follows them), made perpendicular to the normals;
+    None where the file has none or one is unusable (then all are made from the uvs)."""
+    t = getattr(tm, "vertex_attributes", {}).get("tangent")
+    if t is None:
+        return None
+    t = np.asarray(t, np.float64)
+    n = np.asarray(nrm, np.float64)
+    if t.shape != (len(n), 4) or not np.isfinite(t).all():
+        return None
+    xyz = t[:, :3] - n * (t[:, :3] * n).sum(1, keepdims=True)
+    length = np.linalg.norm(xyz, axis=1, keepdims=True)
+    if len(xyz) == 0 or length.min() < 1e-8:
+        return None
+    return np.hstack([xyz / length, np.where(t[:, 3:] < 0, -1.0, 1.0)]).astype("f4")
 
 
 def _tangents(pos, nrm, uv, ind) -> np.ndarray:
