@@ -349,7 +349,7 @@ class AnisotropyReport:
 
 def cmd_report_anisotropy(ns: argparse.Namespace) -> int:
     from nbrdf.neural.neural_brdf import neural_brdf  # late: torch and the walk, --help needs neither
-    from nbrdf.training import anisotropy_report as ar
+    from nbrdf.training import anisotropy_report as ar  # late: as above
 
     c: AnisotropyReport = build(AnisotropyReport, ns)
     if c.per_class < 1 or not 20.0 <= c.noise_target <= 90.0:
