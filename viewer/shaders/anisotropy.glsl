@@ -39,49 +39,39 @@ float smith_g1_dir_aniso(vec3 w, float ax, float ay) {
     return 2.0 / (1.0 + sqrt(1.0 + t));
 }
 
-// Heitz 2018's visible-normal sampling, stretched by (ax, ay).
-vec3 sample_vndf_aniso(vec3 v, float ax, float ay, vec2 u) {
-    vec3 vh = normalize(vec3(ax * v.x, ay * v.y, v.z));
-    float lensq = vh.x * vh.x + vh.y * vh.y;
-    vec3 t1 = lensq > 1e-14 ? vec3(-vh.y, vh.x, 0.0) * inversesqrt(lensq) : vec3(1.0, 0.0, 0.0);
-    vec3 t2 = cross(vh, t1);
-    float r = sqrt(u.x), phi = 2.0 * PI * u.y;
-    float p1 = r * cos(phi), p2 = r * sin(phi);
-    float s = 0.5 * (1.0 + vh.z);
-    p2 = (1.0 - s) * sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2;
-    vec3 nh = p1 * t1 + p2 * t2 + sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2)) * vh;
-    return normalize(vec3(ax * nh.x, ay * nh.y, max(1e-6, nh.z)));
+// The anisotropic coat's frame: (alpha_x, alpha_y) of (alpha_0, ior) = c and anisotropy vector v, and the
+// pair turned into its tangent frame with their half vector.
+vec2 aniso_coat_frame(inout vec3 a, inout vec3 b, vec2 c, vec2 v, out vec3 h) {
+    vec3 k = aniso_stretch(v);
+    a = aniso_turn(a, k.yz);
+    b = aniso_turn(b, k.yz);
+    h = normalize(a + b);
+    return vec2(c.x / k.x, c.x * k.x);
 }
 
-// The anisotropic coat's reflection: (alpha_0, ior) = c (legal range), anisotropy vector v.
+// The anisotropic coat's reflection (c in the legal range).
 float coat_reflection_aniso(vec3 wi, vec3 wo, vec2 c, vec2 v) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return 0.0;
-    vec3 k = aniso_stretch(v);
-    float ax = c.x / k.x, ay = c.x * k.x;
-    wi = aniso_turn(wi, k.yz);
-    wo = aniso_turn(wo, k.yz);
-    vec3 h = normalize(wi + wo);
+    vec3 h;
+    vec2 al = aniso_coat_frame(wi, wo, c, v, h);
     if (dot(wi, h) <= 0.0) return 0.0;
-    float g = smith_g1_dir_aniso(wi, ax, ay) * smith_g1_dir_aniso(wo, ax, ay);
-    return fresnel_dielectric(dot(wi, h), c.y) * ggx_d_aniso(h, ax, ay) * g / max(4.0 * wi.z * wo.z, 1e-30);
+    float g = smith_g1_dir_aniso(wi, al.x, al.y) * smith_g1_dir_aniso(wo, al.x, al.y);
+    return fresnel_dielectric(dot(wi, h), c.y) * ggx_d_aniso(h, al.x, al.y) * g / max(4.0 * wi.z * wo.z, 1e-30);
 }
 
 vec3 coat_sample_aniso(vec3 w, vec2 u, vec2 c, vec2 v) {
     vec3 k = aniso_stretch(v);
     vec3 wf = aniso_turn(w, k.yz);
-    vec3 m = sample_vndf_aniso(wf, c.x / k.x, c.x * k.x, u);
+    vec3 m = sample_vndf2(wf, c.x / k.x, c.x * k.x, u);
     return aniso_unturn(2.0 * dot(wf, m) * m - wf, k.yz);
 }
 
 float coat_pdf_aniso(vec3 w, vec3 l, vec2 c, vec2 v) {
     if (w.z <= 0.0 || l.z <= 0.0) return 0.0;
-    vec3 k = aniso_stretch(v);
-    float ax = c.x / k.x, ay = c.x * k.x;
-    w = aniso_turn(w, k.yz);
-    l = aniso_turn(l, k.yz);
-    vec3 h = normalize(w + l);
-    float g1 = smith_g1_dir_aniso(w, ax, ay);
-    return g1 * max(dot(w, h), 0.0) * ggx_d_aniso(h, ax, ay) / w.z / (4.0 * max(dot(w, h), 1e-8));
+    vec3 h;
+    vec2 al = aniso_coat_frame(w, l, c, v, h);
+    float g1 = smith_g1_dir_aniso(w, al.x, al.y);
+    return g1 * max(dot(w, h), 0.0) * ggx_d_aniso(h, al.x, al.y) / w.z / (4.0 * max(dot(w, h), 1e-8));
 }
 
 // Directions refracted through a smooth interface of relative ior eta, in and out (neural/anisotropy.py

@@ -12,8 +12,9 @@ vec3 sample_cosine(vec2 u, out float pdf) {
 
 float pdf_cosine(vec3 w) { return max(w.z, 0.0) / PI; }
 
-vec3 sample_vndf(vec3 v, float a, vec2 u) {
-    vec3 vh = normalize(vec3(a * v.x, a * v.y, v.z));
+// Heitz 2018's visible-normal sampling, stretched by (ax, ay) (an anisotropic interface; ax = ay: GGX's).
+vec3 sample_vndf2(vec3 v, float ax, float ay, vec2 u) {
+    vec3 vh = normalize(vec3(ax * v.x, ay * v.y, v.z));
     float lensq = vh.x * vh.x + vh.y * vh.y;
     vec3 t1 = lensq > 1e-14 ? vec3(-vh.y, vh.x, 0.0) * inversesqrt(lensq) : vec3(1.0, 0.0, 0.0);
     vec3 t2 = cross(vh, t1);
@@ -22,8 +23,10 @@ vec3 sample_vndf(vec3 v, float a, vec2 u) {
     float s = 0.5 * (1.0 + vh.z);
     p2 = (1.0 - s) * sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2;
     vec3 nh = p1 * t1 + p2 * t2 + sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2)) * vh;
-    return normalize(vec3(a * nh.x, a * nh.y, max(1e-6, nh.z)));
+    return normalize(vec3(ax * nh.x, ay * nh.y, max(1e-6, nh.z)));
 }
+
+vec3 sample_vndf(vec3 v, float a, vec2 u) { return sample_vndf2(v, a, a, u); }
 
 float pdf_ggx_reflection(vec3 wo, vec3 wi, float a) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return 0.0;
