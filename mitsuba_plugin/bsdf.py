@@ -26,7 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from nbrdf.mitsuba.errors import PluginError
-from nbrdf.mitsuba.kernel import Body, TexturedCodeKernel
+from nbrdf.mitsuba.kernel import Body, MixedKernel, TexturedCodeKernel
 from nbrdf.mitsuba.modes import SLOW_WARNING
 from nbrdf.mitsuba.normal_map import BentDirections
 
@@ -40,6 +40,16 @@ def _prop(props, key: str, default=None):
     return props[key] if key in props else default
 
 
+def _components(kernel) -> list:
+    """The uniform or textured kernels a kernel is made of: a ``MixedKernel``'s components, else itself."""
+    return list(kernel.kernels) if isinstance(kernel, MixedKernel) else [kernel]
+
+
+def _diffuse(kernel) -> bool:
+    """Whether one (not mixed) kernel is reported as a diffuse lobe (``DIFFUSE_W``)."""
+    return not kernel.textured and not kernel.coat.present and kernel.proxy.w > DIFFUSE_W
+
+
 class NbrdfBSDF(mi.BSDF):
     """``{"type": "nbrdf", "material": PATH[, "weights": BUNDLE, "pixel_angle": RADIANS, "body": "decoder"|"table"]}``:
     ``body`` "table" reads a uniform material's body from a table baked once
@@ -51,7 +61,10 @@ class NbrdfBSDF(mi.BSDF):
     per hit (0: the finest). A material JSON's ``normal_map`` bends the shading
     frame per hit (``normal_map.py``). A uniform material may be anisotropic,
     its x axis ``si.sh_frame.s`` (module docstring); a texture-mapped one may
-    not (one line)."""
+    not (one line). A uniform material with OpenPBR's linear mixes is held
+    exactly (``kernel.MixedKernel``: eval and pdf the weighted sums, ``sample1``
+    picks the component, the weight eval cos / the mixture's pdf); it is a
+    diffuse lobe only when every component is."""
 
     def __init__(self, props):
         from nbrdf.mitsuba.materials import code_kernel, material_normal_map  # start-up: torch loads with a material
@@ -68,7 +81,7 @@ class NbrdfBSDF(mi.BSDF):
         self.body = str(_prop(props, "body", Body.DECODER.value))
         self.kernel = code_kernel(self.path, _prop(props, "weights"), self.pixel_angle, self.body)
         self.normal_map = material_normal_map(self.path, "nbrdf")
-        diffuse = not self.kernel.textured and not self.kernel.coat.present and self.kernel.proxy.w > DIFFUSE_W
+        diffuse = all(_diffuse(k) for k in _components(self.kernel))
         self._lobe = mi.BSDFFlags.DiffuseReflection if diffuse else mi.BSDFFlags.GlossyReflection
         self.m_components = [self._lobe | mi.BSDFFlags.FrontSide]
         self.m_flags = self.m_components[0]
@@ -115,6 +128,11 @@ class NbrdfBSDF(mi.BSDF):
         pass
 
     def to_string(self):
+        if isinstance(self.kernel, MixedKernel):
+            nmap = "" if self.normal_map is None else f", normal_map={self.normal_map.path!r}"
+            parts = ", ".join(f"{w:.3g}: coat (roughness {k.coat.roughness:g}, ior {k.coat.ior:g}) proxy (sigma "
+                              f"{k.proxy.sigma:g}, w {k.proxy.w:g})" for w, k in self.kernel.parts)
+            return f"NbrdfBSDF[material={self.path!r}, body={self.body}, OpenPBR mix of {parts}{nmap}]"
         c, p = self.kernel.coat, self.kernel.proxy
         if hasattr(self.kernel, "maps"):
             return (f"NbrdfBSDF[material={self.path!r}, parametric body table {self.kernel.decoder.nodes} over "
@@ -164,7 +182,9 @@ class NbrdfReferenceBSDF(mi.BSDF):
     the hit's uv (``textures.ParamMaps``); a ``normal_map`` bends the shading
     frame per hit as in ``nbrdf`` (its finest level: the ground truth is not
     filtered). A uniform material may be anisotropic, in the frame ``nbrdf``
-    uses (module docstring)."""
+    uses (module docstring). A uniform material with OpenPBR's linear mixes is
+    held exactly (``materials.ReferenceWalk``: f the components' walks weighted,
+    ``sample1`` picks the component, the pdf the mixture's)."""
 
     def __init__(self, props):
         from nbrdf.mitsuba.materials import ReferenceWalk, material_normal_map  # start-up: torch loads with a material

@@ -16,7 +16,18 @@ import numpy as np
 import torch
 
 from nbrdf.mitsuba.errors import PluginError
-from nbrdf.mitsuba.kernel import Body, BodyWarp, Coat, CodeKernel, DecoderKernel, Proxy, TableBody, TexturedCodeKernel
+from nbrdf.mitsuba.kernel import (
+    Body,
+    BodyWarp,
+    Coat,
+    CodeKernel,
+    DecoderKernel,
+    MixedKernel,
+    Proxy,
+    TableBody,
+    TexturedCodeKernel,
+    mix_edges,
+)
 from nbrdf.mitsuba.normal_map import NormalMapKernel
 from nbrdf.mitsuba.param_table import param_table_kernel
 from nbrdf.mitsuba.textures import LatentTextureKernel, ParamMaps, sharpest_top_roughness
@@ -24,8 +35,9 @@ from nbrdf.neural.anisotropy import LIFT_Z, TRANSMITTANCE_CAP, body_tail, requir
 from nbrdf.neural.body_table import TableSize, bake_body
 from nbrdf.neural.coat import IOR_RANGE, NO_COAT, ROUGHNESS_RANGE, coat_of
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import LatentBase, Measured, is_material_file, load_material
+from nbrdf.neural.material import LatentBase, Material, Measured, is_material_file, load_material
 from nbrdf.neural.material_code import code_parts, load_code
+from nbrdf.neural.mix import material_mix
 from nbrdf.neural.model import default_model, load_model
 from nbrdf.neural.stack import material_stack
 from nbrdf.neural.svbrdf import latent_texture
@@ -84,10 +96,15 @@ def _code_terms(model, code: torch.Tensor) -> tuple[Coat, Proxy, BodyWarp | None
 
 
 def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 0.0,
-                body: str = Body.DECODER) -> CodeKernel:
+                body: str = Body.DECODER) -> CodeKernel | MixedKernel:
     """The Dr.Jit kernel of a material JSON or code file (``neural.material_code``);
     a texture-mapped material JSON gives a ``TexturedCodeKernel`` over its
     latent texture (mip-mapped by the ray cone of ``pixel_angle`` radians).
+    A uniform material JSON with OpenPBR's linear mixes (``neural.mix.material_mix``)
+    gives a ``MixedKernel`` of its components' kernels, each as a uniform
+    material's; one without gives the ``CodeKernel`` it always did. A
+    texture-mapped one keeps its own layers (the largest component: the
+    components carry no textures).
     ``body`` (a ``Body`` word): ``"decoder"`` (the decoder per query) or
     ``"table"`` (the body baked once into a table: ``TableBody`` for a
     uniform material, a parametric table over its (at most two) mapped
@@ -105,11 +122,21 @@ def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 
                 if body == Body.TABLE:
                     return param_table_kernel(m, model, pixel_angle)
                 return _textured_kernel(m, model, pixel_angle)
+            parts = material_mix(m)
+            if len(parts) > 1:  # OpenPBR's linear mix: each component's kernel, weighted (neural.mix)
+                model = load_model(weights) if weights else default_model()
+                return MixedKernel([(w, _uniform_kernel(model, model.material_latent(c), body)) for w, c in parts])
         model, code = load_code(material, weights)
-        coat, proxy, warp = _code_terms(model, code)
-        decoder = table_body(model.decoder, code) if body == Body.TABLE else decoder_kernel(model.decoder, code)
+        return _uniform_kernel(model, code, body)
     except (NbrdfError, ValueError) as e:
         raise PluginError(f"nbrdf: {e}") from None
+
+
+def _uniform_kernel(model, code: torch.Tensor, body: str) -> CodeKernel:
+    """The kernel of one uniform code (3, 34) (or (3, 39), anisotropic): its coat, proxy and body
+    warp (``_code_terms``) over the decoder or its baked table (``body``)."""
+    coat, proxy, warp = _code_terms(model, code)
+    decoder = table_body(model.decoder, code) if body == Body.TABLE else decoder_kernel(model.decoder, code)
     return CodeKernel(decoder, coat, proxy, warp)
 
 
@@ -156,10 +183,14 @@ class ReferenceWalk:
     maps at the hits' uv (``textures.ParamMaps``). A uniform material may be
     anisotropic (the walk takes it in the local frame, x its tangent; the
     defensive sampler stays isotropic, and unbiased); a texture-mapped one may
-    not (``TEXTURED_PATH``)."""
+    not (``TEXTURED_PATH``). A uniform material with OpenPBR's linear mixes
+    (``neural.mix.material_mix``) is held exactly: f the weighted sum of its
+    components' walks (one seed per call for all, as ``neural.mix.MixedBRDF``
+    of ``ReferenceBRDF``s), sampled by the mixture of their samplers (``mix``)."""
 
     def __init__(self, path: str, spp: int, seed: int = 0):
         """Loads the material (``PluginError``: one line, unusable)."""
+        self.mix: list[tuple[float, Material, DefensiveSampler]] | None = None
         try:
             self.material = load_material(path)
             if self.material.is_textured:
@@ -167,6 +198,10 @@ class ReferenceWalk:
                 self.maps, self.sampler = _texture_reference(self.material)
             else:
                 self.maps, self.sampler = None, ReferenceBRDF(self.material, spp=spp).sampler
+                parts = material_mix(self.material)
+                if len(parts) > 1:  # OpenPBR's linear mix: each component walked and sampled, weighted
+                    self.mix = [(w, c, ReferenceBRDF(c, spp=spp).sampler) for w, c in parts]
+                    self._edges = np.asarray(mix_edges([w for w, _, _ in self.mix]), np.float32)
         except NbrdfError as e:
             raise PluginError(f"nbrdf_reference: {e}") from None
         self.spp = spp
@@ -182,9 +217,23 @@ class ReferenceWalk:
         for a texture-mapped material)."""
         if self.maps is not None:
             return self._f_textured(wi, wo, uv)
+        if self.mix is not None:
+            return self._f_mixed(wi, wo)
         f, _ = reference_eval(self.material, torch.from_numpy(wi), torch.from_numpy(wo), spp=self.spp,
                               seed=next(self._seeds))
         return f.numpy().astype(np.float32)
+
+    def _f_mixed(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """sum_k w_k f_k of a mix, each component's walk with this call's seed (the paths
+        ``neural.mix.MixedBRDF`` of ``ReferenceBRDF``s of that seed draws)."""
+        assert self.mix is not None
+        seed, a, b = next(self._seeds), torch.from_numpy(wi), torch.from_numpy(wo)
+        total = None
+        for w, c, _ in self.mix:
+            f = w * reference_eval(c, a, b, spp=self.spp, seed=seed)[0]
+            total = f if total is None else total + f
+        assert total is not None
+        return total.numpy().astype(np.float32)
 
     def _f_textured(self, wi: np.ndarray, wo: np.ndarray, uv: np.ndarray) -> np.ndarray:
         """The walk over one layer stack per hit, its parameters read at ``uv``."""
@@ -199,11 +248,42 @@ class ReferenceWalk:
         return f
 
     def pdf(self, w: np.ndarray, w_other: np.ndarray) -> np.ndarray:
-        """The sampler's pdf (N,) of ``w_other`` given ``w``."""
-        return self.sampler.pdf(torch.from_numpy(w), torch.from_numpy(w_other)).numpy().astype(np.float32)
+        """The sampler's pdf (N,) of ``w_other`` given ``w`` (a mix: the mixture's, sum_k w_k p_k)."""
+        a, b = torch.from_numpy(w), torch.from_numpy(w_other)
+        if self.mix is None:
+            return self.sampler.pdf(a, b).numpy().astype(np.float32)
+        total = None
+        for weight, _, sampler in self.mix:
+            p = weight * sampler.pdf(a, b)
+            total = p if total is None else total + p
+        assert total is not None
+        return total.numpy().astype(np.float32)
 
     def sample(self, view: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(light directions (N, 3), their pdf (N,)) drawn given ``view`` with
-        random numbers ``u`` (N, 3; ``u[:, 2]`` picks the lobe)."""
+        random numbers ``u`` (N, 3; ``u[:, 2]`` picks the lobe). A mix: ``u[:, 2]`` first
+        picks the component by weight (rescaled to stay uniform for its lobe), the pdf is
+        the mixture's (one-sample MIS, balance heuristic: ``kernel.MixedKernel``)."""
+        if self.mix is not None:
+            return self._sample_mixed(view, u)
         w, pdf = self.sampler.sample(torch.from_numpy(view), torch.from_numpy(np.ascontiguousarray(u)))
         return w.numpy().astype(np.float32), pdf.numpy().astype(np.float32)
+
+    def _sample_mixed(self, view: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``sample`` of a mix: the component of ``u[:, 2]``'s interval (``neural.mix.MixedBRDF``'s
+        cut, on the uniform the walk's own sampler picks its lobe with), its draw, the mixture's pdf."""
+        assert self.mix is not None
+        weights = np.asarray([w for w, _, _ in self.mix], np.float32)
+        u = np.array(u, np.float32)  # a copy: the component's uniform replaces u[:, 2]
+        k = np.minimum(np.searchsorted(self._edges, u[:, 2], side="right"), len(self.mix) - 1)
+        lo = np.concatenate([np.zeros(1, np.float32), self._edges[:-1]])[k]
+        u[:, 2] = np.clip((u[:, 2] - lo) / weights[k], 0.0, np.float32(1.0 - 1e-7))
+        light = np.zeros_like(view, dtype=np.float32)
+        for j, (_, _, sampler) in enumerate(self.mix):
+            sel = k == j
+            if sel.any():
+                w, _ = sampler.sample(torch.from_numpy(view[sel]), torch.from_numpy(u[sel]))
+                light[sel] = w.numpy()
+        pdf = self.pdf(view, light)
+        ok = (pdf > 0) & (light[:, 2] > 0) & (view[:, 2] > 0)
+        return light, np.where(ok, pdf, 0.0).astype(np.float32)

@@ -111,6 +111,27 @@ def body_tail(code: Tensor, iso_size: int) -> Tensor | None:
     return code[..., iso_size + 2:iso_size + 5]
 
 
+def tail_turn(code: Tensor, iso_size: int) -> Tensor | None:
+    """The turn rho of the tangent of a material's code (..., iso_size + FRAME_PARAMS; its first row):
+    half the angle of its body's anisotropy vector, else of its coat's; None for a code without a tail."""
+    if code.shape[-1] != iso_size + FRAME_PARAMS:
+        return None
+    coat_v, body_v = code[0, iso_size:iso_size + 2].float(), code[0, iso_size + 2:iso_size + 4].float()
+    v = coat_v if float(body_v.norm()) == 0.0 else body_v
+    return 0.5 * torch.atan2(v[1], v[0])
+
+
+def turned_tail(code: Tensor, iso_size: int, angle: float) -> Tensor:
+    """Codes (..., iso_size + FRAME_PARAMS) with their coat's and body's anisotropy vectors turned by
+    ``angle`` about the normal (a vector's angle is twice the tangent's: it turns by 2 ``angle``)."""
+    out = code.clone()
+    c2, s2 = math.cos(2.0 * angle), math.sin(2.0 * angle)
+    for i in (iso_size, iso_size + 2):
+        x, y = code[..., i], code[..., i + 1]
+        out[..., i], out[..., i + 1] = c2 * x - s2 * y, s2 * x + c2 * y
+    return out
+
+
 def code_tail(code: Tensor, iso_size: int) -> dict[str, object]:
     """The GPU's uniforms of a code's tail (one material code (3, n)): ``u_aniso`` (the coat's and the
     body's anisotropy vectors) and ``u_body_alpha``; empty for a code without a tail."""
@@ -120,17 +141,25 @@ def code_tail(code: Tensor, iso_size: int) -> dict[str, object]:
     return {"u_aniso": tuple(t[:4]), "u_body_alpha": t[4]}
 
 
+def stretched_half(h: Tensor, v: Tensor, inverse: bool = False) -> Tensor:
+    """Unit half vectors h stretched as an anisotropic body's: h' ~ (k h_x, h_y / k, h_z) in the tangent
+    frame of the anisotropy vectors v (module docstring); ``inverse``: the stretch undone."""
+    k, c, s = stretch(v.to(h.dtype))
+    if inverse:
+        k = 1.0 / k
+    hf = _turn(h, c, s)  # h in the tangent frame
+    hp = _turn(torch.stack([k * hf[..., 0], hf[..., 1] / k, hf[..., 2]], -1), c, -s)  # back in the shading frame
+    return hp / hp.norm(dim=-1, keepdim=True).clamp_min(1e-30)
+
+
 def warp_pair(v: Tensor, wi: Tensor, wo: Tensor) -> tuple[Tensor, Tensor]:
     """The pair (wi, wo) turned about their half vector's plane so that h becomes the stretched h'
     (module docstring): what the isotropic decoder sees of an anisotropic body. v (..., 2) broadcasts
     against the pairs; v = 0 returns the pair unchanged (bit for bit)."""
-    k, c, s = stretch(v.to(wi.dtype))
+    k = stretch(v.to(wi.dtype))[0]
     h = wi + wo
     h = h / h.norm(dim=-1, keepdim=True).clamp_min(1e-30)
-    hf = _turn(h, c, s)  # h in the tangent frame
-    hp = torch.stack([k * hf[..., 0], hf[..., 1] / k, hf[..., 2]], -1)
-    hp = _turn(hp, c, -s)  # back in the shading frame (z rotations commute with nothing else here)
-    hp = hp / hp.norm(dim=-1, keepdim=True).clamp_min(1e-30)
+    hp = stretched_half(h, v)
     # the rotation taking h to h' (both unit, upper hemisphere): R w = w cos + (n x w) + n (n . w) / (1 + cos),
     # n = h x h' (unnormalised, |n| = sin)
     n = torch.linalg.cross(h, hp, dim=-1)

@@ -19,12 +19,11 @@ which applies this: one place, the same code everywhere.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import torch
 
-from nbrdf.neural.anisotropy import body_tail
+from nbrdf.neural.anisotropy import body_tail, from_tangent_frame, tail_turn, turned_tail
 from nbrdf.neural.coat import coat_of, has_coat
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.errors import NbrdfError
@@ -67,22 +66,9 @@ class EnergySettings:
 
 
 def _tangent_turn(decoder: Decoder, code: Tensor) -> Tensor | None:
-    """The turn rho of a code's tangent (its body's anisotropy vector, else its coat's); None for a code
-    without an anisotropic tail."""
-    tail = body_tail(code, decoder.spec.code) if decoder.spec.coat else None
-    if tail is None:
-        return None
-    v = tail[0, :2].float()
-    if float(v.norm()) == 0.0:
-        v = coat_of(code[:1].float(), decoder.spec.latent)[0, 2:4]
-    return 0.5 * torch.atan2(v[1], v[0])
-
-
-def _turn(w: Tensor, t: Tensor | float) -> Tensor:
-    """Directions (N, 3) turned by t about z, counter-clockwise."""
-    t = torch.as_tensor(t, dtype=w.dtype)
-    c, sn = torch.cos(t), torch.sin(t)
-    return torch.stack([c * w[:, 0] - sn * w[:, 1], sn * w[:, 0] + c * w[:, 1], w[:, 2]], -1)
+    """The turn rho of a code's tangent (``neural.anisotropy.tail_turn``); None for a code without an
+    anisotropic tail (or a decoder without a coat, whose codes have none)."""
+    return tail_turn(code, decoder.spec.code) if decoder.spec.coat else None
 
 
 def incidence_count(decoder: Decoder, code: Tensor, s: EnergySettings) -> int:
@@ -108,12 +94,8 @@ def _directions(code: Tensor, decoder: Decoder, sigma: float, w: float, s: Energ
     spec = decoder.spec
     code0 = code
     if rho is not None:
-        base = torch.cat([base, _turn(base, 0.5 * math.pi)])
-        code0 = code.clone()
-        c2, s2 = math.cos(-2.0 * float(rho)), math.sin(-2.0 * float(rho))
-        for i in (spec.code, spec.code + 2):  # the coat's and the body's vectors turned by -rho (angle doubled)
-            x, y = code[:, i].clone(), code[:, i + 1].clone()
-            code0[:, i], code0[:, i + 1] = c2 * x - s2 * y, s2 * x + c2 * y
+        base = torch.cat([base, from_tangent_frame(base, torch.tensor(0.0), torch.tensor(1.0))])  # across it
+        code0 = turned_tail(code, spec.code, -float(rho))
     wi = base.repeat_interleave(n, 0)
     u = torch.quasirandom.SobolEngine(3, scramble=True, seed=s.seed).draw(n).float().repeat(base.shape[0], 1)
     coat = coat_of(code0[:1], spec.latent)[0].float() if has_coat(spec, code0) else None
@@ -125,7 +107,8 @@ def _directions(code: Tensor, decoder: Decoder, sigma: float, w: float, s: Energ
         weight = torch.where(ok, wo[:, 2].clamp_min(0) / torch.where(ok, pdf, torch.ones_like(pdf)),
                              torch.zeros_like(pdf))
         if rho is not None:
-            wi, wo = _turn(wi, rho), _turn(wo, rho)
+            wi, wo = from_tangent_frame(wi, torch.cos(rho), torch.sin(rho)), from_tangent_frame(wo, torch.cos(rho),
+                                                                                               torch.sin(rho))
         c = decoder.coat(code[:1], wi, wo)
         coat_f = torch.zeros_like(weight) if c is None else c.float()
         bi, bo, jac = decoder.body_pair(code[:1].float(), wi, wo)

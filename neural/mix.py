@@ -9,9 +9,8 @@ standard errors combined), ``sample`` picks a component by weight and draws from
 first uniform rescaled to stay uniform), its pdf the mixture's (one-sample MIS with the
 balance heuristic: unbiased whatever each component's sampler).
 
-The material's own ``layers`` hold its largest component: what shows it where a mix is not
-held (the window, the Mitsuba plugins, the GLSL export; loading says so in one line,
-``neural.openpbr.mix_summary``).
+The material's own ``layers`` hold its largest component; ``mix_split`` says its weight and
+the other components', which the window draws beside it (viewer/gpu/pipeline.py ``GpuBrdf.mixed``).
 """
 from __future__ import annotations
 
@@ -38,6 +37,22 @@ def material_mix(material: Material) -> list[tuple[float, Material]]:
         return [(1.0, material)]
     return [(w, parse_material({**d, "name": f"{material.name} ({d['name']})"}, material.base_dir))
             for w, d, _ in comps]
+
+
+def mix_split(material: Material) -> tuple[float, list[tuple[float, Material]]]:
+    """(the weight of the material's own layers, the mix's other components with theirs): the layers
+    hold the component of largest weight (ties: the first, as ``neural.openpbr.openpbr_to_material``
+    chose it); (1, []) for a material that is no mix."""
+    parts = material_mix(material)
+    if len(parts) == 1:
+        return 1.0, []
+    main = max(range(len(parts)), key=lambda i: parts[i][0])
+    return parts[main][0], [p for i, p in enumerate(parts) if i != main]
+
+
+def is_mix(material: Material) -> bool:
+    """Whether the material is an OpenPBR mix of several pure stacks."""
+    return material.openpbr is not None and len(material_mix(material)) > 1
 
 
 @dataclass

@@ -19,7 +19,7 @@ import math
 import torch
 from torch import nn
 
-from nbrdf.neural.anisotropy import from_tangent_frame, in_frame, stretch
+from nbrdf.neural.anisotropy import stretched_half
 from nbrdf.neural.coat import coat_pdf, coat_probability, coat_sample
 from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.nets import MLP, MLPSpec
@@ -62,17 +62,6 @@ def _disk_norm(sigma: Tensor) -> Tensor:
     return 2 * math.pi * sigma * sigma * -torch.expm1(-0.5 / (sigma * sigma))
 
 
-def _stretched(h: Tensor, v: Tensor, inverse: bool = False) -> Tensor:
-    """Unit half vectors stretched as an anisotropic body's (``neural.anisotropy``: h' ~ (k h_x, h_y / k, h_z)
-    in the tangent frame of the anisotropy vector v); ``inverse``: the stretch undone."""
-    k, c, s = stretch(v.to(h.dtype))
-    if inverse:
-        k = 1.0 / k
-    hf = in_frame(h, c, s)
-    out = from_tangent_frame(torch.stack([k * hf[..., 0], hf[..., 1] / k, hf[..., 2]], -1), c, s)
-    return out / out.norm(dim=-1, keepdim=True).clamp_min(1e-30)
-
-
 def gaussian_pdf(wi: Tensor, wo: Tensor, sigma: Tensor, v: Tensor | None = None) -> Tensor:
     """Solid-angle pdf of wo under the half-vector Gaussian, over the sphere. ``v``: an anisotropic
     body's vector; the Gaussian is then over the stretched half vector h' (the body's lobe is round
@@ -82,7 +71,7 @@ def gaussian_pdf(wi: Tensor, wo: Tensor, sigma: Tensor, v: Tensor | None = None)
     h = torch.where(h[..., 2:3] < 0, -h, h)
     q, jac = h, None
     if v is not None:
-        q = _stretched(h, v)
+        q = stretched_half(h, v)
         r = q[..., 2] / h[..., 2].clamp_min(1e-12)
         jac = r * r * r
     r2 = q[..., 0] ** 2 + q[..., 1] ** 2
@@ -113,7 +102,7 @@ def proxy_sample(wi: Tensor, u: Tensor, sigma: Tensor, w: Tensor, v: Tensor | No
     r = (sigma * torch.sqrt(-2 * torch.log1p(-u1 * trunc))).clamp(max=1.0)
     h = torch.stack([r * phi.cos(), r * phi.sin(), (1 - r * r).clamp_min(0).sqrt()], -1)
     if v is not None:
-        h = _stretched(h, v, inverse=True)
+        h = stretched_half(h, v, inverse=True)
     wo_g = 2 * (wi * h).sum(-1, keepdim=True) * h - wi
     wo = torch.where((u0 < w)[:, None], cosine_hemisphere(u1, u2), wo_g)
     wo = wo / wo.norm(dim=-1, keepdim=True).clamp_min(1e-12)

@@ -15,6 +15,7 @@ from nbrdf.neural.geometry import incidence, lobe_grid
 from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured, Medium
 from nbrdf.neural.metrics import noise_psnr
+from nbrdf.neural.mix import material_mix
 from nbrdf.neural.stack import Stack, material_stack
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
 from nbrdf.training.layered import SimStats, StackParams, simulate
@@ -118,6 +119,25 @@ def reference_eval(material: Material, wi: Tensor, wo: Tensor, spp: int = 256, s
         if progress is not None:
             progress(sel.numel())
     return mean, err
+
+
+def mix_reference_eval(material: Material, wi: Tensor, wo: Tensor, spp: int = 256, seed: int = 0,
+                       **kw) -> tuple[Tensor, Tensor]:
+    """``reference_eval`` of what the material shows: an OpenPBR mix (``neural.mix``) is its components'
+    references weighted, their standard errors combined (the same paths per component), where
+    ``reference_eval`` itself walks the material's own layers (its largest component) as a code fitted
+    to them needs. ``progress`` counts each pair once."""
+    parts = material_mix(material)
+    if len(parts) == 1:
+        return reference_eval(material, wi, wo, spp, seed, **kw)
+    progress = kw.pop("progress", None)
+    mean, var = None, None
+    for k, (w, c) in enumerate(parts):
+        m, e = reference_eval(c, wi, wo, spp, seed, progress=progress if k == len(parts) - 1 else None, **kw)
+        mean = w * m if mean is None else mean + w * m
+        var = (w * e) ** 2 if var is None else var + (w * e) ** 2
+    assert mean is not None and var is not None
+    return mean, var.sqrt()
 
 
 def converged_lobe(material: Material, theta_i_deg: float, target_noise_psnr: float = 50.0,

@@ -130,17 +130,30 @@ class BodySource:
         """The BRDF a frame shades with: ``brdf`` itself, or (tables in use, a uniform
         neural material or Belcour's model) its body baked into the interactive or the
         still table (baked once per ``brdf``, i.e. once per edit)."""
-        neural = brdf.kind == BrdfKind.NEURAL and brdf.latent is not None
-        belcour = brdf.kind == BrdfKind.BELCOUR and self.decoder is not None
-        if not self.use_tables or not (neural or belcour):
+        if not self.use_tables or not any(self._bakeable(b) for b in brdf.components()):
             return brdf
         size = self.settings.interactive if interactive else self.settings.still
         done = self._baked.get(size)
         if done is None or done[0] is not brdf:
-            baked = self.tables.brdf(brdf, size) if neural else self.tables.belcour(brdf, size, self.decoder())
-            done = (brdf, baked)
+            baked = [self._bake(b, size, k) for k, b in enumerate(brdf.components())]  # a mix: each component
+            main = baked[0] if baked[0] is not brdf else replace(brdf)
+            main.mixed = tuple(baked[1:])
+            done = (brdf, main)
             self._baked[size] = done
         return done[1]
+
+    def _bakeable(self, brdf: GpuBrdf) -> bool:
+        """A uniform neural material or Belcour's model (with a decoder to bake its body)."""
+        return ((brdf.kind == BrdfKind.NEURAL and brdf.latent is not None)
+                or (brdf.kind == BrdfKind.BELCOUR and self.decoder is not None))
+
+    def _bake(self, brdf: GpuBrdf, size: TableSize, slot: int) -> GpuBrdf:
+        """``brdf``'s body baked into a table of ``size`` in texture ``slot`` (``brdf`` itself where it
+        has none to bake)."""
+        if not self._bakeable(brdf):
+            return brdf
+        return (self.tables.brdf(brdf, size, slot) if brdf.kind == BrdfKind.NEURAL
+                else self.tables.belcour(brdf, size, self.decoder(), slot))
 
     def release(self) -> None:
         self.tables.release()

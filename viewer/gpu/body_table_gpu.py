@@ -49,7 +49,7 @@ class BodyTables:
 
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
-        self._tex: dict[TableSize, moderngl.Texture] = {}
+        self._tex: dict[tuple[TableSize, int], moderngl.Texture] = {}
         self._pre: dict[tuple[int, TableSize], torch.Tensor] = {}
         self.bake_ms: float = 0.0
         """The last bake's milliseconds (decoder pass and upload)."""
@@ -82,36 +82,37 @@ class BodyTables:
             torch.set_num_threads(threads)
         return y.T.reshape(*size.shape, 3).contiguous()
 
-    def brdf(self, base: GpuBrdf, size: TableSize) -> GpuBrdf:
-        """``base`` (a NEURAL ``GpuBrdf``) with its body from a freshly baked table of ``size``."""
+    def brdf(self, base: GpuBrdf, size: TableSize, slot: int = 0) -> GpuBrdf:
+        """``base`` (a NEURAL ``GpuBrdf``) with its body from a freshly baked table of ``size``, in the
+        texture of ``slot`` (one per component of an OpenPBR mix shown at once)."""
         if base.kind != BrdfKind.NEURAL or base.latent is None:
             raise NbrdfError(f"body table: a uniform neural material only (got {base.kind.value})")
         t0 = time.perf_counter()
-        tex = self._upload(self.bake(base.decoder.dec, base.latent, size), size)
+        tex = self._upload(self.bake(base.decoder.dec, base.latent, size), size, slot)
         self.bake_ms = (time.perf_counter() - t0) * 1000.0
         return replace(base, kind=BrdfKind.TABLE, body_table=tex, share=None,
                        uniforms={**base.uniforms, "u_body_table_ordered": 0})
 
-    def belcour(self, base: GpuBrdf, size: TableSize, decoder: GpuDecoder) -> GpuBrdf:
+    def belcour(self, base: GpuBrdf, size: TableSize, decoder: GpuDecoder, slot: int = 0) -> GpuBrdf:
         """``base`` (a BELCOUR ``GpuBrdf``) as a TABLE one: the model's body baked at the
         nodes of ``size`` (viewer/gpu/belcour_gpu.py ``bake_body``), its coat in closed form, its
         lobe strategy as the proxy pdf. ``decoder`` only assembles the table program's source
-        (the table program is the neural one with the decoder left out)."""
+        (the table program is the neural one with the decoder left out); ``slot`` as in ``brdf``."""
         if base.kind != BrdfKind.BELCOUR:
             raise NbrdfError(f"body table: a belcour material only (got {base.kind.value})")
         t0 = time.perf_counter()
         size = replace(size, ordered=True)
         # base's uniforms are the model's decomposition for this material: made once per edit, reused here
-        tex = self._upload(bake_body(base.material, size, uniforms=base.uniforms), size)
+        tex = self._upload(bake_body(base.material, size, uniforms=base.uniforms), size, slot)
         self.bake_ms = (time.perf_counter() - t0) * 1000.0
         return GpuBrdf(base.material, BrdfKind.TABLE, table_uniforms(base.material, base.uniforms), decoder,
-                       normal_map=base.normal_map, body_table=tex)
+                       normal_map=base.normal_map, body_table=tex, weight=base.weight)
 
-    def _upload(self, values: torch.Tensor, size: TableSize) -> moderngl.Texture:
-        """``values`` (K, M, N, 3) into the texture of ``size`` (made on first use)."""
-        tex = self._tex.get(size)
+    def _upload(self, values: torch.Tensor, size: TableSize, slot: int = 0) -> moderngl.Texture:
+        """``values`` (K, M, N, 3) into the texture of (``size``, ``slot``) (made on first use)."""
+        tex = self._tex.get((size, slot))
         if tex is None:
-            tex = self._tex[size] = table_texture(self.ctx, size)
+            tex = self._tex[(size, slot)] = table_texture(self.ctx, size)
         tex.write(values.numpy().astype("f4").tobytes())
         return tex
 

@@ -87,6 +87,8 @@ class DrawKit:
         for k, v in brdf.uniforms.items():
             if k in prog:
                 prog[k].value = v
+        if "u_mix_weight" in prog:  # where the shading is added into an image: the mix's share
+            prog["u_mix_weight"].value = float(brdf.weight)
 
     def surface_uniforms(self, p: moderngl.Program, state: ViewState, w: float, h: int,
                          normal_map: moderngl.Texture | None) -> np.ndarray:

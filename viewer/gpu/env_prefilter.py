@@ -157,9 +157,10 @@ class _Map:
 
 class EnvPrefilter:
     """Bakes and keeps the still view's body environment maps: one per key, the last
-    ``KEPT`` keys (the window's BRDF blend shades two bodies at once)."""
+    ``KEPT`` keys (the window's BRDF blend shades two bodies at once, each an OpenPBR mix of up to
+    four components)."""
 
-    KEPT = 2
+    KEPT = 8
 
     def __init__(self, kit: DrawKit, settings: PrefilterSettings | None = None):
         self.kit, self.ctx = kit, kit.ctx

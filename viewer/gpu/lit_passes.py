@@ -194,15 +194,18 @@ class LitPasses:
 
     def view_compute(self, view: View, state: ViewState, w: int, h: int, brdf: GpuBrdf,
                      tex: moderngl.Texture) -> None:
-        """The lobe or slice view in view.comp (the compute decoder, one pixel per invocation) into ``tex``."""
-        c = self.kit.compute_program(brdf, "view.comp", {"VIEW_IS_LOBE": 1} if view == View.LOBE else None)
-        self.kit.bind_brdf(c, brdf, compute=True)
-        if view == View.LOBE:
-            c["u_wi"].value = incidence(state.theta_i)
-        c["u_size"].value = (float(w), float(h))
-        tex.bind_to_image(0, read=False, write=True)
-        c.run(-(-w // LIT_GROUP), -(-h // LIT_GROUP))
-        self.ctx.memory_barrier()
+        """The lobe or slice view in view.comp (the compute decoder, one pixel per invocation) into ``tex``;
+        a mix's components each add their share."""
+        for k, b in enumerate(brdf.components()):
+            c = self.kit.compute_program(b, "view.comp", {"VIEW_IS_LOBE": 1} if view == View.LOBE else None)
+            self.kit.bind_brdf(c, b, compute=True)
+            if view == View.LOBE:
+                c["u_wi"].value = incidence(state.theta_i)
+            c["u_size"].value = (float(w), float(h))
+            c["u_mix_add"].value = int(k > 0)
+            tex.bind_to_image(0, read=True, write=True)
+            c.run(-(-w // LIT_GROUP), -(-h // LIT_GROUP))
+            self.ctx.memory_barrier()
 
     def gbuffer_target(self, w: int, h: int, slot: str,
                        depth: moderngl.Renderbuffer) -> tuple[moderngl.Framebuffer, list[moderngl.Texture]]:
@@ -259,7 +262,7 @@ class LitPasses:
         if x1 <= x0 or y1 <= y0:
             return vp  # the object is off this band
         tex = target[1] if into is None else into
-        for part, (_, _, b) in enumerate(draws):
+        for part, b in ((part, b) for part, (_, _, drawn) in enumerate(draws) for b in drawn.components()):
             table = self.prefiltered(state, b)
             if table:
                 self.bake_prefilter(state, b, env)  # the rest of its bake (the window bakes in bands first)
@@ -300,7 +303,8 @@ class LitPasses:
         program), over ``rows`` only (GL's, bottom up; None: all). Returns the
         view-projection matrix."""
         kit = self.kit
-        progs = [(kit.program("object.frag", b, "object.vert"), start, count, b) for start, count, b in draws]
+        progs = [(kit.program("object.frag", b, "object.vert"), start, count, b)
+                 for start, count, drawn in draws for b in drawn.components()]
         vp = None
         for p, _, _, b in progs:
             kit.bind_brdf(p, b)

@@ -28,6 +28,7 @@ from nbrdf.neural.gpu_pack import latent_share
 from nbrdf.neural.latent_texture import LatentTexture
 from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.material import Material, material_to_dict
+from nbrdf.neural.mix import is_mix, mix_split
 from nbrdf.neural.model import NeuralModel, default_model
 from nbrdf.neural.neural_brdf import proxy_hint
 from nbrdf.neural.svbrdf import latent_texture as build_latent_texture
@@ -66,8 +67,9 @@ def brdf_kind(mode: BrdfMode, material: Material) -> BrdfKind:
 
 
 def analytic_capable(m: Material) -> bool:
-    """Single layers have an exact closed form on the GPU."""
-    return not m.interfaces and not m.is_textured and m.base.type in PARAMETRIC_BASES
+    """Single layers have an exact closed form on the GPU (an OpenPBR mix is shaded by components:
+    its layers are one of them)."""
+    return not m.interfaces and not m.is_textured and m.base.type in PARAMETRIC_BASES and not is_mix(m)
 
 
 def material_key(m: Material) -> str:
@@ -101,6 +103,16 @@ class GpuBrdf:
     """TABLE: the body's log f over (theta_h, theta_d, phi_d), a float 3D texture (neural/body_table.py)."""
     textures: tuple[tuple[str, int, moderngl.Texture], ...] = ()
     """(sampler uniform, texture unit, texture) bound with the program (BELCOUR: its tables)."""
+    weight: float = 1.0
+    """This BRDF's share of its material's OpenPBR mix (1: no mix; ``neural.mix``): what its shading
+    is scaled by where the shaders add it into an image (``u_mix_weight``)."""
+    mixed: tuple["GpuBrdf", ...] = ()
+    """The mix's other components, each with its own ``weight``: a draw of this BRDF shades each
+    of them too, over the same surface, and the images add up to the mix's."""
+
+    def components(self) -> tuple["GpuBrdf", ...]:
+        """Every BRDF a draw of this one shades: itself, then the mix's other components."""
+        return (self, *self.mixed)
 
     @property
     def neural(self) -> bool:
@@ -284,10 +296,32 @@ class MaterialPipeline:
         return self._belcour
 
     def build(self, material: Material, mode: BrdfMode | str = BrdfMode.AUTO,
-              latent: torch.Tensor | None = None) -> GpuBrdf:
+              latent: torch.Tensor | None = None, conserve: bool = True) -> GpuBrdf:
         """The GPU resources of ``material`` under ``mode``; ``latent`` overrides
-        the material's own (an interpolated latent)."""
+        the material's own (an interpolated latent). An OpenPBR mix: its layers' BRDF
+        with the other components attached (``with_mix``). ``conserve`` False: the networks'
+        codes before their albedo is bounded (a slider's frame; ``latent``)."""
         mode = self.resolve(material, mode)
+        return self.with_mix(material, self._build(material, mode, latent, conserve), mode, conserve)
+
+    def with_mix(self, material: Material, brdf: GpuBrdf, mode: BrdfMode | str, conserve: bool = True) -> GpuBrdf:
+        """``brdf`` (the material's layers: its OpenPBR mix's largest component) weighted, with the
+        mix's other components built under ``mode`` as ``mixed`` (each resolved on its own where
+        ``mode`` cannot shade it), sharing the material's normal map; ``brdf`` itself for no mix."""
+        weight, others = mix_split(material)
+        if not others:
+            return brdf
+        brdf.weight = weight
+        comps = []
+        for w, c in others:
+            b = self._build(c, self.resolve(c, mode), None, conserve)
+            b.weight, b.normal_map = w, brdf.normal_map
+            comps.append(b)
+        brdf.mixed = tuple(comps)
+        return brdf
+
+    def _build(self, material: Material, mode: BrdfMode, latent: torch.Tensor | None,
+               conserve: bool = True) -> GpuBrdf:
         kind = brdf_kind(mode, material)
         if kind == BrdfKind.ANALYTIC:
             return gpu_brdf(self.ctx, material, normal_maps=self.normal_maps)
@@ -299,7 +333,7 @@ class MaterialPipeline:
             z = tex.mean_latent
             return gpu_brdf(self.ctx, material, self.decoder, latent=z, proxy=self.proxy(z), latent_texture=tex,
                             normal_maps=self.normal_maps)
-        z = self.latent(material, mode) if latent is None else latent
+        z = self.latent(material, mode, conserve) if latent is None else latent
         return gpu_brdf(self.ctx, material, self.decoder, latent=z, proxy=self.proxy(z),
                         normal_maps=self.normal_maps)
 

@@ -237,13 +237,14 @@ class Renderer:
         elif first_pass == 0 and self.deferred:
             self.lit.view_compute(view, state, w, h, brdf, tex)
         elif first_pass == 0:
-            p = self.program("lobe.frag" if view == View.LOBE else "slice.frag", brdf)
-            self.bind_brdf(p, brdf)
-            if view == View.LOBE:
-                p["u_wi"].value = incidence(state.theta_i)
-            p["u_size"].value = (float(w), float(h))
-            with flat(self.ctx):
-                self.kit.fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
+            for k, b in enumerate(brdf.components()):  # a mix: each component adds its share
+                p = self.program("lobe.frag" if view == View.LOBE else "slice.frag", b)
+                self.bind_brdf(p, b)
+                if view == View.LOBE:
+                    p["u_wi"].value = incidence(state.theta_i)
+                p["u_size"].value = (float(w), float(h))
+                with flat(self.ctx) if k == 0 else added(self.ctx):
+                    self.kit.fullscreen(p).render(moderngl.TRIANGLES, vertices=3)
         return tex
 
     # --- a pass in bands (the window's still view) ---------------------------------------

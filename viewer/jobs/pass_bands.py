@@ -225,7 +225,7 @@ class PassBands:
         ``budget_ms`` while a shaded BRDF reads one that is not complete; True when this frame
         went to it (the pass waits for the map)."""
         lit = renderer.lit
-        for _, b in shaded:
+        for b in (c for _, drawn in shaded for c in drawn.components()):  # a mix: each component's map
             key = lit.prefilter_key(state, b, renderer.env)
             before = lit.prefilter_rows(key)
             size = lit.prefilter().size if key is not None else 0

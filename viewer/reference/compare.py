@@ -64,7 +64,18 @@ LOBE_CANVAS = 256
 
 def coat_brdf(brdf: GpuBrdf, material: Material) -> GpuBrdf:
     """``brdf`` (a neural BRDF: its coat in closed form) with the coat set to the
-    material's top interface exactly (the code's coat may have been blended)."""
+    material's top interface exactly (the code's coat may have been blended); an OpenPBR
+    mix's components each to their own material's."""
+    main = _exact_coat(brdf, material)
+    if not brdf.mixed:
+        return main
+    return replace(main, mixed=tuple(_exact_coat(b, b.material) for b in brdf.mixed))
+
+
+def _exact_coat(brdf: GpuBrdf, material: Material) -> GpuBrdf:
+    """``brdf`` with its code's coat set to ``material``'s top interface (itself: no interface)."""
+    if not material.interfaces or "u_coat" not in brdf.uniforms:
+        return brdf
     top = material.interfaces[0][0]
     a = float(getattr(top, "anisotropy", 0.0))
     uniforms = {**brdf.uniforms, "u_coat": (float(geometric_alpha(float(top.roughness), a)), float(top.ior))}
@@ -264,7 +275,8 @@ class Compare:
         if view != View.OBJECT:
             return self._upload((key, r.spp if r else 0), img), 1.0
         body = self._upload((key, r.spp if r else 0), img, coverage=True)
-        coat = brdf is not None and brdf.kind == BrdfKind.NEURAL and bool(material.interfaces)
+        coat = brdf is not None and brdf.kind == BrdfKind.NEURAL and any(b.material.interfaces
+                                                                          for b in brdf.components())
         if coat:
             sampling = self.renderer.sampling
             self.renderer.sampling = replace(sampling, terms=COAT_TERMS)

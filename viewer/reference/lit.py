@@ -24,7 +24,7 @@ import torch
 from nbrdf.imaging.environment import EnvironmentMap
 from nbrdf.neural.material import Material, material_to_dict, parse_material
 from nbrdf.neural.microfacet import reflect, sample_vndf, vndf_pdf
-from nbrdf.training.reference import reference_eval
+from nbrdf.training.reference import mix_reference_eval
 
 
 def f32(t) -> np.ndarray:
@@ -160,11 +160,11 @@ def lit_samples(spec: LitSpec, material: Material, env, k: int, seed: int) -> np
     rng = np.random.default_rng(seed)
     if spec.light_wi is not None and spec.light_radiance > 0:
         wi = np.repeat(spec.light_wi.astype(np.float64), k, 0)
-        f, _ = reference_eval(material, torch.from_numpy(wi), torch.from_numpy(wo), spp=1, seed=2 * seed)
+        f, _ = mix_reference_eval(material, torch.from_numpy(wi), torch.from_numpy(wo), spp=1, seed=2 * seed)
         out += f.double().numpy() * np.clip(wi[:, 2:3], 0, None) * spec.light_radiance
     if spec.point_wi is not None:
         wi = np.repeat(spec.point_wi.astype(np.float64), k, 0)
-        f, _ = reference_eval(material, torch.from_numpy(wi), torch.from_numpy(wo), spp=1, seed=2 * seed + 1)
+        f, _ = mix_reference_eval(material, torch.from_numpy(wi), torch.from_numpy(wo), spp=1, seed=2 * seed + 1)
         out += f.double().numpy() * np.clip(wi[:, 2:3], 0, None) * np.repeat(spec.point_irradiance, k, 0)
     if env is not None and spec.env_intensity > 0:
         frame = np.repeat(spec.frame.astype(np.float64), k, 0)
@@ -194,7 +194,7 @@ def lit_samples(spec: LitSpec, material: Material, env, k: int, seed: int) -> np
         pdf = pdf / strategies
         up = (d[:, 2] > 0) & (pdf > 0)
         if up.any():
-            f, _ = reference_eval(material, torch.from_numpy(d[up]), torch.from_numpy(wo[up]), spp=1,
+            f, _ = mix_reference_eval(material, torch.from_numpy(d[up]), torch.from_numpy(wo[up]), spp=1,
                                   seed=2 * seed + 2, top_reflection=False)
             radiance = env_bilinear(env.radiance, d_lookup[up]) * spec.env_intensity
             out[up] += f.double().numpy() * radiance * (d[up, 2:3] / pdf[up, None])

@@ -37,7 +37,7 @@ import torch
 
 from nbrdf.neural.geometry import incidence, lobe_grid
 from nbrdf.neural.material import Material, material_to_dict, parse_material
-from nbrdf.training.reference import reference_eval
+from nbrdf.training.reference import mix_reference_eval
 from nbrdf.viewer.reference.cache import ReferenceCache
 from nbrdf.viewer.reference.lit import LitRun, LitSpec, f32
 
@@ -146,7 +146,7 @@ class _PairRun:
     def step(self) -> tuple[np.ndarray, int, bool, np.ndarray]:
         """One round: (image, paths so far, done, standard error)."""
         job, spp = self.job, self.spp
-        m, e = reference_eval(self.material, self.wi, self.wo, spp=spp, seed=7919 * self.k)
+        m, e = mix_reference_eval(self.material, self.wi, self.wo, spp=spp, seed=7919 * self.k)
         # pooled like one run: the sum of the rounds' path sums, its variance the sum of theirs
         self.acc = m.double() * spp if self.acc is None else self.acc + m.double() * spp
         self.var = (e.double() * spp) ** 2 if self.var is None else self.var + (e.double() * spp) ** 2

@@ -48,7 +48,15 @@ from nbrdf.neural.model import NeuralModel
 from nbrdf.training.refine import material_hash
 from nbrdf.viewer.gpu.backdrop import Backdrop, BackdropSettings
 from nbrdf.viewer.gpu.body_source import BodySource
-from nbrdf.viewer.gpu.pipeline import GpuBrdf, MaterialPipeline, analytic_capable, fallback_note, gpu_brdf, material_key
+from nbrdf.viewer.gpu.pipeline import (
+    BrdfKind,
+    GpuBrdf,
+    MaterialPipeline,
+    analytic_capable,
+    fallback_note,
+    gpu_brdf,
+    material_key,
+)
 from nbrdf.viewer.gpu.renderer import Renderer
 from nbrdf.viewer.jobs.frame import Frame, Stage, render_linear
 from nbrdf.viewer.jobs.plane_curves import PlaneCurves
@@ -299,8 +307,8 @@ class LookDev(SessionEdits, Captures):
                 return
             tex.set_mipmapped(self.mipmapping)
             z = tex.mean_latent
-            brdf = gpu_brdf(self.ctx, m, self.pipeline.decoder, z, self.pipeline.proxy(z), tex,
-                            self.pipeline.normal_maps)
+            brdf = self.pipeline.with_mix(m, gpu_brdf(self.ctx, m, self.pipeline.decoder, z, self.pipeline.proxy(z),
+                                                      tex, self.pipeline.normal_maps), mode)
             self.idle_refine.edited(None, None)
         elif mode == BrdfMode.NEURAL:
             # the networks' code now, its albedo bounded once the edits pause (``update``): the bound's
@@ -309,7 +317,8 @@ class LookDev(SessionEdits, Captures):
             refined = self.idle_refine.edited(None if self.interp.active else m, z)  # a cached refined code
             if refined is not None:
                 refined = self.pipeline.conserved(refined)
-            brdf = self.pipeline.build(m, BrdfMode.NEURAL, latent=z if refined is None else refined)
+            brdf = self.pipeline.build(m, BrdfMode.NEURAL, latent=z if refined is None else refined,
+                                       conserve=False)  # a mix's other components: bounded with the handover
             self._conserve_due = (z, time.monotonic()) if refined is None else None
         else:
             self.idle_refine.edited(None, None)
@@ -367,7 +376,7 @@ class LookDev(SessionEdits, Captures):
         if due is not None and time.monotonic() - due[1] >= CONSERVE_AFTER_S:
             self._conserve_due = None
             z = self.pipeline.conserved(due[0])
-            if not torch.equal(z, due[0]):  # the code reflected more light than arrives: bounded
+            if not torch.equal(z, due[0]) or self._mix_unbounded():  # more light out than in: bounded
                 self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=z))
         refined = self.idle_refine.poll()
         if refined is not None:  # a code that beats the network's on the material's own simulation
@@ -376,6 +385,13 @@ class LookDev(SessionEdits, Captures):
             self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=refined))
         if self.turntables.capture is not None and self.brdf is not None:
             self.guarded(self._turntable_step)
+
+    def _mix_unbounded(self) -> bool:
+        """Whether a component of the OpenPBR mix shown (built with the slider's unbounded codes)
+        reflects more light than arrives, so that the handover must bound it too."""
+        return self.brdf is not None and any(
+            b.kind == BrdfKind.NEURAL and b.latent is not None
+            and not torch.equal(self.pipeline.conserved(b.latent), b.latent) for b in self.brdf.mixed)
 
     def swap_brdf(self, brdf: GpuBrdf) -> None:
         """Shows ``brdf`` for the same material without an edit (idle refinement's better

@@ -3,7 +3,8 @@
 // the same BRDF snippet, samplers and random numbers (pixel, pass) as the
 // fragment path object.frag -- and adds their sum to the float accumulation
 // image (alpha counts the passes, as the fragment path's blending does).
-// A mesh of several materials runs it once per material (u_material_id).
+// A mesh of several materials runs it once per material (u_material_id), an
+// OpenPBR mix once per component (u_mix_weight).
 // A dispatch may cover a band of rows only (u_row0 .. u_row_end - 1): the
 // window's still view shades a pass over several frames (viewer/gpu/renderer.py), and
 // covers the object's box on screen only (u_col0 .. u_col_end - 1 too): llvmpipe runs
@@ -33,6 +34,8 @@ uniform int u_row0;             // the dispatch's first row (invocation y 0)
 uniform int u_row_end;          // rows from here on are another dispatch's
 uniform int u_col0;             // the dispatch's first column (invocation x 0): the object's screen box
 uniform int u_col_end;          // columns from here on are off the object
+uniform float u_mix_weight;     // this BRDF's share of its material's OpenPBR mix (1: no mix): each
+                                // component's dispatch adds its share, the passes counted once in all
 
 void main() {
     ivec2 px = ivec2(gl_GlobalInvocationID.xy) + ivec2(u_col0, u_row0);
@@ -59,5 +62,5 @@ void main() {
 #else
     for (int k = 0; k < u_passes; ++k) sum += shade_lit(tbn, view, world.xyz, uvec2(px), u_first_pass + uint(k));
 #endif
-    imageStore(u_accum, px, imageLoad(u_accum, px) + vec4(sum, float(u_passes)));
+    imageStore(u_accum, px, imageLoad(u_accum, px) + u_mix_weight * vec4(sum, float(u_passes)));
 }

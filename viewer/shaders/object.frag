@@ -12,6 +12,7 @@
 //@INCLUDE lit_shade.glsl
 
 uniform uint u_pass;
+uniform float u_mix_weight;  // this BRDF's share of its material's OpenPBR mix (1: no mix; blending adds the shares)
 
 out vec4 frag;
 
@@ -21,5 +22,5 @@ void main() {
 #ifdef NB_TEXTURED
     nb_load_share(v_uv);
 #endif
-    frag = vec4(shade_lit(tbn, view, v_world, uvec2(gl_FragCoord.xy), u_pass), 1.0);
+    frag = u_mix_weight * vec4(shade_lit(tbn, view, v_world, uvec2(gl_FragCoord.xy), u_pass), 1.0);
 }

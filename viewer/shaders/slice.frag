@@ -4,6 +4,7 @@
 //@INCLUDE brdf
 uniform vec2 u_size;
 out vec4 frag;
+uniform float u_mix_weight;  // this BRDF's share of its material's OpenPBR mix (1: no mix)
 void main() {
     vec2 t = gl_FragCoord.xy / u_size * (0.5 * PI);
     float th = t.x, td = t.y;
@@ -12,5 +13,5 @@ void main() {
     // Rotate d from the frame where h is the pole back to the local frame (about y by theta_h).
     vec3 wi = vec3(cos(th) * d.x + sin(th) * d.z, d.y, -sin(th) * d.x + cos(th) * d.z);
     vec3 wo = 2.0 * dot(wi, h) * h - wi;
-    frag = vec4(brdf(wi, wo), 1.0);
+    frag = vec4(u_mix_weight * brdf(wi, wo), 1.0);
 }

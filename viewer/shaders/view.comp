@@ -6,9 +6,11 @@
 //@INCLUDE common.glsl
 //@INCLUDE brdf
 layout(local_size_x = 8, local_size_y = 8) in;
-layout(rgba32f, binding = 0) uniform writeonly image2D u_target;
+layout(rgba32f, binding = 0) uniform image2D u_target;
 uniform vec3 u_wi;    // the lobe's incidence
 uniform vec2 u_size;  // the target's size, pixels
+uniform float u_mix_weight;  // this BRDF's share of its material's OpenPBR mix (1: no mix)
+uniform int u_mix_add;       // 1: add to what the mix's earlier components wrote
 
 // The pair of pixel ``px`` and the factor of its value; ``inside`` false: zero.
 void view_pair(ivec2 px, out vec3 wi, out vec3 wo, out float scale, out bool inside) {
@@ -43,5 +45,7 @@ void main() {
     bool inside;
     view_pair(px, wi, wo, scale, inside);
     vec3 f = brdf(wi, wo);
-    imageStore(u_target, px, vec4(inside ? f * scale : vec3(0.0), 1.0));
+    vec3 v = u_mix_weight * (inside ? f * scale : vec3(0.0));
+    if (u_mix_add != 0) v += imageLoad(u_target, px).rgb;
+    imageStore(u_target, px, vec4(v, 1.0));
 }

@@ -28,7 +28,8 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
     it, adaptive resolution on (viewer/ui/refinement.py):
 
     - ``first_frame_s``: from opening the window to its first frame on screen;
-    - a slider drag: ``edits`` base-roughness edits, one frame each, no still
+    - a slider drag: ``edits`` base-roughness edits (OpenPBR's specular_roughness for a material
+      made from OpenPBR), one frame each, no still
       frame between them; per edit the time from the edit to the end of the frame
       that shows it (``edit_to_frame_ms_median`` / ``_max``) and the fraction of
       the view's width that frame rendered (``edit_frame_scale``, the median);
@@ -89,7 +90,7 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
         t_edit = time.perf_counter()
         for k in range(edits):  # a drag: one edit per frame
             t_edit, c_edit = time.perf_counter(), time.process_time()
-            ld.set_param(base, "roughness", 0.2 + 0.05 * (k % 4))
+            _roughness_edit(ld, base, 0.2 + 0.05 * (k % 4))
             app.step()
             latency.append((time.perf_counter() - t_edit) * 1000.0)
             edit_cpu.append((time.process_time() - c_edit) * 1000.0)
@@ -104,7 +105,7 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
         compiles = len(app.warmup.built) - built
         latencies, frames_to_show = _click_latency(app, clicks)
         # hands off (the idle budget), on a fresh accumulation: the view stops at its cap (ViewFrames.cap)
-        ld.set_param(base, "roughness", 0.27)
+        _roughness_edit(ld, base, 0.27)
         _until_full_resolution(app)
         _, idle_passes, _ = _still_frames(app, still_passes, hover=False)
         # The noise of the still view's estimator, per pass.
@@ -171,12 +172,21 @@ def _until_full_resolution(app, frames: int = 2000) -> None:
     raise RuntimeError(f"bench app: the still view did not reach full resolution in {frames} frames")
 
 
+def _roughness_edit(ld, layer: int, value: float) -> None:
+    """The bench's slider: the base layer's roughness, or for a material made from OpenPBR its
+    ``specular_roughness`` (the OpenPBR panel's live path, which keeps an OpenPBR mix a mix)."""
+    if ld.editor.openpbr is not None:
+        ld.set_openpbr("specular_roughness", value)
+    else:
+        ld.set_param(layer, "roughness", value)
+
+
 def _converged_after_edit(app, layer: int, passes: int, limit_s: float = 180.0) -> float:
     """Seconds from a base-roughness edit until the image on screen holds ``passes`` passes of the
     still view's full estimator, the window stepped hands off (no input after the edit)."""
     ld = app.lookdev
     t0 = time.perf_counter()
-    ld.set_param(layer, "roughness", 0.33)
+    _roughness_edit(ld, layer, 0.33)
     while time.perf_counter() - t0 < limit_s:
         app.step()
         if not app.interactive and not app.quick and app.scale >= 1.0 and ld.frames.shown_passes >= passes:
