@@ -381,7 +381,8 @@ def load_material(path: str | Path, notes: list[str] | None = None) -> Material:
         file, name = split_material_ref(str(path))
         data, found = read_mtlx(file, name)
         material = parse_material(data, Path(file).parent, source=str(path))
-        lines = [f"{path}: {note}" for note in found]
+        mixed = mix_summary(material.openpbr, textured=True) if material.openpbr and material.is_textured else None
+        lines = [f"{path}: {note}" for note in (found if mixed is None else [*found, mixed])]
         if notes is None:
             for line in lines:
                 print(line, file=sys.stderr)
@@ -409,7 +410,7 @@ def load_material(path: str | Path, notes: list[str] | None = None) -> Material:
         raise NbrdfError(f"{path}: nested too deeply") from None
     material = parse_material(data, p.parent, source=str(path))
     if material.openpbr is not None:  # an OpenPBR mix saved as JSON: said as the .mtlx reader says it
-        note = mix_summary(material.openpbr, "the window, the Mitsuba plugins and the GLSL export")
+        note = mix_summary(material.openpbr, material.is_textured)
         if note is not None:
             if notes is None:
                 print(f"{path}: {note}", file=sys.stderr)

@@ -29,8 +29,10 @@ Tensor = torch.Tensor
 
 def material_mix(material: Material) -> list[tuple[float, Material]]:
     """The material's components with their weights (summing to 1): OpenPBR's mixes where its
-    record has a fractional base_metalness or coat_weight, else [(1, material)]."""
-    if material.openpbr is None:
+    record has a fractional base_metalness or coat_weight, else [(1, material)]. A texture-mapped
+    material is itself: the components, made from the record, would carry none of its textures
+    (``neural.openpbr.mix_summary`` says so when it loads)."""
+    if material.openpbr is None or material.is_textured:  # a texture-mapped one: its layers alone (mix_summary)
         return [(1.0, material)]
     comps = openpbr_components(openpbr_from_record(material.openpbr))
     if len(comps) <= 1:

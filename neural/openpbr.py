@@ -434,38 +434,40 @@ def openpbr_components(p: OpenPbr) -> list[tuple[float, dict, list[str]]]:
             for w, metal, coated, layers, notes in _components(q)]
 
 
-def mix_summary(record: Mapping[str, Any] | Iterable[tuple[str, Any]], where: str) -> str | None:
-    """One line saying that the largest component of the OpenPBR mix ``record`` holds stands for it in
-    ``where`` (e.g. "the window"); None when the record is no mix (``neural.mix`` sums the components)."""
+def mix_summary(record: Mapping[str, Any] | Iterable[tuple[str, Any]], textured: bool = False) -> str | None:
+    """One line naming the components of the OpenPBR mix ``record`` and how it is held: as their
+    weighted sum (``neural.mix``), or for a texture-mapped material (``textured``: the components carry
+    no textures) by its largest component alone; None when the record is no mix."""
     comps = openpbr_components(openpbr_from_record(record))
     if len(comps) <= 1:
         return None
     shown = ", ".join(f"{d['name']} {w:.2g}" for w, d, _ in comps)
-    return (f"OpenPBR mix ({shown}): the stack of the largest weight stands for it in {where}; the command "
-            "line's reference and neural path hold the mix")
+    if textured:
+        return (f"OpenPBR mix ({shown}) of a texture-mapped material: the mix's stacks carry no textures, so the "
+                "stack of the largest weight, with its textures, stands for it everywhere")
+    return f"OpenPBR mix ({shown}): held as the weighted sum of the stacks; the stack shown is the largest"
 
 
 def openpbr_to_material(p: OpenPbr, name: str) -> tuple[dict, list[str]]:
     """The material JSON dict (with the "openpbr" record of ``p``) and the notes: one line per input the
     stack cannot hold or had to clamp. A fractional base_metalness or coat_weight is OpenPBR's mix: the
-    record keeps it (``neural.mix`` sums the components where a BRDF is made on the CPU), the layers
-    are the component of largest weight (what the GPU paths show), with a note saying so. Refuses
+    record keeps it (``neural.mix`` sums the components wherever a BRDF is made), the layers are the
+    component of largest weight (what the stack editor shows), with a note saying so. Refuses
     (``NbrdfError``, one line) a material whose look is mostly transmission, subsurface, fuzz or
     transparency."""
     notes: list[str] = []
     q = _checked(p, notes)
     _, metal, coated, layers, own = max(_components(q), key=lambda c: c[0])  # ties: the first (metal, coated)
     notes += own + unsupported_notes(q)
-    held = ("the command line's reference and neural path hold the mix (neural.mix); the window, the Mitsuba "
-            "plugins and the GLSL export show")
+    held = "held as the weighted sum of the stacks (neural.mix); the stack shown is"
     if 0.0 < q.base_metalness < 1.0:
         m = q.base_metalness
-        notes.append(f"base_metalness {_g(m)}: a mix of metal ({_g(m)}) and dielectric ({_g(1 - m)}) bases; {held} "
-                     f"the {'metal' if metal else 'dielectric'} base alone")
+        notes.append(f"base_metalness {_g(m)}: a mix of metal ({_g(m)}) and dielectric ({_g(1 - m)}) bases, {held} "
+                     f"the {'metal' if metal else 'dielectric'} one")
     if 0.0 < q.coat_weight < 1.0:
         c = q.coat_weight
-        notes.append(f"coat_weight {_g(c)}: a partial coat (a mix of coated {_g(c)} and uncoated {_g(1 - c)}); {held} "
-                     f"the {'coated' if coated else 'uncoated'} stack alone")
+        notes.append(f"coat_weight {_g(c)}: a partial coat (a mix of coated {_g(c)} and uncoated {_g(1 - c)}), {held} "
+                     f"the {'coated' if coated else 'uncoated'} one")
     return {"format": FORMAT, "name": name, "layers": layers, "openpbr": openpbr_record(p)}, notes
 
 

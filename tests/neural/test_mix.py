@@ -4,6 +4,8 @@ by a density that is the mixture's (unbiased albedo, pdf consistent), the Monte 
 within its noise -- and a material without a mix is itself."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 import torch
 
@@ -72,9 +74,29 @@ def test_the_reference_of_a_mix_is_its_components_references():
 
 def test_no_mix_is_the_material_itself_and_the_note_names_the_components():
     m = _material(OpenPbr(base_metalness=1.0, coat_weight=1.0))
-    assert material_mix(m) == [(1.0, m)] and mix_summary(m.openpbr, "the window") is None
-    note = mix_summary(_material(MIXED).openpbr, "the window")
-    assert note is not None and note.startswith("OpenPBR mix (metal, coated 0.18") and "the window" in note
+    assert material_mix(m) == [(1.0, m)] and mix_summary(m.openpbr) is None
+    note = mix_summary(_material(MIXED).openpbr)
+    assert note is not None and note.startswith("OpenPBR mix (metal, coated 0.18") and "weighted sum" in note
+    textured = mix_summary(_material(MIXED).openpbr, textured=True)
+    assert textured is not None and "carry no textures" in textured and "largest" in textured
+
+
+def test_a_texture_mapped_mix_is_its_largest_component_and_says_so(tmp_path):
+    import imageio.v3 as iio
+    import numpy as np
+
+    from nbrdf.neural.material import load_material
+
+    src = (Path(__file__).parent / "data" / "mtlx" / "image_inputs.mtlx").read_text()
+    doc = tmp_path / "m.mtlx"
+    doc.write_text(src.replace('<input name="base_weight" type="float" value="0.9" />',
+                               '<input name="base_weight" type="float" value="0.9" />'
+                               '<input name="coat_weight" type="float" value="0.5" />'))
+    iio.imwrite(tmp_path / "albedo.png", np.full((4, 4, 3), 128, np.uint8))
+    notes: list[str] = []
+    m = load_material(doc, notes)
+    assert m.is_textured and material_mix(m) == [(1.0, m)]  # not two untextured stacks in its place
+    assert sum("carry no textures" in n for n in notes) == 1, notes
 
 
 def test_a_mix_saved_as_json_says_so_when_loaded(tmp_path):

@@ -220,8 +220,9 @@ def test_mixes_are_weighted_pure_components():
 def test_a_mix_keeps_its_largest_component_as_the_layers_and_says_where_the_mix_is_held():
     m, notes = openpbr_to_material(OpenPbr(base_metalness=0.3, coat_weight=0.6, coat_roughness=0.3), "t")
     assert [layer["type"] for layer in m["layers"]] == ["dielectric", "dielectric", "diffuse"]
-    assert any(n.startswith("base_metalness 0.3:") and "hold the mix" in n and "window" in n for n in notes)
-    assert any(n.startswith("coat_weight 0.6:") and "hold the mix" in n for n in notes)
+    assert any(n.startswith("base_metalness 0.3:") and "weighted sum" in n and "the dielectric one" in n
+               for n in notes)
+    assert any(n.startswith("coat_weight 0.6:") and "weighted sum" in n and "the coated one" in n for n in notes)
 
 
 def test_record_holds_every_input_and_rebuilds():
