@@ -26,7 +26,8 @@ import mitsuba as mi
 import numpy as np
 
 from nbrdf.mitsuba.errors import PluginError
-from nbrdf.mitsuba.kernel import Body, MixedKernel, TexturedCodeKernel
+from nbrdf.mitsuba.kernel import Body, TexturedCodeKernel
+from nbrdf.mitsuba.mix import MixedKernel
 from nbrdf.mitsuba.modes import SLOW_WARNING
 from nbrdf.mitsuba.normal_map import BentDirections
 

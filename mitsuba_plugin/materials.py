@@ -22,12 +22,11 @@ from nbrdf.mitsuba.kernel import (
     Coat,
     CodeKernel,
     DecoderKernel,
-    MixedKernel,
     Proxy,
     TableBody,
     TexturedCodeKernel,
-    mix_edges,
 )
+from nbrdf.mitsuba.mix import MixedKernel, mix_edges
 from nbrdf.mitsuba.normal_map import NormalMapKernel
 from nbrdf.mitsuba.param_table import param_table_kernel
 from nbrdf.mitsuba.textures import LatentTextureKernel, ParamMaps, sharpest_top_roughness

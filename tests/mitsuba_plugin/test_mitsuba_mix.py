@@ -74,8 +74,9 @@ def _relative(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def test_the_mix_is_held_and_a_plain_material_is_not_one(mi, mixes):
-    from nbrdf.mitsuba.kernel import CodeKernel, MixedKernel
+    from nbrdf.mitsuba.kernel import CodeKernel
     from nbrdf.mitsuba.materials import ReferenceWalk, code_kernel
+    from nbrdf.mitsuba.mix import MixedKernel
 
     kernel = code_kernel(mixes["mixed"])
     assert isinstance(kernel, MixedKernel) and len(kernel.kernels) == 4
@@ -147,7 +148,7 @@ def test_neural_albedo_is_the_components_weighted(mi, mixes):
     is sum_k w_k albedo_k, each by its component's plugin, within 0.5 % (measured: 0.06 %; each
     estimate's noise at 2^18 samples is ~0.1 %); a sampler drawing the components with the wrong
     weights (reversed) while reporting the mixture's pdf is biased by several %."""
-    from nbrdf.mitsuba.kernel import MixedKernel
+    from nbrdf.mitsuba.mix import MixedKernel
 
     n = 1 << 18
     mix = _albedo(mi, mixes["mixed"], 50.0, n, 1)
@@ -206,7 +207,7 @@ def test_neural_mix_sampler_passes_mitsubas_chi2(mi, mixes, theta):
 def test_chi2_rejects_components_drawn_with_the_wrong_weights(mi, mixes):
     """The test's power: the components drawn with their weights reversed (0.28, 0.42, 0.12, 0.18)
     against the mixture's pdf give p < 1e-6."""
-    from nbrdf.mitsuba.kernel import MixedKernel
+    from nbrdf.mitsuba.mix import MixedKernel
 
     right = mi.load_dict({"type": "nbrdf", "material": mixes["mixed"]})
     wrong = mi.load_dict({"type": "nbrdf", "material": mixes["mixed"]})

@@ -249,6 +249,12 @@ class MaterialPipeline:
         """``code`` with its albedo bounded (``NeuralModel.conserved``)."""
         return self.model.conserved(code)
 
+    def mix_unbounded(self, brdf: GpuBrdf | None) -> bool:
+        """Whether a component of ``brdf``'s OpenPBR mix has a code that reflects more light than arrives
+        (built with a slider's unbounded codes: ``build(conserve=False)``)."""
+        return brdf is not None and any(b.kind == BrdfKind.NEURAL and b.latent is not None
+                                        and not torch.equal(self.conserved(b.latent), b.latent) for b in brdf.mixed)
+
     def proxy(self, z: torch.Tensor) -> tuple[float, float] | None:
         """The sampler network's proxy pdf (sigma, w) of a latent (None without a sampler)."""
         return self.model.proxy(z) if self.model.sampler is not None else None

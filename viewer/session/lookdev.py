@@ -49,7 +49,6 @@ from nbrdf.training.refine import material_hash
 from nbrdf.viewer.gpu.backdrop import Backdrop, BackdropSettings
 from nbrdf.viewer.gpu.body_source import BodySource
 from nbrdf.viewer.gpu.pipeline import (
-    BrdfKind,
     GpuBrdf,
     MaterialPipeline,
     analytic_capable,
@@ -376,7 +375,7 @@ class LookDev(SessionEdits, Captures):
         if due is not None and time.monotonic() - due[1] >= CONSERVE_AFTER_S:
             self._conserve_due = None
             z = self.pipeline.conserved(due[0])
-            if not torch.equal(z, due[0]) or self._mix_unbounded():  # more light out than in: bounded
+            if not torch.equal(z, due[0]) or self.pipeline.mix_unbounded(self.brdf):  # more light out than in
                 self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=z))
         refined = self.idle_refine.poll()
         if refined is not None:  # a code that beats the network's on the material's own simulation
@@ -385,13 +384,6 @@ class LookDev(SessionEdits, Captures):
             self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=refined))
         if self.turntables.capture is not None and self.brdf is not None:
             self.guarded(self._turntable_step)
-
-    def _mix_unbounded(self) -> bool:
-        """Whether a component of the OpenPBR mix shown (built with the slider's unbounded codes)
-        reflects more light than arrives, so that the handover must bound it too."""
-        return self.brdf is not None and any(
-            b.kind == BrdfKind.NEURAL and b.latent is not None
-            and not torch.equal(self.pipeline.conserved(b.latent), b.latent) for b in self.brdf.mixed)
 
     def swap_brdf(self, brdf: GpuBrdf) -> None:
         """Shows ``brdf`` for the same material without an edit (idle refinement's better
