@@ -133,8 +133,9 @@ def test_an_openpbr_slider_makes_a_mix_the_window_draws(gl_ctx):
     gold = Path(__file__).parents[1] / "neural" / "data" / "mtlx" / "openpbr_coated_gold.mtlx"
     ld = LookDev(gl_ctx, load_material(gold, []))
     try:
-        assert ld.brdf is not None and ld.brdf.mixed == ()
+        assert ld.open_material(gold) and ld.brdf is not None and ld.brdf.mixed == ()
         assert ld.set_openpbr("coat_weight", 0.3)
+        assert "coat_weight 0.3: a partial coat" in ld.notice  # the notice says the notes of now, not of the opening
         shown = ld.brdf.components()
         assert [b.weight for b in shown] == pytest.approx([0.7, 0.3])  # uncoated gold is the larger share
         assert [bool(b.material.interfaces) for b in shown] == [False, True]

@@ -221,9 +221,12 @@ class SessionEdits(ABC):
         """Sets one OpenPBR input of a material made from OpenPBR; its stack is rebuilt from the inputs (the same
         live path as a stack edit) and the mapping's notes become ``notes``."""
         def go():
+            old = self.notes
             _, notes = self.editor.set_openpbr(name, value)
             self._apply_material()
             self.notes = notes
+            if not self.notice or (old and self.notice.endswith("; ".join(old))):  # it showed the notes: now's
+                self.notice = "; ".join(notes)
         return self.guarded(go)
 
     def _edit_material(self, m: Material, notes: list[str] | None = None) -> None:
