@@ -18,7 +18,8 @@ class ExportConfig:
     an OpenPBR Surface MaterialX document."""
 
     glsl: str | None = None
-    """output .glsl: the decoder's weights, the material's code and its coat as constants, plus its sampler"""
+    """output .glsl: the decoder's weights, the material's code and its coat as constants, plus its sampler (an
+    OpenPBR mix: every stack's, summed with its weight)"""
     mtlx: str | None = None
     """output .mtlx: the material as OpenPBR Surface inputs (a material that came from OpenPBR: its own inputs)"""
     material: str | None = field(default=None, metadata={"positional": True, "metavar": "MATERIAL"})
@@ -29,8 +30,7 @@ class ExportConfig:
 
 
 def cmd_export(a: argparse.Namespace) -> int:
-    from nbrdf.neural.material_code import load_code  # late: torch costs ~1 s, --help needs none
-    from nbrdf.viewer.glsl_export import export_glsl  # late: the previewer's shaders and torch, as above
+    from nbrdf.viewer.glsl_export import export_file_glsl  # late: the previewer's shaders and torch, --help needs none
 
     c: ExportConfig = build(ExportConfig, a)
     if not c.material:
@@ -41,8 +41,11 @@ def cmd_export(a: argparse.Namespace) -> int:
         export_mtlx(c.material, out_path(c.mtlx, (".mtlx",)))
     if c.glsl:
         out = out_path(c.glsl, (".glsl",))
-        model, code = load_code(c.material, c.model)
-        out.write_text(export_glsl(model, code, Path(c.material).name))
+        text, parts = export_file_glsl(c.material, c.model)
+        out.write_text(text)
+        if parts:  # said: an OpenPBR mix is exported whole, not as the largest stack its layers hold
+            shown = ", ".join(f"{name} {w:.2g}" for w, _, name in parts)
+            print(f"wrote {out}: all {len(parts)} stacks of the OpenPBR mix, weighted: {shown}")
     return 0
 
 

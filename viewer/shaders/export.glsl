@@ -22,15 +22,7 @@
 //@INCLUDE neural_decoder.glsl
 //@INCLUDE coat.glsl
 
-#ifdef NB_ANISO
-vec3 nb_body(vec3 wi, vec3 wo) {
-    vec3 a, b;
-    float j = body_warp(wi, wo, NBRDF_BODY_TAIL, coat_params(NBRDF_COAT).y, a, b);
-    return j > 0.0 ? nb_decode(a, b) * j : vec3(0.0);
-}
-#else
-#define nb_body(wi, wo) nb_decode(wi, wo)
-#endif
+//@INCLUDE export_body.glsl
 
 vec3 nbrdf_eval(vec3 wi, vec3 wo) { return nb_body(wi, wo) + vec3(coat_eval(wi, wo, NBRDF_COAT)); }
 
