@@ -64,21 +64,21 @@ class MixedKernel:
         """(weight, kernel) per component."""
         return list(zip(self.weights, self.kernels))
 
+    def _sum(self, each):
+        """sum_k w_k each(kernel_k)."""
+        total = None
+        for weight, k in self.parts:
+            v = weight * each(k)
+            total = v if total is None else total + v
+        return total
+
     def eval(self, wi, wo, si=None):
         """RGB f(wi, wo) of the mix as a ``mi.Color3f`` (no cosine): sum_k w_k f_k."""
-        total = None
-        for w, k in self.parts:
-            f = w * k.eval(wi, wo, si)
-            total = f if total is None else total + f
-        return total
+        return self._sum(lambda k: k.eval(wi, wo, si))
 
     def pdf(self, w, w_other, si=None):
         """The mixture's pdf sum_k w_k p_k(w_other | w): what ``sample`` draws from."""
-        total = None
-        for weight, k in self.parts:
-            p = weight * k.pdf(w, w_other, si)
-            total = p if total is None else total + p
-        return total
+        return self._sum(lambda k: k.pdf(w, w_other, si))
 
     def sample(self, w, u0, u1, u2, si=None):
         """(other direction, the mixture's pdf there): ``u0`` picks the component (``mix_pick``),
