@@ -39,7 +39,7 @@ from nbrdf.training.refine import material_hash
 from nbrdf.training.render_report import flip  # the evaluation of `nbrdf report render`
 from nbrdf.viewer.gpu import shaders
 from nbrdf.viewer.gpu.labels import Label, Labels
-from nbrdf.viewer.gpu.lit_sampling import Term
+from nbrdf.viewer.gpu.lit_sampling import LitSampling, Term
 from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf, analytic_capable
 from nbrdf.viewer.gpu.renderer import Renderer
 from nbrdf.viewer.modes import CompareMode, View
@@ -60,6 +60,13 @@ PLACEHOLDER_GREYS = (0.24, 0.32)
 COMPUTING = "computing reference..."
 #: The longest side of the Monte Carlo lobe's image as the view shows it (its 64 x 64 disc, upsampled), pixels.
 LOBE_CANVAS = 256
+
+
+def coat_sampling(sampling: LitSampling) -> LitSampling:
+    """The coat pass's estimator: the coat's terms only, by the balance heuristic (no resampling: the
+    resampled estimator evaluates the decoder at every candidate before the terms mask drops the body, so
+    the coat pass paid a body's cost per pass, an OpenPBR mix's n times over)."""
+    return replace(sampling, terms=COAT_TERMS, ris_samples=0)
 
 
 def coat_brdf(brdf: GpuBrdf, material: Material) -> GpuBrdf:
@@ -279,7 +286,7 @@ class Compare:
                                                                           for b in brdf.components())
         if coat:
             sampling = self.renderer.sampling
-            self.renderer.sampling = replace(sampling, terms=COAT_TERMS)
+            self.renderer.sampling = coat_sampling(sampling)
             try:
                 tex = (self.renderer.accumulate(state, w, h, first, n, coat_brdf(brdf, material), REFERENCE_SLOT)
                        if n else self.renderer.frame_texture(view, w, h, REFERENCE_SLOT))
@@ -354,7 +361,7 @@ class Compare:
         if view != View.OBJECT or brdf is None or brdf.kind != BrdfKind.NEURAL:
             return r.image
         sampling = self.renderer.sampling
-        self.renderer.sampling = replace(sampling, terms=COAT_TERMS)
+        self.renderer.sampling = coat_sampling(sampling)
         try:
             coat = self.renderer.render_linear(state, size, coat_passes, coat_brdf(brdf, material))
         finally:
