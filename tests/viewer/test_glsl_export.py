@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from gpu_brdfs import run_pairs
 
 from nbrdf.neural.material import load_material
 from nbrdf.neural.material_code import load_code
@@ -37,23 +38,8 @@ void main() {{
 
 
 def _run(prog, ctx, a: np.ndarray, b: np.ndarray, mode: int) -> np.ndarray:
-    import moderngl
-
-    texels = np.zeros((2 * N, 4), np.float32)
-    texels[0::2, :3], texels[1::2, :3] = a, b
-    tex = ctx.texture((128, 2 * N // 128), 4, texels.tobytes(), dtype="f4")
-    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-    target = ctx.texture((64, N // 64), 4, dtype="f4")
-    fbo = ctx.framebuffer([target])
-    fbo.use()
-    tex.use(0)
-    prog["u_in"].value = 0
-    prog["u_mode"].value = mode
-    ctx.vertex_array(prog, []).render(moderngl.TRIANGLES, vertices=3)
-    out = np.frombuffer(target.read(), np.float32).reshape(N, 4).copy()
-    for r in (fbo, target, tex):
-        r.release()
-    return out
+    """(n, 4) outputs of the program at the n pairs (a, b)."""
+    return run_pairs(prog, ctx, a, b, mode, 128, 64)
 
 
 def _dirs(rng) -> np.ndarray:

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from gpu_brdfs import run_pairs
 
 from nbrdf.neural.anisotropy import FRAME_PARAMS, LIFT_Z
 from nbrdf.neural.errors import NbrdfError
@@ -172,26 +173,8 @@ def _program(ctx, export: str, sample: bool, evaluate: bool):
 
 
 def _run(prog, ctx, a: np.ndarray, b: np.ndarray, mode: int) -> np.ndarray:
-    """(n, 4) outputs of the program at the n pairs (a, b); n a multiple of 128."""
-    import moderngl
-
-    n = a.shape[0]
-    texels = np.zeros((2 * n, 4), np.float32)
-    texels[0::2, :3], texels[1::2, :3] = a, b
-    tex = ctx.texture((256, 2 * n // 256), 4, texels.tobytes(), dtype="f4")
-    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-    target = ctx.texture((WIDTH, n // WIDTH), 4, dtype="f4")
-    fbo = ctx.framebuffer([target])
-    fbo.use()
-    tex.use(0)
-    prog["u_in"].value = 0
-    if "u_mode" in prog:
-        prog["u_mode"].value = mode
-    ctx.vertex_array(prog, []).render(moderngl.TRIANGLES, vertices=3)
-    out = np.frombuffer(target.read(), np.float32).reshape(n, 4).copy()
-    for r in (fbo, target, tex):
-        r.release()
-    return out
+    """(n, 4) outputs of the program at the n pairs (a, b)."""
+    return run_pairs(prog, ctx, a, b, mode, 256, WIDTH)
 
 
 def _dirs(rng, n: int) -> np.ndarray:
