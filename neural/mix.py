@@ -15,6 +15,7 @@ the other components', which the window draws beside it (viewer/gpu/pipeline.py 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import torch
@@ -54,7 +55,19 @@ def mix_split(material: Material) -> tuple[float, list[tuple[float, Material]]]:
 
 def is_mix(material: Material) -> bool:
     """Whether the material is an OpenPBR mix of several pure stacks."""
-    return material.openpbr is not None and len(material_mix(material)) > 1
+    return len(material_mix(material)) > 1
+
+
+def weighted_with_error(parts: Iterable[tuple[float, tuple[Tensor, Tensor | None]]]) -> tuple[Tensor, Tensor | None]:
+    """sum_k w_k f_k and its standard error sqrt(sum_k (w_k e_k)^2) from (w_k, (f_k, e_k)), the components'
+    errors combined as independent ones (e_k None: exact; all exact: None)."""
+    total, var = None, None
+    for w, (f, e) in parts:
+        total = w * f if total is None else total + w * f
+        if e is not None:
+            var = (w * e) ** 2 if var is None else var + (w * e) ** 2
+    assert total is not None
+    return total, None if var is None else var.sqrt()
 
 
 @dataclass
@@ -69,16 +82,7 @@ class MixedBRDF:
             raise NbrdfError(f"a mix needs positive weights summing to 1 (got {w})")
 
     def eval_with_error(self, wi: Tensor, wo: Tensor) -> tuple[Tensor, Tensor | None]:
-        total, var, exact = None, None, True
-        for w, b in self.parts:
-            f, e = b.eval_with_error(wi, wo)
-            total = w * f if total is None else total + w * f
-            if e is None:
-                continue
-            exact = False
-            var = (w * e) ** 2 if var is None else var + (w * e) ** 2
-        assert total is not None
-        return total, None if exact or var is None else var.sqrt()
+        return weighted_with_error((w, b.eval_with_error(wi, wo)) for w, b in self.parts)
 
     def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
         return self.eval_with_error(wi, wo)[0]

@@ -15,7 +15,7 @@ from nbrdf.neural.geometry import incidence, lobe_grid
 from nbrdf.neural.layer_kinds import PARAMETRIC_BASES
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured, Medium
 from nbrdf.neural.metrics import noise_psnr
-from nbrdf.neural.mix import material_mix
+from nbrdf.neural.mix import material_mix, weighted_with_error
 from nbrdf.neural.stack import Stack, material_stack
 from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
 from nbrdf.training.layered import SimStats, StackParams, simulate
@@ -131,13 +131,11 @@ def mix_reference_eval(material: Material, wi: Tensor, wo: Tensor, spp: int = 25
     if len(parts) == 1:
         return reference_eval(material, wi, wo, spp, seed, **kw)
     progress = kw.pop("progress", None)
-    mean, var = None, None
-    for k, (w, c) in enumerate(parts):
-        m, e = reference_eval(c, wi, wo, spp, seed, progress=progress if k == len(parts) - 1 else None, **kw)
-        mean = w * m if mean is None else mean + w * m
-        var = (w * e) ** 2 if var is None else var + (w * e) ** 2
-    assert mean is not None and var is not None
-    return mean, var.sqrt()
+    mean, err = weighted_with_error(
+        (w, reference_eval(c, wi, wo, spp, seed, progress=progress if k == len(parts) - 1 else None, **kw))
+        for k, (w, c) in enumerate(parts))
+    assert err is not None  # the walk's estimates carry their errors
+    return mean, err
 
 
 def converged_lobe(material: Material, theta_i_deg: float, target_noise_psnr: float = 50.0,
