@@ -125,6 +125,44 @@ class EnvironmentMap:
         i, j, _ = self.texel(d)
         return self.radiance[j, i]
 
+    def lookup_bilinear(self, d: np.ndarray) -> np.ndarray:
+        """Radiance (N, 3) at unit directions ``d`` (N, 3), read bilinearly between texel centres (wrapping in
+        phi, clamped in theta), as the shaders' linear filter reads the map."""
+        w, h = self.size
+        theta = np.arccos(np.clip(d[:, 2], -1, 1))
+        phi = np.mod(np.arctan2(d[:, 1], d[:, 0]), 2 * math.pi)
+        x, y = phi / (2 * math.pi) * w - 0.5, np.clip(theta / math.pi * h - 0.5, 0, h - 1)
+        x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+        fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+        x0, x1, y1 = x0 % w, (x0 + 1) % w, np.minimum(y0 + 1, h - 1)
+        r = self.radiance
+        return ((r[y0, x0] * (1 - fx) + r[y0, x1] * fx) * (1 - fy) + (r[y1, x0] * (1 - fx) + r[y1, x1] * fx) * fy)
+
+    def irradiance_sh(self) -> np.ndarray:
+        """(9, 3): the map's radiance projected on the real spherical harmonics of order <= 2 (``sh9``), each
+        band scaled by its clamped-cosine factor over pi (Ramamoorthi and Hanrahan 2001): ``sh9(n) @ this`` is
+        the irradiance at normal n over pi -- the radiance a white Lambertian surface reflects -- to within the
+        order-2 truncation (about 1 % on smooth skies; exact for radiance linear in the direction)."""
+        w, h = self.size
+        theta = (np.arange(h) + 0.5) / h * math.pi
+        phi = (np.arange(w) + 0.5) / w * 2 * math.pi
+        t, p = np.meshgrid(theta, phi, indexing="ij")
+        d = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1).reshape(-1, 3)
+        d_omega = (math.pi / h) * (2 * math.pi / w) * np.sin(t).reshape(-1, 1)
+        coeffs = sh9(d).T @ (self.radiance.reshape(-1, 3).astype(np.float64) * d_omega)
+        band = np.array([1.0, 2 / 3, 2 / 3, 2 / 3, 0.25, 0.25, 0.25, 0.25, 0.25])  # A_l / pi
+        return coeffs * band[:, None]
+
+
+def sh9(d: np.ndarray) -> np.ndarray:
+    """(N, 9) real spherical harmonics Y_00, Y_1-1..Y_11, Y_2-2..Y_22 at unit directions ``d`` (N, 3)."""
+    x, y, z = d[:, 0], d[:, 1], d[:, 2]
+    return np.stack([
+        np.full_like(x, 0.282095),
+        0.488603 * y, 0.488603 * z, 0.488603 * x,
+        1.092548 * x * y, 1.092548 * y * z, 0.315392 * (3 * z * z - 1), 1.092548 * x * z, 0.546274 * (x * x - y * y),
+    ], -1)
+
 
 class GpuEnvironment:
     """The map and its CDF tables as float textures for ``environment.glsl``."""

@@ -30,7 +30,7 @@ from nbrdf.neural.openpbr import (
 )
 
 __all__ = ["list_mtlx_materials", "openpbr_from_record", "read_mtlx", "read_openpbr", "split_material_ref",
-           "write_mtlx"]
+           "data_library", "openpbr_document", "write_mtlx"]
 
 Translate = Callable[[Mapping[str, Any]], tuple[OpenPbr, list[str]]]
 
@@ -61,7 +61,7 @@ def _materialx():
 
 
 @functools.lru_cache(maxsize=1)
-def _library():
+def data_library():
     """MaterialX's standard data libraries (node definitions), loaded once."""
     mx = _materialx()
     lib = mx.createDocument()
@@ -105,7 +105,7 @@ def _load(path: str | Path):
         raise NbrdfError(f"{path}: {_first_line(e)}") from None
     except Exception as e:  # noqa: BLE001 - any other reader failure is a bad file
         raise NbrdfError(f"{path}: cannot be read as MaterialX ({_first_line(e) or type(e).__name__})") from None
-    doc.setDataLibrary(_library())
+    doc.setDataLibrary(data_library())
     ok, message = doc.validate()
     if not ok:
         raise NbrdfError(f"{path}: invalid MaterialX document: {_first_line(message)}")
@@ -321,10 +321,10 @@ def _value_string(v: Any) -> str:
     return repr(float(v))
 
 
-def write_mtlx(p: OpenPbr, name: str, path: str | Path, doc: str = "") -> None:
-    """Writes a MaterialX 1.39 document: one open_pbr_surface (only the inputs that differ from
-    OpenPBR's defaults) and its surfacematerial, named after ``name`` (made a valid MaterialX name),
-    ``doc`` as both elements' doc string; validated before writing, written atomically."""
+def openpbr_document(p: OpenPbr, name: str, doc: str = ""):
+    """A MaterialX 1.39 document (``MaterialX.Document``, its data library set): one open_pbr_surface
+    ``SR_<name>`` (only the inputs that differ from OpenPBR's defaults) and its surfacematerial ``name`` (made a
+    valid MaterialX name), ``doc`` as both elements' doc string; refused (one line) unless it validates."""
     mx = _materialx()
     document = mx.createDocument()
     mat_name = mx.createValidName(name) if name else "material"
@@ -335,8 +335,17 @@ def write_mtlx(p: OpenPbr, name: str, path: str | Path, doc: str = "") -> None:
     if doc:
         material.setDocString(doc)
         shader.setDocString(doc)
-    document.setDataLibrary(_library())
+    document.setDataLibrary(data_library())
     ok, message = document.validate()
     if not ok:
-        raise NbrdfError(f"{path}: the OpenPBR document would be invalid: {_first_line(message)}")
-    save_text(path, mx.writeToXmlString(document))
+        raise NbrdfError(f"the OpenPBR document would be invalid: {_first_line(message)}")
+    return document
+
+
+def write_mtlx(p: OpenPbr, name: str, path: str | Path, doc: str = "") -> None:
+    """Writes ``openpbr_document(p, name, doc)`` to ``path``, atomically."""
+    try:
+        document = openpbr_document(p, name, doc)
+    except NbrdfError as e:
+        raise NbrdfError(f"{path}: {e}") from None
+    save_text(path, _materialx().writeToXmlString(document))

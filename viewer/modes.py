@@ -28,6 +28,12 @@ class CompareMode(_Mode):
     FLIP = "flip"       #: HDR-FLIP error map (magma) with its mean
 
 
+class Against(_Mode):
+    """What the compare view sets beside the neural image."""
+    REFERENCE = "reference"  #: the physical stack's reference (closed form or Monte Carlo)
+    MATERIALX = "materialx"  #: the OpenPBR inputs as MaterialX's own generated GLSL shows them
+
+
 class BrdfMode(WordEnum):
     """Which BRDF the previewer shades with (``--brdf``): the members of ``Method``
     (neural/methods.py, the one list of methods) the GPU can draw, with their words,

@@ -67,6 +67,7 @@ def test_round_trip_is_exact(tmp_path):
     data, out = json.loads(V1.read_text()), doc.to_dict()
     assert Path(out.pop("material_dir")) == Path(data.pop("material_dir")).resolve()  # "." as a folder
     assert out.pop("backdrop") == {"mode": "blur", "flat_colour": [0.18] * 3, "ground": True}  # new: the default
+    assert out["view"].pop("against") == "reference"  # new: the compare view's other side, the default
     assert out == data  # every key the previous version wrote, written the same way
 
 
@@ -82,6 +83,7 @@ def _broken(edit) -> dict:
     (lambda d: d["view"].update(tonemap="reinhard"), "reinhard"),
     (lambda d: d["view"].update(compare="overlay"), "overlay"),
     (lambda d: d["view"].update(wipe=1.5), "wipe"),
+    (lambda d: d["view"].update(against="mitsuba"), "mitsuba"),
     (lambda d: d["interpolation"].update(t=2.0), "weight"),
     (lambda d: d["interpolation"].update(mode="slerp"), "slerp"),
     (lambda d: d["material"]["layers"][0].update(ior=9.0), "ior"),

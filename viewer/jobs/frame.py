@@ -18,7 +18,7 @@ import moderngl
 import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.viewer.modes import CompareMode, View
+from nbrdf.viewer.modes import Against, CompareMode, View
 
 if TYPE_CHECKING:
     from nbrdf.neural.material import Material
@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from nbrdf.viewer.gpu.pipeline import GpuBrdf
     from nbrdf.viewer.gpu.renderer import Renderer
     from nbrdf.viewer.reference.compare import Compare
+    from nbrdf.viewer.reference.materialx_view import MaterialXView
     from nbrdf.viewer.view_settings import ViewState
 
 
@@ -56,6 +57,8 @@ class Frame:
     """The relative-error view's full scale."""
     backdrop: "BackdropSettings"
     """What is drawn behind the object."""
+    against: Against = Against.REFERENCE
+    """What the compare view sets beside the neural image (the stack's reference, or MaterialX's shader)."""
 
     @property
     def view(self) -> View:
@@ -88,6 +91,9 @@ class Stage:
     backdrop: "Backdrop"
     bodies: "BodySource"
     """The body a frame shades with: the decoder or a baked table (viewer/gpu/body_source.py)."""
+    materialx: "MaterialXView"
+    """MaterialX's own shader of the material's OpenPBR inputs, the compare view's other side
+    (viewer/reference/materialx_view.py)."""
 
 
 def render_linear(stage: Stage, frame: Frame, size: tuple[int, int], spp: int) -> np.ndarray:

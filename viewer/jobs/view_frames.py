@@ -26,7 +26,8 @@ from nbrdf.viewer.gpu.pipeline import GpuBrdf
 from nbrdf.viewer.gpu.programs import ProgramKey
 from nbrdf.viewer.jobs.frame import Frame, Stage
 from nbrdf.viewer.jobs.pass_bands import PassBands
-from nbrdf.viewer.modes import CompareMode, View
+from nbrdf.viewer.modes import Against, CompareMode, View
+from nbrdf.viewer.reference.materialx_view import LABEL as MATERIALX_LABEL
 from nbrdf.viewer.view_settings import ViewState
 
 MAX_PASSES = 1024
@@ -129,7 +130,7 @@ class ViewFrames:
         frame's settings -- else the copy drawn again (the backdrop and the tone mapping of a
         full view cost a software GPU as much as a band)."""
         ctx = self.stage.ctx
-        key = (size, shown, frame.state, frame.backdrop, frame.compare, frame.wipe, frame.error_scale,
+        key = (size, shown, frame.state, frame.backdrop, frame.compare, frame.against, frame.wipe, frame.error_scale,
                frame.blend_t, id(frame.brdf), id(frame.other_brdf))
         if self._copy is None or self._copy[1].size != tuple(size):
             if self._copy is not None:
@@ -262,7 +263,11 @@ class ViewFrames:
         done = first + n if view == View.OBJECT else 1
         pa = float(done)
         b, pb, weight, placeholder = None, pa, None, None
-        if comparing:
+        b_label, b_version = None, None
+        if comparing and frame.against == Against.MATERIALX:
+            b, pb = stage.materialx.image(frame.material, lit, vw, h), 1.0
+            placeholder, b_label, b_version = stage.materialx.placeholder, MATERIALX_LABEL, stage.materialx.version
+        elif comparing:
             # The lobe and slice views are not accumulated: their reference is drawn with them each frame.
             rf, rn = (first, n) if view == View.OBJECT else (0, 1)
             b, pb = stage.compare.reference(frame.material, frame.ref_brdf, frame.brdf, lit, frame.mesh, vw, h, rf,
@@ -277,7 +282,7 @@ class ViewFrames:
             weight = max(0.0, 1.0 - done / min(held[1], HANDOVER_PASSES))
         mode = frame.compare
         if mode == CompareMode.FLIP:
-            stage.compare.update_flip(a, pa, b, pb)
+            stage.compare.update_flip(a, pa, b, pb, pending=placeholder is not None, b_version=b_version)
         if view == View.OBJECT and mode not in (CompareMode.ERROR, CompareMode.FLIP):
             # The backdrop on what is shown (the error views score the object alone).
             a, pa = stage.backdrop.apply(a, pa, state, frame.backdrop, slots[0]), 1.0
@@ -286,7 +291,7 @@ class ViewFrames:
         if b is None:
             b, pb = a, pa
         stage.compare.composite(target, a, pa, b, pb, mode, weight, frame.wipe, frame.error_scale,
-                                frame.state.exposure, frame.state.tonemap, placeholder)
+                                frame.state.exposure, frame.state.tonemap, placeholder, b_label)
         return done
 
     def _accumulated(self, view: View, state: ViewState, w: int, h: int, first: int, n: int, brdf: GpuBrdf,

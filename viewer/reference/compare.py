@@ -58,6 +58,9 @@ MIN_LOBE_ALPHA = 0.05
 PLACEHOLDER_GREYS = (0.24, 0.32)
 #: The placeholder's words while the Monte Carlo worker has sent no round of the view yet.
 COMPUTING = "computing reference..."
+#: The longest side of the images the FLIP view scores, pixels (FLIP is CPU work: a reference at the view's size,
+#: MaterialX's, scored at 960 x 540 took 11 s on 2 cores; the Monte Carlo reference is smaller than this already).
+FLIP_SIZE = 256
 #: The longest side of the Monte Carlo lobe's image as the view shows it (its 64 x 64 disc, upsampled), pixels.
 LOBE_CANVAS = 256
 
@@ -387,10 +390,11 @@ class Compare:
         return (f"reference: Monte Carlo, {r.spp if r else 0} paths per pixel{level}"
                 f"{'' if r and r.done else '...'}{died}")
 
-    def label_list(self, mode: CompareMode | str, wipe: float) -> list[Label]:
-        """The labels of ``mode``'s picture: each side's name where it shows."""
+    def label_list(self, mode: CompareMode | str, wipe: float, b_label: str | None = None) -> list[Label]:
+        """The labels of ``mode``'s picture: each side's name where it shows (B's: ``b_label``, default
+        this reference's)."""
         mode = CompareMode.parse(mode)
-        ref = self._ref_label
+        ref = b_label or self._ref_label
         if mode == CompareMode.SIDE:
             return [Label("neural", 0.0), Label(ref, 0.5)]
         if mode == CompareMode.WIPE:
@@ -412,33 +416,41 @@ class Compare:
         return None if r is None else r.image[0]
 
     # --- HDR-FLIP -------------------------------------------------------------------------------
-    def update_flip(self, a: moderngl.Texture, pa: float, b: moderngl.Texture, pb: float) -> float | None:
+    def update_flip(self, a: moderngl.Texture, pa: float, b: moderngl.Texture, pb: float,
+                    pending: bool | None = None, b_version: int | None = None) -> float | None:
         """The HDR-FLIP map of A (sum of ``pa`` passes) against the reference B,
         recomputed when B changes or A's passes reach the next power of two (the
-        FLIP evaluation is CPU work); returns the mean (None: no reference yet)."""
-        if self.placeholder is not None:  # no reference image yet (the Monte Carlo worker has sent nothing)
+        FLIP evaluation is CPU work); returns the mean (None: no reference yet).
+        ``pending``: B has no image yet (default: this reference's placeholder is up);
+        ``b_version``: B's own count of images drawn into it (another source than this one's)."""
+        if self.placeholder is not None if pending is None else pending:  # no image to score against yet
             self.flip_mean, self._flip_key = None, None
             return None
-        key = (id(b), b.size, self._tex_key if b is self._tex else int(math.log2(max(pb, 1.0))),
-               a.size, int(math.log2(max(pa, 1.0))))
+        b_state = (b_version if b_version is not None else self._tex_key if b is self._tex
+                   else int(math.log2(max(pb, 1.0))))
+        key = (id(b), b.size, b_state, a.size, int(math.log2(max(pa, 1.0))))
         if key != self._flip_key:
-            test = _resample(_read_linear(a, pa), b.size)
-            self.flip_mean, fmap = flip(_read_linear(b, pb), test)
+            k = min(1.0, FLIP_SIZE / max(b.size))
+            size = (max(1, round(b.size[0] * k)), max(1, round(b.size[1] * k)))
+            test = _resample(_read_linear(a, pa), size)
+            self.flip_mean, fmap = flip(_resample(_read_linear(b, pb), size), test)
             data = np.ascontiguousarray(fmap, dtype="f4")
             if self._flip_tex is not None:
                 self._flip_tex.release()
-            self._flip_tex = self.ctx.texture(b.size, 1, data.tobytes(), dtype="f4")
+            self._flip_tex = self.ctx.texture(size, 1, data.tobytes(), dtype="f4")
             self._flip_key = key
         return self.flip_mean
 
     # --- the composite ------------------------------------------------------------------------
     def composite(self, target: moderngl.Framebuffer, a: moderngl.Texture, pa: float, b: moderngl.Texture,
                   pb: float, mode: CompareMode, blend: float | None, wipe: float, error_scale: float,
-                  exposure: float, tonemap: ToneMap | str, placeholder: str | None = None) -> None:
+                  exposure: float, tonemap: ToneMap | str, placeholder: str | None = None,
+                  b_label: str | None = None) -> None:
         """Draws A (sum of ``pa`` passes) and B as ``mode`` to ``target``;
         ``blend`` (a weight) draws (1 - blend) A + blend B instead; ``placeholder``
         (words; the reference's ``placeholder``): B has no image, its side shows the
-        hatch with these words, labels off or on."""
+        hatch with these words, labels off or on; ``b_label``: B's name on the image
+        (default: this reference's)."""
         code = ToneMap.parse(tonemap).code
         pending = placeholder is not None and blend is None
         plain = CompareMode.parse(mode) == CompareMode.OFF and blend is None and not pending
@@ -451,7 +463,7 @@ class Compare:
             p["u_a"].value, p["u_passes_a"].value, p["u_exposure"].value = 0, pa, exposure
             vao.render(moderngl.TRIANGLES, vertices=3)
             self.renderer.unbind_textures(0, 1)
-            self.labels.draw(target, self.label_list(mode, wipe) if self.show_labels else [])
+            self.labels.draw(target, self.label_list(mode, wipe, b_label) if self.show_labels else [])
             return
         p["u_a"].value, p["u_b"].value = 0, 1
         flip = CompareMode.parse(mode) == CompareMode.FLIP and blend is None
@@ -470,7 +482,7 @@ class Compare:
         p["u_hatch"].value = PLACEHOLDER_GREYS
         vao.render(moderngl.TRIANGLES, vertices=3)
         self.renderer.unbind_textures(0, 1, 2)
-        labels = self.label_list(mode, wipe) if self.show_labels and blend is None else []
+        labels = self.label_list(mode, wipe, b_label) if self.show_labels and blend is None else []
         if pending:
             labels.append(self.placeholder_label(placeholder, mode, wipe))
         self.labels.draw(target, labels)

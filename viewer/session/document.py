@@ -20,7 +20,7 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.files import save_text
 from nbrdf.neural.material import Material, material_to_dict, parse_material
 from nbrdf.viewer.gpu.backdrop import BackdropSettings
-from nbrdf.viewer.modes import CompareMode
+from nbrdf.viewer.modes import Against, CompareMode
 from nbrdf.viewer.view_settings import ViewState, from_session, to_session
 
 SESSION_FORMAT = "nbrdf-session/1"
@@ -73,9 +73,12 @@ class CompareSettings:
     """The x of the A/B wipe line, 0..1 of the view."""
     error_scale: float = 0.25
     """The relative error shown as full red in the error view."""
+    against: Against = Against.REFERENCE
+    """What the neural image is compared with: the stack's reference, or MaterialX's shader of its OpenPBR inputs."""
 
     def __post_init__(self) -> None:
         self.mode = CompareMode.parse(self.mode, "compare mode")
+        self.against = Against.parse(self.against, "compare against")
         self.wipe, self.error_scale = float(self.wipe), float(self.error_scale)
         if not (0.0 <= self.wipe <= 1.0) or not (math.isfinite(self.error_scale) and self.error_scale > 0):
             raise NbrdfError(f"compare: wipe {self.wipe} must be in [0, 1], error scale {self.error_scale} > 0")
@@ -138,7 +141,8 @@ class SessionDoc:
             "environment": self.environment,
             **settings,
             "view": {**view, "compare": self.compare.mode.value, "wipe": self.compare.wipe,
-                     "error_scale": self.compare.error_scale, "mipmapping": self.mipmapping},
+                     "error_scale": self.compare.error_scale, "against": self.compare.against.value,
+                     "mipmapping": self.mipmapping},
             "interpolation": asdict(self.interpolation),
             "backdrop": {"mode": self.backdrop.mode.value, "flat_colour": list(self.backdrop.flat_colour),
                          "ground": self.backdrop.ground},
@@ -164,7 +168,8 @@ class SessionDoc:
             backdrop = BackdropSettings(bd.get("mode", BackdropSettings.mode), bd.get("flat_colour", (0.18,) * 3),
                                         bd.get("ground", True))
             try:
-                compare = CompareSettings(v.get("compare", CompareMode.OFF.value), v.get("wipe", 0.5), v.get("error_scale", 0.25))
+                compare = CompareSettings(v.get("compare", CompareMode.OFF.value), v.get("wipe", 0.5),
+                                          v.get("error_scale", 0.25), v.get("against", Against.REFERENCE.value))
             except ValueError as e:
                 raise NbrdfError(f"{source}: {e}") from None
         except NbrdfError as e:

@@ -17,7 +17,7 @@ from typing import Callable
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material, load_material, material_to_dict, save_material
 from nbrdf.viewer.gpu.backdrop import BackdropSettings
-from nbrdf.viewer.modes import Background, CompareMode, View
+from nbrdf.viewer.modes import Against, Background, CompareMode, View
 from nbrdf.viewer.session.document import SESSION_FORMAT, CompareSettings, Interpolation, SessionDoc
 from nbrdf.viewer.session.history import GuardedEdits, History
 from nbrdf.viewer.session.stack_editor import StackEditor
@@ -347,17 +347,29 @@ class SessionEdits(ABC):
                 parsed = CompareMode.parse(mode, "compare mode")
             except ValueError as e:
                 raise NbrdfError(str(e)) from None
-            self.compare_settings = CompareSettings(parsed, self.wipe, self.err_scale)
+            self.compare_settings = replace(self.compare_settings, mode=parsed)
+            self.invalidate()
+        return self.guarded(go)
+
+    def set_against(self, against: Against | str) -> bool:
+        """What the compare view sets beside the neural image: the stack's reference, or MaterialX's own shader
+        of the material's OpenPBR inputs (a material without them shows a one-line placeholder there)."""
+        def go():
+            try:
+                parsed = Against.parse(against, "compare against")
+            except ValueError as e:
+                raise NbrdfError(str(e)) from None
+            self.compare_settings = replace(self.compare_settings, against=parsed)
             self.invalidate()
         return self.guarded(go)
 
     def set_wipe(self, x: float) -> bool:
-        return self.guarded(lambda: setattr(self, "compare_settings",
-                                           CompareSettings(self.compare, x, self.err_scale)))
+        return self.guarded(lambda: setattr(self, "compare_settings", CompareSettings(
+            self.compare, x, self.err_scale, self.compare_settings.against)))
 
     def set_error_scale(self, scale: float) -> bool:
-        return self.guarded(lambda: setattr(self, "compare_settings",
-                                           CompareSettings(self.compare, self.wipe, scale)))
+        return self.guarded(lambda: setattr(self, "compare_settings", CompareSettings(
+            self.compare, self.wipe, scale, self.compare_settings.against)))
 
     def set_interpolation(self, other: str | Path | None = None, t: float | None = None,
                           mode: str | None = None) -> bool:

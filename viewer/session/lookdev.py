@@ -64,8 +64,9 @@ from nbrdf.viewer.jobs.screenshot import Screenshots
 from nbrdf.viewer.jobs.texture_jobs import TextureJobs
 from nbrdf.viewer.jobs.turntable import Turntables
 from nbrdf.viewer.jobs.view_frames import ViewFrames
-from nbrdf.viewer.modes import BrdfMode, CompareMode
+from nbrdf.viewer.modes import Against, BrdfMode, CompareMode
 from nbrdf.viewer.reference.compare import Compare
+from nbrdf.viewer.reference.materialx_view import MaterialXView
 from nbrdf.viewer.scene.gltf_import import imported_scene, material_groups
 from nbrdf.viewer.scene.mesh import GLTF_SUFFIXES, named_mesh
 from nbrdf.viewer.session.captures import Captures
@@ -133,7 +134,8 @@ class LookDev(SessionEdits, Captures):
         self.backdrop_part = Backdrop(ctx, self.renderer)
         # The window's frames: decoder or baked body table (viewer/gpu/body_source.py).
         self.bodies = BodySource(ctx, decoder=lambda: self.pipeline.decoder)
-        self.stage = Stage(ctx, self.renderer, self.compare_part, self.backdrop_part, self.bodies)
+        self.materialx_part = MaterialXView(ctx, self.renderer)
+        self.stage = Stage(ctx, self.renderer, self.compare_part, self.backdrop_part, self.bodies, self.materialx_part)
         """The GPU parts the jobs draw with (viewer/jobs/frame.py)."""
         self.frames = ViewFrames(self.stage)
         self.shots = Screenshots(self.stage, self.frames)
@@ -425,7 +427,7 @@ class LookDev(SessionEdits, Captures):
         s = self.compare_settings
         return Frame(self.state, self.material, self.mesh, self.brdf, self.ref_brdf,
                      self.other_brdf if blend else None, self.interp.t, s.mode if comparing else CompareMode.OFF,
-                     s.wipe, s.error_scale, self.backdrop)
+                     s.wipe, s.error_scale, self.backdrop, s.against)
 
     def render(self, target: moderngl.Framebuffer, size: tuple[int, int], passes: int = 1,
                scale: float = 1.0, interactive: bool = False, quick: bool | None = None,
@@ -470,6 +472,8 @@ class LookDev(SessionEdits, Captures):
 
     # --- ground truth -----------------------------------------------------
     def reference_status(self) -> str:
+        if self.compare_settings.against == Against.MATERIALX:
+            return self.materialx_part.status(self.material, self.state.view)
         return self.compare_part.status(self.material, self.state.view)
 
     def reference_linear(self, size: tuple[int, int], spp: int, timeout: float = 300.0) -> np.ndarray:
@@ -498,6 +502,7 @@ class LookDev(SessionEdits, Captures):
 
     def close(self) -> None:
         self.compare_part.close()
+        self.materialx_part.close()
         self.bodies.release()
         self.backdrop_part.release()
         self.shots.release()

@@ -17,7 +17,7 @@ from imgui_bundle import imgui
 from nbrdf.imaging.env_presets import ENV_PRESETS
 from nbrdf.neural.anisotropy import anisotropic_layers
 from nbrdf.neural.layer_kinds import KINDS
-from nbrdf.viewer.modes import Background, BrdfMode, CompareMode, View
+from nbrdf.viewer.modes import Against, Background, BrdfMode, CompareMode, View
 from nbrdf.viewer.scene.camera import FOV_RANGE
 from nbrdf.viewer.session.lookdev import LookDev
 from nbrdf.viewer.session.stack_editor import BASE_TYPES
@@ -28,6 +28,7 @@ from nbrdf.viewer.view_settings import Row, rows
 
 COMPARE_LABELS = {CompareMode.OFF: "off", CompareMode.SIDE: "side by side", CompareMode.WIPE: "A/B wipe",
                   CompareMode.ERROR: "relative error", CompareMode.FLIP: "HDR-FLIP"}
+AGAINST_LABELS = {Against.REFERENCE: "reference (physical stack)", Against.MATERIALX: "MaterialX GLSL (OpenPBR)"}
 MESHES = ("sphere", "testmesh")
 #: The window's BRDF choices (the panel's combo) and their labels.
 WINDOW_BRDFS = (BrdfMode.NEURAL, BrdfMode.BELCOUR)
@@ -231,6 +232,11 @@ class Panels(MaterialWidgets):
         if changed:
             ld.set_compare(modes[k])
         if ld.compare != CompareMode.OFF:
+            sources = list(Against)
+            changed, k = imgui.combo("against", sources.index(ld.compare_settings.against),
+                                     [AGAINST_LABELS[a] for a in sources])
+            if changed:
+                ld.set_against(sources[k])
             imgui.push_style_color(imgui.Col_.text, DIM)
             imgui.text_wrapped(ld.reference_status())  # wrapped: the paths and the noise stay readable
             imgui.pop_style_color()
