@@ -54,15 +54,16 @@ def export_mtlx(material: str, out: Path) -> None:
     OpenPBR (a round trip that changes nothing); for any other stack, the inputs that match it best in render
     space (``training.openpbr_fit``), with the fit's HDR-FLIP in the document's doc string and printed."""
     from nbrdf.neural.material import is_material_file, load_material  # late: torch costs ~1 s, --help needs none
-    from nbrdf.neural.mtlx import openpbr_from_record, write_mtlx  # late: MaterialX, as above
+    from nbrdf.neural.mtlx import write_material_mtlx, write_mtlx  # late: MaterialX, as above
 
     if not is_material_file(material):
         raise NbrdfError(f"{material}: --mtlx takes a material (JSON or .mtlx), not a code file")
     m = load_material(material)
     name = m.name or Path(material.split("#")[0]).stem
     if m.openpbr is not None:
-        write_mtlx(openpbr_from_record(dict(m.openpbr)), name, out, doc=f"exported by nbrdf from {Path(material).name}")
-        print(f"wrote {out} (the material's own OpenPBR inputs)")
+        for note in write_material_mtlx(m, out, doc=f"exported by nbrdf from {Path(material).name}"):
+            print(f"{out}: {note}")
+        print(f"wrote {out} (the material's own OpenPBR inputs{', its base colour image' if m.is_textured else ''})")
         return
     from nbrdf.training.openpbr_fit import fit_openpbr  # late: the walk and FLIP, for a fit only
 

@@ -19,6 +19,7 @@ from typing import Any
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.files import save_text
+from nbrdf.neural.material import Material, material_to_dict
 from nbrdf.neural.openpbr import (
     OpenPbr,
     gltf_pbr_to_openpbr,
@@ -30,7 +31,8 @@ from nbrdf.neural.openpbr import (
 )
 
 __all__ = ["list_mtlx_materials", "openpbr_from_record", "read_mtlx", "read_openpbr", "split_material_ref",
-           "data_library", "openpbr_document", "write_mtlx"]
+           "data_library", "openpbr_document", "write_material_mtlx",
+           "write_mtlx"]
 
 Translate = Callable[[Mapping[str, Any]], tuple[OpenPbr, list[str]]]
 
@@ -321,16 +323,22 @@ def _value_string(v: Any) -> str:
     return repr(float(v))
 
 
-def openpbr_document(p: OpenPbr, name: str, doc: str = ""):
+def openpbr_document(p: OpenPbr, name: str, doc: str = "", base_color_image: str | None = None):
     """A MaterialX 1.39 document (``MaterialX.Document``, its data library set): one open_pbr_surface
     ``SR_<name>`` (only the inputs that differ from OpenPBR's defaults) and its surfacematerial ``name`` (made a
-    valid MaterialX name), ``doc`` as both elements' doc string; refused (one line) unless it validates."""
+    valid MaterialX name), ``doc`` as both elements' doc string; ``base_color_image``: a file (as the document
+    names it) read by an ``image`` node into base_color. Refused (one line) unless it validates."""
     mx = _materialx()
     document = mx.createDocument()
     mat_name = mx.createValidName(name) if name else "material"
     shader = document.addNode("open_pbr_surface", f"SR_{mat_name}", "surfaceshader")
     for k, v in p.changed().items():
         shader.addInput(k, input_type(k)).setValueString(_value_string(v))
+    if base_color_image is not None:
+        image = document.addNode("image", f"{mat_name}_base_color", "color3")
+        image.addInput("file", "filename").setValueString(base_color_image)
+        inp = shader.getInput("base_color") or shader.addInput("base_color", "color3")
+        inp.setConnectedNode(image)
     material = document.addMaterialNode(mat_name, shader)
     if doc:
         material.setDocString(doc)
@@ -342,10 +350,48 @@ def openpbr_document(p: OpenPbr, name: str, doc: str = ""):
     return document
 
 
-def write_mtlx(p: OpenPbr, name: str, path: str | Path, doc: str = "") -> None:
-    """Writes ``openpbr_document(p, name, doc)`` to ``path``, atomically."""
+def write_mtlx(p: OpenPbr, name: str, path: str | Path, doc: str = "", base_color_image: str | None = None) -> None:
+    """Writes ``openpbr_document(p, name, doc, base_color_image)`` to ``path``, atomically."""
     try:
-        document = openpbr_document(p, name, doc)
+        document = openpbr_document(p, name, doc, base_color_image)
     except NbrdfError as e:
         raise NbrdfError(f"{path}: {e}") from None
     save_text(path, _materialx().writeToXmlString(document))
+
+
+def write_material_mtlx(m: Material, path: str | Path, doc: str = "") -> list[str]:
+    """Writes a material made from OpenPBR back as an OpenPBR document: its inputs (a round trip that changes
+    nothing), and the image on its base colour where its base reads one as ``read_mtlx`` made it (the file named
+    relative to the document). Returns one note per thing the document does not carry (a normal map). A material
+    with no OpenPBR inputs, or whose base textures are not the reader's image, is refused in one line."""
+    out = Path(path)
+    if m.openpbr is None:
+        raise NbrdfError(f"{path}: {m.name or 'this material'} has no OpenPBR inputs (it was not made from OpenPBR, "
+                         f"or its stack was edited); `nbrdf export MATERIAL --mtlx OUT.mtlx` fits them to its stack")
+    if not out.parent.is_dir():
+        raise NbrdfError(f"{path}: the folder {out.parent} does not exist")
+    p = openpbr_from_record(dict(m.openpbr))
+    image = _base_color_image(m, out) if m.is_textured else None
+    write_mtlx(p, m.name or out.stem, out, doc, image)
+    return ["the normal map is not written (OpenPBR documents here carry no normal-map node graph)"] \
+        if m.normal_map is not None else []
+
+
+def _base_color_image(m: Material, out: Path) -> str:
+    """The one image file the base's colour reads, as ``read_mtlx`` wrote it (r, g, b of one file over
+    [0, base_weight]), relative to the document ``out``; anything else is refused in one line."""
+    layers = material_to_dict(m, out.parent)["layers"]
+    textured = [(i, k) for i, layer in enumerate(layers) for k, v in layer.items()
+                if isinstance(v, list) and any(isinstance(x, dict) and "texture" in x for x in v)]
+    base = layers[-1]
+    key = "r0" if base["type"] == "conductor" else "albedo"
+    refs = base.get(key)
+    weight = min(max(float(dict(m.openpbr or ()).get("base_weight", 1.0)), 0.0), 1.0)
+    same = (textured == [(len(layers) - 1, key)] and isinstance(refs, list) and len(refs) == 3
+            and all(isinstance(r, dict) and r.get("channel") == c and list(r.get("range", [0.0, 1.0])) == [0.0, weight]
+                    for r, c in zip(refs, "rgb"))
+            and len({r.get("texture") for r in refs}) == 1)
+    if not same:
+        raise NbrdfError(f"{out}: the material's textures are not one image on OpenPBR's base colour; "
+                         "an OpenPBR document cannot carry them")
+    return str(refs[0]["texture"])

@@ -3,6 +3,7 @@ connections, material selection, every bad file one NbrdfError line, and OpenPBR
 and read again unchanged."""
 from __future__ import annotations
 
+import copy
 import math
 import shutil
 import tempfile
@@ -23,6 +24,7 @@ from nbrdf.neural.mtlx import (
     read_mtlx,
     read_openpbr,
     split_material_ref,
+    write_material_mtlx,
     write_mtlx,
 )
 from nbrdf.neural.openpbr import (
@@ -272,3 +274,29 @@ def test_constants_are_read_and_tiling_is_noted(painted: Path):
     assert m["openpbr"]["specular_roughness"] == 0.5 and m["layers"][0]["roughness"] == 0.25
     assert m["layers"][-1]["albedo"][1] == {"texture": "albedo.png", "channel": "g", "range": [0.0, 1.0]}
     assert notes == ["base_color: uvtiling 4, 4 of image albedo.png is not read (the mesh's uv is used)"]
+
+
+def test_a_textured_openpbr_material_goes_back_out_with_its_image(painted: Path):
+    """Read, written back, read again: the same OpenPBR inputs and the same base colour image (its file named
+    relative to the new document's folder), so a look opened with an image leaves with it."""
+    m, _ = read_mtlx(painted)
+    material = parse_material(m, painted.parent)
+    out_dir = painted.parent / "out"
+    out_dir.mkdir()
+    assert write_material_mtlx(material, out_dir / "back.mtlx") == []
+    again, _ = read_mtlx(out_dir / "back.mtlx")
+    assert again["openpbr"] == m["openpbr"]
+    assert again["layers"][-1]["albedo"] == [{"texture": "../albedo.png", "channel": c, "range": [0.0, 0.9]}
+                                             for c in "rgb"]
+
+
+def test_what_an_openpbr_document_cannot_carry_is_refused_in_one_line(painted: Path):
+    m, _ = read_mtlx(painted)
+    swapped = copy.deepcopy(m)
+    swapped["layers"][-1]["albedo"][0]["channel"] = "g"  # an edit the reader never makes
+    with pytest.raises(NbrdfError, match="not one image on OpenPBR's base colour"):
+        write_material_mtlx(parse_material(swapped, painted.parent), painted.parent / "x.mtlx")
+    plain = parse_material({"format": "nbrdf-material/1", "name": "plain", "layers": [{"type": "diffuse", "albedo": 0.5}]})
+    with pytest.raises(NbrdfError, match="no OpenPBR inputs.*--mtlx"):
+        write_material_mtlx(plain, painted.parent / "y.mtlx")
+    assert not (painted.parent / "x.mtlx").exists() and not (painted.parent / "y.mtlx").exists()

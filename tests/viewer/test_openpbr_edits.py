@@ -53,3 +53,29 @@ def test_the_record_survives_a_session_round_trip(tmp_path):
     doc = SessionDoc.parse({**SessionDoc.load(Path(__file__).parent / "data" / "session_v1.json").to_dict(),
                             "material": material_to_dict(m)}, "test")
     assert doc.material.openpbr == m.openpbr
+
+
+@pytest.mark.gl
+def test_the_window_saves_an_edited_openpbr_material_back_as_openpbr(gl_ctx, tmp_path):
+    """"save material" to a .mtlx path writes the edited OpenPBR inputs (read back equal, said in the notice);
+    a stack with no OpenPBR inputs is refused in one line and nothing is written (a JSON body in a .mtlx file,
+    what the button used to write, is gone)."""
+    from nbrdf.neural.material import parse_material
+    from nbrdf.neural.mtlx import read_openpbr
+    from nbrdf.viewer.session.lookdev import LookDev
+
+    ld = LookDev(gl_ctx, load_material(GOLD, []))
+    try:
+        assert ld.set_openpbr("coat_roughness", 0.2)
+        assert ld.save_material(tmp_path / "edited.mtlx") and "as OpenPBR" in ld.notice
+        p, notes = read_openpbr(tmp_path / "edited.mtlx")
+        assert math.isclose(p.coat_roughness, 0.2, rel_tol=1e-6) and notes == []
+    finally:
+        ld.close()
+    ld = LookDev(gl_ctx, parse_material({"format": "nbrdf-material/1", "name": "plain",
+                                         "layers": [{"type": "diffuse", "albedo": 0.5}]}))
+    try:
+        assert not ld.save_material(tmp_path / "plain.mtlx") and "no OpenPBR inputs" in ld.error
+        assert not (tmp_path / "plain.mtlx").exists()
+    finally:
+        ld.close()

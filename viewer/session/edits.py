@@ -279,7 +279,16 @@ class SessionEdits(ABC):
             self._edit_material(load_material(p))
 
     def save_material(self, path: str | Path) -> bool:
-        return self.guarded(lambda: save_material(self.material, path))
+        """Saves the edited material: the project's JSON, or (a path ending in .mtlx) an OpenPBR document of its
+        OpenPBR inputs (a material made from OpenPBR; anything it does not carry is said in ``notice``)."""
+        def go():
+            if str(path).lower().endswith(".mtlx"):
+                from nbrdf.neural.mtlx import write_material_mtlx  # late: MaterialX loads for .mtlx files only
+                notes = write_material_mtlx(self.material, path)
+                self.notice = "; ".join([f"saved {Path(path).name} as OpenPBR", *notes])
+            else:
+                save_material(self.material, path)
+        return self.guarded(go)
 
     def load_preset(self, name: str) -> bool:
         table = presets()
