@@ -53,7 +53,11 @@ def export_mtlx(material: str, out: Path) -> None:
     """Writes the material as an OpenPBR Surface document: the inputs it was made from when it came from
     OpenPBR (a round trip that changes nothing); for any other stack, the inputs that match it best in render
     space (``training.openpbr_fit``), with the fit's HDR-FLIP in the document's doc string and printed."""
-    from nbrdf.neural.material import is_material_file, load_material  # late: torch costs ~1 s, --help needs none
+    from nbrdf.neural.material import (  # late: torch costs ~1 s, --help needs none
+        is_material_file,
+        load_material,
+        material_to_dict,
+    )
     from nbrdf.neural.mtlx import write_material_mtlx, write_mtlx  # late: MaterialX, as above
 
     if not is_material_file(material):
@@ -61,7 +65,8 @@ def export_mtlx(material: str, out: Path) -> None:
     m = load_material(material)
     name = m.name or Path(material.split("#")[0]).stem
     if m.openpbr is not None:
-        for note in write_material_mtlx(m, out, doc=f"exported by nbrdf from {Path(material).name}"):
+        for note in write_material_mtlx(material_to_dict(m, out.parent), out,
+                                        doc=f"exported by nbrdf from {Path(material).name}"):
             print(f"{out}: {note}")
         print(f"wrote {out} (the material's own OpenPBR inputs{', its base colour image' if m.is_textured else ''})")
         return

@@ -19,7 +19,6 @@ from typing import Any
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.files import save_text
-from nbrdf.neural.material import Material, material_to_dict
 from nbrdf.neural.openpbr import (
     OpenPbr,
     gltf_pbr_to_openpbr,
@@ -359,39 +358,41 @@ def write_mtlx(p: OpenPbr, name: str, path: str | Path, doc: str = "", base_colo
     save_text(path, _materialx().writeToXmlString(document))
 
 
-def write_material_mtlx(m: Material, path: str | Path, doc: str = "") -> list[str]:
-    """Writes a material made from OpenPBR back as an OpenPBR document: its inputs (a round trip that changes
-    nothing), and the image on its base colour where its base reads one as ``read_mtlx`` made it (the file named
-    relative to the document). Returns one note per thing the document does not carry (a normal map). A material
-    with no OpenPBR inputs, or whose base textures are not the reader's image, is refused in one line."""
+def write_material_mtlx(material: Mapping[str, Any], path: str | Path, doc: str = "") -> list[str]:
+    """Writes a material made from OpenPBR back as an OpenPBR document. ``material`` is its JSON
+    (``neural.material.material_to_dict`` relative to ``path``'s folder). The document carries the material's
+    inputs (a round trip that changes nothing) and the image on its base colour where its base reads one as
+    ``read_mtlx`` made it. Returns one note per thing the document does not carry (a normal map). A material
+    with no OpenPBR inputs, or whose textures are not the reader's base colour image, is refused in one line."""
     out = Path(path)
-    if m.openpbr is None:
-        raise NbrdfError(f"{path}: {m.name or 'this material'} has no OpenPBR inputs (it was not made from OpenPBR, "
-                         f"or its stack was edited); `nbrdf export MATERIAL --mtlx OUT.mtlx` fits them to its stack")
+    record, name = material.get("openpbr"), material.get("name") or out.stem
+    if record is None:
+        raise NbrdfError(f"{path}: {name} has no OpenPBR inputs (it was not made from OpenPBR, or its stack was "
+                         f"edited); `nbrdf export MATERIAL --mtlx OUT.mtlx` fits them to its stack")
     if not out.parent.is_dir():
         raise NbrdfError(f"{path}: the folder {out.parent} does not exist")
-    p = openpbr_from_record(dict(m.openpbr))
-    image = _base_color_image(m, out) if m.is_textured else None
-    write_mtlx(p, m.name or out.stem, out, doc, image)
+    p = openpbr_from_record(record)
+    write_mtlx(p, name, out, doc, _base_color_image(material["layers"], p, out))
     return ["the normal map is not written (OpenPBR documents here carry no normal-map node graph)"] \
-        if m.normal_map is not None else []
+        if material.get("normal_map") is not None else []
 
 
-def _base_color_image(m: Material, out: Path) -> str:
+def _base_color_image(layers: list[dict], p: OpenPbr, out: Path) -> str | None:
     """The one image file the base's colour reads, as ``read_mtlx`` wrote it (r, g, b of one file over
-    [0, base_weight]), relative to the document ``out``; anything else is refused in one line."""
-    layers = material_to_dict(m, out.parent)["layers"]
+    [0, base_weight]); None for a material without textures; anything else is refused in one line."""
     textured = [(i, k) for i, layer in enumerate(layers) for k, v in layer.items()
                 if isinstance(v, list) and any(isinstance(x, dict) and "texture" in x for x in v)]
+    if not textured:
+        return None
     base = layers[-1]
     key = "r0" if base["type"] == "conductor" else "albedo"
     refs = base.get(key)
-    weight = min(max(float(dict(m.openpbr or ()).get("base_weight", 1.0)), 0.0), 1.0)
+    weight = min(max(p.base_weight, 0.0), 1.0)
     same = (textured == [(len(layers) - 1, key)] and isinstance(refs, list) and len(refs) == 3
             and all(isinstance(r, dict) and r.get("channel") == c and list(r.get("range", [0.0, 1.0])) == [0.0, weight]
                     for r, c in zip(refs, "rgb"))
             and len({r.get("texture") for r in refs}) == 1)
-    if not same:
+    if not same or not isinstance(refs, list):
         raise NbrdfError(f"{out}: the material's textures are not one image on OpenPBR's base colour; "
                          "an OpenPBR document cannot carry them")
     return str(refs[0]["texture"])

@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import parse_material
+from nbrdf.neural.material import material_to_dict, parse_material
 from nbrdf.neural.mtlx import (
     list_mtlx_materials,
     openpbr_from_record,
@@ -283,7 +283,7 @@ def test_a_textured_openpbr_material_goes_back_out_with_its_image(painted: Path)
     material = parse_material(m, painted.parent)
     out_dir = painted.parent / "out"
     out_dir.mkdir()
-    assert write_material_mtlx(material, out_dir / "back.mtlx") == []
+    assert write_material_mtlx(material_to_dict(material, out_dir), out_dir / "back.mtlx") == []
     again, _ = read_mtlx(out_dir / "back.mtlx")
     assert again["openpbr"] == m["openpbr"]
     assert again["layers"][-1]["albedo"] == [{"texture": "../albedo.png", "channel": c, "range": [0.0, 0.9]}
@@ -295,8 +295,9 @@ def test_what_an_openpbr_document_cannot_carry_is_refused_in_one_line(painted: P
     swapped = copy.deepcopy(m)
     swapped["layers"][-1]["albedo"][0]["channel"] = "g"  # an edit the reader never makes
     with pytest.raises(NbrdfError, match="not one image on OpenPBR's base colour"):
-        write_material_mtlx(parse_material(swapped, painted.parent), painted.parent / "x.mtlx")
+        write_material_mtlx(material_to_dict(parse_material(swapped, painted.parent), painted.parent),
+                            painted.parent / "x.mtlx")
     plain = parse_material({"format": "nbrdf-material/1", "name": "plain", "layers": [{"type": "diffuse", "albedo": 0.5}]})
     with pytest.raises(NbrdfError, match="no OpenPBR inputs.*--mtlx"):
-        write_material_mtlx(plain, painted.parent / "y.mtlx")
+        write_material_mtlx(material_to_dict(plain, painted.parent), painted.parent / "y.mtlx")
     assert not (painted.parent / "x.mtlx").exists() and not (painted.parent / "y.mtlx").exists()

@@ -284,7 +284,7 @@ class SessionEdits(ABC):
         def go():
             if str(path).lower().endswith(".mtlx"):
                 from nbrdf.neural.mtlx import write_material_mtlx  # late: MaterialX loads for .mtlx files only
-                notes = write_material_mtlx(self.material, path)
+                notes = write_material_mtlx(material_to_dict(self.material, Path(path).parent), path)
                 self.notice = "; ".join([f"saved {Path(path).name} as OpenPBR", *notes])
             else:
                 save_material(self.material, path)
