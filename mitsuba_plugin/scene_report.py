@@ -35,12 +35,12 @@ from pathlib import Path
 
 import numpy as np
 
+from nbrdf.imaging.flip import flip
 from nbrdf.imaging.image_io import tonemap
 from nbrdf.mitsuba.render import RenderResult, is_wavefront, load, render
 from nbrdf.mitsuba.scenes import Scene, load_scene, neural_bodies, with_method
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.training.plots import _plt
-from nbrdf.training.render_report import flip
 
 #: The paper's Table 3: equal-time MSE, (neural, Guo et al. Monte Carlo), at 1024 x 1024.
 #: Samples per pixel per pass of the converged reference (its cache does not depend on ``--chunk``).

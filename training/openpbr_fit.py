@@ -17,11 +17,12 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from nbrdf.imaging.flip import flip
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, Material, Medium, parse_material
 from nbrdf.neural.neural_brdf import neural_brdf
 from nbrdf.neural.openpbr import OpenPbr, openpbr_to_material
-from nbrdf.training.render_report import SphereGeometry, flip, reference_render, shade, sphere_geometry
+from nbrdf.training.render_report import SphereGeometry, reference_render, shade, sphere_geometry
 
 
 @dataclass

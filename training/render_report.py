@@ -37,11 +37,11 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable
 
-import flip_evaluator
 import numpy as np
 import torch
 from tqdm import tqdm
 
+from nbrdf.imaging.flip import flip
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Conductor, Material, load_material, material_to_dict
 from nbrdf.neural.methods import Method
@@ -185,19 +185,6 @@ def shade(fn: EvalFn, geo: SphereGeometry) -> np.ndarray:
 
 
 # --- scores -----------------------------------------------------------------------------
-def flip(reference: np.ndarray, test: np.ndarray) -> tuple[float, np.ndarray]:
-    """HDR-FLIP with default settings on linear images: (mean over the image, error map (H, W))."""
-    ref = np.ascontiguousarray(np.maximum(reference, 0.0), dtype=np.float32)
-    tst = np.ascontiguousarray(np.maximum(test, 0.0), dtype=np.float32)
-    if not np.isfinite(tst).all():
-        raise NbrdfError("test image holds NaN or infinite values")
-    if not ref.any() and not tst.any():  # FLIP's exposure range is undefined for black images
-        return 0.0, np.zeros(ref.shape[:2], dtype=np.float32)
-    err, mean, _ = flip_evaluator.evaluate(ref, tst, "HDR", applyMagma=False)
-    err = np.asarray(err, dtype=np.float32)
-    return float(mean), err.reshape(ref.shape[:2])
-
-
 def material_class(m: Material) -> str:
     """A look-development class from the stack's structure."""
     n = len(m.interfaces)

@@ -14,11 +14,11 @@ import moderngl
 import numpy as np
 import torch
 
+from nbrdf.imaging.flip import flip
 from nbrdf.neural.body_table import TableSize
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, DecoderSpec, load_decoder
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import load_material
-from nbrdf.training.render_report import flip
 from nbrdf.viewer.gpu import shaders
 from nbrdf.viewer.gpu.body_table_gpu import BodyTables
 from nbrdf.viewer.gpu.gl import COMPUTE_VERSION, describe, half_float_extensions, offscreen_context

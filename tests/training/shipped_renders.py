@@ -70,7 +70,7 @@ def neural_render(m, geo, model=None) -> np.ndarray:
 
 def flip(reference: np.ndarray, test: np.ndarray) -> float:
     """Mean HDR-FLIP of a render against its reference (render_report's scoring)."""
-    from nbrdf.training.render_report import flip as _flip
+    from nbrdf.imaging.flip import flip as _flip
 
     return _flip(reference, test)[0]
 

@@ -143,7 +143,8 @@ def test_refined_is_at_least_as_close_to_the_reference_as_neural(name, model, ca
     the report. Seeded; the refinement runs a fixed number of rounds, so the
     outcome does not depend on the machine's speed."""
     from nbrdf.neural.neural_brdf import latent_brdf
-    from nbrdf.training.render_report import flip, reference_render, shade, sphere_geometry
+    from nbrdf.imaging.flip import flip
+    from nbrdf.training.render_report import reference_render, shade, sphere_geometry
 
     m = load_material(LOOKDEV / f"{name}.json")
     geo = sphere_geometry(32)

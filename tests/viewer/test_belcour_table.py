@@ -55,7 +55,7 @@ def per_pixel_and_table(setup, material, size, table_of=None):
 @pytest.mark.parametrize("name", ["varnished_copper.json", "car_paint.json", "clear_coat_plastic.json"])
 @pytest.mark.parametrize("size,flip_max", [(INTERACTIVE, 0.02), (STILL, 0.01)], ids=["interactive", "still"])
 def test_the_table_shades_what_the_model_does(setup, name, size, flip_max):
-    from nbrdf.training.render_report import flip
+    from nbrdf.imaging.flip import flip
 
     m = load_material(ASSETS / name) if name != "varnished_copper.json" else load_material(DEFAULT_MATERIAL)
     ref, img = per_pixel_and_table(setup, m, size)
@@ -68,7 +68,7 @@ def test_the_table_shades_what_the_model_does(setup, name, size, flip_max):
 
 def test_another_materials_table_is_seen(setup):
     """The check has teeth: the car paint's table under the default material's coat."""
-    from nbrdf.training.render_report import flip
+    from nbrdf.imaging.flip import flip
 
     ref, img = per_pixel_and_table(setup, load_material(DEFAULT_MATERIAL), STILL,
                                    table_of=load_material(ASSETS / "car_paint.json"))

@@ -35,7 +35,7 @@ def setup(gl_ctx):
 
 @pytest.mark.parametrize("size,flip_max", [(INTERACTIVE, 0.02), (STILL, 0.01)], ids=["interactive", "still"])
 def test_table_render_agrees_with_the_decoder(setup, size, flip_max):
-    from nbrdf.training.render_report import flip
+    from nbrdf.imaging.flip import flip
 
     ctx, r, brdf, state, ref = setup
     tables = BodyTables(ctx)
@@ -52,7 +52,7 @@ def test_table_render_agrees_with_the_decoder(setup, size, flip_max):
 
 def test_a_wrong_table_is_seen(setup):
     # The same check fails for a table of another material (the test can fail).
-    from nbrdf.training.render_report import flip
+    from nbrdf.imaging.flip import flip
 
     ctx, r, brdf, state, ref = setup
     tables = BodyTables(ctx)

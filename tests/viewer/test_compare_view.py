@@ -89,7 +89,7 @@ def test_flip_view_shows_the_hdr_flip_of_neural_against_reference(gl_ctx):
     image against its reference (here the closed form of a conductor), and the
     view draws the map in magma (black where FLIP is 0)."""
     from nbrdf.neural.material import parse_material
-    from nbrdf.training.render_report import flip
+    from nbrdf.imaging.flip import flip
     from nbrdf.viewer.session.lookdev import LookDev
 
     ld = LookDev(gl_ctx, parse_material(GOLD))
@@ -112,6 +112,36 @@ def test_flip_view_shows_the_hdr_flip_of_neural_against_reference(gl_ctx):
         ld.render(fbo, size, passes)
         other = np.frombuffer(fbo.read(components=3), np.uint8).reshape(size[1], size[0], 3)[::-1]
         assert np.abs(other.astype(int) - shown).mean() > 5  # a different view, not the same picture
+    finally:
+        ld.close()
+
+
+def test_the_window_flip_runs_in_a_process_of_its_own_and_shows_the_same_map(gl_ctx):
+    """With ``flip_async`` (the window) a frame never waits for FLIP: the first frames show no mean while the
+    evaluation runs in its own process; once it is finished the mean shown is the synchronous evaluation's
+    (to 1e-6: the same images, the same evaluator)."""
+    import time
+
+    from nbrdf.neural.material import parse_material
+    from nbrdf.viewer.session.lookdev import LookDev
+
+    ld = LookDev(gl_ctx, parse_material(GOLD))
+    try:
+        size, passes = (40, 32), 4
+        assert ld.set_compare("flip")
+        fbo = gl_ctx.simple_framebuffer(size, components=4)
+        ld.render(fbo, size, passes)
+        sync = ld.flip_mean
+        ld.compare_part.flip_async = True
+        ld.compare_part._flip_key = None  # score the same view again, now in the process
+        ld.compare_part.flip_mean = None
+        ld.render(fbo, size, 0)
+        assert ld.flip_mean is None and ld.compare_part._flip_job is not None  # submitted, not waited for
+        deadline = time.monotonic() + 120.0
+        while ld.flip_mean is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+            ld.render(fbo, size, 0)
+        assert ld.flip_mean == pytest.approx(sync, rel=1e-6) and ld.compare_part.flip_notice == ""
     finally:
         ld.close()
 

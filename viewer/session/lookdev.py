@@ -472,9 +472,8 @@ class LookDev(SessionEdits, Captures):
 
     # --- ground truth -----------------------------------------------------
     def reference_status(self) -> str:
-        if self.compare_settings.against == Against.MATERIALX:
-            return self.materialx_part.status(self.material, self.state.view)
-        return self.compare_part.status(self.material, self.state.view)
+        part = self.materialx_part if self.compare_settings.against == Against.MATERIALX else self.compare_part
+        return "; ".join(x for x in (part.status(self.material, self.state.view), self.compare_part.flip_notice) if x)
 
     def reference_linear(self, size: tuple[int, int], spp: int, timeout: float = 300.0) -> np.ndarray:
         """The reference image of the current view (tests, batch): closed form, or Monte Carlo
