@@ -142,8 +142,8 @@ def test_refined_is_at_least_as_close_to_the_reference_as_neural(name, model, ca
     (the first in file order and the plainest stack); all 14 are measured by
     the report. Seeded; the refinement runs a fixed number of rounds, so the
     outcome does not depend on the machine's speed."""
-    from nbrdf.neural.neural_brdf import latent_brdf
     from nbrdf.imaging.flip import flip
+    from nbrdf.neural.neural_brdf import latent_brdf
     from nbrdf.training.render_report import reference_render, shade, sphere_geometry
 
     m = load_material(LOOKDEV / f"{name}.json")

@@ -88,8 +88,8 @@ def test_flip_view_shows_the_hdr_flip_of_neural_against_reference(gl_ctx):
     """The FLIP view's mean and map are flip-evaluator's HDR-FLIP of the neural
     image against its reference (here the closed form of a conductor), and the
     view draws the map in magma (black where FLIP is 0)."""
-    from nbrdf.neural.material import parse_material
     from nbrdf.imaging.flip import flip
+    from nbrdf.neural.material import parse_material
     from nbrdf.viewer.session.lookdev import LookDev
 
     ld = LookDev(gl_ctx, parse_material(GOLD))
