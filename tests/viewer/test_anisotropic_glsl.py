@@ -116,3 +116,23 @@ def test_both_lit_paths_shade_in_the_frame_of_the_tangent(gl_ctx, pipeline):
     other = _image(gl_ctx, turned, True)
     diff = np.abs(other[..., :3] - comp[..., :3]).mean() / np.abs(comp[..., :3]).mean()
     assert diff > 0.05, diff
+
+
+def test_a_bare_brushed_metal_opens_in_the_window_through_the_neural_path(gl_ctx):
+    """A single anisotropic conductor has no GLSL closed form: the window shades it with the neural path and
+    compares it with the Monte Carlo reference (it used to refuse to open it: the closed form's one-line error)."""
+    from nbrdf.viewer.gpu.pipeline import BrdfKind, analytic_capable
+    from nbrdf.viewer.session.lookdev import LookDev
+
+    brushed = parse_material({"format": "nbrdf-material/1", "name": "brushed", "anisotropy_rotation": 30.0,
+                              "layers": [{"type": "conductor", "roughness": 0.2, "r0": [0.9, 0.9, 0.9],
+                                          "anisotropy": 0.8}]})
+    assert not analytic_capable(brushed)
+    assert analytic_capable(dataclasses.replace(brushed, layers=(dataclasses.replace(brushed.layers[0],
+                                                                                      anisotropy=0.0),)))
+    ld = LookDev(gl_ctx, brushed)
+    try:
+        assert ld.brdf.kind != BrdfKind.ANALYTIC and ld.ref_brdf is None
+        assert "Monte Carlo" in ld.compare_part.status(ld.material, "object")
+    finally:
+        ld.close()

@@ -21,7 +21,7 @@ import moderngl
 import torch
 
 from nbrdf.imaging.image_io import read_normal_map
-from nbrdf.neural.anisotropy import code_tail
+from nbrdf.neural.anisotropy import anisotropic_layers, code_tail
 from nbrdf.neural.coat import code_coat
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.gpu_pack import latent_share
@@ -67,9 +67,10 @@ def brdf_kind(mode: BrdfMode, material: Material) -> BrdfKind:
 
 
 def analytic_capable(m: Material) -> bool:
-    """Single layers have an exact closed form on the GPU (an OpenPBR mix is shaded by components:
-    its layers are one of them)."""
-    return not m.interfaces and not m.is_textured and m.base.type in PARAMETRIC_BASES and not is_mix(m)
+    """Single isotropic layers have an exact closed form on the GPU (an OpenPBR mix is shaded by components:
+    its layers are one of them; the GLSL closed form has no anisotropy, so a bare brushed metal is neural)."""
+    return (not m.interfaces and not m.is_textured and m.base.type in PARAMETRIC_BASES and not is_mix(m)
+            and not anisotropic_layers(m))
 
 
 def material_key(m: Material) -> str:
