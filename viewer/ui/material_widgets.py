@@ -7,6 +7,7 @@ import functools
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
 from imgui_bundle import imgui
 
 from nbrdf.neural.errors import NbrdfError
@@ -15,6 +16,13 @@ from nbrdf.neural.mtlx import list_mtlx_materials, split_material_ref
 from nbrdf.neural.openpbr import OpenPbr
 from nbrdf.viewer.session.lookdev import LookDev
 from nbrdf.viewer.session.stack_editor import COLOUR_KEYS, RANGES
+
+
+def typed(v: float) -> float:
+    """A value from an imgui widget (a float32) as the shortest decimal that is the same float32: what the user
+    typed or the slider shows (0.3, not 0.30000001192092896), so saved documents read as they were edited."""
+    return float(str(np.float32(v)))
+
 
 DIM = imgui.ImVec4(0.7, 0.7, 0.7, 1.0)
 #: The OpenPBR inputs the panel edits (those a stack holds), in OpenPBR's order.
@@ -87,12 +95,12 @@ class MaterialWidgets:
                 if changed:
                     self._grouped = True
                     with ld.coalescing(group or f"openpbr.{name}.picker"):
-                        ld.set_openpbr(name, [float(x) for x in new])
+                        ld.set_openpbr(name, [typed(x) for x in new])
                 continue
             changed, v = imgui.slider_float(name, float(value), lo, hi, "%.3f")
             if changed:
                 with ld.coalescing(self._held(f"openpbr.{name}")):
-                    ld.set_openpbr(name, float(v))
+                    ld.set_openpbr(name, typed(v))
         imgui.push_style_color(imgui.Col_.text, DIM)
         for note in ld.notes:
             imgui.text_wrapped(note)
@@ -109,7 +117,7 @@ class MaterialWidgets:
             changed, rng = imgui.drag_float2(f"{key} range", list(value.get("range", [lo, hi])), 0.005, lo, hi)
             if changed:
                 with ld.coalescing(self._held(f"{i}.{key}.range")):
-                    ld.set_param(i, key, {**value, "range": [float(rng[0]), float(rng[1])]})
+                    ld.set_param(i, key, {**value, "range": [typed(rng[0]), typed(rng[1])]})
             return
         if key in COLOUR_KEYS:
             if isinstance(value, list) and any(isinstance(x, dict) for x in value):
@@ -121,17 +129,17 @@ class MaterialWidgets:
             if changed:
                 self._grouped = True
                 with ld.coalescing(group or f"{i}.{key}.picker"):  # a picker's drag, too
-                    ld.set_param(i, key, [float(x) for x in new])
+                    ld.set_param(i, key, [typed(x) for x in new])
             return
         if isinstance(value, list):  # a per-channel parameter that is no colour (a coloured coat's sigma_t)
             changed, new = imgui.drag_float3(key, [float(x) for x in value], 0.01, lo, hi, "%.3f")
             if changed:
                 with ld.coalescing(self._held(f"{i}.{key}")):
-                    ld.set_param(i, key, [min(max(float(x), lo), hi) for x in new])
+                    ld.set_param(i, key, [min(max(typed(x), lo), hi) for x in new])
             return
         changed, v = imgui.slider_float(key, float(value), lo, hi,
                                         "%.3f", imgui.SliderFlags_.logarithmic if key == "roughness" else 0)
         group = self._held(f"{i}.{key}")
         if changed:
             with ld.coalescing(group):
-                ld.set_param(i, key, float(v))
+                ld.set_param(i, key, typed(v))
