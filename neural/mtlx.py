@@ -30,7 +30,7 @@ from nbrdf.neural.openpbr import (
 )
 
 __all__ = ["list_mtlx_materials", "openpbr_from_record", "read_mtlx", "read_openpbr", "split_material_ref",
-           "data_library", "openpbr_document", "write_material_mtlx",
+           "base_color_image", "data_library", "openpbr_document", "write_material_mtlx",
            "write_mtlx"]
 
 Translate = Callable[[Mapping[str, Any]], tuple[OpenPbr, list[str]]]
@@ -372,14 +372,15 @@ def write_material_mtlx(material: Mapping[str, Any], path: str | Path, doc: str 
     if not out.parent.is_dir():
         raise NbrdfError(f"{path}: the folder {out.parent} does not exist")
     p = openpbr_from_record(record)
-    write_mtlx(p, name, out, doc, _base_color_image(material["layers"], p, out))
+    write_mtlx(p, name, out, doc, base_color_image(material["layers"], p, out))
     return ["the normal map is not written (OpenPBR documents here carry no normal-map node graph)"] \
         if material.get("normal_map") is not None else []
 
 
-def _base_color_image(layers: list[dict], p: OpenPbr, out: Path) -> str | None:
-    """The one image file the base's colour reads, as ``read_mtlx`` wrote it (r, g, b of one file over
-    [0, base_weight]); None for a material without textures; anything else is refused in one line."""
+def base_color_image(layers: list[dict], p: OpenPbr, where: str | Path) -> str | None:
+    """The one image file the base's colour reads (as the material JSON's ``layers`` name it), as ``read_mtlx``
+    wrote it: r, g, b of one file over [0, base_weight]; None for a material without textures; anything else
+    is refused in one line starting with ``where``."""
     textured = [(i, k) for i, layer in enumerate(layers) for k, v in layer.items()
                 if isinstance(v, list) and any(isinstance(x, dict) and "texture" in x for x in v)]
     if not textured:
@@ -393,6 +394,6 @@ def _base_color_image(layers: list[dict], p: OpenPbr, out: Path) -> str | None:
                     for r, c in zip(refs, "rgb"))
             and len({r.get("texture") for r in refs}) == 1)
     if not same or not isinstance(refs, list):
-        raise NbrdfError(f"{out}: the material's textures are not one image on OpenPBR's base colour; "
+        raise NbrdfError(f"{where}: the material's textures are not one image on OpenPBR's base colour; "
                          "an OpenPBR document cannot carry them")
     return str(refs[0]["texture"])

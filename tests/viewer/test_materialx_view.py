@@ -172,3 +172,50 @@ def test_a_material_without_openpbr_inputs_says_why(gl_ctx):
         assert isinstance(ld.materialx_part.image(ld.material, ld.state, 8, 8), moderngl.Texture)
     finally:
         ld.close()
+
+
+@pytest.mark.gl
+def test_a_base_colour_image_is_read_where_the_stack_reads_it(gl_ctx, tmp_path):
+    """A document with an image on base_color (red in the file's bottom half, blue in its top half): MaterialX's
+    side reads the same image at the same uv as the neural side -- where one shows red over blue, so does the
+    other (at least 90 % of the object's pixels agree; a flipped v agrees on about half)."""
+    import imageio.v3 as iio
+
+    from nbrdf.viewer.session.lookdev import LookDev
+
+    img = np.zeros((16, 16, 3), np.uint8)
+    img[:8] = (40, 60, 230)  # the file's top rows: blue
+    img[8:] = (230, 40, 40)  # its bottom rows: red
+    iio.imwrite(tmp_path / "halves.png", img)
+    (tmp_path / "halves.mtlx").write_text("""<?xml version="1.0"?>
+<materialx version="1.39">
+  <image name="halves" type="color3"><input name="file" type="filename" value="halves.png" /></image>
+  <open_pbr_surface name="SR_h" type="surfaceshader">
+    <input name="base_color" type="color3" nodename="halves" />
+    <input name="specular_weight" type="float" value="0.0" />
+  </open_pbr_surface>
+  <surfacematerial name="h" type="material"><input name="surfaceshader" type="surfaceshader" nodename="SR_h" /></surfacematerial>
+</materialx>
+""")
+    ld = LookDev(gl_ctx, load_material(tmp_path / "halves.mtlx", []), threaded=False)  # its latent texture at once
+    try:
+        size = (96, 48)
+        ld.frame(1.0)
+        ld.update_state(camera=replace(ld.state.camera, pitch=10.0))
+        assert ld.set_compare("side") and ld.set_against("materialx")
+        ld.compare_part.show_labels = False  # the names would cover the top of the spheres
+        fbo = gl_ctx.simple_framebuffer(size, components=4)
+        for _ in range(4):
+            ld.update()
+            ld.render(fbo, size, 2)
+        assert ld.materialx_part.placeholder is None, ld.materialx_part.placeholder
+        shown = np.frombuffer(fbo.read(components=3), np.uint8).reshape(size[1], size[0], 3)[::-1].astype(int)
+        neural, mx = shown[:, :48], shown[:, 48:]
+        _, _, mask, _ = ld.compare_part.surface(ld.state, (48, 48))
+        inside = _interior(mask)
+        red_n = neural[..., 0] > neural[..., 2]
+        red_m = mx[..., 0] > mx[..., 2]
+        assert red_n[inside].mean() > 0.2 and (~red_n[inside]).mean() > 0.2  # both halves of the image in view
+        assert (red_n == red_m)[inside].mean() > 0.9, (red_n == red_m)[inside].mean()
+    finally:
+        ld.close()

@@ -6,21 +6,25 @@ input a public uniform; each material and each OpenPBR edit only sets those unif
 without regenerating or recompiling. The environment is MaterialX's filtered importance sampling of the
 window's own map (``materialx_environment``: the radiance resampled into MaterialX's layout with its mips, the
 irradiance from spherical harmonics), turned by the window's environment rotation through ``u_envMatrix``; the
-directional light and the point light are MaterialX's own light shaders. The image is the object alone (alpha
-1 on it), drawn again only when what it shows changes; the backdrop goes behind it as behind the neural image.
+directional light and the point light are MaterialX's own light shaders. A base colour image (the one texture
+layout an OpenPBR document carries) is a second program, its image node reading the texels the stack reads. The
+image is the object alone (alpha 1 on it), drawn again only when what it shows changes; the backdrop goes behind
+it as behind the neural image.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import astuple
+from pathlib import Path
 from typing import Any
 
 import moderngl
 import numpy as np
 
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import Material
-from nbrdf.neural.openpbr import OpenPbr
+from nbrdf.neural.material import Material, material_to_dict
+from nbrdf.neural.openpbr import OpenPbr, openpbr_from_record
+from nbrdf.neural.svbrdf import read_texels
 from nbrdf.viewer.gpu.materialx_glsl import (
     DIRECTIONAL,
     POINT,
@@ -37,6 +41,8 @@ from nbrdf.viewer.view_settings import ViewState
 VIEW_MATERIAL = "nbrdf_view"
 #: Environment samples per pixel and lobe of MaterialX's filtered importance sampling (MaterialXView's default).
 ENV_SAMPLES = 16
+#: The file name the generated document's image node reads (its texture is bound in its place).
+BASE_IMAGE = "base_color.png"
 #: The side's label on the image.
 LABEL = "MaterialX GLSL (OpenPBR)"
 
@@ -61,9 +67,11 @@ class MaterialXView:
         """Set by ``image``: the words its side shows while it has no image (None when it shows one)."""
         self.version = 0
         """Counts the images drawn (the FLIP view recomputes when it changes)."""
-        self._shader: MaterialXShader | None = None
+        self._programs: dict[bool, tuple[MaterialXShader, moderngl.Program]] = {}  # by "reads a base colour image"
+        self._shader: MaterialXShader | None = None  # the program of the material shown
         self._prog: moderngl.Program | None = None
         self._error: str | None = None  # generation or compilation failed: said, never retried
+        self._image: tuple[tuple, moderngl.Texture] | None = None  # ((path, mtime), texture) of the base colour
         self._env: tuple[Any, moderngl.Texture, moderngl.Texture] | None = None  # (environment, radiance, irradiance)
         self._mesh: tuple[tuple, moderngl.Buffer, moderngl.Buffer, moderngl.VertexArray] | None = None
         self._target: tuple[moderngl.Framebuffer, moderngl.Texture, moderngl.Renderbuffer] | None = None
@@ -77,10 +85,12 @@ class MaterialXView:
             return self._error
         if material.openpbr is None:
             return "no OpenPBR inputs: MaterialX's view needs a material opened from a MaterialX document"
-        if material.is_textured:
-            return "MaterialX's view draws uniform OpenPBR inputs; this material is texture-mapped"
         if View.parse(view) != View.OBJECT:
             return "MaterialX's view shows the lit object only"
+        try:
+            base_image(material)
+        except NbrdfError as e:
+            return str(e)
         return None
 
     def status(self, material: Material, view: View | str) -> str:
@@ -96,14 +106,15 @@ class MaterialXView:
         """The (w, h) float image of the object (alpha 1 on it, one pass) as MaterialX's shader shows ``material``
         under ``state``'s camera and lights; a blank 1 x 1 texture with ``placeholder`` set when it cannot."""
         self.placeholder = self.why_not(material, state.view)
-        if self.placeholder is None and self._prog is None:
-            self._build()
+        if self.placeholder is None:
+            self._use(base_image(material) is not None)
             self.placeholder = self.why_not(material, state.view)
         if self.placeholder is not None:
             return self._blank
         mesh = self.renderer.mesh
         env = self.renderer.env
-        key = (material.openpbr, float(material.anisotropy_rotation), astuple(state.camera), tuple(state.light_dir),
+        key = (material.openpbr, base_image(material), float(material.anisotropy_rotation), astuple(state.camera),
+               tuple(state.light_dir),
                state.light_radiance, state.point_light, state.point_intensity, state.env_on, state.env_rotation,
                state.env_intensity, id(env), id(mesh), w, h)
         if key != self._key or self._target is None:
@@ -113,17 +124,41 @@ class MaterialXView:
         return self._target[1]
 
     # --- GPU work -----------------------------------------------------------------------------
-    def _build(self) -> None:
-        """Generates and compiles the shader (once; a failure is kept as the side's one line)."""
+    def _use(self, textured: bool) -> None:
+        """Makes the program of this variant (with an image on base_color or not) the one drawn: generated and
+        compiled on first use (a failure is kept as the side's one line)."""
         from nbrdf.neural.mtlx import openpbr_document  # late: MaterialX loads for this view only
-        try:
-            self._shader = generate(openpbr_document(OpenPbr(), VIEW_MATERIAL), VIEW_MATERIAL, environment=True,
-                                    where="MaterialX view")
-            self._prog = self.ctx.program(vertex_shader=self._shader.vertex, fragment_shader=self._shader.fragment)
-        except NbrdfError as e:
-            self._error = str(e)
-        except moderngl.Error as e:
-            self._error = f"MaterialX's GLSL does not compile here ({str(e).splitlines()[0]})"
+        if textured not in self._programs:
+            try:
+                document = openpbr_document(OpenPbr(), VIEW_MATERIAL, base_color_image=BASE_IMAGE if textured else None)
+                shader = generate(document, VIEW_MATERIAL, environment=True, where="MaterialX view")
+                self._programs[textured] = (shader, self.ctx.program(vertex_shader=shader.vertex,
+                                                                     fragment_shader=shader.fragment))
+            except NbrdfError as e:
+                self._error = str(e)
+                return
+            except moderngl.Error as e:
+                self._error = f"MaterialX's GLSL does not compile here ({str(e).splitlines()[0]})"
+                return
+        shader, prog = self._programs[textured]
+        if prog is not self._prog:
+            self._release_mesh()  # the vertex array is the program's
+            self._shader, self._prog = shader, prog
+
+    def _base_texture(self, path: Path) -> moderngl.Texture:
+        """The base colour image as the stack reads it (``read_texels``: linear, row 0 = v 0), with mips."""
+        key = (path, path.stat().st_mtime_ns)
+        if self._image is None or self._image[0] != key:
+            if self._image is not None:
+                self._image[1].release()
+            x = read_texels(path)
+            rgb = np.clip(x[..., :3] if x.shape[2] >= 3 else np.repeat(x[..., :1], 3, -1), 0.0, 1.0)
+            tex = self.ctx.texture((rgb.shape[1], rgb.shape[0]), 3, np.ascontiguousarray(rgb, np.float32).tobytes(),
+                                   dtype="f4")
+            tex.build_mipmaps()
+            tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            self._image = (key, tex)
+        return self._image[1]
 
     def _environment(self) -> tuple[moderngl.Texture, moderngl.Texture]:
         """MaterialX's radiance (with mips) and irradiance maps of the renderer's environment."""
@@ -198,6 +233,10 @@ class MaterialXView:
         radiance.use(0)
         irradiance.use(1)
         values.update(u_envRadiance=0, u_envIrradiance=1, u_envRadianceMips=radiance_mips(radiance.size))
+        image = base_image(material)
+        if image is not None and "file" in shader.inputs:
+            self._base_texture(image).use(2)
+            values[shader.inputs["file"]] = 2
         for name, value in values.items():
             if name in p:
                 p[name].value = tuple(value.T.ravel()) if isinstance(value, np.ndarray) else value
@@ -218,7 +257,7 @@ class MaterialXView:
         self.ctx.depth_func = "<"
         vao.render(moderngl.TRIANGLES)
         self.ctx.disable(moderngl.DEPTH_TEST)
-        self.renderer.unbind_textures(0, 1)
+        self.renderer.unbind_textures(0, 1, 2)
 
     # --- resources ----------------------------------------------------------------------------
     def _release_mesh(self) -> None:
@@ -240,10 +279,25 @@ class MaterialXView:
             self._env[1].release()
             self._env[2].release()
             self._env = None
-        if self._prog is not None:
-            self._prog.release()
-            self._prog = None
+        for _, prog in self._programs.values():
+            prog.release()
+        self._programs.clear()
+        self._shader = self._prog = None
+        if self._image is not None:
+            self._image[1].release()
+            self._image = None
         self._blank.release()
+
+
+def base_image(material: Material) -> Path | None:
+    """The image file on the material's base colour (None: uniform inputs); a texture layout an OpenPBR
+    document cannot carry (not ``read_mtlx``'s one image) is refused in one line."""
+    if not material.is_textured or material.openpbr is None:
+        return None
+    from nbrdf.neural.mtlx import base_color_image  # late: MaterialX loads for this view only
+    layers = material_to_dict(material, material.base_dir)["layers"]
+    rel = base_color_image(layers, openpbr_from_record(material.openpbr), "MaterialX's view")
+    return None if rel is None else (material.base_dir / rel).resolve()
 
 
 def radiance_mips(size: tuple[int, int]) -> int:
