@@ -84,20 +84,27 @@ GOLD = {"format": "nbrdf-material/1", "name": "g", "layers": [{"type": "conducto
                                                              "r0": [1.0, 0.78, 0.34]}]}
 
 
+def _gold_in_the_flip_view(gl_ctx):
+    """A session of GOLD in the FLIP view, 4 passes drawn at 40 x 32: (session, framebuffer, size, passes)."""
+    from nbrdf.neural.material import parse_material
+    from nbrdf.viewer.session.lookdev import LookDev
+
+    ld = LookDev(gl_ctx, parse_material(GOLD))
+    size, passes = (40, 32), 4
+    assert ld.set_compare("flip")
+    fbo = gl_ctx.simple_framebuffer(size, components=4)
+    ld.render(fbo, size, passes)
+    return ld, fbo, size, passes
+
+
 def test_flip_view_shows_the_hdr_flip_of_neural_against_reference(gl_ctx):
     """The FLIP view's mean and map are flip-evaluator's HDR-FLIP of the neural
     image against its reference (here the closed form of a conductor), and the
     view draws the map in magma (black where FLIP is 0)."""
     from nbrdf.imaging.flip import flip
-    from nbrdf.neural.material import parse_material
-    from nbrdf.viewer.session.lookdev import LookDev
 
-    ld = LookDev(gl_ctx, parse_material(GOLD))
+    ld, fbo, size, passes = _gold_in_the_flip_view(gl_ctx)
     try:
-        size, passes = (40, 32), 4
-        assert ld.set_compare("flip")
-        fbo = gl_ctx.simple_framebuffer(size, components=4)
-        ld.render(fbo, size, passes)
         shown = np.frombuffer(fbo.read(components=3), np.uint8).reshape(size[1], size[0], 3)[::-1]
         state = replace(ld.state, background=False)  # the error views score the object alone
         neural = ld.renderer.render_linear(state, size, passes, ld.brdf)
@@ -122,15 +129,8 @@ def test_the_window_flip_runs_in_a_process_of_its_own_and_shows_the_same_map(gl_
     (to 1e-6: the same images, the same evaluator)."""
     import time
 
-    from nbrdf.neural.material import parse_material
-    from nbrdf.viewer.session.lookdev import LookDev
-
-    ld = LookDev(gl_ctx, parse_material(GOLD))
+    ld, fbo, size, _ = _gold_in_the_flip_view(gl_ctx)
     try:
-        size, passes = (40, 32), 4
-        assert ld.set_compare("flip")
-        fbo = gl_ctx.simple_framebuffer(size, components=4)
-        ld.render(fbo, size, passes)
         sync = ld.flip_mean
         ld.compare_part.flip_async = True
         ld.compare_part._flip_key = None  # score the same view again, now in the process

@@ -187,16 +187,7 @@ def test_a_base_colour_image_is_read_where_the_stack_reads_it(gl_ctx, tmp_path):
     img[:8] = (40, 60, 230)  # the file's top rows: blue
     img[8:] = (230, 40, 40)  # its bottom rows: red
     iio.imwrite(tmp_path / "halves.png", img)
-    (tmp_path / "halves.mtlx").write_text("""<?xml version="1.0"?>
-<materialx version="1.39">
-  <image name="halves" type="color3"><input name="file" type="filename" value="halves.png" /></image>
-  <open_pbr_surface name="SR_h" type="surfaceshader">
-    <input name="base_color" type="color3" nodename="halves" />
-    <input name="specular_weight" type="float" value="0.0" />
-  </open_pbr_surface>
-  <surfacematerial name="h" type="material"><input name="surfaceshader" type="surfaceshader" nodename="SR_h" /></surfacematerial>
-</materialx>
-""")
+    write_mtlx(OpenPbr(specular_weight=0.0), "h", tmp_path / "halves.mtlx", base_color_image="halves.png")
     ld = LookDev(gl_ctx, load_material(tmp_path / "halves.mtlx", []), threaded=False)  # its latent texture at once
     try:
         size = (96, 48)

@@ -351,24 +351,21 @@ class SessionEdits(ABC):
         return self.guarded(go)
 
     def set_compare(self, mode: CompareMode | str) -> bool:
-        def go():
-            try:
-                parsed = CompareMode.parse(mode, "compare mode")
-            except ValueError as e:
-                raise NbrdfError(str(e)) from None
-            self.compare_settings = replace(self.compare_settings, mode=parsed)
-            self.invalidate()
-        return self.guarded(go)
+        return self._compare_setting("mode", lambda: CompareMode.parse(mode, "compare mode"))
 
     def set_against(self, against: Against | str) -> bool:
         """What the compare view sets beside the neural image: the stack's reference, or MaterialX's own shader
         of the material's OpenPBR inputs (a material without them shows a one-line placeholder there)."""
+        return self._compare_setting("against", lambda: Against.parse(against, "compare against"))
+
+    def _compare_setting(self, name: str, parse: Callable[[], object]) -> bool:
+        """Sets one compare setting from its word (a bad one: one line, nothing changed) and starts the view over."""
         def go():
             try:
-                parsed = Against.parse(against, "compare against")
+                value = parse()
             except ValueError as e:
                 raise NbrdfError(str(e)) from None
-            self.compare_settings = replace(self.compare_settings, against=parsed)
+            self.compare_settings = replace(self.compare_settings, **{name: value})
             self.invalidate()
         return self.guarded(go)
 
