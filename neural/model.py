@@ -38,6 +38,12 @@ PARTS = ("leaf", "layering", "layering_deep", "sampler")
 #: but costs the shallow stacks render-space fidelity, so each depth gets the network that is best at it
 #: (docs/decisions/112-depth-routed-layering.md).
 DEEP_INTERFACES = 3
+#: Whether a conductor under an interface keeps its F82 tint in its leaf code. It does not (record 119): under an
+#: interface the base is reached only inside the critical cone, where the tint's edge term is a few 1e-3, while the
+#: tinted leaf codes lie off what the layering network was trained on (plain conductors'); coated tinted metals
+#: scored 0.262 / 0.431 HDR-FLIP median / worst with the tint, 0.087 / 0.144 without (10 of 10 better,
+#: tools/f82_under_coat.py). A bare conductor keeps it.
+TINT_UNDER_INTERFACES = False
 #: How a part's tensors are stored: the deep layering network in half precision (the bundle stays a few MB).
 STORED = {"layering_deep": torch.float16}
 
@@ -138,7 +144,8 @@ def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, sta
         raise NbrdfError(f"a {stack.base} base needs the leaf encoders")
     elif stack.base == CONDUCTOR:
         r0 = stack.base_param("base_r0").expand(n, C).reshape(-1)
-        tint = (stack.base_f82 if stack.base_f82 is not None else torch.ones(1, 1)).expand(n, C).reshape(-1)
+        tinted = stack.base_f82 is not None and (TINT_UNDER_INTERFACES or stack.layers == 0)
+        tint = (stack.base_f82 if tinted else torch.ones(1, 1)).expand(n, C).reshape(-1)
         z = with_coat(leaf.conductor(chan(stack.base_param("base_roughness")), r0, tint), None)
     elif stack.base == DIELECTRIC:  # a bare interface: all coat, achromatic, the encoder gives a black body
         z_b = leaf.dielectric(stack.base_param("base_roughness"), stack.base_param("base_ior"))

@@ -123,3 +123,23 @@ def test_a_spec_that_does_not_fit_its_features_is_named():
         LayeringSpec(**{**asdict(layering_spec()), "medium": "slab"})
     with pytest.raises(NbrdfError, match="unknown"):
         layering_spec(medium="thin")
+
+
+def test_a_conductors_tint_stays_out_of_the_layering_network_and_in_a_bare_code():
+    """Record 119: under an interface a tinted conductor is layered from the plain conductor's code (the tint's
+    edge term lies outside the critical cone the base is reached in; the tinted codes lie off the layering
+    network's training set), so the coated code is the plain one's exactly; a bare conductor's code keeps its
+    tint (it differs from the plain one)."""
+    from nbrdf.neural.material import parse_material
+    from nbrdf.neural.model import default_model
+
+    def stack(tint, coated):
+        base = {"type": "conductor", "roughness": 0.2, "r0": [0.9, 0.6, 0.3], "f82_tint": tint}
+        layers = [{"type": "dielectric", "roughness": 0.05, "ior": 1.5}, base] if coated else [base]
+        return parse_material({"format": "nbrdf-material/1", "name": "m", "layers": layers})
+
+    model = default_model()
+    coated = [model.material_latent(stack(t, True)) for t in ([0.5, 0.7, 0.9], 1.0)]
+    bare = [model.material_latent(stack(t, False)) for t in ([0.5, 0.7, 0.9], 1.0)]
+    assert torch.equal(coated[0], coated[1])
+    assert (bare[0] - bare[1]).abs().max() > 1e-3
