@@ -144,8 +144,8 @@ def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, sta
         raise NbrdfError(f"a {stack.base} base needs the leaf encoders")
     elif stack.base == CONDUCTOR:
         r0 = stack.base_param("base_r0").expand(n, C).reshape(-1)
-        tinted = stack.base_f82 is not None and (TINT_UNDER_INTERFACES or stack.layers == 0)
-        tint = (stack.base_f82 if tinted else torch.ones(1, 1)).expand(n, C).reshape(-1)
+        f82 = stack.base_f82 if stack.base_f82 is not None and (TINT_UNDER_INTERFACES or stack.layers == 0) else None
+        tint = (f82 if f82 is not None else torch.ones(1, 1)).expand(n, C).reshape(-1)
         z = with_coat(leaf.conductor(chan(stack.base_param("base_roughness")), r0, tint), None)
     elif stack.base == DIELECTRIC:  # a bare interface: all coat, achromatic, the encoder gives a black body
         z_b = leaf.dielectric(stack.base_param("base_roughness"), stack.base_param("base_ior"))

@@ -34,6 +34,10 @@ SIGMA_T_MAX = 5.0
 ROUGHNESS_NOTE_BELOW = 0.05
 #: A base interface whose (modulated) IOR is below this is left out (closer to the truth than 1.05).
 IOR_OMIT_BELOW = 1.025
+#: The same under a coat: light that leaves the stack meets the base interface only inside the coat's critical
+#: cone (the Snell invariant n sin theta is kept across parallel interfaces), where its reflectance is about F0;
+#: below the F0 midpoint of 1 and 1.05 (1.0346-1.0351 for coat iors 1.2-2) leaving it out is the closer of the two.
+IOR_OMIT_BELOW_COATED = 1.035
 #: An input "mostly" drives the look at or above this effective weight: the material is refused.
 DOMINANT = 0.5
 
@@ -324,7 +328,7 @@ def _dielectric_layers(p: OpenPbr, coated: bool, notes: list[str]) -> list[dict]
     eta = modulated_ior(p.specular_ior, above, p.specular_weight)
     where = f"specular_ior {_g(p.specular_ior)}" + (f" under coat_ior {_g(p.coat_ior)}" if coated else "") + (
         f" with specular_weight {_g(p.specular_weight)}" if p.specular_weight != 1.0 else "")
-    if eta < IOR_OMIT_BELOW:
+    if eta < (IOR_OMIT_BELOW_COATED if coated else IOR_OMIT_BELOW):
         if eta != 1.0:
             notes.append(f"{where}: the base interface's relative IOR {_g(eta)} reflects almost nothing "
                          f"(F0 {fresnel_f0(eta):.2g}); it is left out")

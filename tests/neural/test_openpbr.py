@@ -101,6 +101,20 @@ def test_a_nearly_matched_interface_is_noted_when_clamped_or_left_out():
     assert any("left out" in n and "specular_ior 1.5" in n for n in notes)
 
 
+def test_under_a_coat_an_interface_below_the_f0_midpoint_is_left_out():
+    """Under a coat the base interface is met inside the coat's critical cone, where it reflects about F0: a
+    relative IOR of 1.027 (specular_ior 1.46 under coat_ior 1.5) has F0 1.8e-4, nearer 0 than 1.05's 5.9e-4, so
+    it is left out; bare, the same 1.03 is clamped (trapping at grazing angles decides there)."""
+    from nbrdf.neural.openpbr import IOR_OMIT_BELOW_COATED, fresnel_f0
+
+    assert abs(fresnel_f0(IOR_OMIT_BELOW_COATED) - fresnel_f0(1.05) / 2) < 0.05 * fresnel_f0(1.05)
+    m, notes = openpbr_to_material(OpenPbr(coat_weight=1.0, specular_ior=1.46, coat_ior=1.5), "t")
+    assert [layer["type"] for layer in m["layers"]] == ["dielectric", "diffuse"]
+    assert any("left out" in n and "specular_ior 1.46" in n for n in notes)
+    m, notes = openpbr_to_material(OpenPbr(specular_ior=1.03), "t")
+    assert m["layers"][0]["ior"] == 1.05 and any("clamped to 1.05" in n for n in notes)
+
+
 def test_ior_outside_the_stack_range_is_clamped_with_a_note():
     m, notes = openpbr_to_material(OpenPbr(specular_ior=3.0), "t")
     assert m["layers"][0]["ior"] == 2.0
