@@ -124,7 +124,7 @@ def test_flip_view_shows_the_hdr_flip_of_neural_against_reference(gl_ctx):
 
 
 def test_the_window_flip_runs_in_a_process_of_its_own_and_shows_the_same_map(gl_ctx):
-    """With ``flip_async`` (the window) a frame never waits for FLIP: the first frames show no mean while the
+    """With ``run_async`` (the window) a frame never waits for FLIP: the first frames show no mean while the
     evaluation runs in its own process; once it is finished the mean shown is the synchronous evaluation's
     (to 1e-6: the same images, the same evaluator)."""
     import time
@@ -132,16 +132,16 @@ def test_the_window_flip_runs_in_a_process_of_its_own_and_shows_the_same_map(gl_
     ld, fbo, size, _ = _gold_in_the_flip_view(gl_ctx)
     try:
         sync = ld.flip_mean
-        ld.compare_part.flip_async = True
-        ld.compare_part._flip_key = None  # score the same view again, now in the process
-        ld.compare_part.flip_mean = None
+        flip = ld.compare_part.flip
+        flip.run_async = True
+        flip.clear()  # score the same view again, now in the process
         ld.render(fbo, size, 0)
-        assert ld.flip_mean is None and ld.compare_part._flip_job is not None  # submitted, not waited for
+        assert ld.flip_mean is None and flip.job is not None  # submitted, not waited for
         deadline = time.monotonic() + 120.0
         while ld.flip_mean is None and time.monotonic() < deadline:
             time.sleep(0.05)
             ld.render(fbo, size, 0)
-        assert ld.flip_mean == pytest.approx(sync, rel=1e-6) and ld.compare_part.flip_notice == ""
+        assert ld.flip_mean == pytest.approx(sync, rel=1e-6) and flip.notice == ""
     finally:
         ld.close()
 

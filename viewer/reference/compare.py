@@ -22,18 +22,15 @@ from __future__ import annotations
 
 import hashlib
 import math
-import multiprocessing
 import os
 import tempfile
 from collections.abc import Callable
-from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import asdict, replace
 
 import moderngl
 import numpy as np
 import torch
 
-from nbrdf.imaging.flip import flip  # the evaluation of `nbrdf report render`
 from nbrdf.imaging.tonemap import ToneMap
 from nbrdf.neural.anisotropy import anisotropic_layers, anisotropy_vector, geometric_alpha
 from nbrdf.neural.errors import NbrdfError
@@ -45,6 +42,7 @@ from nbrdf.viewer.gpu.lit_sampling import LitSampling, Term
 from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf, analytic_capable
 from nbrdf.viewer.gpu.renderer import Renderer
 from nbrdf.viewer.modes import CompareMode, View
+from nbrdf.viewer.reference.flip_view import FlipView
 from nbrdf.viewer.reference.lit import LitJob, frames_from_normals, to_local, turned_frames
 from nbrdf.viewer.reference.worker import ReferenceJob, ReferenceWorker, lobe_job, slice_job
 from nbrdf.viewer.view_settings import ViewState
@@ -60,9 +58,6 @@ MIN_LOBE_ALPHA = 0.05
 PLACEHOLDER_GREYS = (0.24, 0.32)
 #: The placeholder's words while the Monte Carlo worker has sent no round of the view yet.
 COMPUTING = "computing reference..."
-#: The longest side of the images the FLIP view scores, pixels (FLIP is CPU work: a reference at the view's size,
-#: MaterialX's, scored at 960 x 540 took 11 s on 2 cores; the Monte Carlo reference is smaller than this already).
-FLIP_SIZE = 256
 #: The longest side of the Monte Carlo lobe's image as the view shows it (its 64 x 64 disc, upsampled), pixels.
 LOBE_CANVAS = 256
 
@@ -134,16 +129,8 @@ class Compare:
         self._sum_vao = ctx.vertex_array(self._sum_prog, [])
         self._gbuf_prog: moderngl.Program | None = None
         self._env_file: tuple[object, str, str] | None = None  # (environment, content hash, .npy path)
-        self.flip_mean: float | None = None  # mean HDR-FLIP of the last FLIP view (None: no reference yet)
-        self._flip_tex: moderngl.Texture | None = None
-        self._flip_key: tuple | None = None  # what the map shown scores
-        self.flip_async = False
-        """Evaluate FLIP in a process of its own, the map shown the last one finished (the window: an evaluation
-        costs 0.1-2.5 s on 2 cores, more with the image's dynamic range); off: at once (batch, tests)."""
-        self.flip_notice = ""
-        """One line when the FLIP process failed and FLIP went back to this process."""
-        self._flip_job: tuple[tuple, Future] | None = None  # (key, evaluation) in flight
-        self._pool: ProcessPoolExecutor | None = None
+        self.flip = FlipView(ctx)
+        """The FLIP view's map (viewer/reference/flip_view.py)."""
 
     # --- Monte Carlo jobs ---------------------------------------------------------------
     def _env_identity(self) -> tuple[str, str]:
@@ -428,49 +415,24 @@ class Compare:
     def update_flip(self, a: moderngl.Texture, pa: float, b: moderngl.Texture, pb: float,
                     pending: bool | None = None, b_version: int | None = None) -> float | None:
         """The HDR-FLIP map of A (sum of ``pa`` passes) against the reference B,
-        recomputed when B changes or A's passes reach the next power of two (the
-        FLIP evaluation is CPU work); returns the mean of the map shown (None: no
-        reference yet). ``pending``: B has no image yet (default: this reference's
-        placeholder is up); ``b_version``: B's own count of images drawn into it
-        (another source than this one's). With ``flip_async`` the evaluation runs in
-        a process of its own and the map shown is the last one finished."""
+        scored again when B changes or A's passes reach the next power of two
+        (``flip``: at once, or in a process of its own in the window); returns
+        the mean of the map shown (None: no reference yet). ``pending``: B has no
+        image yet (default: this reference's placeholder is up); ``b_version``: B's
+        own count of images drawn into it (another source than this one's)."""
         if self.placeholder is not None if pending is None else pending:  # no image to score against yet
-            self.flip_mean, self._flip_key, self._flip_job = None, None, None
+            self.flip.clear()
             return None
         b_state = (b_version if b_version is not None else self._tex_key if b is self._tex
                    else int(math.log2(max(pb, 1.0))))
         key = (id(b), b.size, b_state, a.size, int(math.log2(max(pa, 1.0))))
-        job = self._flip_job
-        if job is not None and job[1].done():
-            self._flip_job = None
-            try:
-                self._show_flip(job[0], *job[1].result())
-            except Exception as e:  # noqa: BLE001 - the FLIP process died or refused: said, computed here next
-                self.flip_notice, self.flip_async = f"FLIP in its own process failed ({e}); computed here", False
-        if key != self._flip_key and self._flip_job is None:
-            k = min(1.0, FLIP_SIZE / max(b.size))
-            size = (max(1, round(b.size[0] * k)), max(1, round(b.size[1] * k)))
-            ref, test = _resample(_read_linear(b, pb), size), _resample(_read_linear(a, pa), size)
-            if self.flip_async:
-                self._flip_job = (key, self._flip_pool().submit(flip, ref, test))
-            else:
-                self._show_flip(key, *flip(ref, test))
-        return self.flip_mean
+        size = FlipView.size(b.size)
+        return self.flip.update(key, lambda: (_resample(_read_linear(a, pa), size), _resample(_read_linear(b, pb), size)))
 
-    def _show_flip(self, key: tuple, mean: float, fmap: np.ndarray) -> None:
-        """Makes a finished FLIP evaluation the map shown."""
-        self.flip_mean = mean
-        data = np.ascontiguousarray(fmap, dtype="f4")
-        if self._flip_tex is not None:
-            self._flip_tex.release()
-        self._flip_tex = self.ctx.texture((data.shape[1], data.shape[0]), 1, data.tobytes(), dtype="f4")
-        self._flip_key = key
-
-    def _flip_pool(self) -> ProcessPoolExecutor:
-        """The process the FLIP evaluations run in (flip-evaluator holds the GIL: a thread would stop the window)."""
-        if self._pool is None:
-            self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
-        return self._pool
+    @property
+    def flip_mean(self) -> float | None:
+        """The mean HDR-FLIP of the FLIP map shown (None: no reference yet)."""
+        return self.flip.mean
 
     # --- the composite ------------------------------------------------------------------------
     def composite(self, target: moderngl.Framebuffer, a: moderngl.Texture, pa: float, b: moderngl.Texture,
@@ -498,8 +460,8 @@ class Compare:
             return
         p["u_a"].value, p["u_b"].value = 0, 1
         flip = CompareMode.parse(mode) == CompareMode.FLIP and blend is None
-        if flip and self._flip_tex is not None and self._flip_key is not None:
-            self._flip_tex.use(2)
+        if flip and self.flip.texture is not None and self.flip.key is not None:
+            self.flip.texture.use(2)
         else:
             self.renderer.unbind_textures(2)  # no map yet: FLIP 0 (black) until the reference arrives
         p["u_flip"].value = 2
@@ -538,13 +500,11 @@ class Compare:
 
     def close(self) -> None:
         self.worker.close()
-        if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
-            self._pool, self._flip_job = None, None
-        for tex in (self._tex, self._flip_tex, *(self._sum or ())):
+        self.flip.release()
+        for tex in (self._tex, *(self._sum or ())):
             if tex is not None:
                 tex.release()
-        self._tex = self._flip_tex = self._sum = None
+        self._tex = self._sum = None
         for prog, vao in self._compositors.values():
             vao.release()
             prog.release()

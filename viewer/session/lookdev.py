@@ -473,7 +473,7 @@ class LookDev(SessionEdits, Captures):
     # --- ground truth -----------------------------------------------------
     def reference_status(self) -> str:
         part = self.materialx_part if self.compare_settings.against == Against.MATERIALX else self.compare_part
-        return "; ".join(x for x in (part.status(self.material, self.state.view), self.compare_part.flip_notice) if x)
+        return "; ".join(x for x in (part.status(self.material, self.state.view), self.compare_part.flip.notice) if x)
 
     def reference_linear(self, size: tuple[int, int], spp: int, timeout: float = 300.0) -> np.ndarray:
         """The reference image of the current view (tests, batch): closed form, or Monte Carlo

@@ -168,7 +168,7 @@ class App:
         """A frame whose GL work fails is one line in the panel (viewer/ui/gl_faults.py)."""
         imgui.get_io().config_input_trickle_event_queue = True  # one click per imgui pass: none is lost
         self.lookdev.calibrate_bodies()  # the decoder timed on this GL: per-pixel or baked bodies
-        self.lookdev.compare_part.flip_async = True  # the FLIP view's evaluation never stops the window
+        self.lookdev.compare_part.flip.run_async = True  # the FLIP view's evaluation never stops the window
         glfw.set_key_callback(self.window, self._on_key)
         glfw.set_mouse_button_callback(self.window, self._on_mouse_button)
         glfw.set_cursor_pos_callback(self.window, self._on_cursor)
