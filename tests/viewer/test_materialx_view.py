@@ -210,3 +210,23 @@ def test_a_base_colour_image_is_read_where_the_stack_reads_it(gl_ctx, tmp_path):
         assert (red_n == red_m)[inside].mean() > 0.9, (red_n == red_m)[inside].mean()
     finally:
         ld.close()
+
+
+@pytest.mark.gl
+def test_a_base_colour_image_gone_since_opening_is_one_line_on_the_side(gl_ctx, tmp_path):
+    """The image file is deleted after the material opened: MaterialX's side shows the placeholder with one line
+    naming the file, and the view goes on (no exception out of the frame)."""
+    import imageio.v3 as iio
+
+    from nbrdf.viewer.session.lookdev import LookDev
+
+    iio.imwrite(tmp_path / "c.png", np.full((4, 4, 3), 128, np.uint8))
+    write_mtlx(OpenPbr(), "c", tmp_path / "c.mtlx", base_color_image="c.png")
+    ld = LookDev(gl_ctx, load_material(tmp_path / "c.mtlx", []), threaded=False)
+    try:
+        (tmp_path / "c.png").unlink()
+        ld.materialx_part.image(ld.material, ld.state, 16, 16)
+        assert ld.materialx_part.placeholder is not None and "c.png" in ld.materialx_part.placeholder
+        assert "\n" not in ld.materialx_part.placeholder
+    finally:
+        ld.close()

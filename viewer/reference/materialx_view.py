@@ -118,7 +118,12 @@ class MaterialXView:
                state.light_radiance, state.point_light, state.point_intensity, state.env_on, state.env_rotation,
                state.env_intensity, id(env), id(mesh), w, h)
         if key != self._key or self._target is None:
-            self._draw(material, state, w, h)
+            try:
+                self._draw(material, state, w, h)
+            except (NbrdfError, OSError) as e:  # the base colour image went missing or broke since the material opened
+                self.placeholder = str(e) if isinstance(e, NbrdfError) else f"MaterialX's view: {e}"
+                self._key = None
+                return self._blank
             self._key = key
             self.version += 1
         return self._target[1]
