@@ -190,3 +190,34 @@ def test_a_mapped_still_view_stops_at_its_cap(session):
         ld.renderer.settings.prefilter = None
         ld.renderer.table_sampling = None
         ld.bodies.use_tables = None
+
+
+def test_the_compare_view_is_shaded_in_bands_with_its_reference_coat(session, monkeypatch):
+    """Side by side with a stack's reference, still frames shade in bands too (they were whole passes: 1.2 s
+    frames at 1080p, the interface answering once a second): the neural half and the reference's coat
+    accumulation (its own estimator, in the same bands) are those of whole passes."""
+    from nbrdf.viewer.jobs import view_frames
+    from nbrdf.viewer.modes import View
+    from nbrdf.viewer.reference.compare import REFERENCE_SLOT
+
+    monkeypatch.setattr(view_frames, "COMPOSE_INTERVAL_S", 0.0)
+    ld, fbo = session
+    assert ld.set_compare("side")
+    half = (SIZE[0] // 2, SIZE[1])
+
+    def coat() -> np.ndarray:
+        tex = ld.renderer.frame_texture(View.OBJECT, *half, REFERENCE_SLOT)
+        return np.frombuffer(tex.read(), np.float32).reshape(half[1], half[0], 4)
+
+    frames = 0
+    while ld.passes < 2:
+        ld.render(fbo, SIZE, budget_ms=1e-6)
+        frames += 1
+        assert frames < 400
+    assert frames > 2  # in bands, not a whole pass a frame
+    banded_coat, banded = coat(), _shown(fbo)[:, : half[0]]
+    ld.invalidate()
+    ld.render(fbo, SIZE, 2)  # two whole passes
+    assert banded_coat[..., 3].max() == 2.0  # the coat's accumulation holds two passes (a nonempty image)
+    np.testing.assert_allclose(banded_coat, coat(), rtol=2e-5, atol=1e-6)
+    assert np.abs(banded - _shown(fbo)[:, : half[0]]).max() <= 1  # the neural half, 8-bit rounding aside

@@ -40,7 +40,7 @@ ever holds whole passes (what the composite divides by).
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import Optional, Sequence, Union
 
 import moderngl
 import numpy as np
@@ -65,6 +65,10 @@ from nbrdf.viewer.view_settings import ViewState
 
 LOBE_SIZE = 64
 MAIN = "main"    # the default accumulation slot
+
+
+#: An accumulation a pass shades: (slot, BRDF), or (slot, BRDF, the estimator it is shaded with: None, the renderer's).
+Shaded = Union[tuple[str, GpuBrdf], tuple[str, GpuBrdf, Optional[LitSampling]]]
 
 
 class Renderer:

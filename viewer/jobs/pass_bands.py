@@ -33,8 +33,8 @@ import numpy as np
 
 from nbrdf.viewer.gpu.env_prefilter import baked_per_row
 from nbrdf.viewer.gpu.lit_passes import LIT_GROUP
-from nbrdf.viewer.gpu.pipeline import GpuBrdf
-from nbrdf.viewer.gpu.renderer import Renderer
+from nbrdf.viewer.gpu.lit_sampling import LitSampling
+from nbrdf.viewer.gpu.renderer import Renderer, Shaded
 from nbrdf.viewer.view_settings import ViewState
 
 #: Pixels on the object the first band ever shades, its cost unknown (its time then sizes the
@@ -179,10 +179,11 @@ class PassBands:
         return (time.perf_counter() - t0) * 1000.0
 
     def advance(self, renderer: Renderer, state: ViewState, w: int, h: int, index: int,
-                shaded: Sequence[tuple[str, GpuBrdf]], budget_ms: float, cost_key: Hashable,
+                shaded: Sequence[Shaded], budget_ms: float, cost_key: Hashable,
                 end_extra_ms: float = 0.0) -> bool:
-        """Shades the next band of pass ``index`` of the accumulations ``shaded`` ((slot, BRDF)
-        each, one band of each) at (w, h), as many rows as ``budget_ms`` allows by the measured
+        """Shades the next band of pass ``index`` of the accumulations ``shaded`` ((slot, BRDF) or
+        (slot, BRDF, estimator: the renderer's sampling for that one, e.g. a reference's coat
+        alone) each, one band of each) at (w, h), as many rows as ``budget_ms`` allows by the measured
         costs (at least one); ends the pass when its last row is in (``end_extra_ms``: what else
         the frame then costs, the new image's composite). Returns whether the pass is complete
         (each slot's accumulation then holds it)."""
@@ -192,12 +193,14 @@ class PassBands:
         if self._baking:
             self.ms = (time.perf_counter() - t0) * 1000.0
             return False
-        key = (w, h, tuple((s, id(b)) for s, b in shaded), cost_key, index)
+        entries = [(e[0], e[1], e[2] if len(e) > 2 else None) for e in shaded]
+        key = (w, h, tuple((s, id(b)) for s, b, _ in entries), cost_key, index)
         p = self._pass
         spent = 0.0
         if p is None or p.key != key:
             p = self._pass = _Pass(key)
-            ms = self._timed(lambda: [renderer.begin_pass(state, w, h, index, b, s) for s, b in shaded])
+            ms = self._timed(lambda: [_with(renderer, sm, lambda: renderer.begin_pass(state, w, h, index, b, s))
+                                      for s, b, sm in entries])
             if index == 0 or self._coverage is None or self._coverage[0] != (w, h, shaded[0][0]):
                 t1 = time.perf_counter()
                 self._coverage = ((w, h, shaded[0][0]), renderer.row_coverage(w, h, shaded[0][0]))
@@ -208,24 +211,26 @@ class PassBands:
         end_ms = (end_px if end_px is not None else 0.0) * w * h
         y1 = self._rows(p.row, weights, self.cost.line(cost_key), budget_ms - spent, end_ms + end_extra_ms,
                         self.cost.most(cost_key))
-        ms = self._timed(lambda: [renderer.shade_rows(state, w, h, index, (p.row, y1), b, s) for s, b in shaded])
+        ms = self._timed(lambda: [_with(renderer, sm, lambda: renderer.shade_rows(state, w, h, index, (p.row, y1), b, s))
+                                  for s, b, sm in entries])
         self.cost.band(cost_key, float(weights[p.row:y1].sum()), ms)
         p.row = y1
         done = y1 >= h
         if done:
-            ms = self._timed(lambda: [renderer.end_pass(state, w, h, index, s) for s, _ in shaded])
+            ms = self._timed(lambda: [renderer.end_pass(state, w, h, index, s) for s, _, _ in entries])
             self.cost.end(w * h, ms)
             self._pass = None
         self.ms = (time.perf_counter() - t0) * 1000.0
         return done
 
-    def _bake(self, renderer: Renderer, state: ViewState, shaded: Sequence[tuple[str, GpuBrdf]],
+    def _bake(self, renderer: Renderer, state: ViewState, shaded: Sequence[Shaded],
               budget_ms: float) -> bool:
         """Bakes rows of the body environment map (viewer/gpu/env_prefilter.py) within
         ``budget_ms`` while a shaded BRDF reads one that is not complete; True when this frame
         went to it (the pass waits for the map)."""
         lit = renderer.lit
-        for b in (c for _, drawn in shaded for c in drawn.components()):  # a mix: each component's map
+        # a mix: each component's map; an entry with its own estimator (a reference's coat alone) reads none
+        for b in (c for e in shaded if len(e) < 3 or e[2] is None for c in e[1].components()):
             key = lit.prefilter_key(state, b, renderer.env)
             before = lit.prefilter_rows(key)
             size = lit.prefilter().size if key is not None else 0
@@ -267,6 +272,19 @@ class PassBands:
         if end < h and n >= LIT_GROUP:  # whole work groups, unless the band is thinner than one
             end -= end % LIT_GROUP
         return min(end, h)
+
+
+def _with(renderer: Renderer, sampling: LitSampling | None, work: Callable[[], object]) -> None:
+    """``work`` with the renderer's estimator set to ``sampling`` (None: as it is)."""
+    if sampling is None:
+        work()
+        return
+    old = renderer.sampling
+    renderer.sampling = sampling
+    try:
+        work()
+    finally:
+        renderer.sampling = old
 
 
 __all__ = ["BandCost", "CostFit", "PassBands", "PROBE_PIXELS"]

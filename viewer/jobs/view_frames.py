@@ -130,8 +130,11 @@ class ViewFrames:
         frame's settings -- else the copy drawn again (the backdrop and the tone mapping of a
         full view cost a software GPU as much as a band)."""
         ctx = self.stage.ctx
+        # a compare view's other side moves on by itself (the worker's rounds, a FLIP map finished in its process):
+        # composited again at most every COMPOSE_INTERVAL_S
+        other = int(time.perf_counter() / max(COMPOSE_INTERVAL_S, 1e-3)) if frame.comparing else 0
         key = (size, shown, frame.state, frame.backdrop, frame.compare, frame.against, frame.wipe, frame.error_scale,
-               frame.blend_t, id(frame.brdf), id(frame.other_brdf))
+               frame.blend_t, id(frame.brdf), id(frame.other_brdf), other)
         if self._copy is None or self._copy[1].size != tuple(size):
             if self._copy is not None:
                 for res in self._copy:
@@ -202,11 +205,14 @@ class ViewFrames:
         mapped = view == View.OBJECT and stage.renderer.lit.prefiltered(frame.state, body)
         self.cap = MAPPED_MAX_PASSES if mapped and not frame.blending else MAX_PASSES
         capped = self.cap < MAX_PASSES and self.passes >= self.cap  # the kept image, drawn again: no pass shaded
-        if budget_ms is not None and view == View.OBJECT and not frame.comparing and (self.passes < self.cap or capped):
-            shaded = [(slots[0], body)] + ([(slots[1], frame.other_brdf)] if frame.blending else [])
+        if budget_ms is not None and view == View.OBJECT and (self.passes < self.cap or capped):
+            shaded: list = [(slots[0], body)] + ([(slots[1], frame.other_brdf)] if frame.blending else [])
+            if frame.comparing and frame.against == Against.REFERENCE:  # its closed form or coat, in the same bands
+                shaded += stage.compare.banded(frame.material, frame.ref_brdf, frame.brdf)
             # a band's cost: the estimator, the body, the BRDFs shaded, the body environment map read
             cost_key = (stage.renderer.quick, body.kind, len(shaded), mapped)
-            if not capped and self.bands.advance(stage.renderer, replace(frame.state, background=False), w, h,
+            vw = max(1, w // 2) if frame.side_by_side else w
+            if not capped and self.bands.advance(stage.renderer, replace(frame.state, background=False), vw, h,
                                                  self.passes, shaded, budget_ms, cost_key,
                                                  end_extra_ms=self._compose_ms):
                 self.passes += 1
@@ -229,7 +235,7 @@ class ViewFrames:
                                     view_size=size, held=self._held)
         if self.passes > before or (self.bands.in_progress and not blank):
             self.restarted = False
-        if self.passes > 0 and view == View.OBJECT and not frame.comparing:
+        if self.passes > 0 and view == View.OBJECT:
             self._shown = (w, h, self._slot, self.passes, (size, frame.side_by_side, frame.blending))
         if self._held is not None and self.passes >= min(self._held[1], HANDOVER_PASSES):
             self._held = None  # faded out: the new code's image alone from the next frame

@@ -40,7 +40,7 @@ from nbrdf.viewer.gpu import shaders
 from nbrdf.viewer.gpu.labels import Label, Labels
 from nbrdf.viewer.gpu.lit_sampling import LitSampling, Term
 from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf, analytic_capable
-from nbrdf.viewer.gpu.renderer import Renderer
+from nbrdf.viewer.gpu.renderer import Renderer, Shaded
 from nbrdf.viewer.modes import CompareMode, View
 from nbrdf.viewer.reference.flip_view import FlipView
 from nbrdf.viewer.reference.lit import LitJob, frames_from_normals, to_local, turned_frames
@@ -129,6 +129,7 @@ class Compare:
         self._sum_vao = ctx.vertex_array(self._sum_prog, [])
         self._gbuf_prog: moderngl.Program | None = None
         self._env_file: tuple[object, str, str] | None = None  # (environment, content hash, .npy path)
+        self._coat: tuple | None = None  # (BRDF, material, estimator, the coat's BRDF) of ``banded``
         self.flip = FlipView(ctx)
         """The FLIP view's map (viewer/reference/flip_view.py)."""
 
@@ -281,9 +282,7 @@ class Compare:
         if view != View.OBJECT:
             return self._upload((key, r.spp if r else 0), img), 1.0
         body = self._upload((key, r.spp if r else 0), img, coverage=True)
-        coat = brdf is not None and brdf.kind == BrdfKind.NEURAL and any(b.material.interfaces
-                                                                          for b in brdf.components())
-        if coat:
+        if _has_coat(brdf):
             sampling = self.renderer.sampling
             self.renderer.sampling = coat_sampling(sampling)
             try:
@@ -294,6 +293,21 @@ class Compare:
         else:
             tex = self.renderer.frame_texture(view, w, h, REFERENCE_SLOT)
         return self._add_body(tex, float(max(passes, 1)), body, r is not None), 1.0
+
+    def banded(self, material: Material, analytic: GpuBrdf | None, brdf: GpuBrdf | None) -> list[Shaded]:
+        """The reference's own accumulations of the lit object, shaded with the neural image's passes in the
+        same bands (viewer/jobs/pass_bands.py): a single layer's closed form, or a stack's coat by its own
+        estimator; none where the Monte Carlo worker draws all of it."""
+        if analytic is not None:
+            return [(REFERENCE_SLOT, analytic)]
+        if material.is_textured or not _has_coat(brdf):
+            return []
+        assert brdf is not None
+        sampling = coat_sampling(self.renderer.sampling)
+        if self._coat is None or self._coat[0] is not brdf or self._coat[1] != material or self._coat[2] != sampling:
+            # the same objects frame after frame: a band's pass is keyed by what it shades
+            self._coat = (brdf, material, sampling, coat_brdf(brdf, material))
+        return [(REFERENCE_SLOT, self._coat[3], self._coat[2])]
 
     def _add_body(self, coat: moderngl.Texture, passes: float, body: moderngl.Texture,
                   has_body: bool) -> moderngl.Texture:
@@ -513,6 +527,11 @@ class Compare:
         if self._env_file is not None:
             _remove(self._env_file[2])
             self._env_file = None
+
+
+def _has_coat(brdf: GpuBrdf | None) -> bool:
+    """Whether the reference of ``brdf``'s lit object has a coat pass on the GPU (a neural BRDF of a stack)."""
+    return brdf is not None and brdf.kind == BrdfKind.NEURAL and any(b.material.interfaces for b in brdf.components())
 
 
 def _remove(path: str) -> None:
