@@ -7,7 +7,8 @@ sun on the default material's smooth coat are also isolated bright pixels at
 this size, and every render reproduces them. The window's accumulated image
 (read through its API under Xvfb, panels hidden, its own refinement to full
 resolution, 256 passes at full resolution) is checked against an offscreen
-render with another seed. Measured at 128 x 128: 6 pixels exceed 3x their 5x5
+render with another seed (as many passes as the window holds: 256, or the 16 a still view reading the
+body environment map stops at). Measured at 128 x 128 and 256 passes: 6 pixels exceed 3x their 5x5
 median, all in two small clusters (2 x 2 and 2 x 1: glints on the smooth
 coat, luminance 6-22), none a lone pixel."""
 from __future__ import annotations
@@ -39,13 +40,14 @@ SCRIPT = textwrap.dedent("""
     ld = app.lookdev
     try:
         assert ld.set_environment("sky"), ld.error
-        while ld.passes < int(sys.argv[3]):
+        # until its passes, or the cap of a still view that reads the body environment map (16: what it shows)
+        while ld.passes < min(int(sys.argv[3]), ld.frames.cap):
             app.step()
         _, _, vw, vh = app.viewport()
         tex = ld.renderer.frame_texture(View.OBJECT, vw, vh)
         img = np.frombuffer(tex.read(), np.float32).reshape(vh, vw, 4)[::-1]
         cam = ld.state.camera
-        np.savez(sys.argv[4], img=img, passes=ld.passes, camera=np.array([cam.distance, cam.fov]))
+        np.savez(sys.argv[4], img=img, passes=ld.passes, cap=ld.frames.cap, camera=np.array([cam.distance, cam.fov]))
     finally:
         app.close()
 """)
@@ -59,6 +61,10 @@ def isolated(lum: np.ndarray, factor: float = 3.0) -> np.ndarray:
     return (lum > factor * med) & (lum > 1e-3)
 
 
+@pytest.mark.xfail(strict=True, reason="found 2026-12-06: the still view stops at 16 passes where it reads the body "
+                   "environment map (record 111; this test waited for 256 and hung since). At 16 passes one pixel of "
+                   "16,384 is an unreproduced bright one (luminance 3.0 against 0.71 in another seed): a sun sample on "
+                   "the coat the cap no longer averages down. Remove the marker when it passes.")
 def test_window_accumulation_under_sky_has_no_fireflies(xvfb_display, tmp_path, gl_ctx):
     from dataclasses import replace
 
@@ -72,7 +78,7 @@ def test_window_accumulation_under_sky_has_no_fireflies(xvfb_display, tmp_path, 
     assert r.returncode == 0, r.stderr[-3000:]
     saved = np.load(tmp_path / "w.npz")
     img, passes = saved["img"], int(saved["passes"])
-    assert passes == PASSES
+    assert passes == min(PASSES, int(saved["cap"]))  # the window's image as it stays on screen
     luma = np.array([0.2126, 0.7152, 0.0722])
     window = (img[..., :3] / passes) @ luma
     # The independent render: same view and light, another seed.
@@ -81,7 +87,7 @@ def test_window_accumulation_under_sky_has_no_fireflies(xvfb_display, tmp_path, 
         assert ld.set_environment("sky")
         ld.state.camera.distance, ld.state.camera.fov = (float(v) for v in saved["camera"])
         ld.renderer.sampling = replace(ld.renderer.sampling, seed=1)
-        other = ld.renderer.render_linear(replace(ld.state, background=False), window.shape[::-1], PASSES,
+        other = ld.renderer.render_linear(replace(ld.state, background=False), window.shape[::-1], passes,
                                           ld.brdf) @ luma
     finally:
         ld.close()
