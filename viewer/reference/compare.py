@@ -304,7 +304,7 @@ class Compare:
             return []
         assert brdf is not None
         sampling = coat_sampling(self.renderer.sampling)
-        if self._coat is None or self._coat[0] is not brdf or self._coat[1] != material or self._coat[2] != sampling:
+        if self._coat is None or self._coat[0] is not brdf or self._coat[1] is not material or self._coat[2] != sampling:
             # the same objects frame after frame: a band's pass is keyed by what it shades
             self._coat = (brdf, material, sampling, coat_brdf(brdf, material))
         return [(REFERENCE_SLOT, self._coat[3], self._coat[2])]

@@ -76,6 +76,7 @@ class MaterialXView:
         self._mesh: tuple[tuple, moderngl.Buffer, moderngl.Buffer, moderngl.VertexArray] | None = None
         self._target: tuple[moderngl.Framebuffer, moderngl.Texture, moderngl.Renderbuffer] | None = None
         self._key: tuple | None = None
+        self._found: tuple[Material, Path | str | None] | None = None  # (material, its base image or refusal)
         self._blank = ctx.texture((1, 1), 4, np.zeros(4, np.float32).tobytes(), dtype="f4")
 
     # --- what it shows ------------------------------------------------------------------------
@@ -87,11 +88,8 @@ class MaterialXView:
             return "no OpenPBR inputs: MaterialX's view needs a material opened from a MaterialX document"
         if View.parse(view) != View.OBJECT:
             return "MaterialX's view shows the lit object only"
-        try:
-            base_image(material)
-        except NbrdfError as e:
-            return str(e)
-        return None
+        found = self._base_image(material)
+        return found if isinstance(found, str) else None
 
     def status(self, material: Material, view: View | str) -> str:
         """One line on what the side shows."""
@@ -107,13 +105,13 @@ class MaterialXView:
         under ``state``'s camera and lights; a blank 1 x 1 texture with ``placeholder`` set when it cannot."""
         self.placeholder = self.why_not(material, state.view)
         if self.placeholder is None:
-            self._use(base_image(material) is not None)
+            self._use(self._base_image(material) is not None)
             self.placeholder = self.why_not(material, state.view)
         if self.placeholder is not None:
             return self._blank
         mesh = self.renderer.mesh
         env = self.renderer.env
-        key = (material.openpbr, base_image(material), float(material.anisotropy_rotation), astuple(state.camera),
+        key = (material.openpbr, self._base_image(material), float(material.anisotropy_rotation), astuple(state.camera),
                tuple(state.light_dir),
                state.light_radiance, state.point_light, state.point_intensity, state.env_on, state.env_rotation,
                state.env_intensity, id(env), id(mesh), w, h)
@@ -127,6 +125,15 @@ class MaterialXView:
             self._key = key
             self.version += 1
         return self._target[1]
+
+    def _base_image(self, material: Material) -> Path | str | None:
+        """``base_image(material)``, or its refusal's line, worked out once per material (every frame asks)."""
+        if self._found is None or self._found[0] is not material:
+            try:
+                self._found = (material, base_image(material))
+            except NbrdfError as e:
+                self._found = (material, str(e))
+        return self._found[1]
 
     # --- GPU work -----------------------------------------------------------------------------
     def _use(self, textured: bool) -> None:
@@ -238,8 +245,8 @@ class MaterialXView:
         radiance.use(0)
         irradiance.use(1)
         values.update(u_envRadiance=0, u_envIrradiance=1, u_envRadianceMips=radiance_mips(radiance.size))
-        image = base_image(material)
-        if image is not None and "file" in shader.inputs:
+        image = self._base_image(material)
+        if isinstance(image, Path) and "file" in shader.inputs:
             self._base_texture(image).use(2)
             values[shader.inputs["file"]] = 2
         for name, value in values.items():
