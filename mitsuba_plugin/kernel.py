@@ -217,6 +217,15 @@ def _lifted(w, lift_z: float):
     return dr.select(w.z < lift_z, mi.Vector3f(w.x / n * most, w.y / n * most, lift_z), w)
 
 
+def _floored(w2, w, floor_z: float, lift_z: float):
+    """Warped directions w2 raised along their azimuth to z = min(``floor_z``, the z of their unwarped w)
+    (``neural.anisotropy._floored``)."""
+    f = dr.minimum(floor_z, dr.maximum(w.z, lift_z))
+    n = dr.maximum(dr.sqrt(_sq(w2.x) + _sq(w2.y)), 1e-12)
+    most = dr.sqrt(dr.maximum(1.0 - f * f, 0.0))
+    return dr.select(w2.z < f, mi.Vector3f(w2.x / n * most, w2.y / n * most, f), w2)
+
+
 def _transmittance(w, eta: float):
     """1 - F of a smooth interface of relative ior ``eta`` at the outside direction w."""
     return 1.0 - fresnel_dielectric(dr.clip(w.z, 0.0, 1.0), eta)
@@ -240,6 +249,8 @@ class BodyWarp:
     """the lowest z of a warped direction (``neural.anisotropy.LIFT_Z``)"""
     cap: float
     """the most the coat's transmittance ratio raises J (``neural.anisotropy.TRANSMITTANCE_CAP``)"""
+    floor_z: float
+    """how low the decoder is read (``neural.anisotropy.FLOOR_Z_BARE`` or ``FLOOR_Z_COATED``, by ``eta``)"""
 
     def warp(self, wi, wo) -> tuple:
         """The pair turned about its half vector's plane so that h becomes the stretched h'
@@ -263,12 +274,16 @@ class BodyWarp:
         wi2_in, wo2_in = self.warp(wi_in, wo_in)
         h, hp = wi_in + wo_in, wi2_in + wo2_in
         wi2, wo2 = _outside(_lifted(wi2_in, lift), eta, lift), _outside(_lifted(wo2_in, lift), eta, lift)
+        wi2, wo2 = _floored(wi2, wi, self.floor_z, lift), _floored(wo2, wo, self.floor_z, lift)
         hz = h.z / dr.maximum(dr.norm(h), 1e-30)
         hpz = hp.z / dr.maximum(dr.norm(hp), 1e-30)
         r = hpz / dr.maximum(hz, 1e-12)
         wi2_in, wo2_in = _inside(wi2, eta), _inside(wo2, eta)
+        he = wi2_in + wo2_in  # the pair read: D(h') / D(h_e) (neural.anisotropy._d_ratio)
+        hez = he.z / dr.maximum(dr.norm(he), 1e-30)
+        d = (hez * hez * (a0 * a0 - 1.0) + 1.0) / (hpz * hpz * (a0 * a0 - 1.0) + 1.0)
         cc = dr.maximum(wi2_in.z * wo2_in.z, 0.0) / dr.maximum(wi_in.z * wo_in.z, 1e-12)
-        j = (r * r) * (r * r) * cc
+        j = (r * r) * (r * r) * cc * d * d
         ax, ay = a0 / k, a0 * k
         aniso = _g1_dir(_turn(wi_in, c, s), ax, ay) * _g1_dir(_turn(wo_in, c, s), ax, ay)
         iso = _g1_dir(wi2_in, a0) * _g1_dir(wo2_in, a0)

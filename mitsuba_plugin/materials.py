@@ -30,7 +30,15 @@ from nbrdf.mitsuba.mix import MixedKernel, mix_edges
 from nbrdf.mitsuba.normal_map import NormalMapKernel
 from nbrdf.mitsuba.param_table import param_table_kernel
 from nbrdf.mitsuba.textures import LatentTextureKernel, ParamMaps, sharpest_top_roughness
-from nbrdf.neural.anisotropy import LIFT_Z, TRANSMITTANCE_CAP, body_tail, require_isotropic, stretch
+from nbrdf.neural.anisotropy import (
+    FLOOR_Z_BARE,
+    FLOOR_Z_COATED,
+    LIFT_Z,
+    TRANSMITTANCE_CAP,
+    body_tail,
+    require_isotropic,
+    stretch,
+)
 from nbrdf.neural.body_table import TableSize, bake_body
 from nbrdf.neural.coat import IOR_RANGE, NO_COAT, ROUGHNESS_RANGE, coat_of
 from nbrdf.neural.errors import NbrdfError
@@ -89,8 +97,9 @@ def _code_terms(model, code: torch.Tensor) -> tuple[Coat, Proxy, BodyWarp | None
         return Coat(float(r), float(ior)), Proxy(float(sigma), float(w)), None
     coat = coat_of(code[0], spec.latent)  # roughness, ior, the coat's anisotropy vector
     body = _stretch(tail[0, :2])
-    warp = None if body[0] == 1.0 else BodyWarp(body, float(tail[0, 2].clamp(0.005, 1.0)),
-                                                float(coat[1].clamp_min(1.0)), LIFT_Z, TRANSMITTANCE_CAP)
+    eta = float(coat[1].clamp_min(1.0))
+    warp = None if body[0] == 1.0 else BodyWarp(body, float(tail[0, 2].clamp(0.005, 1.0)), eta, LIFT_Z,
+                                                TRANSMITTANCE_CAP, FLOOR_Z_COATED if eta > 1.0 else FLOOR_Z_BARE)
     return Coat(float(r), float(ior), _stretch(coat[2:4])), Proxy(float(sigma), float(w), body), warp
 
 

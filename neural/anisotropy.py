@@ -64,6 +64,9 @@ def from_frame(w: Tensor, rotation_deg) -> Tensor:
 FRAME_PARAMS = 5
 #: The largest anisotropy a stretch takes (SPEC section 10's range).
 A_MAX = 0.95
+#: The version of the warp's arithmetic (``body_pair``): codes refined through an older one are refitted
+#: (``training.refine``). 2: J's D(h') / D(h_e) (decision 120).
+WARP_VERSION = 2
 
 
 def geometric_alpha(alpha, a):
@@ -176,6 +179,13 @@ def warp_pair(v: Tensor, wi: Tensor, wo: Tensor) -> tuple[Tensor, Tensor]:
 #: The lowest elevation cosine of a warped direction: one the warp turns below it is lifted to it
 #: (docs/decisions/116).
 LIFT_Z = 0.02
+#: How low the decoder is read, as an elevation cosine (outside the coat): a warped direction lower than
+#: min(floor, its unwarped direction's) is raised to it along its azimuth (``_floored``), and J's ratios,
+#: taken at the pair read, carry the value there (exact for closed forms, decision 120). The decoder is
+#: least accurate, and a coat's 1 - F smallest, at grazing. Bare: 1 (the warp never lowers a direction);
+#: under a coat 0.35 (chosen on a validation set, tools/anisotropy_floor.py).
+FLOOR_Z_BARE = 1.0
+FLOOR_Z_COATED = 0.35
 
 
 #: The most the coat's transmittance ratio may raise an anisotropic body: a warped pair turned past the
@@ -194,6 +204,17 @@ def _lifted(w: Tensor) -> Tensor:
     n = xy.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     up = torch.cat([xy / n * (1.0 - LIFT_Z * LIFT_Z) ** 0.5, torch.full_like(w[..., 2:], LIFT_Z)], -1)
     return torch.where(w[..., 2:] < LIFT_Z, up, w)
+
+
+def _floored(w2: Tensor, w: Tensor, floor_z: Tensor) -> Tensor:
+    """Warped directions w2 raised along their azimuth to z = min(``floor_z``, the z of their unwarped
+    direction w): the decoder is read no lower than that (``FLOOR_Z_BARE``, ``FLOOR_Z_COATED``). A pair
+    the warp leaves at or above its own elevations is unchanged."""
+    floor = torch.minimum(floor_z[..., None].to(w.dtype), w[..., 2:].clamp_min(LIFT_Z))
+    xy = w2[..., :2]
+    n = xy.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    up = torch.cat([xy / n * (1.0 - floor * floor).clamp_min(0.0).sqrt(), floor], -1)
+    return torch.where(w2[..., 2:] < floor, up, w2)
 
 
 def _inside(w: Tensor, eta: Tensor) -> Tensor:
@@ -217,17 +238,31 @@ def _transmittance(w: Tensor, eta: Tensor) -> Tensor:
     return 1.0 - fresnel_dielectric(w[..., 2].clamp(0.0, 1.0), eta)
 
 
+def _d_ratio(hpz: Tensor, he: Tensor, a0: Tensor) -> Tensor:
+    """D(h') / D(h_e) of isotropic GGX at alpha ``a0``: h' the warped half vector (its z ``hpz``), h_e
+    the half vector (unnormalised) of the pair the decoder is read at. They differ where a warped
+    direction was lifted (``_lifted``) or, under a coat, clamped to its critical cone (``_outside``):
+    the decoder's value there has the D of h_e, not of h' (1 up to rounding elsewhere; decision 120)."""
+    hez = he[..., 2] / he.norm(dim=-1).clamp_min(1e-30)
+    a2m1 = a0 * a0 - 1.0
+    d = (hez * hez * a2m1 + 1.0) / (hpz * hpz * a2m1 + 1.0)
+    return d * d
+
+
 def body_pair(tail: Tensor, wi: Tensor, wo: Tensor, coat_ior: Tensor | None = None
               ) -> tuple[Tensor, Tensor, Tensor]:
     """(wi', wo', J): the warped pair the decoder evaluates an anisotropic body at, and the factor its
     value takes. ``tail`` (..., 3): the body's anisotropy vector and masking alpha (``body_tail``).
     Under a coat (``coat_ior`` > 1) the lobe lives inside it: the pair is refracted in, warped there and
-    refracted out. J = (h'_z / h_z)^4 (D's Jacobian) times cos(theta_i') cos(theta_o') / (cos(theta_i)
-    cos(theta_o)) (the microfacet denominator) times the ratio of the anisotropic to the isotropic Smith
-    masking of both directions, all inside, times the ratio of the coat's transmittances at the pair and
-    at the warped pair (at most ``TRANSMITTANCE_CAP``): for a lone interface the warped value is exact;
-    under a coat an approximation (docs/decisions/116). A warped direction under ``LIFT_Z`` is lifted to it
-    (``_lifted``, ``_outside``); J is 0 where wi or wo is below the horizon."""
+    refracted out. A warped direction under ``LIFT_Z`` is lifted to it (``_lifted``, ``_outside``), and
+    the pair read is raised to the floor (``_floored``). J, at the pair read: (h'_z / h_z)^4 (D's
+    Jacobian) times D(h') / D(h_e) (``_d_ratio``) times cos(theta_i') cos(theta_o') / (cos(theta_i)
+    cos(theta_o)) (the microfacet denominator) times the ratio of the anisotropic to the isotropic
+    Smith masking of both directions, all inside, times the ratio of the coat's transmittances at the
+    pair and at the pair read (at most ``TRANSMITTANCE_CAP``). For closed forms the value is the
+    anisotropic one exactly, alone or under a smooth coat (the cap aside); for a decoded body under a
+    coat and a medium an approximation (docs/decisions/116, 120). J is 0 where wi or wo is below the
+    horizon."""
     v, a0 = tail[..., :2], tail[..., 2].clamp(0.005, 1.0)
     eta = torch.ones_like(a0) if coat_ior is None else torch.as_tensor(coat_ior, dtype=wi.dtype).clamp_min(1.0)
     wi_in, wo_in = _inside(wi, eta), _inside(wo, eta)
@@ -235,12 +270,15 @@ def body_pair(tail: Tensor, wi: Tensor, wo: Tensor, coat_ior: Tensor | None = No
     h = wi_in + wo_in
     hp = wi2_in + wo2_in
     wi2, wo2 = _outside(_lifted(wi2_in), eta), _outside(_lifted(wo2_in), eta)
+    floor_z = torch.where(eta > 1.0, torch.full_like(eta, FLOOR_Z_COATED), torch.full_like(eta, FLOOR_Z_BARE))
+    wi2, wo2 = _floored(wi2, wi, floor_z), _floored(wo2, wo, floor_z)
     hz = h[..., 2] / h.norm(dim=-1).clamp_min(1e-30)
     hpz = hp[..., 2] / hp.norm(dim=-1).clamp_min(1e-30)
     r = hpz / hz.clamp_min(1e-12)
     wi2_in, wo2_in = _inside(wi2, eta), _inside(wo2, eta)
+    dfix = _d_ratio(hpz, wi2_in + wo2_in, a0)
     cc = (wi2_in[..., 2] * wo2_in[..., 2]).clamp_min(0.0) / (wi_in[..., 2] * wo_in[..., 2]).clamp_min(1e-12)
-    j = (r * r) * (r * r) * cc
+    j = (r * r) * (r * r) * cc * dfix
     ax, ay, c, s = coat_alphas(a0, v)
     aniso = smith_g1_dir(in_frame(wi_in, c, s), ax, ay) * smith_g1_dir(in_frame(wo_in, c, s), ax, ay)
     iso = smith_g1_dir(wi2_in, a0) * smith_g1_dir(wo2_in, a0)

@@ -41,7 +41,7 @@ from typing import Callable
 
 import torch
 
-from nbrdf.neural.anisotropy import FRAME_PARAMS, body_pair, body_tail
+from nbrdf.neural.anisotropy import FRAME_PARAMS, WARP_VERSION, anisotropic_layers, body_pair, body_tail
 from nbrdf.neural.coat import coat_eval, with_coat
 from nbrdf.neural.decoder import Decoder
 from nbrdf.neural.errors import NbrdfError
@@ -499,6 +499,8 @@ def material_hash(material: Material) -> str:
     blob = {"m": d}
     if any(isinstance(layer, (LatentBase, Measured)) for layer in material.layers):
         blob["dir"] = str(Path(material.base_dir).resolve())
+    if anisotropic_layers(material):  # its body is fitted through the warp: a code fitted by another is stale
+        blob["warp"] = WARP_VERSION
     return hashlib.sha256(json.dumps(blob, sort_keys=True).encode()).hexdigest()[:24]
 
 

@@ -3,7 +3,7 @@
 // the body's masking alpha. The coat is anisotropic GGX in closed form (alpha_x = alpha_0 / k,
 // alpha_y = alpha_0 k, k = sqrt(1 - a), in the tangent frame turned by rho); the body is the decoder
 // (or its table) at the pair turned so its half vector becomes the stretched one, times J
-// (neural/anisotropy.py body_pair: D's Jacobian, the cosines, the masking ratio). Directions are in
+// (neural/anisotropy.py body_pair: D's Jacobian and ratio, the cosines, the masking ratio). Directions are in
 // the shading frame, whose x is the surface's tangent (shading_frame.glsl under NB_ANISO).
 // Needs PI (common.glsl).
 
@@ -94,6 +94,16 @@ vec3 aniso_lifted(vec3 w) {
     vec2 xy = w.xy / max(length(w.xy), 1e-12);
     return vec3(xy * sqrt(1.0 - AN_LIFT_Z * AN_LIFT_Z), AN_LIFT_Z);
 }
+// How low the decoder is read (FLOOR_Z_BARE, FLOOR_Z_COATED): a warped direction w2 under
+// min(floor, the z of its unwarped w) is raised to it along its azimuth (_floored).
+const float AN_FLOOR_Z_BARE = 1.0;
+const float AN_FLOOR_Z_COATED = 0.35;
+vec3 aniso_floored(vec3 w2, vec3 w, float floor_z) {
+    float f = min(floor_z, max(w.z, AN_LIFT_Z));
+    if (w2.z >= f) return w2;
+    vec2 xy = w2.xy / max(length(w2.xy), 1e-12);
+    return vec3(xy * sqrt(max(1.0 - f * f, 0.0)), f);
+}
 
 // The pair turned so its half vector becomes the stretched one (warp_pair).
 void aniso_warp(vec3 wi, vec3 wo, vec3 k, out vec3 wi2, out vec3 wo2, out float r) {
@@ -121,11 +131,16 @@ float body_warp(vec3 wi, vec3 wo, vec3 tail, float coat_ior, out vec3 wi2, out v
     vec3 a, b;
     float r;
     aniso_warp(wi_in, wo_in, k, a, b, r);
-    wi2 = aniso_outside(aniso_lifted(a), eta);
-    wo2 = aniso_outside(aniso_lifted(b), eta);
+    float floor_z = eta > 1.0 ? AN_FLOOR_Z_COATED : AN_FLOOR_Z_BARE;
+    wi2 = aniso_floored(aniso_outside(aniso_lifted(a), eta), wi, floor_z);
+    wo2 = aniso_floored(aniso_outside(aniso_lifted(b), eta), wo, floor_z);
     vec3 wi2_in = aniso_inside(wi2, eta), wo2_in = aniso_inside(wo2, eta);
-    float j = r * r * r * r * (wi2_in.z * wo2_in.z) / max(wi_in.z * wo_in.z, 1e-12);
     float a0 = clamp(tail.z, 0.005, 1.0);
+    // D(h') / D(h_e): the pair read is not the warped one where a direction was lifted, clamped or raised (_d_ratio)
+    float hpz = r * normalize(wi_in + wo_in).z;
+    float hez = normalize(wi2_in + wo2_in).z;
+    float d = (hez * hez * (a0 * a0 - 1.0) + 1.0) / (hpz * hpz * (a0 * a0 - 1.0) + 1.0);
+    float j = r * r * r * r * d * d * (wi2_in.z * wo2_in.z) / max(wi_in.z * wo_in.z, 1e-12);
     float ax = a0 / k.x, ay = a0 * k.x;
     float aniso = smith_g1_dir_aniso(aniso_turn(wi_in, k.yz), ax, ay) * smith_g1_dir_aniso(aniso_turn(wo_in, k.yz), ax, ay);
     float iso = smith_g1_dir_aniso(wi2_in, a0, a0) * smith_g1_dir_aniso(wo2_in, a0, a0);
