@@ -19,15 +19,8 @@ from typing import Any
 
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.files import save_text
-from nbrdf.neural.openpbr import (
-    OpenPbr,
-    gltf_pbr_to_openpbr,
-    input_type,
-    openpbr_from_record,
-    openpbr_to_material,
-    standard_surface_to_openpbr,
-    usd_preview_surface_to_openpbr,
-)
+from nbrdf.neural.openpbr import OpenPbr, input_type, openpbr_from_record, openpbr_to_material
+from nbrdf.neural.surface_models import gltf_pbr_to_openpbr, standard_surface_to_openpbr, usd_preview_surface_to_openpbr
 
 __all__ = ["list_mtlx_materials", "openpbr_from_record", "read_mtlx", "read_openpbr", "split_material_ref",
            "base_color_image", "data_library", "openpbr_document", "write_material_mtlx",

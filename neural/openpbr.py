@@ -8,8 +8,8 @@ OpenPBR's F82-tint Fresnel; a dielectric base is an interface (its IOR modulated
 specular_weight as OpenPBR's own graph does) over a Lambertian base; roughness r is GGX alpha r^2.
 Whatever a stack cannot hold is one note line naming the input and its value; a material whose look
 is mostly such an input is refused (``NbrdfError``). Standard Surface, glTF PBR and
-UsdPreviewSurface inputs translate to ``OpenPbr`` first (``standard_surface_to_openpbr``,
-``gltf_pbr_to_openpbr``, ``usd_preview_surface_to_openpbr``). MaterialX files: ``neural.mtlx``.
+UsdPreviewSurface inputs translate to ``OpenPbr`` first (``neural.surface_models``). MaterialX files:
+``neural.mtlx``.
 """
 from __future__ import annotations
 
@@ -130,7 +130,7 @@ class OpenPbr:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            object.__setattr__(self, f.name, _coerce(f.name, _kind(f.name), getattr(self, f.name)))
+            object.__setattr__(self, f.name, coerce_input(f.name, _kind(f.name), getattr(self, f.name)))
 
     def changed(self) -> dict[str, Any]:
         """The inputs that differ from OpenPBR's defaults, in the node definition's order."""
@@ -155,7 +155,7 @@ def input_type(name: str) -> str:
     return _KINDS[name]
 
 
-def _finite(name: str, v: Any) -> float:
+def finite_input(name: str, v: Any) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise NbrdfError(f"{name}: expected a number, got {type(v).__name__}")
     if not math.isfinite(v):
@@ -163,7 +163,7 @@ def _finite(name: str, v: Any) -> float:
     return float(v)
 
 
-def _coerce(name: str, kind: str, v: Any) -> Any:
+def coerce_input(name: str, kind: str, v: Any) -> Any:
     if kind == "boolean":
         if not isinstance(v, bool):
             raise NbrdfError(f"{name}: expected true or false, got {type(v).__name__}")
@@ -171,9 +171,9 @@ def _coerce(name: str, kind: str, v: Any) -> Any:
     if kind == "color3":
         if not isinstance(v, (tuple, list)) or len(v) != 3:
             raise NbrdfError(f"{name}: expected 3 values (r, g, b)")
-        r, g, b = (_finite(f"{name}[{i}]", x) for i, x in enumerate(v))
+        r, g, b = (finite_input(f"{name}[{i}]", x) for i, x in enumerate(v))
         return (r, g, b)
-    return _finite(name, v)
+    return finite_input(name, v)
 
 
 def openpbr_from_record(record: Mapping[str, Any] | Iterable[tuple[str, Any]]) -> OpenPbr:
@@ -185,7 +185,7 @@ def openpbr_from_record(record: Mapping[str, Any] | Iterable[tuple[str, Any]]) -
         if k not in _KINDS:
             raise NbrdfError(f"openpbr.{k}: not an OpenPBR Surface input")
         try:
-            kw[k] = _coerce(k, _KINDS[k], v)
+            kw[k] = coerce_input(k, _KINDS[k], v)
         except NbrdfError as e:
             raise NbrdfError(f"openpbr.{e}") from None
     return OpenPbr(**kw)
@@ -197,16 +197,16 @@ def openpbr_record(p: OpenPbr) -> dict[str, Any]:
 
 
 # --- small physics -----------------------------------------------------------------------
-def _g(x: float) -> str:
+def number_text(x: float) -> str:
     return f"{x:.4g}"
 
 
-def _show(v: Any) -> str:
+def value_text(v: Any) -> str:
     if isinstance(v, tuple):
-        return "[" + ", ".join(_g(x) for x in v) + "]"
+        return "[" + ", ".join(number_text(x) for x in v) + "]"
     if isinstance(v, bool):
         return "true" if v else "false"
-    return _g(v)
+    return number_text(v)
 
 
 def _value(rgb: Iterable[float]) -> float | list[float]:
@@ -251,8 +251,8 @@ def _clamped(p: OpenPbr, notes: list[str]) -> OpenPbr:
         vals = v if isinstance(v, tuple) else (v,)
         new = tuple(min(max(x, lo if lo is not None else x), hi if hi is not None else x) for x in vals)
         if new != vals:
-            span = f"[{_g(lo)}, {_g(hi) if hi is not None else 'inf'}]"
-            notes.append(f"{f.name} {_show(v)} is outside OpenPBR's range {span}; clamped to {_show(new if len(new) == 3 else new[0])}")
+            span = f"[{number_text(lo)}, {number_text(hi) if hi is not None else 'inf'}]"
+            notes.append(f"{f.name} {value_text(v)} is outside OpenPBR's range {span}; clamped to {value_text(new if len(new) == 3 else new[0])}")
             kw[f.name] = new if isinstance(v, tuple) else new[0]
     return replace(p, **kw) if kw else p
 
@@ -262,7 +262,7 @@ def _alpha(name: str, r: float, notes: list[str]) -> float:
     if a >= ALPHA_MIN:
         return a
     if r < ROUGHNESS_NOTE_BELOW:
-        notes.append(f"{name} {_g(r)}: GGX alpha {_g(a)} is below the stack's smallest, {ALPHA_MIN}; "
+        notes.append(f"{name} {number_text(r)}: GGX alpha {number_text(a)} is below the stack's smallest, {ALPHA_MIN}; "
                      "raised to it (a mirror-like highlight is slightly blurred)")
     return ALPHA_MIN
 
@@ -270,12 +270,12 @@ def _alpha(name: str, r: float, notes: list[str]) -> float:
 def _interface_ior(name: str, eta: float, notes: list[str]) -> float:
     if eta < 1.0:
         inv = 1.0 / eta if eta > 0 else math.inf
-        notes.append(f"{name} {_g(eta)} is below 1 (a base less dense than what is above it); the stack holds "
-                     f"its inverse {_g(inv)}, which reflects the same at normal incidence")
+        notes.append(f"{name} {number_text(eta)} is below 1 (a base less dense than what is above it); the stack holds "
+                     f"its inverse {number_text(inv)}, which reflects the same at normal incidence")
         eta = inv
     if eta > IOR_MAX or eta < IOR_MIN:
         clamped = min(max(eta, IOR_MIN), IOR_MAX)
-        notes.append(f"{name} {_g(eta)} is outside the stack's IOR range [{IOR_MIN}, {IOR_MAX}]; clamped to {_g(clamped)}")
+        notes.append(f"{name} {number_text(eta)} is outside the stack's IOR range [{IOR_MIN}, {IOR_MAX}]; clamped to {number_text(clamped)}")
         eta = clamped
     return eta
 
@@ -287,7 +287,7 @@ def _anisotropic(layer: dict, name: str, a: float, notes: list[str]) -> dict:
         return layer
     hi = LAYER_RANGES["anisotropy"][1]
     if a > hi:
-        notes.append(f"{name} {_g(a)} is above the stack's largest anisotropy, {hi}; clamped to it")
+        notes.append(f"{name} {number_text(a)} is above the stack's largest anisotropy, {hi}; clamped to it")
     return {**layer, "anisotropy": min(a, hi)}
 
 
@@ -300,7 +300,7 @@ def _coat_layers(p: OpenPbr, notes: list[str]) -> list[dict]:
         if max(sigma) > SIGMA_T_MAX:
             r, g, b = (min(s, SIGMA_T_MAX) for s in sigma)
             floor = math.exp(-2.0 * SIGMA_T_MAX)
-            notes.append(f"coat_color {_show(p.coat_color)}: the coat's optical depth {_show(sigma)} is capped at "
+            notes.append(f"coat_color {value_text(p.coat_color)}: the coat's optical depth {value_text(sigma)} is capped at "
                          f"{SIGMA_T_MAX} (a transmittance of at least {floor:.2g} per channel)")
             sigma = (r, g, b)
         layers.append({"type": "medium", "albedo": 0.0, "sigma_t": _value(sigma)})
@@ -314,7 +314,7 @@ def _metal_layers(p: OpenPbr, notes: list[str]) -> list[dict]:
         layer["f82_tint"] = _value(p.specular_color)
     layer = _anisotropic(layer, "specular_roughness_anisotropy", p.specular_roughness_anisotropy, notes)
     if p.specular_weight != 1.0:
-        notes.append(f"specular_weight {_g(p.specular_weight)} on a metal base: OpenPBR scales the whole metal lobe "
+        notes.append(f"specular_weight {number_text(p.specular_weight)} on a metal base: OpenPBR scales the whole metal lobe "
                      "by it, which a stack cannot; the lobe is left at full strength")
     return [layer]
 
@@ -323,25 +323,25 @@ def _dielectric_layers(p: OpenPbr, coated: bool, notes: list[str]) -> list[dict]
     layers: list[dict] = []
     above = p.coat_ior if coated else 1.0
     if not coated and p.specular_ior < 1.0:
-        notes.append(f"specular_ior {_g(p.specular_ior)} is below 1 (a base less dense than air); the stack's interface "
+        notes.append(f"specular_ior {number_text(p.specular_ior)} is below 1 (a base less dense than air); the stack's interface "
                      "is the denser one that reflects the same at normal incidence")
     eta = modulated_ior(p.specular_ior, above, p.specular_weight)
-    where = f"specular_ior {_g(p.specular_ior)}" + (f" under coat_ior {_g(p.coat_ior)}" if coated else "") + (
-        f" with specular_weight {_g(p.specular_weight)}" if p.specular_weight != 1.0 else "")
+    where = f"specular_ior {number_text(p.specular_ior)}" + (f" under coat_ior {number_text(p.coat_ior)}" if coated else "") + (
+        f" with specular_weight {number_text(p.specular_weight)}" if p.specular_weight != 1.0 else "")
     if eta < (IOR_OMIT_BELOW_COATED if coated else IOR_OMIT_BELOW):
         if eta != 1.0:
-            notes.append(f"{where}: the base interface's relative IOR {_g(eta)} reflects almost nothing "
+            notes.append(f"{where}: the base interface's relative IOR {number_text(eta)} reflects almost nothing "
                          f"(F0 {fresnel_f0(eta):.2g}); it is left out")
     else:
         if eta < IOR_MIN or eta > IOR_MAX:
             clamped = min(max(eta, IOR_MIN), IOR_MAX)
-            notes.append(f"{where}: the base interface's relative IOR {_g(eta)} is outside the stack's range "
-                         f"[{IOR_MIN}, {IOR_MAX}]; clamped to {_g(clamped)}")
+            notes.append(f"{where}: the base interface's relative IOR {number_text(eta)} is outside the stack's range "
+                         f"[{IOR_MIN}, {IOR_MAX}]; clamped to {number_text(clamped)}")
             eta = clamped
         spec = {"type": "dielectric", "roughness": _alpha("specular_roughness", p.specular_roughness, notes), "ior": eta}
         layers.append(_anisotropic(spec, "specular_roughness_anisotropy", p.specular_roughness_anisotropy, notes))
         if p.specular_color != WHITE:
-            notes.append(f"specular_color {_show(p.specular_color)} on a dielectric base: a non-physical tint "
+            notes.append(f"specular_color {value_text(p.specular_color)} on a dielectric base: a non-physical tint "
                          "of its reflection, which a stack cannot hold; left untinted")
     layers.append({"type": "diffuse", "albedo": _value(p.base_weight * c for c in p.base_color)})
     return layers
@@ -361,13 +361,13 @@ def _refuse_if_dominated(p: OpenPbr) -> None:
     subsurface = dielectric * (1.0 - p.transmission_weight) * p.subsurface_weight
     why = None
     if transmission >= DOMINANT:
-        why = f"transmission_weight {_g(p.transmission_weight)}: the look is mostly transmission (weight {_g(transmission)})"
+        why = f"transmission_weight {number_text(p.transmission_weight)}: the look is mostly transmission (weight {number_text(transmission)})"
     elif subsurface >= DOMINANT:
-        why = f"subsurface_weight {_g(p.subsurface_weight)}: the look is mostly subsurface scattering (weight {_g(subsurface)})"
+        why = f"subsurface_weight {number_text(p.subsurface_weight)}: the look is mostly subsurface scattering (weight {number_text(subsurface)})"
     elif p.geometry_opacity <= 1.0 - DOMINANT:
-        why = f"geometry_opacity {_g(p.geometry_opacity)}: the surface is mostly transparent"
+        why = f"geometry_opacity {number_text(p.geometry_opacity)}: the surface is mostly transparent"
     elif p.fuzz_weight >= DOMINANT and max(p.fuzz_color) > 0.0:
-        why = f"fuzz_weight {_g(p.fuzz_weight)}: the look is mostly fuzz (sheen)"
+        why = f"fuzz_weight {number_text(p.fuzz_weight)}: the look is mostly fuzz (sheen)"
     if why:
         raise NbrdfError(f"{why}, which a layered BRDF stack cannot hold; not converted")
 
@@ -381,7 +381,7 @@ def unsupported_notes(p: OpenPbr) -> list[str]:
     coated = p.coat_weight > 0.0
 
     def note(name: str, what: str) -> None:
-        notes.append(f"{name} {_show(getattr(p, name))}: {what}")
+        notes.append(f"{name} {value_text(getattr(p, name))}: {what}")
 
     if dielectric and p.base_diffuse_roughness > 0:
         note("base_diffuse_roughness", "OpenPBR's rough (Oren-Nayar) diffuse is not held; the stack's base is Lambertian")
@@ -466,170 +466,10 @@ def openpbr_to_material(p: OpenPbr, name: str) -> tuple[dict, list[str]]:
     held = "held as the weighted sum of the stacks (neural.mix); the stack shown is"
     if 0.0 < q.base_metalness < 1.0:
         m = q.base_metalness
-        notes.append(f"base_metalness {_g(m)}: a mix of metal ({_g(m)}) and dielectric ({_g(1 - m)}) bases, {held} "
+        notes.append(f"base_metalness {number_text(m)}: a mix of metal ({number_text(m)}) and dielectric ({number_text(1 - m)}) bases, {held} "
                      f"the {'metal' if metal else 'dielectric'} one")
     if 0.0 < q.coat_weight < 1.0:
         c = q.coat_weight
-        notes.append(f"coat_weight {_g(c)}: a partial coat (a mix of coated {_g(c)} and uncoated {_g(1 - c)}), {held} "
+        notes.append(f"coat_weight {number_text(c)}: a partial coat (a mix of coated {number_text(c)} and uncoated {number_text(1 - c)}), {held} "
                      f"the {'coated' if coated else 'uncoated'} one")
     return {"format": FORMAT, "name": name, "layers": layers, "openpbr": openpbr_record(p)}, notes
-
-
-# --- the other shading models ----------------------------------------------------------------
-#: Standard Surface 1.0.1's defaults (MaterialX ``ND_standard_surface_surfaceshader``; vectors left out).
-STANDARD_SURFACE_DEFAULTS: dict[str, Any] = {
-    "base": 1.0, "base_color": (0.8, 0.8, 0.8), "diffuse_roughness": 0.0, "metalness": 0.0, "specular": 1.0,
-    "specular_color": WHITE, "specular_roughness": 0.2, "specular_IOR": 1.5, "specular_anisotropy": 0.0,
-    "specular_rotation": 0.0, "transmission": 0.0, "transmission_color": WHITE, "transmission_depth": 0.0,
-    "transmission_scatter": (0.0, 0.0, 0.0), "transmission_scatter_anisotropy": 0.0, "transmission_dispersion": 0.0,
-    "transmission_extra_roughness": 0.0, "subsurface": 0.0, "subsurface_color": WHITE, "subsurface_radius": WHITE,
-    "subsurface_scale": 1.0, "subsurface_anisotropy": 0.0, "sheen": 0.0, "sheen_color": WHITE, "sheen_roughness": 0.3,
-    "coat": 0.0, "coat_color": WHITE, "coat_roughness": 0.1, "coat_anisotropy": 0.0, "coat_rotation": 0.0,
-    "coat_IOR": 1.5, "coat_affect_color": 0.0, "coat_affect_roughness": 0.0, "thin_film_thickness": 0.0,
-    "thin_film_IOR": 1.5, "emission": 0.0, "emission_color": WHITE, "opacity": WHITE, "thin_walled": False,
-}
-#: glTF PBR's defaults (MaterialX ``ND_gltf_pbr_surfaceshader``; vectors left out).
-GLTF_PBR_DEFAULTS: dict[str, Any] = {
-    "base_color": WHITE, "metallic": 1.0, "roughness": 1.0, "occlusion": 1.0, "transmission": 0.0, "specular": 1.0,
-    "specular_color": WHITE, "ior": 1.5, "alpha": 1.0, "alpha_mode": 0, "alpha_cutoff": 0.5, "iridescence": 0.0,
-    "iridescence_ior": 1.3, "iridescence_thickness": 100.0, "sheen_color": (0.0, 0.0, 0.0), "sheen_roughness": 0.0,
-    "clearcoat": 0.0, "clearcoat_roughness": 0.0, "emissive": (0.0, 0.0, 0.0), "emissive_strength": 1.0,
-    "thickness": 0.0, "attenuation_distance": 0.0, "attenuation_color": WHITE, "anisotropy_strength": 0.0,
-    "anisotropy_rotation": 0.0, "dispersion": 0.0,
-}
-#: UsdPreviewSurface's defaults (MaterialX ``ND_UsdPreviewSurface_surfaceshader``; the normal left out).
-USD_PREVIEW_SURFACE_DEFAULTS: dict[str, Any] = {
-    "diffuseColor": (0.18, 0.18, 0.18), "emissiveColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 0,
-    "specularColor": (0.0, 0.0, 0.0), "metallic": 0.0, "roughness": 0.5, "clearcoat": 0.0, "clearcoatRoughness": 0.01,
-    "opacity": 1.0, "opacityMode": 0, "opacityThreshold": 0.0, "ior": 1.5, "displacement": 0.0, "occlusion": 1.0,
-}
-
-
-def _inputs(model: str, defaults: dict[str, Any], given: Mapping[str, Any]) -> dict[str, Any]:
-    """``given`` over ``defaults``; an unknown name or a value of the wrong shape is one NbrdfError line."""
-    out = dict(defaults)
-    for k, v in given.items():
-        if k not in defaults:
-            raise NbrdfError(f"{k}: not a {model} input this reader knows")
-        d = defaults[k]
-        if isinstance(d, bool):
-            if not isinstance(v, bool):
-                raise NbrdfError(f"{k}: expected true or false, got {type(v).__name__}")
-            out[k] = v
-        elif isinstance(d, tuple):
-            out[k] = _coerce(k, "color3", v)
-        else:
-            out[k] = _finite(k, v)
-    return out
-
-
-def standard_surface_to_openpbr(inputs: Mapping[str, Any]) -> tuple[OpenPbr, list[str]]:
-    """Autodesk Standard Surface inputs (missing ones at 1.0.1's defaults) as OpenPBR inputs, after
-    MaterialX's standard_surface_to_open_pbr graph except where docs/openpbr.md says why not; the notes
-    name the Standard Surface inputs OpenPBR has no place for."""
-    s = _inputs("Standard Surface", STANDARD_SURFACE_DEFAULTS, inputs)
-    notes: list[str] = []
-    spec_color = WHITE if sum(s["specular_color"]) == 0 else s["specular_color"]
-    thickness_um = s["thin_film_thickness"] * 0.001
-    p = OpenPbr(
-        base_weight=s["base"], base_color=s["base_color"], base_diffuse_roughness=s["diffuse_roughness"],
-        base_metalness=s["metalness"], specular_weight=1.0 if s["metalness"] > 0 else s["specular"],
-        specular_color=spec_color, specular_roughness=s["specular_roughness"], specular_ior=s["specular_IOR"],
-        specular_roughness_anisotropy=s["specular_anisotropy"], transmission_weight=s["transmission"],
-        transmission_color=s["transmission_color"], transmission_depth=s["transmission_depth"],
-        transmission_scatter=s["transmission_scatter"],
-        transmission_scatter_anisotropy=s["transmission_scatter_anisotropy"],
-        transmission_dispersion_scale=1.0 if s["transmission_dispersion"] > 0 else 0.0,
-        transmission_dispersion_abbe_number=s["transmission_dispersion"] if s["transmission_dispersion"] > 0 else 20.0,
-        subsurface_weight=s["subsurface"],
-        subsurface_color=s["subsurface_color"], subsurface_radius=s["subsurface_scale"],
-        subsurface_radius_scale=s["subsurface_radius"], subsurface_scatter_anisotropy=s["subsurface_anisotropy"],
-        fuzz_weight=s["sheen"], fuzz_color=s["sheen_color"], fuzz_roughness=max(s["sheen_roughness"], 0.0) ** 0.4,
-        coat_weight=s["coat"], coat_color=s["coat_color"], coat_roughness=s["coat_roughness"],
-        coat_roughness_anisotropy=s["coat_anisotropy"], coat_ior=s["coat_IOR"], coat_darkening=1.0,
-        thin_film_weight=1.0 if thickness_um > 0 else 0.0, thin_film_thickness=thickness_um if thickness_um > 0 else 0.5,
-        thin_film_ior=s["thin_film_IOR"], emission_luminance=s["emission"], emission_color=s["emission_color"],
-        geometry_opacity=s["opacity"][0], geometry_thin_walled=s["thin_walled"])
-    if s["coat"] > 0:
-        for k, what in (("coat_affect_color", "saturates the base under the coat"),
-                        ("coat_affect_roughness", "roughens the base under the coat")):
-            if s[k] > 0:
-                notes.append(f"{k} {_g(s[k])}: Standard Surface's artistic control {what}; the simulated coat "
-                             "does its physical equivalent, this control is not applied")
-    if s["metalness"] > 0 and s["specular"] != 1.0:
-        notes.append(f"specular {_g(s['specular'])} with metalness {_g(s['metalness'])}: OpenPBR's specular_weight "
-                     "would scale the metal too; kept at 1 (as MaterialX's translation does)")
-    if len(set(s["opacity"])) > 1:
-        notes.append(f"opacity {_show(s['opacity'])}: coloured opacity has no OpenPBR input; its red channel is used")
-    return p, notes
-
-
-def gltf_pbr_to_openpbr(inputs: Mapping[str, Any]) -> tuple[OpenPbr, list[str]]:
-    """glTF PBR inputs (MaterialX's gltf_pbr; missing ones at its defaults) as OpenPBR inputs: the
-    inverse of MaterialX's standard_surface_to_gltf_pbr composed with standard_surface_to_open_pbr."""
-    s = _inputs("glTF PBR", GLTF_PBR_DEFAULTS, inputs)
-    notes: list[str] = []
-    metal = s["metallic"] > 0
-    mode = int(s["alpha_mode"])
-    opacity = 1.0 if mode == 0 else (1.0 if s["alpha"] >= s["alpha_cutoff"] else 0.0) if mode == 1 else s["alpha"]
-    emissive = s["emissive"]
-    has_sheen = max(s["sheen_color"]) > 0
-    p = OpenPbr(
-        base_weight=1.0, base_color=s["base_color"], base_metalness=s["metallic"],
-        specular_weight=1.0 if metal else s["specular"], specular_color=WHITE if metal else s["specular_color"],
-        specular_roughness=s["roughness"], specular_ior=s["ior"],
-        specular_roughness_anisotropy=s["anisotropy_strength"], transmission_weight=s["transmission"],
-        transmission_color=s["attenuation_color"], transmission_depth=s["attenuation_distance"] if s["thickness"] > 0 else 0.0,
-        transmission_dispersion_scale=1.0 if s["dispersion"] > 0 else 0.0,
-        transmission_dispersion_abbe_number=20.0 / s["dispersion"] if s["dispersion"] > 0 else 20.0,
-        fuzz_weight=1.0 if has_sheen else 0.0, fuzz_color=s["sheen_color"] if has_sheen else WHITE,
-        fuzz_roughness=s["sheen_roughness"] if has_sheen else 0.5,
-        coat_weight=s["clearcoat"], coat_roughness=s["clearcoat_roughness"], coat_ior=1.5,
-        thin_film_weight=s["iridescence"],
-        thin_film_thickness=s["iridescence_thickness"] / 1000.0 if s["iridescence"] > 0 else 0.5,
-        thin_film_ior=s["iridescence_ior"] if s["iridescence"] > 0 else 1.4,
-        emission_luminance=s["emissive_strength"] if max(emissive) > 0 else 0.0,
-        emission_color=emissive if max(emissive) > 0 else WHITE, geometry_opacity=opacity,
-        geometry_thin_walled=s["transmission"] > 0 and s["thickness"] == 0)
-    if metal and (s["specular"] != 1.0 or s["specular_color"] != WHITE):
-        notes.append(f"specular {_g(s['specular'])}, specular_color {_show(s['specular_color'])} with metallic "
-                     f"{_g(s['metallic'])}: glTF applies them to the dielectric part only; the metal keeps OpenPBR's defaults")
-    if s["occlusion"] != 1.0:
-        notes.append(f"occlusion {_g(s['occlusion'])}: ambient occlusion is baked lighting, not part of a BRDF; left out")
-    return p, notes
-
-
-def usd_preview_surface_to_openpbr(inputs: Mapping[str, Any]) -> tuple[OpenPbr, list[str]]:
-    """UsdPreviewSurface inputs (missing ones at its defaults) as OpenPBR inputs, after MaterialX's
-    implementation graph of UsdPreviewSurface. The specular workflow (useSpecularWorkflow 1) becomes a
-    dielectric whose F0 is specularColor's largest channel (its IOR) and whose tint is the rest."""
-    s = _inputs("UsdPreviewSurface", USD_PREVIEW_SURFACE_DEFAULTS, inputs)
-    notes: list[str] = []
-    kw: dict[str, Any] = {}
-    if int(s["useSpecularWorkflow"]) == 1:
-        f0 = min(max(s["specularColor"]), 0.99)
-        root = math.sqrt(max(f0, 0.0))
-        tint = tuple(c / f0 for c in s["specularColor"]) if f0 > 0 else WHITE
-        kw.update(base_metalness=0.0, specular_ior=(1.0 + root) / (1.0 - root), specular_color=tint)
-        notes.append(f"useSpecularWorkflow 1: specularColor {_show(s['specularColor'])} is read as a dielectric's "
-                     f"normal-incidence reflectance (specular_ior {_g(kw['specular_ior'])}); metallic is ignored")
-    else:
-        kw.update(base_metalness=s["metallic"], specular_ior=s["ior"])
-    threshold, opacity = s["opacityThreshold"], s["opacity"]
-    if threshold > 0:
-        kw["geometry_opacity"] = 1.0 if opacity >= threshold else 0.0
-    elif int(s["opacityMode"]) == 1:
-        kw["geometry_opacity"] = opacity
-    else:
-        kw["transmission_weight"] = 1.0 - opacity
-    emissive = s["emissiveColor"]
-    peak = max(emissive)
-    if peak > 0:
-        kw.update(emission_luminance=peak, emission_color=tuple(c / peak for c in emissive))
-    p = OpenPbr(base_weight=1.0, base_color=s["diffuseColor"], specular_roughness=s["roughness"],
-                coat_weight=s["clearcoat"], coat_roughness=s["clearcoatRoughness"], coat_ior=s["ior"], **kw)
-    if s["occlusion"] != 1.0:
-        notes.append(f"occlusion {_g(s['occlusion'])}: ambient occlusion is baked lighting, not part of a BRDF; left out")
-    if s["displacement"] != 0.0:
-        notes.append(f"displacement {_g(s['displacement'])}: displacement moves geometry, not part of a BRDF; left out")
-    return p, notes

@@ -27,12 +27,8 @@ from nbrdf.neural.mtlx import (
     write_material_mtlx,
     write_mtlx,
 )
-from nbrdf.neural.openpbr import (
-    GLTF_PBR_DEFAULTS,
-    STANDARD_SURFACE_DEFAULTS,
-    USD_PREVIEW_SURFACE_DEFAULTS,
-    OpenPbr,
-)
+from nbrdf.neural.openpbr import OpenPbr
+from nbrdf.neural.surface_models import GLTF_PBR_DEFAULTS, STANDARD_SURFACE_DEFAULTS, USD_PREVIEW_SURFACE_DEFAULTS
 
 DATA = Path(__file__).parent / "data" / "mtlx"
 
