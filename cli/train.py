@@ -56,9 +56,10 @@ def cmd_train_representation(a: argparse.Namespace) -> int:
 
 def cmd_train_operation(a: argparse.Namespace) -> int:
     from nbrdf.training import train_operations as to  # late: torch costs ~1 s, --help needs none
+    from nbrdf.training import train_sampler as ts  # late: as above
 
     cls, train = {"leaf": (to.LeafConfig, to.train_leaf), "layering": (to.LayeringConfig, to.train_layering),
-                  "sampler": (to.SamplerConfig, to.train_sampler)}[a.what]
+                  "sampler": (ts.SamplerConfig, ts.train_sampler)}[a.what]
     for name in ("steps", "batch", "pairs"):
         at_least("--" + name, getattr(a, name))
     in_range("--lr", a.lr, 0.0, low_open=True)
@@ -105,8 +106,9 @@ def _representation_flags(p: Parser) -> None:
 def _operation_flags(what: str) -> Callable[[Parser], None]:
     def populate(p: Parser) -> None:
         from nbrdf.training import train_operations as to  # late: flags added on first use (torch)
+        from nbrdf.training import train_sampler as ts  # late: as above
 
-        cls = {"leaf": to.LeafConfig, "layering": to.LayeringConfig, "sampler": to.SamplerConfig}[what]
+        cls = {"leaf": to.LeafConfig, "layering": to.LayeringConfig, "sampler": ts.SamplerConfig}[what]
         p.description = cls.__doc__
         add_arguments(p, cls, exclude=() if what == "layering" else LAYERING_ONLY,
                       required=("data",) if what == "layering" else (), defaults={"decoder": None})

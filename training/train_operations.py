@@ -1,4 +1,4 @@
-"""Training of the latent operations (``nbrdf train leaf|layering|sampler``).
+"""Training of the latent operations (``nbrdf train leaf|layering``; the sampler: ``training.train_sampler``).
 
 All three train *through the frozen decoder*, so every network is judged by
 the BRDF its latents decode to, not by distances in latent space:
@@ -31,12 +31,10 @@ from tqdm import tqdm
 
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, encode, loss_target, predicted_target, unbiased_error
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC
-from nbrdf.neural.layering import CODE, LATENT, MEDIUM_SETS, LayeringNet, layering_spec
+from nbrdf.neural.layering import CODE, MEDIUM_SETS, LayeringNet, layering_spec
 from nbrdf.neural.leaf import F82, LEAF_PARAMS, LeafEncoders, leaf_spec
 from nbrdf.neural.model import NeuralModel, layered_latents, load_model, save_model
-from nbrdf.neural.sampling import SamplerNet, lambert_pdf, proxy_pdf, proxy_sample
 from nbrdf.neural.stack import CLASSES, DEEP, THREE_LAYERED, P, params_to_stack
 from nbrdf.training.analytic import GGXConductor, Lambertian
 from nbrdf.training.dataset import body_values, data_folders, load_manifest, load_split, pair_pdf, sample_pairs
@@ -127,18 +125,8 @@ class LayeringConfig(OpsConfig):
     loss: str = "mean"
 
 
-@dataclass
-class SamplerConfig(OpsConfig):
-    """``nbrdf train sampler``: the proxy-pdf network, by KL divergence to decoded lobes."""
-
-    steps: int = 3000
-    batch: int = 64
-    pairs: int = 256
-    lr: float = 3e-3
-
-
 # --- a small resumable loop ---------------------------------------------------------------
-def _run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], total: int,
+def run_loop(name: str, cfg: OpsConfig, modules: dict[str, torch.nn.Module], total: int,
               step: Callable[[int], Tensor], validate: Callable[[], float], progress: bool,
               rng: torch.Generator, scaled: tuple[tuple[Tensor, tuple, float], ...] = ()) -> dict:
     """Adam with a cosine schedule; checkpoints every 250 steps into
@@ -231,7 +219,7 @@ def _swap(params: list[Tensor], ema: list[Tensor]) -> None:
         e.copy_(t)
 
 
-def _finish(name: str, cfg: OpsConfig, model: NeuralModel, history: dict, extra: dict) -> Path:
+def finish_run(name: str, cfg: OpsConfig, model: NeuralModel, history: dict, extra: dict) -> Path:
     out = Path(cfg.out)
     save_curves({"train": history["train"]}, out / f"{name}_curves.png", xlabel="step / 50")
     model.trained_on[name] = {"config": asdict(cfg), **extra}
@@ -314,12 +302,12 @@ def train_leaf(cfg: OpsConfig, progress: bool = True) -> Path:
         return {k: loss_of(k, *val[k]).item() for k in LEAF_PARAMS}
 
     t0 = time.perf_counter()
-    history = _run_loop("leaf", cfg, {"leaf": leaf}, cfg.steps, step, validate, progress, rng=g)
+    history = run_loop("leaf", cfg, {"leaf": leaf}, cfg.steps, step, validate, progress, rng=g)
     model.leaf = leaf
     model.layering = model.layering_deep = model.sampler = None  # trained on the old leaf latents: retrain them
     for stale in ("layering", "layering_deep", "sampler"):
         model.trained_on.pop(stale, None)
-    return _finish("leaf", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
+    return finish_run("leaf", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
                                                  "val_loss": history["val"][-1]})
 
 
@@ -355,11 +343,11 @@ def _train_leaf_f82(cfg: OpsConfig, model: NeuralModel, pool: "_PairPool", g: to
         return _decoder_loss(model, leaf.encode(CONDUCTOR, params), feats, cos_o, target, s_)
 
     t0 = time.perf_counter()
-    history = _run_loop("leaf_f82", cfg, {"leaf_f82": net}, cfg.steps,
+    history = run_loop("leaf_f82", cfg, {"leaf_f82": net}, cfg.steps,
                         lambda _s: loss_of(tinted(cfg.batch, g), *pool.draw(cfg.batch, cfg.pairs, g)),
                         lambda: loss_of(*val).item(), progress, rng=g)
     model.leaf = leaf
-    return _finish("leaf_f82", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
+    return finish_run("leaf_f82", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
                                                      "val_loss": history["val"][-1]})
 
 
@@ -520,14 +508,14 @@ def train_layering(cfg: OpsConfig, progress: bool = True) -> Path:
         return out
 
     t0 = time.perf_counter()
-    history = _run_loop("layering", cfg, {"layering": net}, cfg.steps, step, validate, progress, rng=g,
+    history = run_loop("layering", cfg, {"layering": net}, cfg.steps, step, validate, progress, rng=g,
                         scaled=scaled)
     model.layering = net
     model.layering_deep = None  # the new network layers every depth until a bundle routes them (route_depth)
     model.sampler = None  # trained on the old layered latents: retrain it on these
     for stale in ("layering_deep", "sampler"):
         model.trained_on.pop(stale, None)
-    return _finish("layering", cfg, model, history, {
+    return finish_run("layering", cfg, model, history, {
         "seconds_this_run": round(time.perf_counter() - t0, 1), "val_loss": history["val"][-1],
         "data_preset": ",".join(str(m.get("preset")) for m in manifests), "train_stacks": int(two.numel() + three.numel())})
 
@@ -549,72 +537,3 @@ def route_depth(base: str | Path, deep: str | Path, out: str | Path) -> str:
     b.trained_on["layering_deep"] = {**d.trained_on.get("layering", {}), "bundle": str(deep)}
     save_model(b, out, like=base)
     return str(out)
-
-
-# --- sampler --------------------------------------------------------------------------------
-PROPOSAL_SIGMAS = (0.03, 0.12, 0.5)
-
-
-def _proposal(wi: Tensor, g: torch.Generator) -> tuple[Tensor, Tensor]:
-    """wo from an even mixture of a cosine lobe and three half-vector
-    Gaussians (narrow to wide), with the mixture's pdf."""
-    n = wi.shape[0]
-    k = torch.randint(0, 1 + len(PROPOSAL_SIGMAS), (n,), generator=g)
-    sig = torch.tensor((1.0,) + PROPOSAL_SIGMAS)[k]
-    wo, _ = proxy_sample(wi, torch.rand(n, 3, generator=g), sig, (k == 0).float())
-    pdf = lambert_pdf(wo) + sum(proxy_pdf(wi, wo, torch.tensor(s), torch.tensor(0.0)) for s in PROPOSAL_SIGMAS)
-    return wo, pdf / (1 + len(PROPOSAL_SIGMAS))
-
-
-def random_material_params(n: int, g: torch.Generator) -> Tensor:
-    """Data-set parameter vectors over every class, as the paper's distributions."""
-    return mixed_params(n, g).float()
-
-
-def sampler_targets(model: NeuralModel, z: Tensor, n_wi: int, n_wo: int, g: torch.Generator):
-    """Importance-sampled body lobes of codes z (M, 34): wi (M, n_wi, 3), wo
-    (M, n_wi, n_wo, 3), normalised weights f cos / proposal per wi (the
-    proxy serves the body; the coat is sampled exactly)."""
-    z = z[:, :LATENT]
-    M = z.shape[0]
-    a, b = torch.rand(M, n_wi, generator=g), torch.rand(M, n_wi, generator=g)
-    wi = cosine_hemisphere(a.clamp(max=1 - 1e-4), b)  # never exactly at the horizon
-    wi_r = wi[:, :, None, :].expand(M, n_wi, n_wo, 3).reshape(-1, 3)
-    wo, pdf = _proposal(wi_r, g)
-    with torch.no_grad():
-        f = model.decoder(z[:, None, :].expand(M, n_wi * n_wo, LATENT).reshape(-1, LATENT), wi_r, wo)
-    w = torch.where(wo[:, 2] > 0, f * wo[:, 2].clamp_min(0) / pdf.clamp_min(1e-12), torch.zeros_like(f))
-    w = w.view(M, n_wi, n_wo)
-    w = w / w.sum(-1, keepdim=True).clamp_min(1e-20)
-    return wi_r.view(M, n_wi, n_wo, 3), wo.view(M, n_wi, n_wo, 3), w
-
-
-def train_sampler(cfg: OpsConfig, progress: bool = True) -> Path:
-    model = load_model(cfg.decoder)
-    torch.manual_seed(cfg.seed)
-    g = torch.Generator().manual_seed(cfg.seed)
-    n_mat = max(cfg.batch * 16, 512)
-    with torch.no_grad():
-        z = stack_latents(model, random_material_params(n_mat, g))
-        z_val = stack_latents(model, random_material_params(256, g))
-    wi, wo, w = sampler_targets(model, z, 8, cfg.pairs, g)
-    vwi, vwo, vw = sampler_targets(model, z_val, 8, cfg.pairs, g)
-    net = SamplerNet()
-
-    def cross_entropy(zz: Tensor, a: Tensor, b: Tensor, ww: Tensor) -> Tensor:
-        sigma, lam = net(zz)
-        q = proxy_pdf(a, b, sigma[:, None, None], lam[:, None, None])
-        return -(ww * torch.log(q.clamp_min(1e-30))).sum(-1).mean()
-
-    def step(_s: int) -> Tensor:
-        idx = torch.randint(0, n_mat, (cfg.batch,), generator=g)
-        return cross_entropy(z[idx], wi[idx], wo[idx], w[idx])
-
-    def validate() -> float:
-        return cross_entropy(z_val, vwi, vwo, vw).item()
-
-    t0 = time.perf_counter()
-    history = _run_loop("sampler", cfg, {"sampler": net}, cfg.steps, step, validate, progress, rng=g)
-    model.sampler = net
-    return _finish("sampler", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
-                                                    "val_cross_entropy": history["val"][-1]})

@@ -166,13 +166,14 @@ def test_training_flags_default_to_the_training_configs():
     """`nbrdf train ...` with no optional flags builds exactly the training code's configs."""
     from nbrdf.neural.decoder import DEFAULT_WEIGHTS, DecoderSpec
     from nbrdf.training import train_operations as to
+    from nbrdf.training import train_sampler as ts
     from nbrdf.training.train_representation import TrainConfig
 
     p = build_parser()
     a = p.parse_args(["train", "representation", "--data", "d", "--out", "o"])
     assert build(TrainConfig, a, spec=build(DecoderSpec, a, ("width", "depth", "activation", "loss_scale"))) \
         == TrainConfig(data="d", out="o")
-    for what, cls in (("leaf", to.LeafConfig), ("layering", to.LayeringConfig), ("sampler", to.SamplerConfig)):
+    for what, cls in (("leaf", to.LeafConfig), ("layering", to.LayeringConfig), ("sampler", ts.SamplerConfig)):
         argv = ["train", what, "--out", "o"] + (["--data", "d"] if what == "layering" else [])
         a = p.parse_args(argv)
         want = cls(out="o", data="d") if what == "layering" else cls(out="o")
@@ -185,8 +186,9 @@ def test_training_flags_default_to_the_training_configs():
 def test_operation_defaults_are_the_documented_ones():
     """The per-operation defaults the command line has always had (SPEC section 8)."""
     from nbrdf.training import train_operations as to
+    from nbrdf.training import train_sampler as ts
 
-    got = {c.__name__: (c.steps, c.batch, c.pairs, c.lr) for c in (to.LeafConfig, to.LayeringConfig, to.SamplerConfig)}
+    got = {c.__name__: (c.steps, c.batch, c.pairs, c.lr) for c in (to.LeafConfig, to.LayeringConfig, ts.SamplerConfig)}
     assert got == {"LeafConfig": (6000, 32, 128, 2e-3), "LayeringConfig": (5000, 48, 192, 1e-3),
                    "SamplerConfig": (3000, 64, 256, 3e-3)}
     assert (to.LayeringConfig.recursion_steps, to.LayeringConfig.width) == (2000, 256)

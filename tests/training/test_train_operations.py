@@ -17,7 +17,8 @@ from nbrdf.neural.material import parse_material
 from nbrdf.neural.model import load_model
 from nbrdf.neural.neural_brdf import material_brdfs
 from nbrdf.training.dataset import DataConfig, generate
-from nbrdf.training.train_operations import OpsConfig, train_layering, train_leaf, train_sampler
+from nbrdf.training.train_operations import OpsConfig, train_layering, train_leaf
+from nbrdf.training.train_sampler import train_sampler
 
 STACKS = DataConfig(counts=dict(conductor=0, dielectric=0, two_layer=6, three_layer=3, diffuse_base=3),
                     val_counts=dict(conductor=0, dielectric=0, two_layer=2, three_layer=1, diffuse_base=1),
@@ -156,9 +157,9 @@ def test_moving_average_of_weights_is_shipped_and_survives_a_resume(bundles, mon
     diff = max((through[k] - v).abs().max().item() for k, v in plain.sampler.state_dict().items())
     assert diff > 1e-4  # the average is not the last step's weights
 
-    import nbrdf.training.train_operations as to
+    import nbrdf.training.train_sampler as ts
 
-    real = to._run_loop
+    real = ts.run_loop  # the shared loop, as the sampler's module holds it
 
     def stop_at_260(name, c, modules, total, step, validate, progress, rng):
         def failing(s):
@@ -168,10 +169,10 @@ def test_moving_average_of_weights_is_shipped_and_survives_a_resume(bundles, mon
         return real(name, c, modules, total, failing, validate, progress, rng=rng)
 
     resumed = replace(cfg, out=str(root / "smp_ema_resumed"))
-    monkeypatch.setattr(to, "_run_loop", stop_at_260)
+    monkeypatch.setattr(ts, "run_loop", stop_at_260)
     with pytest.raises(KeyboardInterrupt):
         train_sampler(resumed, progress=False)
-    monkeypatch.setattr(to, "_run_loop", real)
+    monkeypatch.setattr(ts, "run_loop", real)
     again = load_model(train_sampler(resumed, progress=False)).sampler.state_dict()
     for k, v in through.items():
         assert torch.allclose(again[k], v, atol=1e-6), k
