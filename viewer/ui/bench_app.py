@@ -1,6 +1,55 @@
 """``nbrdf bench app``: the window's frame time and slider-to-frame latency, measured in a real window (needs a
 display). The window is the top of the previewer, so its bench lives beside it; the offscreen benches are
-viewer/bench.py's."""
+viewer/bench.py's. ``bench_app`` measures the look-development window as a user gets it, adaptive
+resolution on (viewer/ui/refinement.py), and reports:
+
+- ``first_frame_s``: from opening the window to its first frame on screen;
+- a slider drag: ``edits`` base-roughness edits (OpenPBR's specular_roughness for a material
+  made from OpenPBR), one frame each, no still
+  frame between them; per edit the time from the edit to the end of the frame
+  that shows it (``edit_to_frame_ms_median`` / ``_max``) and the fraction of
+  the view's width that frame rendered (``edit_frame_scale``, the median);
+- ``still_full_res_s``: from the drag's last edit until a full-resolution frame is
+  on screen (the refinement's preview: one pass of the quick estimator);
+- ``still_converged_s``: from an edit until the accumulated image's relative noise is under
+  ``noise_target``, measured: one more edit, then the window hands off (a person watching the view)
+  until its accumulation holds as many passes of the still view's estimator as the noise needs
+  (the full-resolution preview, the body environment map's bake where it applies,
+  viewer/gpu/env_prefilter.py, and the passes: all on the clock; ``env_map_bake_ms`` the map's
+  own GPU time). ``still_converged_model_s``: the full-resolution preview plus the passes at
+  ``full_res_pass_idle_ms_median`` each, the figure of earlier rounds. The noise is
+  measured on the still view's own estimator and body, as viewer/gpu/noise.py
+  defines it (``noise_renders`` renders that differ only in their seed, at half the
+  view's size); the passes it needs are measured, not extrapolated
+  (``passes_to_target``: the passes are stratified, so the noise falls faster than
+  1 / sqrt(passes); ``noise_exponent`` is the measured rate, ``passes_to_converge_sqrt_law``
+  the count the square-root law would give from ``noise_spp`` passes, an upper bound);
+- ``full_res_pass_ms_median``: wall time per full-resolution pass of the still view's
+  estimator, from one completed pass to the next (a pass may be shaded over several frames), with
+  the pointer moving (the interface's short budget); ``full_res_pass_idle_ms_median`` the same hands off;
+- ``edit_to_frame_cpu_ms_median``, ``full_res_pass_cpu_ms_median``: CPU time of an edit's
+  frame and of a full-resolution pass, all
+  threads (llvmpipe's included): what a pass needs of the machine, whatever else runs on it;
+- ``ui_frame_ms_p95`` (and ``_median``, ``_max``, over ``ui_frames`` frames): the interface's frame
+  time while the still view accumulates -- the wall time between consecutive imgui frames on
+  screen, from the first full-resolution frame until ``still_passes`` more passes are complete and
+  ``UI_WINDOW_S`` seconds have passed (the window reads input only between frames: this is how long
+  a click may wait; target <= 50),
+  with the pointer moving over the window each frame, as a person's hand does (hands off for
+  ``RefinementSettings.idle_after_s``, still frames take the longer idle budget: the view converges
+  faster and the first event after it waits one such frame);
+  ``ui_frame_compiles``: how many of those frames compiled a shader variant the session had not
+  used yet (viewer/ui/program_warmup.py: once the window is idle, one per frame, hundreds of
+  milliseconds each on llvmpipe, early in a session only);
+- ``input_latency_ms_p95`` (and ``_median``, over ``clicks`` clicks): from a click on a panel's
+  combo box to the end of the frame that shows its list open. The click goes through the
+  window's own glfw mouse callback (the path a real click takes); it is delivered before a
+  frame, and its arrival time is drawn uniformly within the frame before (a real click lands
+  at any moment of a frame and waits for the next one), so the figure is that wait plus the
+  frame that shows it. ``input_latency_frames_max``: the most frames a click took to show (1:
+  the next frame). A second click closes the list between clicks;
+- the machine's load average (1 minute) before and after: other work on the machine slows every figure.
+"""
 from __future__ import annotations
 
 import os
@@ -24,57 +73,8 @@ UI_WINDOW_S = 10.0
 def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int = 3,
               noise_target: float = 0.01, noise_renders: int = 4, noise_spp: int = 4,
               still_passes: int = 4, clicks: int = 8, material: str | None = None) -> dict:
-    """The look-development window (needs a display; Xvfb will do) as a user gets
-    it, adaptive resolution on (viewer/ui/refinement.py):
-
-    - ``first_frame_s``: from opening the window to its first frame on screen;
-    - a slider drag: ``edits`` base-roughness edits (OpenPBR's specular_roughness for a material
-      made from OpenPBR), one frame each, no still
-      frame between them; per edit the time from the edit to the end of the frame
-      that shows it (``edit_to_frame_ms_median`` / ``_max``) and the fraction of
-      the view's width that frame rendered (``edit_frame_scale``, the median);
-    - ``still_full_res_s``: from the drag's last edit until a full-resolution frame is
-      on screen (the refinement's preview: one pass of the quick estimator);
-    - ``still_converged_s``: from an edit until the accumulated image's relative noise is under
-      ``noise_target``, measured: one more edit, then the window hands off (a person watching the view)
-      until its accumulation holds as many passes of the still view's estimator as the noise needs
-      (the full-resolution preview, the body environment map's bake where it applies,
-      viewer/gpu/env_prefilter.py, and the passes: all on the clock; ``env_map_bake_ms`` the map's
-      own GPU time). ``still_converged_model_s``: the full-resolution preview plus the passes at
-      ``full_res_pass_idle_ms_median`` each, the figure of earlier rounds. The noise is
-      measured on the still view's own estimator and body, as viewer/gpu/noise.py
-      defines it (``noise_renders`` renders that differ only in their seed, at half the
-      view's size); the passes it needs are measured, not extrapolated
-      (``passes_to_target``: the passes are stratified, so the noise falls faster than
-      1 / sqrt(passes); ``noise_exponent`` is the measured rate, ``passes_to_converge_sqrt_law``
-      the count the square-root law would give from ``noise_spp`` passes, an upper bound);
-    - ``full_res_pass_ms_median``: wall time per full-resolution pass of the still view's
-      estimator, from one completed pass to the next (a pass may be shaded over several frames), with
-      the pointer moving (the interface's short budget); ``full_res_pass_idle_ms_median`` the same hands off;
-    - ``edit_to_frame_cpu_ms_median``, ``full_res_pass_cpu_ms_median``: CPU time of an edit's
-      frame and of a full-resolution pass, all
-      threads (llvmpipe's included): what a pass needs of the machine, whatever else runs on it;
-    - ``ui_frame_ms_p95`` (and ``_median``, ``_max``, over ``ui_frames`` frames): the interface's frame
-      time while the still view accumulates -- the wall time between consecutive imgui frames on
-      screen, from the first full-resolution frame until ``still_passes`` more passes are complete and
-      ``UI_WINDOW_S`` seconds have passed (the window reads input only between frames: this is how long
-      a click may wait; target <= 50),
-      with the pointer moving over the window each frame, as a person's hand does (hands off for
-      ``RefinementSettings.idle_after_s``, still frames take the longer idle budget: the view converges
-      faster and the first event after it waits one such frame);
-      ``ui_frame_compiles``: how many of those frames compiled a shader variant the session had not
-      used yet (viewer/ui/program_warmup.py: once the window is idle, one per frame, hundreds of
-      milliseconds each on llvmpipe, early in a session only);
-    - ``input_latency_ms_p95`` (and ``_median``, over ``clicks`` clicks): from a click on a panel's
-      combo box to the end of the frame that shows its list open. The click goes through the
-      window's own glfw mouse callback (the path a real click takes); it is delivered before a
-      frame, and its arrival time is drawn uniformly within the frame before (a real click lands
-      at any moment of a frame and waits for the next one), so the figure is that wait plus the
-      frame that shows it. ``input_latency_frames_max``: the most frames a click took to show (1:
-      the next frame). A second click closes the list between clicks;
-    - the machine's load average (1 minute) before and after: other work on the machine slows every figure.
-
-    ``material``: the file the window opens (default: the previewer's default material)."""
+    """The look-development window (needs a display; Xvfb will do) as a user gets it: the figures of the
+    module docstring. ``material``: the file the window opens (default: the previewer's default material)."""
 
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
@@ -85,18 +85,8 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
         first_frame_s = time.perf_counter() - t0
         for _ in range(warmup):  # the still view's programs and tables
             app.step()
-        latency, edit_cpu, scales, latent, bake = [], [], [], [], []
         base = len(ld.editor.layers) - 1
-        t_edit = time.perf_counter()
-        for k in range(edits):  # a drag: one edit per frame
-            t_edit, c_edit = time.perf_counter(), time.process_time()
-            _roughness_edit(ld, base, 0.2 + 0.05 * (k % 4))
-            app.step()
-            latency.append((time.perf_counter() - t_edit) * 1000.0)
-            edit_cpu.append((time.process_time() - c_edit) * 1000.0)
-            scales.append(app.scale)
-            latent.append(ld.timings.latent_ms)
-            bake.append(ld.bodies.tables.bake_ms)
+        latency, edit_cpu, scales, latent, bake, t_edit = _drag(app, base, edits)
         _until_full_resolution(app)
         full_res_s = time.perf_counter() - t_edit
         built = len(app.warmup.built)
@@ -108,17 +98,9 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
         _roughness_edit(ld, base, 0.27)
         _until_full_resolution(app)
         _, idle_passes, _ = _still_frames(app, still_passes, hover=False)
-        # The noise of the still view's estimator, per pass.
         _, _, vw, vh = app.viewport()
+        per_pass, need, rate, need_sqrt = _still_noise(app, noise_target, noise_renders, noise_spp)
         r = ld.renderer
-        body = ld.bodies.for_frame(ld.brdf, interactive=False)
-        state = replace(ld.state, background=False)
-        r.quick = False
-        noise = lambda spp: float(per_pixel_noise(*lit_seeds(r, state, vw, vh, spp, noise_renders, body)[:2]).mean())
-        rel = noise(noise_spp)
-        per_pass = rel * noise_spp ** 0.5
-        need_sqrt = max(1, int(np.ceil((per_pass / noise_target) ** 2)))
-        need, rate = passes_to_target(noise, noise_spp, noise_target)
         pass_ms = statistics.median(passes)
         idle_pass_ms = statistics.median(idle_passes)
         # watching the view after an edit (hands off): the full-resolution preview is not accumulated
@@ -160,6 +142,42 @@ def bench_app(size: tuple[int, int] = (1000, 620), edits: int = 8, warmup: int =
         }
     finally:
         app.close()
+
+
+def _drag(app, layer: int, edits: int) -> tuple[list[float], list[float], list[float], list[float], list[float],
+                                                 float]:
+    """A slider drag, one roughness edit of ``layer`` per frame: per edit its wall and CPU time to the end of
+    the frame that shows it (ms), that frame's scale, the latent update's and the table bake's ms; and the
+    clock at the last edit."""
+    ld = app.lookdev
+    latency, cpu, scales, latent, bake = [], [], [], [], []
+    t_edit = time.perf_counter()
+    for k in range(edits):
+        t_edit, c_edit = time.perf_counter(), time.process_time()
+        _roughness_edit(ld, layer, 0.2 + 0.05 * (k % 4))
+        app.step()
+        latency.append((time.perf_counter() - t_edit) * 1000.0)
+        cpu.append((time.process_time() - c_edit) * 1000.0)
+        scales.append(app.scale)
+        latent.append(ld.timings.latent_ms)
+        bake.append(ld.bodies.tables.bake_ms)
+    return latency, cpu, scales, latent, bake, t_edit
+
+
+def _still_noise(app, target: float, renders: int, spp: int) -> tuple[float, int, float, int]:
+    """The still view's estimator's relative noise per pass (viewer/gpu/noise.py, ``renders`` seeds of ``spp``
+    passes at half the view's size), the passes it needs to reach ``target`` (measured), its rate, and the
+    count the square-root law gives (an upper bound: the passes are stratified)."""
+    ld = app.lookdev
+    _, _, vw, vh = app.viewport()
+    r = ld.renderer
+    body = ld.bodies.for_frame(ld.brdf, interactive=False)
+    state = replace(ld.state, background=False)
+    r.quick = False
+    noise = lambda n: float(per_pixel_noise(*lit_seeds(r, state, vw, vh, n, renders, body)[:2]).mean())
+    per_pass = noise(spp) * spp ** 0.5
+    need, rate = passes_to_target(noise, spp, target)
+    return per_pass, need, rate, max(1, int(np.ceil((per_pass / target) ** 2)))
 
 
 def _until_full_resolution(app, frames: int = 2000) -> None:
