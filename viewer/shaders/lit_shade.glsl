@@ -317,12 +317,23 @@ vec3 add_lights(mat3 to_local, vec3 wo, vec3 world, vec3 color) {
 // The still view where the body's environment light is pre-integrated over the
 // object's normals (env_table.glsl, viewer/gpu/env_prefilter.py): the lights (the
 // whole BRDF), the body's environment light from the map at the shading normal
-// (one fetch), and the clear coat's environment light from its own visible-normal
-// samples (u_coat_samples), nothing else. A program of its own: llvmpipe runs the
+// (one fetch), and the clear coat's environment light from u_coat_samples of its own
+// visible normals and a quarter as many of the environment's CDF (balance heuristic), nothing else. A program of its own: llvmpipe runs the
 // straight-line code of every branch under a mask, so the sampling strategies this
 // pass does not use are compiled out, not skipped.
 //@INCLUDE env_table.glsl
 uniform sampler2D u_env_table;
+
+#ifdef NB_SPLIT_COAT
+// One sampled direction l (local; lw in world) of the coat's environment light, weighted by the balance
+// heuristic over its n visible-normal and ne environment-CDF samples.
+vec3 coat_env_sample(vec3 wo, vec3 l, vec3 lw, vec2 coat, int n, int ne) {
+    if (l.z <= 0.0) return vec3(0.0);
+    float p = float(n) * coat_pdf(wo, l, coat) + float(ne) * pdf_env(lw);
+    return p > 0.0 ? clamp_contribution(coat_eval(l, wo, coat) * l.z * env_radiance(lw) * u_env_intensity / p)
+                   : vec3(0.0);
+}
+#endif
 
 vec3 shade_lit_mapped(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index) {
     mat3 to_local = transpose(tbn);
@@ -332,14 +343,22 @@ vec3 shade_lit_mapped(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index
     if (u_env_on == 0) return color;
     if ((u_terms & TERM_ENV_BODY) != 0) color += textureLod(u_env_table, env_table_uv(tbn[2]), 0.0).rgb;
 #ifdef NB_SPLIT_COAT
+    // The coat: its visible-normal samples and a quarter as many of the environment's CDF, balance
+    // heuristic. Its own samples alone left a small bright source (the sky's sun) to the few that hit
+    // it: fireflies the 16-pass cap no longer averaged away (record 121).
     vec2 coat = coat_code();
-    int n = coat_params(coat).y > 1.0 + 1e-4 && (u_terms & TERM_LOBE_COAT) != 0 ? max(u_coat_samples, 0) : 0;
+    bool coated = coat_params(coat).y > 1.0 + 1e-4;
+    int n = coated && (u_terms & TERM_LOBE_COAT) != 0 ? max(u_coat_samples, 0) : 0;
+    int ne = coated && (u_terms & TERM_ENV_COAT) != 0 ? max(u_coat_samples, 0) / 4 : 0;  // 0 in the edits' quick frames
+    // two loops, not a branch per sample: llvmpipe runs both sides of a branch under a mask
     for (int j = 0; j < n; ++j) {
         vec3 l = coat_sample(wo, rand3(px, pass_index * uint(n) + uint(j), STREAM_COAT, u_seed).xy, coat);
-        if (l.z <= 0.0) continue;
-        float pc = float(n) * coat_pdf(wo, l, coat);
-        if (pc > 0.0)
-            color += clamp_contribution(coat_eval(l, wo, coat) * l.z * env_radiance(tbn * l) * u_env_intensity / pc);
+        color += coat_env_sample(wo, l, tbn * l, coat, n, ne);
+    }
+    for (int j = 0; j < ne; ++j) {
+        float unused;
+        vec3 lw = sample_env(rand3(px, pass_index * uint(ne) + uint(j), STREAM_ENV, u_seed).xy, unused);
+        color += coat_env_sample(wo, to_local * lw, lw, coat, n, ne);
     }
 #endif
     return color;
