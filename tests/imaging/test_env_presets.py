@@ -144,3 +144,11 @@ def test_resolver_names_paths_and_errors(tmp_path):
         make_environment("sky", 0, 16)
     with pytest.raises(NbrdfError, match="expected one of"):
         make_environment("beach")
+
+
+@pytest.mark.parametrize("name, peaked", [("sky", True), ("studio", False), ("softbox", False)])
+def test_a_sun_makes_an_environment_peaked(name, peaked):
+    """The sky's sun holds about half its power in 0.1 % of the sphere; the studio's and the softbox's
+    panels are broad (record 121: the still pass samples the environment for the coat under a sun only)."""
+    assert EnvironmentMap(make_environment(name, 256, 128)).peaked is peaked
+    assert not EnvironmentMap(np.ones((32, 64, 3), np.float32)).peaked  # uniform: 0.1 % of the power there

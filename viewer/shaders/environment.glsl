@@ -6,6 +6,7 @@ uniform sampler2D u_env;              // W x H linear RGB radiance
 uniform sampler2D u_env_marginal;     // (H + 1) x 1 CDF over rows
 uniform sampler2D u_env_conditional;  // (W + 1) x H CDF per row
 uniform ivec2 u_env_size;             // W, H
+uniform int u_env_peaked;             // a small bright source holds much of the power (EnvironmentMap.peaked)
 uniform float u_env_rotation;         // radians about world z
 
 vec3 env_rotate(vec3 d, float a) {

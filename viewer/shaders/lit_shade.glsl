@@ -318,7 +318,7 @@ vec3 add_lights(mat3 to_local, vec3 wo, vec3 world, vec3 color) {
 // object's normals (env_table.glsl, viewer/gpu/env_prefilter.py): the lights (the
 // whole BRDF), the body's environment light from the map at the shading normal
 // (one fetch), and the clear coat's environment light from u_coat_samples of its own
-// visible normals and a quarter as many of the environment's CDF (balance heuristic), nothing else. A program of its own: llvmpipe runs the
+// visible normals (and a quarter as many of the environment's CDF under a sun, balance heuristic). A program of its own: llvmpipe runs the
 // straight-line code of every branch under a mask, so the sampling strategies this
 // pass does not use are compiled out, not skipped.
 //@INCLUDE env_table.glsl
@@ -329,7 +329,9 @@ uniform sampler2D u_env_table;
 // heuristic over its n visible-normal and ne environment-CDF samples.
 vec3 coat_env_sample(vec3 wo, vec3 l, vec3 lw, vec2 coat, int n, int ne) {
     if (l.z <= 0.0) return vec3(0.0);
-    float p = float(n) * coat_pdf(wo, l, coat) + float(ne) * pdf_env(lw);
+    float pe = 0.0;
+    for (int t = 0; t < min(ne, 1); ++t) pe = pdf_env(lw);  // a loop, not a branch: skipped where ne is 0
+    float p = float(n) * coat_pdf(wo, l, coat) + float(ne) * pe;
     return p > 0.0 ? clamp_contribution(coat_eval(l, wo, coat) * l.z * env_radiance(lw) * u_env_intensity / p)
                    : vec3(0.0);
 }
@@ -343,13 +345,14 @@ vec3 shade_lit_mapped(mat3 tbn, vec3 view, vec3 world, uvec2 px, uint pass_index
     if (u_env_on == 0) return color;
     if ((u_terms & TERM_ENV_BODY) != 0) color += textureLod(u_env_table, env_table_uv(tbn[2]), 0.0).rgb;
 #ifdef NB_SPLIT_COAT
-    // The coat: its visible-normal samples and a quarter as many of the environment's CDF, balance
-    // heuristic. Its own samples alone left a small bright source (the sky's sun) to the few that hit
-    // it: fireflies the 16-pass cap no longer averaged away (record 121).
+    // The coat: its visible-normal samples and, under a peaked environment, a quarter as many of the
+    // environment's CDF, balance heuristic. Its own samples alone left a small bright source (the sky's
+    // sun) to the few that hit it: fireflies the 16-pass cap no longer averaged away (record 121).
     vec2 coat = coat_code();
     bool coated = coat_params(coat).y > 1.0 + 1e-4;
     int n = coated && (u_terms & TERM_LOBE_COAT) != 0 ? max(u_coat_samples, 0) : 0;
-    int ne = coated && (u_terms & TERM_ENV_COAT) != 0 ? max(u_coat_samples, 0) / 4 : 0;  // 0 in the edits' quick frames
+    // a peaked environment only (a sun: EnvironmentMap.peaked); 0 in the edits' quick frames (1 coat sample)
+    int ne = coated && u_env_peaked != 0 && (u_terms & TERM_ENV_COAT) != 0 ? max(u_coat_samples, 0) / 4 : 0;
     // two loops, not a branch per sample: llvmpipe runs both sides of a branch under a mask
     for (int j = 0; j < n; ++j) {
         vec3 l = coat_sample(wo, rand3(px, pass_index * uint(n) + uint(j), STREAM_COAT, u_seed).xy, coat);
