@@ -31,7 +31,6 @@ class SamplerConfig(OpsConfig):
     lr: float = 3e-3
 
 
-
 PROPOSAL_SIGMAS = (0.03, 0.12, 0.5)
 
 
