@@ -151,10 +151,13 @@ def test_the_map_is_baked_again_when_what_it_depends_on_changes(setup):
         assert lit.prefilter_rows(lit.prefilter_key(turned, body, env)) == 0
         lit.bake_prefilter(turned, body, env, rows=8)
         assert lit.prefilter_rows(lit.prefilter_key(turned, body, env)) == 8
-        # two maps are kept (the BRDF blend shades two bodies): the first is still complete
+        # the maps of the view before are kept (an undo goes back to it): the first is still complete
         assert lit.prefilter_rows(key) == SMALL.size
         moved = replace(state, camera=replace(state.camera, yaw=state.camera.yaw + 10.0))
         assert lit.prefilter_key(moved, body, env) not in (key, lit.prefilter_key(turned, body, env))
+        # a third view: the first one's map is stale (an orbit makes a view a frame), its texture reused
+        lit.bake_prefilter(moved, body, env, rows=8)
+        assert lit.prefilter_rows(key) == 0 and lit.prefilter_rows(lit.prefilter_key(turned, body, env)) == 8
     finally:
         r.settings.prefilter = None
 

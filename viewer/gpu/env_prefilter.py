@@ -158,9 +158,14 @@ class _Map:
 class EnvPrefilter:
     """Bakes and keeps the still view's body environment maps: one per key, the last
     ``KEPT`` keys (the window's BRDF blend shades two bodies at once, each an OpenPBR mix of up to
-    four components)."""
+    four components) of the last ``VIEWS_KEPT`` views."""
 
     KEPT = 8
+    VIEWS_KEPT = 2
+    """Views (the key's second part: camera, environment, sampling) whose maps are kept: the current
+    one and the one before it (an undo goes back to it; a capture's frames interleave with the
+    window's). An older view's maps are stale, and an orbit makes a new view every frame: kept to
+    ``KEPT``, they held textures that nothing reads again (the soak's live GL objects grew)."""
 
     def __init__(self, kit: DrawKit, settings: PrefilterSettings | None = None):
         self.kit, self.ctx = kit, kit.ctx
@@ -188,28 +193,35 @@ class EnvPrefilter:
                 and (not brdf.anisotropic or (parallels and self.settings.anisotropic_draws > 0)))
 
     def key(self, state: ViewState, brdf: GpuBrdf, env, sampling: LitSampling, radius: float = 1.0) -> tuple:
-        """What the map depends on: the body (its code and closed-form uniforms), the camera,
-        the environment, its rotation and intensity, the sampling and the settings."""
+        """What the map depends on, as (body, view): the body (its code and closed-form uniforms), and
+        the camera, the environment, its rotation and intensity, the sampling and the settings."""
         h = hashlib.blake2b(digest_size=16)
         if brdf.latent is not None:
             h.update(brdf.latent.detach().cpu().numpy().tobytes())
         h.update(repr(sorted((k, np.asarray(v).tolist()) for k, v in brdf.uniforms.items())).encode())
         eye = tuple(round(float(v), 7) for v in state.camera.eye())
-        return (h.hexdigest(), id(brdf.body_table), brdf.body_table.size, eye, id(env), float(state.env_rotation),
-                float(state.env_intensity), sampling.seed, sampling.ris_candidates, sampling.lobe_candidates,
-                round(radius, 6), self.settings)
+        return ((h.hexdigest(), id(brdf.body_table), brdf.body_table.size),
+                (eye, id(env), float(state.env_rotation), float(state.env_intensity), sampling.seed,
+                 sampling.ris_candidates, sampling.lobe_candidates, round(radius, 6), self.settings))
 
     def ready(self, key: tuple) -> bool:
         """True when the map of ``key`` is complete."""
         return self.rows_done(key) >= self.size
 
     def _map(self, key: tuple) -> _Map:
-        """The map of ``key``, started (a texture reused from the oldest key past ``KEPT``)."""
+        """The map of ``key``, started: a texture reused from the maps of views older than the last
+        ``VIEWS_KEPT`` (the others of those released), or else from the oldest key past ``KEPT``."""
         m = self._maps.pop(key, None)
         if m is None:
+            others = dict.fromkeys(k[1] for k in reversed(self._maps) if k[1] != key[1])  # the most recent first
+            views = {key[1], *list(others)[:self.VIEWS_KEPT - 1]}
+            spare = [self._maps.pop(k).texture for k in [k for k in self._maps if k[1] not in views]]
             if len(self._maps) >= self.KEPT:
-                old = self._maps.pop(next(iter(self._maps)))
-                m = _Map(old.texture)
+                spare.append(self._maps.pop(next(iter(self._maps))).texture)
+            if spare:
+                m = _Map(spare.pop())
+                for tex in spare:
+                    tex.release()
             else:
                 tex = self.ctx.texture((self.size, self.size), 4, dtype="f4")
                 tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
