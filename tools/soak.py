@@ -220,6 +220,11 @@ def run(edits: int, seed: int, every: int, warmup: float, repeat: int = 1, size=
     from nbrdf.viewer.ui.app import App
 
     rng = random.Random(seed)
+    # llvmpipe frees a scene's binned draws (a sphere's G-buffer draw: 11 MB of heap) only when it bins into that
+    # scene again, and it takes its first idle scene: with rasterizer threads, which one is idle follows their
+    # timing, so such a draw stays held or not at random for a whole pass. Without threads (set before the context
+    # is made; other drivers ignore it) every scene is done at once and the first is always the one reused.
+    os.environ.setdefault("LP_NUM_THREADS", "0")
     app = App(ViewOptions(size=size), size=size)
     # Render sizes that do not depend on the machine's speed (the interactive scale steps up frame by frame
     # as on a fast machine, never down): the same edits make the same targets, the measurement is of leaks.

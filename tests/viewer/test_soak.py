@@ -26,7 +26,7 @@ SOAK = Path(__file__).resolve().parents[2] / "tools" / "soak.py"
 #: edits); a latent texture, a reference image or a set of render targets kept per edit is more.
 HEAP_GROWTH_MB = 4.0
 #: The median step of the heap in use between the replay's samples (5 edits apart) that is a leak: 160 KB per
-#: edit (a clean replay's steps: -0.1-0 MB, with one of -12.5 where caches are emptied; 256 KB per edit: 1.1-1.4).
+#: edit (a clean replay's steps: -0.1-0 MB; 256 KB per edit: 1.1-1.4).
 HEAP_STEP_MB = 0.8
 EDITS = 25
 
@@ -62,9 +62,9 @@ def leaks(res: dict) -> dict[str, object]:
                    + [(second if p else first)["malloc_mb"]["used"]]) for p in (False, True)}
     if used[True] - used[False] >= HEAP_GROWTH_MB:
         found["heap in use"] = used
-    # the replay's steady growth: the median of the heap's steps between its samples (every 5 edits). A cache
-    # filled or emptied once is one step (the window frees 10-13 MB of caches late in a pass, which hid a leak
-    # from the ends above); a leak is every step
+    # the replay's steady growth: the median of the heap's steps between its samples (every 5 edits). A one-off
+    # release is one step (llvmpipe's binned draws, 11 MB, once freed at random: tools/soak.py now runs it
+    # without rasterizer threads); a leak is every step
     replay = [s["malloc_mb"]["used"] for s in states if s["edit"] >= EDITS]
     steps = [b - a for a, b in zip(replay, replay[1:])]
     if steps and statistics.median(steps) >= HEAP_STEP_MB:
@@ -84,5 +84,4 @@ def test_the_short_soak_sees_an_injected_leak(xvfb_display, tmp_path):
     """256 KB of heap and one 4 x 4 texture kept per edit: every criterion it touches fails."""
     res = short_soak(xvfb_display, tmp_path, "--leak-kb", "256", "--leak-gl")
     found = leaks(res)
-    assert {"gl after each pass", "gl in one state"} <= set(found), found
-    assert {"heap in use", "heap in use, per step"} & set(found), found
+    assert {"gl after each pass", "gl in one state", "heap in use", "heap in use, per step"} <= set(found), found

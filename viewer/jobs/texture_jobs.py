@@ -84,6 +84,13 @@ class TextureJobs:
         """A build ended (done or failed) and waits to be picked up by ``texture``."""
         return self.job is not None and (self.job.result is not None or self.job.error is not None)
 
+    def drop_finished(self) -> None:
+        """Forgets a build that ended without ``texture`` picking it up (the material shown is no longer
+        its own): kept, it stayed ``finished``, so the session applied the shown material again every
+        frame (its still view restarting each time) and held the unused texture."""
+        if self.finished:
+            self.job = None
+
     @property
     def progress(self) -> float | None:
         """The running build's share done (None: none running)."""

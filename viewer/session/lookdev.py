@@ -372,6 +372,7 @@ class LookDev(SessionEdits, Captures):
         if self.textures.finished:
             if not self.guarded(self._apply_material):
                 self._keep_shown_material()
+            self.textures.drop_finished()  # a build the material shown did not take: applied once, not every frame
             self.notice = ""
         due = self._conserve_due
         if due is not None and time.monotonic() - due[1] >= CONSERVE_AFTER_S:
