@@ -241,8 +241,9 @@ def _transmittance(w: Tensor, eta: Tensor) -> Tensor:
 def _d_ratio(hpz: Tensor, he: Tensor, a0: Tensor) -> Tensor:
     """D(h') / D(h_e) of isotropic GGX at alpha ``a0``: h' the warped half vector (its z ``hpz``), h_e
     the half vector (unnormalised) of the pair the decoder is read at. They differ where a warped
-    direction was lifted (``_lifted``) or, under a coat, clamped to its critical cone (``_outside``):
-    the decoder's value there has the D of h_e, not of h' (1 up to rounding elsewhere; decision 120)."""
+    direction was lifted (``_lifted``), clamped to a coat's critical cone (``_outside``) or raised to
+    the floor (``_floored``): the decoder's value there has the D of h_e, not of h' (1 up to rounding
+    elsewhere; decision 120)."""
     hez = he[..., 2] / he.norm(dim=-1).clamp_min(1e-30)
     a2m1 = a0 * a0 - 1.0
     d = (hez * hez * a2m1 + 1.0) / (hpz * hpz * a2m1 + 1.0)

@@ -318,9 +318,11 @@ vec3 add_lights(mat3 to_local, vec3 wo, vec3 world, vec3 color) {
 // object's normals (env_table.glsl, viewer/gpu/env_prefilter.py): the lights (the
 // whole BRDF), the body's environment light from the map at the shading normal
 // (one fetch), and the clear coat's environment light from u_coat_samples of its own
-// visible normals (and a quarter as many of the environment's CDF under a sun, balance heuristic). A program of its own: llvmpipe runs the
-// straight-line code of every branch under a mask, so the sampling strategies this
-// pass does not use are compiled out, not skipped.
+// visible normals (and a quarter as many of the environment's CDF under a sun, balance
+// heuristic). A program of its own: llvmpipe runs the straight-line code of every branch
+// under a mask, so the sampling strategies this pass does not use are compiled out, not
+// skipped (so the coat's balance heuristic here is not shade_lit's coat_mis_pdf, which
+// would evaluate the body's pdf and the environment's for every sample).
 //@INCLUDE env_table.glsl
 uniform sampler2D u_env_table;
 
