@@ -9,9 +9,10 @@ same lights and environment as the neural image: its clear coat (the top
 interface's single reflection, exact in closed form) is accumulated on the GPU
 under the environment like the neural image's coat, and the worker estimates
 the rest per pixel -- the lights with the whole BRDF, the environment on the
-body -- from this module's G-buffer of shading frames (reference_sum.frag adds
-the two). The reference's key leaves out the compare mode and the render
-scale, so switching modes keeps its samples. The
+body -- from a G-buffer of shading frames (viewer/reference/mc_jobs.py, which
+makes the worker's jobs; reference_sum.frag adds the two). The reference's
+key leaves out the compare mode and the render scale, so switching modes
+keeps its samples. The
 compositor draws A alone, A | B, an A/B wipe, the relative error in false
 colour, the HDR-FLIP map (NVIDIA's ``flip-evaluator``, computed on the CPU
 from the two linear images whenever either has refined, shown in magma with
@@ -22,19 +23,17 @@ from __future__ import annotations
 
 import hashlib
 import math
-import os
-import tempfile
 from collections.abc import Callable
-from dataclasses import asdict, replace
+from dataclasses import replace
 
 import moderngl
 import numpy as np
 import torch
 
 from nbrdf.imaging.tonemap import ToneMap
-from nbrdf.neural.anisotropy import anisotropic_layers, anisotropy_vector, geometric_alpha
+from nbrdf.neural.anisotropy import anisotropy_vector, geometric_alpha
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import Conductor, Dielectric, Material
+from nbrdf.neural.material import Material
 from nbrdf.training.refine import material_hash
 from nbrdf.viewer.gpu import shaders
 from nbrdf.viewer.gpu.labels import Label, Labels
@@ -43,17 +42,13 @@ from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf, analytic_capable
 from nbrdf.viewer.gpu.renderer import Renderer, Shaded
 from nbrdf.viewer.modes import CompareMode, View
 from nbrdf.viewer.reference.flip_view import FlipView
-from nbrdf.viewer.reference.lit import LitJob, frames_from_normals, to_local, turned_frames
-from nbrdf.viewer.reference.worker import ReferenceJob, ReferenceWorker, lobe_job, slice_job
+from nbrdf.viewer.reference.mc_jobs import MonteCarloJobs
+from nbrdf.viewer.reference.worker import ReferenceJob, ReferenceWorker
 from nbrdf.viewer.view_settings import ViewState
 
-OBJECT_REF_SIZE = 160  # the Monte Carlo object reference's longest side, pixels
-SLICE_REF_SIZE = 96    # the Monte Carlo slice reference's longest side, pixels
 REFERENCE_SLOT = "reference"
 #: The lit pass's terms of the reference's GPU part: the coat's environment light alone.
 COAT_TERMS = Term.ENV_COAT | Term.LOBE_COAT
-#: The direction strategy around the mirror direction is never sharper than this GGX alpha.
-MIN_LOBE_ALPHA = 0.05
 #: The placeholder's hatch, two greys (display values): a reference's side until its first image.
 PLACEHOLDER_GREYS = (0.24, 0.32)
 #: The placeholder's words while the Monte Carlo worker has sent no round of the view yet.
@@ -92,18 +87,9 @@ def _exact_coat(brdf: GpuBrdf, material: Material) -> GpuBrdf:
     return replace(brdf, uniforms=uniforms)
 
 
-def lobe_alpha(material: Material) -> float | None:
-    """GGX alpha of the reference's direction strategy around the mirror direction:
-    the roughest interface's or glossy base's (a diffuse base: None, the cosine
-    lobe and the environment serve)."""
-    base = material.base
-    if not isinstance(base, (Conductor, Dielectric)):
-        return None
-    return max(MIN_LOBE_ALPHA, float(base.roughness), *(float(i.roughness) for i, _ in material.interfaces))
-
-
-class Compare:
-    """The reference source (closed form or Monte Carlo worker) and the compositor."""
+class Compare(MonteCarloJobs):
+    """The reference source (closed form or Monte Carlo worker) and the compositor; the worker's jobs
+    are made by ``MonteCarloJobs`` (viewer/reference/mc_jobs.py)."""
 
     def __init__(self, ctx: moderngl.Context, renderer: Renderer, worker: ReferenceWorker | None = None):
         self.ctx, self.renderer = ctx, renderer
@@ -133,109 +119,7 @@ class Compare:
         self.flip = FlipView(ctx)
         """The FLIP view's map (viewer/reference/flip_view.py)."""
 
-    # --- Monte Carlo jobs ---------------------------------------------------------------
-    def _env_identity(self) -> tuple[str, str]:
-        """(content hash, .npy file) of the renderer's environment, written once per
-        environment for the worker process (which reads, never receives, the map)."""
-        env = self.renderer.env
-        if self._env_file is None or self._env_file[0] is not env:
-            radiance = np.ascontiguousarray(env.env.radiance, np.float32)
-            digest = hashlib.sha1(radiance.tobytes()).hexdigest()[:16]
-            path = os.path.join(tempfile.gettempdir(), f"nbrdf-reference-env-{os.getpid()}-{digest}.npy")
-            if not os.path.exists(path):
-                np.save(path, radiance)
-            if self._env_file is not None and self._env_file[2] != path:
-                _remove(self._env_file[2])
-            self._env_file = (env, digest, path)
-        return self._env_file[1], self._env_file[2]
-
-    def job_key(self, material: Material, state: ViewState, size: tuple[int, int] | None, scene: str) -> str:
-        """The cache key of a view's reference: material document, view, and what
-        decides the pairs (incidence; size; camera, lights, environment and mesh)
-        -- not the compare mode, nor the render scale."""
-        view = View.parse(state.view)
-        doc = material_hash(material)  # the content (and a file layer's folder), not the name: a rename keeps it
-        extra = {View.LOBE: f"{state.theta_i:.3f}", View.SLICE: f"{size}", View.OBJECT: f"{size}"}[view]
-        cam = asdict(state.camera) if view == View.OBJECT else {}
-        light = ()
-        if view == View.OBJECT:
-            env = (self._env_identity()[0], state.env_rotation, state.env_intensity) if state.env_on else None
-            light = (tuple(state.light_dir), state.light_radiance, state.point_light, state.point_intensity, env,
-                     scene)
-        return hashlib.sha1(f"{doc}|{view.value}|{extra}|{cam}|{light}".encode()).hexdigest()
-
-    def job(self, material: Material, state: ViewState, key: str, size: tuple[int, int],
-            brdf: GpuBrdf | None, aspect: float | None = None) -> ReferenceJob | LitJob:
-        """The Monte Carlo job of a stack's view (the lit object from a G-buffer at
-        ``size`` whose projection has ``aspect``, default that of ``size``)."""
-        view = View.parse(state.view)
-        if view == View.LOBE:
-            return lobe_job(material, key, state.theta_i)
-        if view == View.SLICE:
-            return slice_job(material, key, size)
-        return self.lit_job(material, state, key, size, brdf, aspect)
-
-    def surface(self, state: ViewState, size: tuple[int, int], brdf: GpuBrdf | None = None,
-                aspect: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Per pixel of the object view at ``size`` (row 0 at the top): the shading
-        normal and the position, world space, (H, W, 3) each, the (H, W) mask
-        of pixels on the object and the (H, W) turn of the mesh's tangent about the
-        normal (shading_frame.glsl ``tangent_turn``: an anisotropic material's frame).
-        ``aspect``: the projection's (default w / h)."""
-        r = self.renderer
-        w, h = size
-        if self._gbuf_prog is None:
-            self._gbuf_prog = self.ctx.program(vertex_shader=shaders.source("object.vert"),
-                                               fragment_shader=shaders.source("reference_gbuffer.frag"))
-        p = self._gbuf_prog
-        vao = r.mesh_vao(p)  # kept by the renderer until its mesh changes
-        targets = [self.ctx.texture((w, h), 4, dtype="f4") for _ in range(2)]
-        depth = self.ctx.depth_renderbuffer((w, h))
-        fbo = self.ctx.framebuffer(targets, depth)
-        try:
-            fbo.use()
-            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self.ctx.enable(moderngl.DEPTH_TEST)
-            self.ctx.disable(moderngl.BLEND)
-            self.ctx.depth_func = "<"
-            a = aspect if aspect is not None else w / h
-            r.surface_uniforms(p, state, a * h, h, brdf.normal_map if brdf is not None else None)
-            vao.render(moderngl.TRIANGLES)
-            n, x = (np.frombuffer(t.read(), np.float32).reshape(h, w, 4)[::-1] for t in targets)
-            return np.ascontiguousarray(n[..., :3]), np.ascontiguousarray(x[..., :3]), n[..., 3] > 0.5, x[..., 3].copy()
-        finally:
-            for res in (fbo, depth, *targets):
-                res.release()
-
-    def lit_job(self, material: Material, state: ViewState, key: str, size: tuple[int, int],
-                brdf: GpuBrdf | None, aspect: float | None = None) -> LitJob:
-        """The lit object's job: shading frames from ``surface``, the lights and the environment of ``state``."""
-        normal, world, mask, turn = self.surface(state, size, brdf, aspect)
-        frame = frames_from_normals(normal[mask].astype(np.float64))
-        if anisotropic_layers(material):  # the walk's frame is the tangent's, as the shader's (NB_ANISO)
-            frame = turned_frames(frame, turn[mask].astype(np.float64))
-        p = world[mask].astype(np.float64)
-        view = np.asarray(state.camera.eye(), np.float64) - p
-        wo = to_local(frame, view / np.linalg.norm(view, axis=-1, keepdims=True))
-        ld = np.asarray(state.light_dir, np.float64)
-        job = LitJob(key, material, frame, wo, mask, light_wi=to_local(frame, ld / np.linalg.norm(ld)),
-                     light_radiance=float(state.light_radiance), lobe_alpha=lobe_alpha(material))
-        if state.point_light is not None:
-            d = np.asarray(state.point_light, np.float64) - p
-            d2 = np.maximum((d * d).sum(-1, keepdims=True), 1e-8)
-            job.point_wi = to_local(frame, d / np.sqrt(d2))
-            job.point_irradiance = state.point_intensity / d2
-        if state.env_on:
-            job.env_file = self._env_identity()[1]
-            job.env_rotation, job.env_intensity = math.radians(state.env_rotation), float(state.env_intensity)
-        return job
-
-    @staticmethod
-    def mc_size(view: View, w: int, h: int) -> tuple[int, int]:
-        """The Monte Carlo reference's resolution for a (w, h) view."""
-        s = min(1.0, (OBJECT_REF_SIZE if view == View.OBJECT else SLICE_REF_SIZE) / max(w, h))
-        return max(1, round(w * s)), max(1, round(h * s))
-
+    # --- Monte Carlo jobs (made by MonteCarloJobs, viewer/reference/mc_jobs.py) ---------------------------
     def collect(self) -> None:
         """Takes the Monte Carlo worker's new images (once a frame, before rendering: ``LookDev.update``)."""
         self.worker.collect()
@@ -524,22 +408,12 @@ class Compare:
             prog.release()
         self._compositors.clear()
         self.labels.release()
-        if self._env_file is not None:
-            _remove(self._env_file[2])
-            self._env_file = None
+        self._remove_env_file()
 
 
 def _has_coat(brdf: GpuBrdf | None) -> bool:
     """Whether the reference of ``brdf``'s lit object has a coat pass on the GPU (a neural BRDF of a stack)."""
     return brdf is not None and brdf.kind == BrdfKind.NEURAL and any(b.material.interfaces for b in brdf.components())
-
-
-def _remove(path: str) -> None:
-    """Deletes a file of ours if it is there."""
-    try:
-        os.remove(path)
-    except OSError:
-        pass
 
 
 def _read_linear(tex: moderngl.Texture, passes: float) -> np.ndarray:

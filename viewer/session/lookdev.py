@@ -17,6 +17,8 @@ offscreen path (viewer/offscreen.py) both start there. It delegates each job:
 - viewer/jobs/screenshot.py, viewer/jobs/turntable.py: screenshots and turntables
   (run and reported as session methods by viewer/session/captures.py);
 - viewer/jobs/texture_jobs.py: latent textures built in a worker thread;
+- viewer/session/scene_edits.py: the scene's edits (mesh, the material selected on a
+  multi-material mesh, environment, mipmapping), a mixin like captures.py;
 - viewer/session/material_parts.py: a glTF file's materials, one per draw range;
 - viewer/jobs/plane_curves.py: the lobe plot's curves;
 - viewer/gpu/renderer.py: the one renderer that owns programs, mesh and
@@ -33,7 +35,6 @@ from __future__ import annotations
 import copy
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
 import moderngl
@@ -67,12 +68,11 @@ from nbrdf.viewer.jobs.view_frames import ViewFrames
 from nbrdf.viewer.modes import Against, BrdfMode, CompareMode
 from nbrdf.viewer.reference.compare import Compare
 from nbrdf.viewer.reference.materialx_view import MaterialXView
-from nbrdf.viewer.scene.gltf_import import imported_scene, material_groups
-from nbrdf.viewer.scene.mesh import GLTF_SUFFIXES, named_mesh
 from nbrdf.viewer.session.captures import Captures
 from nbrdf.viewer.session.document import SessionDoc
 from nbrdf.viewer.session.edits import SessionEdits
-from nbrdf.viewer.session.material_parts import MaterialParts, PartMaterial
+from nbrdf.viewer.session.material_parts import MaterialParts
+from nbrdf.viewer.session.scene_edits import SceneEdits
 from nbrdf.viewer.session.stack_editor import StackEditor
 from nbrdf.viewer.view_settings import ViewState
 
@@ -99,7 +99,7 @@ class Timings:
     """From an edit to the end of the first frame showing it."""
 
 
-class LookDev(SessionEdits, Captures):
+class LookDev(SceneEdits, SessionEdits, Captures):
     """One look-development session: the edited material, scene and view, their
     GPU resources, and the jobs that render them (frames, screenshots, turntables)."""
 
@@ -174,16 +174,6 @@ class LookDev(SessionEdits, Captures):
         return self.compare_part.worker
 
     @property
-    def parts(self) -> list[PartMaterial]:
-        """The materials of a multi-material mesh (empty: the edited material on the whole mesh)."""
-        return self.material_parts.parts
-
-    @property
-    def selected(self) -> int:
-        """The index in ``parts`` of the material the stack editor edits."""
-        return self.material_parts.selected
-
-    @property
     def passes(self) -> int:
         """Passes accumulated in the view so far."""
         return self.frames.passes
@@ -207,72 +197,6 @@ class LookDev(SessionEdits, Captures):
     def flip_mean(self) -> float | None:
         """The mean HDR-FLIP of the FLIP compare view (None until there is a reference)."""
         return self.compare_part.flip_mean
-
-    # --- the scene -------------------------------------------------------------------------
-    def set_mesh(self, mesh: str) -> bool:
-        """A built-in mesh or a file; a .gltf/.glb brings its materials (the first
-        one selected in the stack editor), any other mesh is shown with the edited material."""
-        def go():
-            new = named_mesh(mesh)
-            groups = None
-            if Path(mesh).suffix.lower() in GLTF_SUFFIXES:
-                groups = material_groups(imported_scene(mesh))
-            parts = self.material_parts
-            old = (self.renderer.mesh, parts.parts, parts.selected, self.editor)
-            self.renderer.set_mesh(new)
-            try:
-                if groups is None:  # the edited material on the whole mesh
-                    parts.clear()
-                else:
-                    self._edit_material(parts.set(groups, len(new.draw_ranges), mesh))
-            except NbrdfError:
-                self.renderer.set_mesh(old[0])
-                parts.parts, parts.selected, self.editor = old[1:]
-                self._apply_material()
-                raise
-            self.mesh = mesh
-            self.invalidate()
-        return self.guarded(go)
-
-    def select_material(self, index: int) -> bool:
-        """Makes material ``index`` of a multi-material mesh the one the stack editor
-        (and compare, interpolation, save) works on; the others keep their edits."""
-        def go():
-            old = (self.material_parts.selected, self.editor)
-            m = self.material_parts.select(index, self.material)
-            try:
-                self._edit_material(m)
-            except NbrdfError:
-                self.material_parts.selected, self.editor = old
-                self._apply_material()
-                raise
-        return self.guarded(go)
-
-    def pick_material(self, x: int, y: int, size: tuple[int, int]) -> int:
-        """Selects the material seen at pixel (x, y) (top-left origin) of a view of
-        ``size`` (a click in the window); returns its index, -1 off the object or
-        with a single material."""
-        if not self.parts or not (0 <= x < size[0] and 0 <= y < size[1]):
-            return -1
-        k = int(self.renderer.material_ids(self.state, size)[int(y), int(x)])
-        if k >= 0 and k != self.selected and not self.select_material(k):
-            return -1
-        return k
-
-    def set_environment(self, path: str | None) -> bool:
-        def go():
-            self.renderer.set_environment(resolve_environment(str(path)) if path else None)
-            self.env_path = path
-            self.invalidate()
-        return self.guarded(go)
-
-    def set_mipmapping(self, on: bool) -> bool:
-        def go():
-            self.mipmapping = bool(on)
-            if self.brdf is not None and self.brdf.latent_texture is not None:
-                self.brdf.latent_texture.set_mipmapped(self.mipmapping)
-            self.invalidate()
-        return self.guarded(go)
 
     def invalidate(self) -> None:
         """Starts the progressive accumulation over (and a screenshot being rendered:
