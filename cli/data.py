@@ -19,7 +19,8 @@ class DataArgs:
     preset: str = "tiny"
     """tiny (seconds), cpu (the shipped decoder), layering (stacks for the layering network), layering_open (the
     same without clear top slabs), coats (look-development stacks to fine-tune it), lacquers (dark thick coatings),
-    paints (car paints and coated metals), paper"""
+    paints (car paints and coated metals), paper; albedo: walk albedos of drawn stacks for the albedo network
+    (``training.albedo_data``; --seed applies, --spp and --ray do not)"""
     seed: int | None = None
     """random seed (default: the preset's)"""
     spp: int | None = None
@@ -36,6 +37,12 @@ def cmd_data(a: argparse.Namespace) -> int:
     from nbrdf.training.dataset import PRESETS, generate  # late: torch and the walk, --help needs neither
 
     c: DataArgs = build(DataArgs, a)
+    if c.preset == "albedo":
+        from nbrdf.training import albedo_data  # late: as above
+
+        cfg_a = albedo_data.AlbedoDataConfig()
+        print(f"data set ready: {albedo_data.generate(c.out, replace(cfg_a, seed=c.seed or cfg_a.seed))}")
+        return 0
     if c.preset not in PRESETS:
         raise NbrdfError(f"--preset: {c.preset!r} is not one of {', '.join(PRESETS)}")
     cfg = PRESETS[c.preset]

@@ -1,6 +1,6 @@
-"""``nbrdf train representation|leaf|layering|sampler``: the flags are the
+"""``nbrdf train representation|leaf|layering|sampler|albedo``: the flags are the
 training code's own config dataclasses (``TrainConfig`` with the decoder's
-``DecoderSpec``; ``LeafConfig``, ``LayeringConfig``, ``SamplerConfig``), so
+``DecoderSpec``; ``LeafConfig``, ``LayeringConfig``, ``SamplerConfig``, ``AlbedoTrainConfig``), so
 ``--help`` shows the defaults the code uses."""
 from __future__ import annotations
 
@@ -95,6 +95,24 @@ def cmd_route_depth(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train_albedo(a: argparse.Namespace) -> int:
+    from nbrdf.training import train_albedo as ta  # late: torch costs ~1 s, --help needs none
+
+    cfg = build(ta.AlbedoTrainConfig, a)
+    at_least("--steps", cfg.steps)
+    in_range("--lr", cfg.lr, 0.0, low_open=True)
+    in_range("--val-share", cfg.val_share, 0.0, 0.5, low_open=True)
+    ta.train_albedo(cfg)
+    return 0
+
+
+def _albedo_flags(p: Parser) -> None:
+    from nbrdf.training import train_albedo as ta  # late: flags added on first use (torch)
+
+    p.description = ta.AlbedoTrainConfig.__doc__
+    add_arguments(p, ta.AlbedoTrainConfig)
+
+
 def _representation_flags(p: Parser) -> None:
     decoder, tr = _representation()
     p.description = tr.TrainConfig.__doc__
@@ -135,6 +153,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     for what, help_ in TRAINERS.items():
         to = tsub.add_parser(what, help=help_, populate=_operation_flags(what))
         to.set_defaults(fn=cmd_train_operation)
+    al = tsub.add_parser("albedo", help="albedo network: a layered code's walk albedo, which its code is "
+                         "settled to (neural.energy.settle)", populate=_albedo_flags)
+    al.set_defaults(fn=cmd_train_albedo)
     rd = tsub.add_parser("route-depth", help="a bundle whose deep stacks (3 interfaces or more) take another "
                          "run's layering network (docs/decisions/112)",
                          populate=lambda p: add_arguments(p, RouteDepthArgs))

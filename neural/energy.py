@@ -13,6 +13,12 @@ latent that brings it just inside the bound, to first order) until every
 incidence is within it. Codes within the bound (most stacks) are returned
 unchanged; the coat is closed form and never changed.
 
+``settle`` goes further for the layering network's codes: the albedo network
+(``neural.albedo_net``) predicts the walk's albedo from the code and its decoded
+albedo, and the body latent takes the smallest move (Gauss-Newton on every
+incidence at once) that brings the decoded albedo to that prediction, then the
+bound as above.
+
 Every consumer of a uniform material's code -- the window, the Mitsuba plugins,
 the GLSL export, the command line -- gets it from ``NeuralModel.material_latent``,
 which applies this: one place, the same code everywhere.
@@ -23,6 +29,7 @@ from dataclasses import dataclass
 
 import torch
 
+from nbrdf.neural.albedo_net import ALBEDO_FLOOR, AlbedoNet
 from nbrdf.neural.anisotropy import body_tail, from_tangent_frame, tail_turn, turned_tail
 from nbrdf.neural.coat import coat_of, has_coat
 from nbrdf.neural.decoder import Decoder
@@ -55,11 +62,20 @@ class EnergySettings:
     """Newton steps of the projection at most (each: the albedo and its gradient once)."""
     seed: int = 11
     """The scramble of the Sobol points (fixed: a code always maps to the same code)."""
+    match_steps: int = 2
+    """Gauss-Newton steps at most that move a network's code to the albedo network's prediction (``settle``)."""
+    match_tolerance: float = 0.01
+    """``settle`` stops once every incidence and channel is this close (relative) to the prediction."""
+    match_threshold: float = 0.03
+    """``settle`` moves a channel only where the prediction differs from the decoded albedo by more than this
+    (relative, at some incidence): the network's own error is about 1-2 %, and every move of the latent
+    changes the lobe's shape as well as its albedo."""
 
     def check(self) -> "EnergySettings":
         if not (self.thetas and all(0.0 <= t < 90.0 for t in self.thetas) and 16 <= self.samples <= 1 << 16
                 and 0.5 <= self.bound <= 1.0 and 0 <= self.steps <= 10_000
-                and 1 <= self.screen_samples and 0.0 < self.screen_bound <= self.bound):
+                and 1 <= self.screen_samples and 0.0 < self.screen_bound <= self.bound
+                and 0 <= self.match_steps <= 100 and self.match_tolerance > 0.0):
             raise NbrdfError(f"energy: incidences in [0, 90), samples 16..65536, bound 0.5..1, steps >= 0 "
                              f"(got {self.thetas}, {self.samples}, {self.bound}, {self.steps})")
         return self
@@ -152,7 +168,14 @@ def conserve(decoder: Decoder, code: Tensor, sigma: float, w: float,
         with torch.no_grad():
             if float(_estimate(decoder, z, feats, wi, wo, weight, coat_f, jac, T).max()) < s.screen_bound:
                 return code
-    wi, wo, weight, coat_f, feats, jac = _directions(code, decoder, sigma, w, s)
+    return _bounded(decoder, code, _directions(code, decoder, sigma, w, s), s)
+
+
+def _bounded(decoder: Decoder, code: Tensor, dirs: tuple[Tensor, ...], s: EnergySettings) -> Tensor:
+    """``conserve`` on the sample set ``dirs`` of ``_directions``."""
+    wi, wo, weight, coat_f, feats, jac = dirs
+    L, T = decoder.spec.latent, incidence_count(decoder, code, s)
+    z = code[:, :L].float()
     # Newton steps on each channel's worst incidence: the smallest move of the latent (its norm) that brings
     # that incidence's albedo, to first order, to just inside the bound; again from there while any incidence
     # is above it (the albedo is smooth in the latent: two or three steps). Channels within it never move.
@@ -175,3 +198,76 @@ def conserve(decoder: Decoder, code: Tensor, sigma: float, w: float,
     out = code.clone()
     out[:, :L] = z.to(code.dtype)
     return out
+
+
+def _with_jacobian(decoder: Decoder, z: Tensor, feats: Tensor, wi: Tensor, wo: Tensor, weight: Tensor,
+                   coat_f: Tensor, jac: Tensor, incidences: int) -> tuple[Tensor, Tensor]:
+    """``_estimate``'s albedo (3, T) and its Jacobian in the body latent (3, T, L), from one backward pass: the
+    latent enters the decoder only through its first layer's share (affine in it), so each sample gets a copy
+    of the share, one backward gives every sample's gradient, and a sum per incidence times the share's matrix
+    gives the Jacobian (instead of one backward per incidence)."""
+    L = decoder.spec.latent
+    share = decoder.latent_share(z.detach())
+    up = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    with torch.enable_grad():  # callers may hold no_grad (the window's plots): the gradient is this call's own
+        copies = share[:, None, :].expand(share.shape[0], feats.shape[0], share.shape[-1]).clone().requires_grad_(True)
+        y = decoder.log_f_from_share(copies, feats[None])
+        body = torch.where(up[None], torch.exp(y.clamp(max=80.0)) * jac[None], torch.zeros_like(y))
+        (g,) = torch.autograd.grad((body * weight).sum(), copies)  # (3, N, width)
+    with torch.no_grad():
+        a = ((body + coat_f) * weight).reshape(3, incidences, -1).mean(-1)
+        per_t = g.reshape(3, incidences, -1, g.shape[-1]).mean(2)  # (3, T, width)
+        return a, per_t @ decoder.first_layer.weight[:, :L]
+
+
+def settle(decoder: Decoder, code: Tensor, sigma: float, w: float, net: AlbedoNet | None,
+           settings: EnergySettings | None = None) -> Tensor:
+    """A layering network's ``code`` (3, code) with its decoded albedo moved to what ``net`` predicts for it
+    (at most the bound), then bounded (``conserve``). A code with an anisotropic tail, or without a network
+    (or one trained for other incidences), is only bounded.
+
+    Levenberg-Marquardt on the relative residuals of all incidences at once, each step the least move of the
+    latent (its norm) that meets them to first order, halved until it lowers their sum of squares; channels
+    apart (their rows are independent)."""
+    s = (settings or EnergySettings()).check()
+    T = len(s.thetas)
+    if (net is None or code.dim() != 2 or code.shape[0] != 3 or not torch.isfinite(code).all()
+            or _tangent_turn(decoder, code) is not None or net.incidences != T):
+        return conserve(decoder, code, sigma, w, s)
+    L = decoder.spec.latent
+    dirs = _directions(code, decoder, sigma, w, s)
+    wi, wo, weight, coat_f, feats, jac = dirs
+    z = code[:, :L].float()
+    a, J = _with_jacobian(decoder, z, feats, wi, wo, weight, coat_f, jac, T)
+    with torch.no_grad():
+        target = net(code.float(), a).clamp(max=s.bound - 0.002)
+        scale = target.clamp_min(ALBEDO_FLOOR)
+        live = target.min(-1).values > 10 * ALBEDO_FLOOR  # a near-black channel has nothing to match
+        live &= ((target - a) / scale).abs().amax(-1) > s.match_threshold  # a small correction is not worth a move
+        sq = lambda a_: ((target - a_) / scale).pow(2).sum(-1)  # noqa: E731  (per channel)
+        for _ in range(s.match_steps):
+            r = (target - a) / scale
+            now = sq(a)
+            todo = live & (r.abs().amax(-1) > s.match_tolerance)
+            if not bool(todo.any()):
+                break
+            Jr = J / scale[..., None]
+            jjt = Jr @ Jr.transpose(1, 2)
+            damp = (1e-3 * jjt.diagonal(dim1=1, dim2=2).mean(-1) + 1e-12)[:, None, None] * torch.eye(T)
+            step = (Jr.transpose(1, 2) @ torch.linalg.solve(jjt + damp, r[..., None]))[..., 0]
+            step = torch.where(todo[:, None], step, torch.zeros_like(step))
+            for _half in range(4):  # backtracking: a step that does not lower the residuals' squares is halved
+                a_new, J_new = _with_jacobian(decoder, z + step, feats, wi, wo, weight, coat_f, jac, T)
+                better = sq(a_new) < now
+                if bool(better[todo].all()):
+                    break
+                step = torch.where(better[:, None], step, 0.5 * step)
+            keep = (todo & better)[:, None]
+            z = torch.where(keep, z + step, z)
+            a = torch.where(keep, a_new, a)
+            J = torch.where(keep[..., None], J_new, J)
+            if not bool(keep.any()):
+                break
+    out = code.clone()
+    out[:, :L] = z.to(code.dtype)
+    return _bounded(decoder, out, dirs, s)  # the prediction is capped at the bound: a guard, rarely a step

@@ -15,10 +15,11 @@ from pathlib import Path
 
 import torch
 
+from nbrdf.neural.albedo_net import AlbedoNet
 from nbrdf.neural.anisotropy import with_frame
 from nbrdf.neural.coat import with_coat
 from nbrdf.neural.decoder import DEFAULT_WEIGHTS, Decoder, load_decoder, read_bundle, save_decoder
-from nbrdf.neural.energy import EnergySettings, conserve
+from nbrdf.neural.energy import EnergySettings, conserve, settle
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent import load_latent
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, LATENT
@@ -32,7 +33,7 @@ from nbrdf.neural.stack import uniform_values as stack_uniform_values
 
 Tensor = torch.Tensor
 OPS_FORMAT = "nbrdf-operations/2"  # /2: codes under the coat split (neural.coat)
-PARTS = ("leaf", "layering", "layering_deep", "sampler")
+PARTS = ("leaf", "layering", "layering_deep", "sampler", "albedo")
 #: Stacks of this many interfaces or more (four layers and deeper, the base counted) are layered by the bundle's
 #: ``layering_deep`` network where it has one: a network trained with deep stacks keeps its error flat to six layers
 #: but costs the shallow stacks render-space fidelity, so each depth gets the network that is best at it
@@ -56,6 +57,8 @@ class NeuralModel:
     layering_deep: LayeringNet | None = None
     """The layering of stacks of ``DEEP_INTERFACES`` interfaces or more (None: ``layering`` for every depth)."""
     sampler: SamplerNet | None = None
+    albedo: AlbedoNet | None = None
+    """Predicts a layered code's walk albedo (``neural.albedo_net``); None: codes are only bounded."""
     trained_on: dict = field(default_factory=dict)  # per operation part
     source: str = ""
     energy: EnergySettings | None = field(default_factory=EnergySettings)
@@ -83,14 +86,25 @@ class NeuralModel:
     # -- the full path ---------------------------------------------------------------------
     def material_latent(self, material: Material, conserve: bool = True) -> Tensor:
         """(3, 34) code of a uniform material of any number of layers (``neural.coat``), its albedo
-        bounded (``conserved``; ``conserve`` False: the networks' code, which the window shows while a
-        slider moves and bounds once it stops)."""
+        settled (``settled``; ``conserve`` False: the networks' code, which the window shows while a
+        slider moves and settles once it stops)."""
         z = self.stack_latents(material)[0]
-        return self.conserved(z) if conserve else z
+        return self.settled(z, bool(material.interfaces)) if conserve else z
+
+    def settled(self, code: Tensor, layered: bool = True) -> Tensor:
+        """A layering network's ``code`` (3, 34) with its albedo moved to the albedo network's prediction and
+        bounded (``neural.energy.settle``); only bounded without an albedo network, or for a code that is not
+        ``layered`` (a single layer's leaf code, which the network was not trained on)."""
+        if self.energy is None or self.sampler is None:
+            return code
+        if not layered:
+            return self.conserved(code)
+        return settle(self.decoder, code, *self.proxy(code), self.albedo, self.energy)
 
     def conserved(self, code: Tensor) -> Tensor:
         """``code`` (3, 34) with its directional albedo at most ``energy.bound`` at every incidence
-        (``neural.energy.conserve``; unchanged without ``energy`` or a sampler network)."""
+        (``neural.energy.conserve``; unchanged without ``energy`` or a sampler network): for codes that are
+        not the layering network's (refined, projected), which the albedo network was not trained on."""
         if self.energy is None or self.sampler is None:
             return code
         return conserve(self.decoder, code, *self.proxy(code), self.energy)
@@ -185,6 +199,8 @@ def _specs(model: NeuralModel) -> dict:
         out["layering_deep"] = asdict(model.layering_deep.spec)
     if model.sampler is not None:
         out["sampler"] = asdict(model.sampler.spec)
+    if model.albedo is not None:
+        out["albedo"] = asdict(model.albedo.spec)
     return out
 
 
@@ -235,6 +251,9 @@ def load_model(path: str | Path | None = None) -> NeuralModel:
         if "sampler" in specs:
             model.sampler = SamplerNet(MLPSpec(**specs["sampler"]))
             load_state(model.sampler, tensors, "sampler", str(path))
+        if "albedo" in specs:
+            model.albedo = AlbedoNet(MLPSpec(**specs["albedo"]))
+            load_state(model.albedo, tensors, "albedo", str(path))
         model.trained_on = ops.get("trained_on", {})
     except (KeyError, TypeError, AttributeError, ValueError) as e:
         raise NbrdfError(f"{path}: operations metadata is missing or malformed ({e})") from None

@@ -47,13 +47,15 @@ def test_each_depth_takes_its_network(bundles):
     base, deep, routed, _ = bundles
     for coats in range(1, 5):
         m = _stack(coats)
-        z = routed.material_latent(m)
+        # the networks' codes (a settled code also moves with the albedo network: neural/energy.py settle)
+        z = routed.material_latent(m, conserve=False)
         if coats < DEEP_INTERFACES:
-            assert torch.equal(z, base.material_latent(m))  # the shallow stacks: bit for bit the base's
+            assert torch.equal(z, base.material_latent(m, conserve=False))  # the shallow stacks: bit for bit the base's
+            assert torch.equal(routed.material_latent(m), base.material_latent(m))
         else:
             # the deep network (stored in half precision): its codes, not the base's
-            assert torch.allclose(z, deep.material_latent(m), atol=2e-2, rtol=2e-2)
-            assert (z - base.material_latent(m)).abs().max() > 0.1
+            assert torch.allclose(z, deep.material_latent(m, conserve=False), atol=2e-2, rtol=2e-2)
+            assert (z - base.material_latent(m, conserve=False)).abs().max() > 0.1
 
 
 def test_the_deep_network_is_stored_in_half_precision(bundles):

@@ -42,8 +42,9 @@ def test_ranges_follow_the_maps_texels_or_the_references(tmp_path):
 
 
 def test_node_codes_are_the_uniform_materials_codes(tmp_path):
-    """Node (i, j)'s code is ``material_latent`` of the material with those albedos
-    (what ``brdf_for(..., "neural")`` decodes), whatever the other channels hold."""
+    """Node (i, j)'s code is the networks' code of the material with those albedos, whatever the other channels
+    hold (``material_latent`` before settling: a latent texture's codes are neither settled nor bounded,
+    docs/decisions/114 and 122)."""
     from nbrdf.neural.material import parse_material
     from nbrdf.neural.model import default_model
     from nbrdf.neural.param_table import ParamGrid, node_codes, node_values, table_params
@@ -59,5 +60,5 @@ def test_node_codes_are_the_uniform_materials_codes(tmp_path):
         spec = json.loads((tmp_path / "m.json").read_text())
         spec["layers"][1]["albedo"] = [float(a[i]), 0.9, 0.1]
         spec["layers"][2]["albedo"] = [float(b[j]), 0.3, 0.7]
-        z = model.material_latent(parse_material(spec))
+        z = model.material_latent(parse_material(spec), conserve=False)
         torch.testing.assert_close(codes[i, j], z[0], rtol=1e-5, atol=1e-5)

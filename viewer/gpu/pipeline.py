@@ -247,14 +247,20 @@ class MaterialPipeline:
         return self.model.material_latent(material, conserve)
 
     def conserved(self, code: torch.Tensor) -> torch.Tensor:
-        """``code`` with its albedo bounded (``NeuralModel.conserved``)."""
+        """``code`` (a refined one) with its albedo bounded (``NeuralModel.conserved``)."""
         return self.model.conserved(code)
 
+    def settled(self, code: torch.Tensor, layered: bool = True) -> torch.Tensor:
+        """A network's ``code`` with its albedo settled (``NeuralModel.settled``; ``layered``: the code of a
+        stack with interfaces): what ``latent`` returns."""
+        return self.model.settled(code, layered)
+
     def mix_unbounded(self, brdf: GpuBrdf | None) -> bool:
-        """Whether a component of ``brdf``'s OpenPBR mix has a code that reflects more light than arrives
-        (built with a slider's unbounded codes: ``build(conserve=False)``)."""
+        """Whether a component of ``brdf``'s OpenPBR mix has a code its settling would change (built with a
+        slider's unsettled codes: ``build(conserve=False)``)."""
         return brdf is not None and any(b.kind == BrdfKind.NEURAL and b.latent is not None
-                                        and not torch.equal(self.conserved(b.latent), b.latent) for b in brdf.mixed)
+                                        and not torch.equal(self.settled(b.latent, bool(b.material.interfaces)),
+                                                            b.latent) for b in brdf.mixed)
 
     def proxy(self, z: torch.Tensor) -> tuple[float, float] | None:
         """The sampler network's proxy pdf (sigma, w) of a latent (None without a sampler)."""

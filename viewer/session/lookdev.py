@@ -236,8 +236,8 @@ class LookDev(SceneEdits, SessionEdits, Captures):
                                                       tex, self.pipeline.normal_maps), mode)
             self.idle_refine.edited(None, None)
         elif mode == BrdfMode.NEURAL:
-            # the networks' code now, its albedo bounded once the edits pause (``update``): the bound's
-            # estimate costs several ms, a slider's frame has none to spare
+            # the networks' code now, its albedo settled once the edits pause (``update``): settling
+            # costs tens of ms, a slider's frame has none to spare
             z = self.latent(conserve=False)
             refined = self.idle_refine.edited(None if self.interp.active else m, z)  # a cached refined code
             if refined is not None:
@@ -301,8 +301,8 @@ class LookDev(SceneEdits, SessionEdits, Captures):
         due = self._conserve_due
         if due is not None and time.monotonic() - due[1] >= CONSERVE_AFTER_S:
             self._conserve_due = None
-            z = self.pipeline.conserved(due[0])
-            if not torch.equal(z, due[0]) or self.pipeline.mix_unbounded(self.brdf):  # more light out than in
+            z = self.pipeline.settled(due[0], bool(self.material.interfaces) and not self.interp.active)
+            if not torch.equal(z, due[0]) or self.pipeline.mix_unbounded(self.brdf):  # the albedo moved
                 self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=z))
         refined = self.idle_refine.poll()
         if refined is not None:  # a code that beats the network's on the material's own simulation
