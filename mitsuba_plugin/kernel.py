@@ -251,6 +251,12 @@ class BodyWarp:
     """the most the coat's transmittance ratio raises J (``neural.anisotropy.TRANSMITTANCE_CAP``)"""
     floor_z: float
     """how low the decoder is read (``neural.anisotropy.FLOOR_Z_BARE`` or ``FLOOR_Z_COATED``, by ``eta``)"""
+    glow: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """a scattering medium's glow per channel, added unwarped (``neural.anisotropy.glow_basis``, decision 123)"""
+
+    def glow_basis(self, wi, wo):
+        """t(wi) t(wo) / pi, t the coat's 1 - F (``neural.anisotropy.glow_basis``)."""
+        return _transmittance(wi, self.eta) * _transmittance(wo, self.eta) / math.pi
 
     def warp(self, wi, wo) -> tuple:
         """The pair turned about its half vector's plane so that h becomes the stretched h'
@@ -491,12 +497,14 @@ class CodeKernel:
         self.decoder, self.coat, self.proxy, self.warp = decoder, coat, proxy, warp
 
     def body(self, wi, wo, shares: list | None) -> list:
-        """[f_r, f_g, f_b] of the body (1/sr), at the warped pair times J for an anisotropic one."""
+        """[f_r, f_g, f_b] of the body (1/sr), at the warped pair times J for an anisotropic one, plus its
+        glow."""
         if self.warp is None:
             return self.decoder.body(wi, wo, shares)
         bi, bo, j = self.warp.pair(wi, wo)
+        g = self.warp.glow_basis(wi, wo)
         up = (wi.z > 0) & (wo.z > 0)
-        return [dr.select(up, f * j, 0.0) for f in self.decoder.body(bi, bo, shares)]
+        return [dr.select(up, f * j + k * g, 0.0) for f, k in zip(self.decoder.body(bi, bo, shares), self.warp.glow)]
 
     def at(self, si) -> tuple[list | None, Coat]:
         """(per-lane latent shares or None, the coat) at the hit ``si``."""

@@ -35,6 +35,7 @@ from nbrdf.neural.anisotropy import (
     FLOOR_Z_COATED,
     LIFT_Z,
     TRANSMITTANCE_CAP,
+    body_glow,
     body_tail,
     require_isotropic,
     stretch,
@@ -86,7 +87,7 @@ def _stretch(v: torch.Tensor) -> tuple[float, float, float]:
 
 
 def _code_terms(model, code: torch.Tensor) -> tuple[Coat, Proxy, BodyWarp | None]:
-    """(coat, proxy, body warp) of a uniform material's code (3, 34), or (3, 39) with an anisotropic tail
+    """(coat, proxy, body warp) of a uniform material's code (3, 34), or (3, 34 + FRAME_PARAMS) with an anisotropic tail
     (``neural.anisotropy``): its coat anisotropic GGX, its proxy stretched with the body
     (``neural.neural_brdf``), its body read through a ``BodyWarp`` unless the body's anisotropy is 0
     (None, as for an isotropic code: the torch path's pair and J = 1 exactly)."""
@@ -98,8 +99,10 @@ def _code_terms(model, code: torch.Tensor) -> tuple[Coat, Proxy, BodyWarp | None
     coat = coat_of(code[0], spec.latent)  # roughness, ior, the coat's anisotropy vector
     body = _stretch(tail[0, :2])
     eta = float(coat[1].clamp_min(1.0))
+    glow = body_glow(code, spec.code)  # 0 unless the body is warped (neural.model.layered_latents)
     warp = None if body[0] == 1.0 else BodyWarp(body, float(tail[0, 2].clamp(0.005, 1.0)), eta, LIFT_Z,
-                                                TRANSMITTANCE_CAP, FLOOR_Z_COATED if eta > 1.0 else FLOOR_Z_BARE)
+                                                TRANSMITTANCE_CAP, FLOOR_Z_COATED if eta > 1.0 else FLOOR_Z_BARE,
+                                                (float(glow[0]), float(glow[1]), float(glow[2])))
     return Coat(float(r), float(ior), _stretch(coat[2:4])), Proxy(float(sigma), float(w), body), warp
 
 
@@ -141,7 +144,7 @@ def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 
 
 
 def _uniform_kernel(model, code: torch.Tensor, body: str) -> CodeKernel:
-    """The kernel of one uniform code (3, 34) (or (3, 39), anisotropic): its coat, proxy and body
+    """The kernel of one uniform code (3, 34) (or (3, 34 + FRAME_PARAMS), anisotropic): its coat, proxy and body
     warp (``_code_terms``) over the decoder or its baked table (``body``)."""
     coat, proxy, warp = _code_terms(model, code)
     decoder = table_body(model.decoder, code) if body == Body.TABLE else decoder_kernel(model.decoder, code)

@@ -9,9 +9,14 @@ Here: the alphas, the change of frame, the anisotropic tail of a material
 code and the warp the decoder reads it through, and the one-line refusal of
 the paths that cannot take anisotropy yet (``require_isotropic``).
 
-A code's anisotropic tail (``FRAME_PARAMS`` floats after the coat, the same in
-the three channels) holds two *anisotropy vectors* v = a (cos 2 rho, sin 2 rho),
-rho the tangent's turn: the coat's and the body's. GGX is unchanged by a half
+A code's anisotropic tail (``FRAME_PARAMS`` floats after the coat) holds two
+*anisotropy vectors* v = a (cos 2 rho, sin 2 rho), rho the tangent's turn: the
+coat's and the body's (the same in the three channels), the body's masking
+alpha, and the *glow* K of the channel: the light a scattering medium sends back
+(it comes out nearly isotropic), K t(wi) t(wo) / pi with t the coat's 1 - F
+(``glow_basis``). Over a scattering medium the body latent is then the *direct*
+light's, the stack with its media's albedo 0 (``neural.scattered_glow``;
+docs/decisions/123); K is 0 without one. GGX is unchanged by a half
 turn of its frame, so the doubled angle makes v continuous: codes blend and
 mip-map as vectors, and two crossed brushings average to an isotropic one.
 The first 34 floats of such a code are its *isotropic equivalent*: the body
@@ -59,14 +64,14 @@ def from_frame(w: Tensor, rotation_deg) -> Tensor:
     return to_frame(w, -torch.as_tensor(rotation_deg, dtype=w.dtype, device=w.device))
 
 
-#: Floats of a code's anisotropic tail: the coat's anisotropy vector, the body's, and the body's masking
-#: alpha (the geometric-mean alpha of the interface whose anisotropy the body takes).
-FRAME_PARAMS = 5
+#: Floats of a code's anisotropic tail: the coat's anisotropy vector, the body's, the body's masking
+#: alpha (the geometric-mean alpha of the interface whose anisotropy the body takes) and the channel's glow.
+FRAME_PARAMS = 6
 #: The largest anisotropy a stretch takes (SPEC section 10's range).
 A_MAX = 0.95
 #: The version of the warp's arithmetic (``body_pair``): codes refined through an older one are refitted
-#: (``training.refine``). 2: J's D(h') / D(h_e) (decision 120).
-WARP_VERSION = 2
+#: (``training.refine``). 2: J's D(h') / D(h_e) (decision 120); 3: the glow of a scattering medium (decision 123).
+WARP_VERSION = 3
 
 
 def geometric_alpha(alpha, a):
@@ -96,13 +101,15 @@ def _turn(w: Tensor, c: Tensor, s: Tensor) -> Tensor:
     return torch.stack([c * x + s * y, c * y - s * x, w[..., 2]], -1)
 
 
-def with_frame(code: Tensor, coat_v: Tensor, body_v: Tensor, body_alpha: Tensor) -> Tensor:
+def with_frame(code: Tensor, coat_v: Tensor, body_v: Tensor, body_alpha: Tensor,
+               glow: Tensor | float = 0.0) -> Tensor:
     """Codes (..., 34 + FRAME_PARAMS) of isotropic-equivalent codes (..., 34), the anisotropy vectors
-    (..., 2) of their coat and body and the body's masking alpha (..., 1) (broadcast)."""
+    (..., 2) of their coat and body, the body's masking alpha (..., 1) and the glow (..., 1) (broadcast)."""
     shape = code.shape[:-1]
     tail = torch.cat([torch.as_tensor(coat_v, dtype=code.dtype).expand(*shape, 2),
                       torch.as_tensor(body_v, dtype=code.dtype).expand(*shape, 2),
-                      torch.as_tensor(body_alpha, dtype=code.dtype).expand(*shape, 1)], -1)
+                      torch.as_tensor(body_alpha, dtype=code.dtype).expand(*shape, 1),
+                      torch.as_tensor(glow, dtype=code.dtype).expand(*shape, 1)], -1)
     return torch.cat([code, tail], -1)
 
 
@@ -112,6 +119,21 @@ def body_tail(code: Tensor, iso_size: int) -> Tensor | None:
     if code.shape[-1] != iso_size + FRAME_PARAMS:
         return None
     return code[..., iso_size + 2:iso_size + 5]
+
+
+def body_glow(code: Tensor, iso_size: int) -> Tensor | None:
+    """The glow K (...,) of codes (..., iso_size + FRAME_PARAMS), per channel; None for any other code."""
+    if code.shape[-1] != iso_size + FRAME_PARAMS:
+        return None
+    return code[..., iso_size + 5]
+
+
+def glow_basis(wi: Tensor, wo: Tensor, coat_ior: Tensor | float | None) -> Tensor:
+    """t(wi) t(wo) / pi (...,): the shape of a scattering medium's glow, t the coat's smooth 1 - F (1 without
+    a coat); 0 below the horizon."""
+    eta = torch.as_tensor(1.0 if coat_ior is None else coat_ior, dtype=wi.dtype).clamp_min(1.0)
+    b = _transmittance(wi, eta) * _transmittance(wo, eta) / math.pi
+    return torch.where((wi[..., 2] > 0) & (wo[..., 2] > 0), b, torch.zeros_like(b))
 
 
 def tail_turn(code: Tensor, iso_size: int) -> Tensor | None:
@@ -137,11 +159,14 @@ def turned_tail(code: Tensor, iso_size: int, angle: float) -> Tensor:
 
 def code_tail(code: Tensor, iso_size: int) -> dict[str, object]:
     """The GPU's uniforms of a code's tail (one material code (3, n)): ``u_aniso`` (the coat's and the
-    body's anisotropy vectors) and ``u_body_alpha``; empty for a code without a tail."""
+    body's anisotropy vectors), ``u_body_alpha`` and ``u_body_glow`` (per channel); empty for a code without
+    a tail."""
     if code.shape[-1] != iso_size + FRAME_PARAMS:
         return {}
-    t = [float(x) for x in code.reshape(-1, code.shape[-1])[0, iso_size:iso_size + FRAME_PARAMS]]
-    return {"u_aniso": tuple(t[:4]), "u_body_alpha": t[4]}
+    rows = code.reshape(-1, code.shape[-1])
+    t = [float(x) for x in rows[0, iso_size:iso_size + FRAME_PARAMS]]
+    glow = [float(x) for x in rows[:, iso_size + 5]]
+    return {"u_aniso": tuple(t[:4]), "u_body_alpha": t[4], "u_body_glow": tuple((glow * 3)[:3])}
 
 
 def stretched_half(h: Tensor, v: Tensor, inverse: bool = False) -> Tensor:

@@ -25,7 +25,7 @@ from safetensors import safe_open
 from safetensors.torch import save_file
 from torch import nn
 
-from nbrdf.neural.anisotropy import body_pair, body_tail
+from nbrdf.neural.anisotropy import body_glow, body_pair, body_tail, glow_basis
 from nbrdf.neural.coat import coat_eval, coat_of, code_size, has_coat
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.nets import load_state
@@ -205,13 +205,21 @@ class Decoder(nn.Module):
             return wi, wo, None
         return body_pair(tail.to(wi.dtype), wi, wo, coat_of(z, self.spec.latent)[..., 1].to(wi.dtype))
 
+    def glow(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
+        """The unwarped glow of codes with an anisotropic tail (``neural.anisotropy.glow_basis``; decision 123),
+        broadcast against the pairs; 0 for any other code."""
+        k = body_glow(z, self.spec.code) if self.spec.coat else None
+        if k is None:
+            return torch.zeros(torch.broadcast_shapes(z.shape[:-1], wi.shape[:-1]), dtype=wi.dtype)
+        return k.to(wi.dtype) * glow_basis(wi, wo, coat_of(z, self.spec.latent)[..., 1].to(wi.dtype))
+
     def forward(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
         """f >= 0 (...,) for one channel: the decoded body, plus the coat when
         z is a material code; directions below the horizon give 0."""
         bi, bo, jac = self.body_pair(z, wi, wo)
         f = torch.exp(self.log_f(z, self.encode(bi, bo)).clamp(max=80.0))
         if jac is not None:
-            f = f * jac.to(f.dtype)
+            f = f * jac.to(f.dtype) + self.glow(z, wi, wo).to(f.dtype)
         f = torch.where((wi[..., 2] > 0) & (wo[..., 2] > 0), f, torch.zeros_like(f))
         c = self.coat(z, wi, wo)
         return f if c is None else f + c.to(f.dtype)
@@ -224,7 +232,7 @@ class Decoder(nn.Module):
         y = self.log_f_from_share(share[None, :, :], feats[:, None, :])
         f = torch.exp(y.clamp(max=80.0))
         if jac is not None:
-            f = f * jac.to(f.dtype)[:, None]
+            f = f * jac.to(f.dtype)[:, None] + self.glow(z[:, None, :], wi[None], wo[None]).T.to(f.dtype)
         up = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
         f = torch.where(up, f, torch.zeros_like(f))
         c = self.coat(z[:1], wi, wo)  # the coat is the same in the three channels

@@ -127,6 +127,8 @@ def _directions(code: Tensor, decoder: Decoder, sigma: float, w: float, s: Energ
                                                                                                torch.sin(rho))
         c = decoder.coat(code[:1], wi, wo)
         coat_f = torch.zeros_like(weight) if c is None else c.float()
+        if rho is not None:  # an anisotropic code's glow (per channel, unwarped) joins the closed-form terms
+            coat_f = coat_f[None] + decoder.glow(code[:, None, :].float(), wi[None], wo[None]).float()
         bi, bo, jac = decoder.body_pair(code[:1].float(), wi, wo)
         feats = decoder.encode(bi, bo)
     return wi, wo, weight, coat_f, feats, torch.ones_like(weight) if jac is None else jac.float()

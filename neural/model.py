@@ -28,6 +28,7 @@ from nbrdf.neural.leaf import LEAF_NETS, LeafEncoders
 from nbrdf.neural.material import Material, Measured
 from nbrdf.neural.nets import MLPSpec, load_state, prefixed
 from nbrdf.neural.sampling import SamplerNet
+from nbrdf.neural.scattered_glow import scattered_glow, thinly_scattering
 from nbrdf.neural.stack import ParamValues, Stack, material_stack
 from nbrdf.neural.stack import uniform_values as stack_uniform_values
 
@@ -126,7 +127,7 @@ class NeuralModel:
         leaf = self.require("leaf") if z_base is None or stack.layers else None
         layering = self.layering_for(stack.layers) if stack.layers else None
         with torch.no_grad():
-            return layered_latents(leaf, layering, stack, z_base)
+            return layered_latents(leaf, layering, stack, z_base, self.decoder)
 
     def proxy(self, z: Tensor) -> tuple[float, float]:
         """(sigma, w) of the proxy pdf of a material code (3, 34) (of its body)."""
@@ -136,7 +137,7 @@ class NeuralModel:
 
 
 def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, stack: Stack,
-                    z_base: Tensor | None = None) -> Tensor:
+                    z_base: Tensor | None = None, decoder: Decoder | None = None) -> Tensor:
     """Material codes (N, C, 34) of N stacks of C channels (``neural.coat``):
     the leaf encoder of the base (or the given base codes ``z_base`` (N or 1,
     C, 34)), then the layering network over each interface and its medium,
@@ -144,9 +145,16 @@ def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, sta
     layering."""
     if stack.is_anisotropic:  # the networks see the isotropic equivalent; the code's tail stretches it back
         iso, coat_v, body = stack.isotropic_equivalent()
+        full = None
+        if thinly_scattering(stack):  # the media's scattered light: a glow of its own (decision 123)
+            if decoder is None:
+                raise NbrdfError("an anisotropic stack over a scattering medium needs the decoder for its glow")
+            full = layered_latents(leaf, layering, iso, z_base)
+            iso = stack.without_scattering().isotropic_equivalent()[0]
         z = layered_latents(leaf, layering, iso, z_base)
+        glow = 0.0 if full is None or decoder is None else scattered_glow(decoder, full, z)[..., None]
         return with_frame(z, coat_v[:, None, :].to(z.dtype), body[:, None, :2].to(z.dtype),
-                          body[:, None, 2:].to(z.dtype))
+                          body[:, None, 2:].to(z.dtype), glow)
     n, C = stack.n, stack.channels
     chan = lambda t: t[:, None].expand(n, C).reshape(-1)  # shared parameter, per channel
     if z_base is not None:

@@ -93,13 +93,38 @@ class Stack:
         """Whether any interface or the base has a non-zero anisotropy (the rotation alone changes nothing)."""
         return any(t is not None and bool((t != 0).any()) for t in (self.anisotropy, self.base_anisotropy))
 
+    @property
+    def scatters(self) -> bool:
+        """Whether any medium has a non-zero albedo and extinction (light scattered in it)."""
+        return self.layers > 0 and bool(((self.albedo * self.sigma_t) > 0).any())
+
+    def without_scattering(self) -> "Stack":
+        """This stack with every medium's albedo 0: its light is what never scattered in a medium."""
+        return replace(self, albedo=torch.zeros_like(self.albedo))
+
+    def body_scattering_depth(self) -> Tensor:
+        """(N,) the scattering optical depth (albedo times sigma_t, means over channels) of the media above the
+        highest anisotropic interface under the coat (the body's; 0 where there is none)."""
+        n, dtype = self.n, self.roughness.dtype
+        a_l = self.anisotropy if self.anisotropy is not None else torch.zeros_like(self.roughness)
+        a_b = self.base_anisotropy if self.base_anisotropy is not None else torch.zeros(n, dtype=dtype)
+        if not self.layers:
+            return torch.zeros(n, dtype=dtype)
+        below = [a_l[:, j] for j in range(1, self.layers)] + [a_b]  # under the coat, top down
+        depth = [(self.albedo[:, j].mean(-1) * self.sigma_t[:, j].mean(-1)).to(dtype) for j in range(self.layers)]
+        out = torch.zeros(n, dtype=dtype)
+        for i in reversed(range(len(below))):  # the highest non-zero one wins
+            out = torch.where(below[i] != 0, sum(depth[:i + 1], torch.zeros(n, dtype=dtype)), out)
+        return out
+
     def isotropic_equivalent(self) -> tuple["Stack", Tensor, Tensor]:
         """(stack, coat vectors (N, 2), body tails (N, 3)): this stack with each anisotropic alpha replaced
         by its geometric mean (what the leaf encoders and the layering network see), and the anisotropy
         vectors of a code's tail (``neural.anisotropy``): the coat's (the top interface's, as ``coat``) and
         the body's, that of the highest anisotropic interface below the coat (a documented
         approximation, docs/decisions/116), lessened by the media's scattering above it (exp(-2 tau albedo), the
-        unscattered share of a round trip), with that interface's geometric-mean alpha (its masking)."""
+        unscattered share of a round trip), with that interface's geometric-mean alpha (its masking). A stack
+        whose media scatter little may be split instead (``without_scattering``, ``neural.scattered_glow``)."""
         n, dtype = self.n, self.roughness.dtype
         rot = self.rotation if self.rotation is not None else torch.zeros(n, dtype=dtype)
         a_l = self.anisotropy if self.anisotropy is not None else torch.zeros_like(self.roughness)
@@ -120,18 +145,13 @@ class Stack:
             alphas_below = alphas_below[-1:]
         body_a = torch.zeros(n, dtype=dtype)
         body_alpha = torch.full((n,), NO_COAT[0], dtype=dtype)
-        # scattering above it: the optical depth times the albedo of the media over the body's interface
-        depth = [(self.albedo[:, j].mean(-1) * self.sigma_t[:, j].mean(-1)).to(dtype) for j in range(self.layers)]
-        scatter = torch.zeros(n, dtype=dtype)
         for i in reversed(range(len(below))):  # the highest non-zero one wins
             col, alpha = below[i], alphas_below[i]
-            over = sum(depth[:i + 1], torch.zeros(n, dtype=dtype)) if self.layers else torch.zeros(n, dtype=dtype)
             body_a = torch.where(col != 0, col, body_a)
             body_alpha = torch.where(col != 0, alpha.to(dtype), body_alpha)
-            scatter = torch.where(col != 0, over, scatter)
         # light scattered in a medium on its way to the interface and back comes out isotropic: the body keeps the
         # anisotropy of the unscattered share, exp(-2 tau albedo) at normal incidence (decision 116)
-        body_a = body_a * torch.exp(-2.0 * scatter)
+        body_a = body_a * torch.exp(-2.0 * self.body_scattering_depth())
         return (replace(self, **changes), anisotropy_vector(coat_a, rot).to(dtype),
                 torch.cat([anisotropy_vector(body_a, rot).to(dtype), body_alpha[:, None]], -1))
 

@@ -255,9 +255,10 @@ class Refiner:
                              f"{dec.spec.code + FRAME_PARAMS} with anisotropy), got {code.shape[1]}")
         self.dec, self.material, self.cfg, self.clock = dec, material, cfg, clock
         self.coat = code[:1, dec.spec.latent:dec.spec.code]  # (1, 2): the material's coat, as the network's code has it
-        self.tail = code[:1, dec.spec.code:]
-        """(1, 0) or (1, FRAME_PARAMS): an anisotropic code's tail, kept; its body is fitted at the warped
-        pairs, where the decoder reads it (``neural.anisotropy.body_pair``: the values divided by J)."""
+        self.tail = code[:, dec.spec.code:]
+        """(3, 0) or (3, FRAME_PARAMS): an anisotropic code's tail, kept (its glow per channel); its body is
+        fitted at the warped pairs, where the decoder reads it (``neural.anisotropy.body_pair``: the values less
+        the glow, divided by J)."""
         self.coat_only = not material.interfaces and float(self.coat[0, 1]) > 1.0
         """A single layer that the code holds as its coat (a lone dielectric): exact in closed form, no body to fit."""
         self.roughness = body_roughness(material)
@@ -444,7 +445,7 @@ class Refiner:
             return st
         self.costs.fit = (self.clock() - t_fit) / (max(ran[0], 1) * fitted)
         code = torch.cat([with_coat(z[:, :self.dec.spec.latent], self.coat.expand(3, -1)),
-                          self.tail.expand(3, -1)], -1)
+                          self.tail], -1)
         e = self._score(code)
         st.rounds, st.pairs = st.rounds + 1, st.pairs + have
         st.history.append(e)
@@ -463,9 +464,11 @@ class Refiner:
 
     def _warped(self, wi: Tensor, wo: Tensor, f: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         """Body samples of an anisotropic code where its isotropic latent is read: the warped pairs and
-        the values over J (pairs the warp turns below the horizon, J = 0, are left out)."""
-        tail = body_tail(torch.cat([self._network_code[:1, :self.dec.spec.code], self.tail], -1), self.dec.spec.code)
+        the values less the glow, over J (pairs the warp turns below the horizon, J = 0, are left out)."""
+        code = torch.cat([self._network_code[:, :self.dec.spec.code], self.tail], -1)
+        tail = body_tail(code[:1], self.dec.spec.code)
         wi2, wo2, j = body_pair(tail[0].to(wi.dtype), wi, wo, self.coat[0, 1].to(wi.dtype))
+        f = (f - self.dec.glow(code[:, None, :].to(wi.dtype), wi[None], wo[None]).T.to(f.dtype)).clamp_min(0.0)
         keep = j > 1e-6
         return wi2[keep], wo2[keep], f[keep] / j[keep, None].to(f.dtype)
 

@@ -33,7 +33,7 @@ from nbrdf.viewer.gpu.shaders import MODE_DEFINES, source
 TEMPLATE = "export.glsl"
 MIX_TEMPLATE = "export_mix.glsl"
 
-#: One stack of a mix: (its weight, its material code (3, 34) or (3, 39), its name for the comments).
+#: One stack of a mix: (its weight, its material code (3, 34) or (3, 34 + FRAME_PARAMS), its name for the comments).
 MixPart = tuple[float, torch.Tensor, str]
 
 
@@ -56,18 +56,25 @@ def _render(template: str, consts: str, packed: PackedDecoder) -> str:
     return text.replace(MODE_DEFINES + "\n", "", 1).lstrip("\n")
 
 
-def _tail(model: NeuralModel, code: torch.Tensor) -> tuple[tuple[float, float, float, float], float] | None:
-    """((coat vector, body vector), the body's masking alpha) of an anisotropic code's tail; None without one."""
+Tail = tuple[tuple[float, float, float, float], float, tuple[float, float, float]]
+
+
+def _tail(model: NeuralModel, code: torch.Tensor) -> Tail | None:
+    """((coat vector, body vector), the body's masking alpha, the glow per channel) of an anisotropic code's
+    tail; None without one."""
     t = code_tail(code, model.decoder.spec.code)
     if not t:
         return None
     cx, cy, bx, by = cast(tuple[float, float, float, float], t["u_aniso"])
-    return (float(cx), float(cy), float(bx), float(by)), float(cast(float, t["u_body_alpha"]))
+    glow = cast(tuple[float, float, float], t["u_body_glow"])
+    return ((float(cx), float(cy), float(bx), float(by)), float(cast(float, t["u_body_alpha"])),
+            (float(glow[0]), float(glow[1]), float(glow[2])))
 
 
 def export_glsl(model: NeuralModel, code: torch.Tensor, name: str = "material") -> str:
-    """GLSL text defining nbrdf_eval / nbrdf_sample / nbrdf_pdf for the code (3, 34), or (3, 39) of an
-    anisotropic material (its tail as constants, the body read at its warped pair: anisotropy.glsl)."""
+    """GLSL text defining nbrdf_eval / nbrdf_sample / nbrdf_pdf for the code (3, 34), or (3, 34 + FRAME_PARAMS)
+    of an anisotropic material (its tail as constants, the body read at its warped pair plus its glow:
+    anisotropy.glsl)."""
     (rough, ior), (sigma, w) = code_parts(model, code)
     packed = pack(model.decoder)
     share = latent_share(model.decoder, code)  # (width, 3)
@@ -83,12 +90,13 @@ def export_glsl(model: NeuralModel, code: torch.Tensor, name: str = "material") 
     ])
     tail = _tail(model, code)
     if tail:  # an anisotropic code: the frame's x must be the surface's tangent (export.glsl's header)
-        (cx, cy, bx, by), alpha = tail
+        (cx, cy, bx, by), alpha, glow = tail
         consts += "\n" + "\n".join([
             "#define NB_ANISO 1",
             f"#define NB_COAT_ANISO vec2({_f(cx)}, {_f(cy)})",
             f"#define NB_BODY_ANISO vec2({_f(bx)}, {_f(by)})",
             f"#define NBRDF_BODY_TAIL vec3({_f(bx)}, {_f(by)}, {_f(alpha)})",
+            f"#define NBRDF_BODY_GLOW vec3({', '.join(_f(g) for g in glow)})",
         ])
     return _render(TEMPLATE, consts, packed)
 
@@ -146,11 +154,14 @@ def export_mix_glsl(model: NeuralModel, parts: Sequence[MixPart], name: str = "m
     if any(tails):  # some stack is anisotropic: all run the anisotropic functions, an isotropic one with zero vectors
         vecs = [t[0] if t else (0.0, 0.0, 0.0, 0.0) for t in tails]
         alphas = [t[1] if t else 0.0 for t in tails]
+        glows = [t[2] if t else (0.0, 0.0, 0.0) for t in tails]
         consts += [
             "#define NB_ANISO 1",
             f"const vec4 nb_part_aniso[{k}] = vec4[{k}]("
             + ", ".join(f"vec4({', '.join(_f(x) for x in v)})" for v in vecs) + ");  // (coat vector, body vector)",
             f"const float nb_part_body_alpha[{k}] = float[{k}]({', '.join(_f(a) for a in alphas)});",
+            f"const vec3 nb_part_body_glow[{k}] = vec3[{k}]("
+            + ", ".join(f"vec3({', '.join(_f(x) for x in g)})" for g in glows) + ");",
         ]
     return _render(MIX_TEMPLATE, "\n".join(consts), packed)
 

@@ -16,6 +16,7 @@ import torch
 from chi2_adapter import sampler_and_pdf
 from hits import directions, interactions
 
+from nbrdf.neural.anisotropy import FRAME_PARAMS, body_glow
 from nbrdf.neural.material import load_material
 
 pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not installed (pip install -e '.[mitsuba]')")
@@ -23,7 +24,9 @@ pytest.importorskip("mitsuba", reason="the optional extra 'mitsuba' is not insta
 N = 4096
 METAL = {"type": "conductor", "roughness": 0.3, "r0": [0.9, 0.6, 0.5], "anisotropy": 0.8}
 COAT = {"type": "dielectric", "roughness": 0.1, "ior": 1.5, "anisotropy": 0.8}
-STACKS = {"brushed": [METAL], "coated_brushed": [COAT, METAL]}
+VARNISH = [{"type": "dielectric", "roughness": 0.05, "ior": 1.5},
+           {"type": "medium", "albedo": [0.4, 0.3, 0.2], "sigma_t": 0.5}]  # scatters thinly: a glow (decision 123)
+STACKS = {"brushed": [METAL], "coated_brushed": [COAT, METAL], "varnished_brushed": VARNISH + [METAL]}
 ROTATIONS = (0.0, 30.0, 90.0)
 
 
@@ -61,14 +64,15 @@ def _pairs(seed: int):
 @pytest.mark.parametrize("stack", STACKS)
 def test_eval_equals_the_torch_path(mi, brushed, stack, rotation):
     """Within SPEC 7's tolerance of ``neural_brdf(material).eval``: the decoder at the warped pair times J
-    (grazing pairs included, where the warp lifts a direction), the anisotropic coat."""
+    (grazing pairs included, where the warp lifts a direction), the anisotropic coat, a thin varnish's glow."""
     from nbrdf.neural.neural_brdf import neural_brdf
 
     light, view = _pairs(11)
     path = brushed[(stack, rotation)]
     value = _eval(mi, mi.load_dict({"type": "nbrdf", "material": path}), view, light)
     brdf = neural_brdf(load_material(path))
-    assert brdf.z.shape == (3, 39)
+    assert brdf.z.shape == (3, 34 + FRAME_PARAMS)
+    assert (body_glow(brdf.z, 34) > 0).all() == (stack == "varnished_brushed")
     ref = brdf.eval(torch.from_numpy(light), torch.from_numpy(view)).numpy()
     ref = ref * np.clip(light[:, 2:3], 0, None)  # Mitsuba's eval carries cos(theta_i), i the light
     assert _within_spec(value, ref) <= 1.0

@@ -85,7 +85,7 @@ def test_the_reference_takes_anisotropy_where_the_others_refuse_it_in_one_line()
     """The closed-form reference of a lone anisotropic layer differs from the isotropic one; the GLSL shader,
     Belcour, the analytic layering and the projection name the layer and say it is not supported yet; the
     refinement and the neural path take it."""
-    from nbrdf.neural.model import layered_latents
+    from nbrdf.neural.model import default_model, layered_latents
     from nbrdf.training.analytic_layering import check_analytic
     from nbrdf.training.belcour import atoms_of
     from nbrdf.training.project import material_samples
@@ -107,8 +107,11 @@ def test_the_reference_takes_anisotropy_where_the_others_refuse_it_in_one_line()
         with pytest.raises(NbrdfError, match=rf"^layers\[2\]\.anisotropy: anisotropy is not yet supported by {path}$"):
             call(coated)
     check_refinable(coated)
+    # the neural path takes it (its isotropic equivalent): what it lacks here is its networks, not anisotropy
+    with pytest.raises(NbrdfError, match="^an anisotropic stack over a scattering medium needs the decoder for its glow$"):
+        layered_latents(None, None, material_stack(coated))
     with pytest.raises(NbrdfError, match="^a conductor base needs the leaf encoders$"):
-        layered_latents(None, None, material_stack(coated))  # the neural path takes it (its isotropic equivalent)
+        layered_latents(None, None, material_stack(coated), decoder=default_model().decoder)
 
 
 def test_the_mitsuba_plugins_take_a_uniform_anisotropic_material_and_refuse_a_mapped_one(tmp_path):

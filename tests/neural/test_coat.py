@@ -60,7 +60,7 @@ def test_codes_carry_and_clamp_the_coat():
     torch.testing.assert_close(coat_of(code, 32), torch.tensor([[0.02, 1.6]]).expand(3, 2))
     wild = with_coat(z, (-1.0, 9.0))
     assert coat_of(wild, 32)[0].tolist() == pytest.approx([0.005, 3.0])
-    with pytest.raises(NbrdfError, match=r"34 \(or 39 with anisotropy\) floats"):
+    with pytest.raises(NbrdfError, match=r"34 \(or 40 with anisotropy\) floats"):
         coat_of(z, 32)
 
 

@@ -28,15 +28,16 @@ from nbrdf.viewer.glsl_export import export_glsl, export_mix_glsl, material_part
 ASSETS = Path(__file__).resolve().parents[2] / "viewer" / "assets" / "materials"
 #: four stacks, weights 0.18 / 0.12 / 0.42 / 0.28 (metal coated, metal, dielectric coated, dielectric)
 MIXED = OpenPbr(base_color=(0.8, 0.5, 0.3), base_metalness=0.3, coat_weight=0.6, coat_roughness=0.3)
-#: two stacks, one anisotropic (the coat's roughness anisotropy: a (3, 39) code) and one isotropic (3, 34)
+#: two stacks, one anisotropic (the coat's roughness anisotropy: a (3, 40) code) and one isotropic (3, 34)
 ANISO = OpenPbr(base_color=(0.9, 0.6, 0.4), base_metalness=1.0, specular_roughness=0.4, coat_weight=0.4,
                 coat_roughness=0.2, coat_roughness_anisotropy=0.6)
 #: sha256 of the single-material exports as they were before mixes were exported, under the shipped weights
-#: (decoder id): the mix must not touch them (re-record when the weights or a shader they include change on purpose)
+#: (decoder id): the mix must not touch them (re-record when the weights or a shader they include change on purpose;
+#: last: the anisotropic glow, decision 123, which isotropic texts carry inside #ifdef NB_ANISO only)
 SINGLE_DIGESTS = {"718aba7be9e02cb3": {
-    "car_paint.json": "8d357453575a6f519be9b6cb67248eb5a8f961febcc7a1022bc0f2c097b0226a",
-    "rough_gold.json": "37194c72c5f227e987bb387f1a5ba2194479c31b960e68f1c52250ed6af5ae25",
-    "brushed_steel_lacquer.json": "561a1a49dda2d62f8eadd85aa07f97fddca078ccaba9529479625a3fdee3f7a0",
+    "car_paint.json": "e690e80d9e48903748c9c3cdf2b00febb4203e63dfbe66dbe77f4011cdc663a8",
+    "rough_gold.json": "32a79627579dea0dcbd6988331a3bd20c698dee306dc398f3c014dc1c73c4185",
+    "brushed_steel_lacquer.json": "3cc74e91a0198d2b0dd25deef1f710c52facf01838ad7d6499a3dee6f2a3b7cd",
 }}
 
 

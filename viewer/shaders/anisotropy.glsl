@@ -1,6 +1,6 @@
 // Anisotropic material codes (neural/anisotropy.py, SPEC section 10), compiled in by NB_ANISO:
-// a code's tail holds the coat's and the body's anisotropy vectors v = a (cos 2 rho, sin 2 rho) and
-// the body's masking alpha. The coat is anisotropic GGX in closed form (alpha_x = alpha_0 / k,
+// a code's tail holds the coat's and the body's anisotropy vectors v = a (cos 2 rho, sin 2 rho),
+// the body's masking alpha and, per channel, the glow of a scattering medium (glow_basis). The coat is anisotropic GGX in closed form (alpha_x = alpha_0 / k,
 // alpha_y = alpha_0 k, k = sqrt(1 - a), in the tangent frame turned by rho); the body is the decoder
 // (or its table) at the pair turned so its half vector becomes the stretched one, times J
 // (neural/anisotropy.py body_pair: D's Jacobian and ratio, the cosines, the masking ratio). Directions are in
@@ -151,6 +151,14 @@ float body_warp(vec3 wi, vec3 wo, vec3 tail, float coat_ior, out vec3 wi2, out v
         j *= min(t, AN_TRANSMITTANCE_CAP);
     }
     return j;
+}
+
+// The shape of a scattering medium's glow, added to the body unwarped (neural/anisotropy.py glow_basis,
+// decision 123): t(wi) t(wo) / pi, t the coat's smooth 1 - F (1 without a coat); 0 below the horizon.
+float glow_basis(vec3 wi, vec3 wo, float coat_ior) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return 0.0;
+    float eta = max(coat_ior, 1.0);
+    return (1.0 - fresnel_dielectric(wi.z, eta)) * (1.0 - fresnel_dielectric(wo.z, eta)) / PI;
 }
 
 // The body's proxy of an anisotropic code (neural/sampling.py with v): the Gaussian over the stretched

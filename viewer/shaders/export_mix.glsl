@@ -33,9 +33,11 @@ vec2 nb_proxy;
 vec2 nb_coat_aniso;
 vec2 nb_body_aniso;
 vec3 nb_body_tail;
+vec3 nb_body_glow;
 #define NB_COAT_ANISO nb_coat_aniso
 #define NB_BODY_ANISO nb_body_aniso
 #define NBRDF_BODY_TAIL nb_body_tail
+#define NBRDF_BODY_GLOW nb_body_glow
 #endif
 #define NBRDF_COAT nb_coat
 #define NB_SHARE(j) nb_share[j]
@@ -54,6 +56,7 @@ void nb_use(int k) {
     nb_coat_aniso = nb_part_aniso[k].xy;
     nb_body_aniso = nb_part_aniso[k].zw;
     nb_body_tail = vec3(nb_body_aniso, nb_part_body_alpha[k]);
+    nb_body_glow = nb_part_body_glow[k];
 #endif
 }
 

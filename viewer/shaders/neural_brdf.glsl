@@ -10,7 +10,8 @@
 // pass's resampling target (NB_BODY_GUIDE, lit_shade.glsl ris_target); the
 // decoder stays the body.
 // NB_ANISO: a code with an anisotropic tail (anisotropy.glsl): u_aniso = (the coat's anisotropy
-// vector, the body's), u_body_alpha the body's masking alpha; the body is read at its warped pair.
+// vector, the body's), u_body_alpha the body's masking alpha; the body is read at its warped pair,
+// plus u_body_glow (per channel) times glow_basis, unwarped.
 #if defined(NB_BODY_TABLE) || defined(NB_GUIDE_TABLE)
 //@INCLUDE body_table.glsl
 #define NB_BODY_GUIDE(wi, wo) nb_table(wi, wo)
@@ -25,6 +26,7 @@
 #ifdef NB_ANISO
 uniform vec4 u_aniso;
 uniform float u_body_alpha;
+uniform vec3 u_body_glow;
 #define NB_COAT_ANISO u_aniso.xy
 #define NB_BODY_ANISO u_aniso.zw
 #endif
@@ -38,14 +40,16 @@ uniform vec2 u_coat;  // (roughness, ior); ior 1: no coat
 #ifdef NB_ANISO
 vec3 nb_body(vec3 wi, vec3 wo) {
     vec3 a, b;
-    float j = body_warp(wi, wo, vec3(u_aniso.zw, u_body_alpha), coat_params(NB_COAT).y, a, b);
-    return j > 0.0 ? NB_BODY(a, b) * j : vec3(0.0);
+    float c_ior = coat_params(NB_COAT).y;
+    float j = body_warp(wi, wo, vec3(u_aniso.zw, u_body_alpha), c_ior, a, b);
+    return (j > 0.0 ? NB_BODY(a, b) * j : vec3(0.0)) + u_body_glow * glow_basis(wi, wo, c_ior);
 }
 #ifdef NB_BODY_GUIDE  // the resampling target warped as the body is (a round target under a stretched body: fireflies)
 vec3 nb_guide_aniso(vec3 wi, vec3 wo) {
     vec3 a, b;
-    float j = body_warp(wi, wo, vec3(u_aniso.zw, u_body_alpha), coat_params(NB_COAT).y, a, b);
-    return j > 0.0 ? nb_table(a, b) * j : vec3(0.0);
+    float c_ior = coat_params(NB_COAT).y;
+    float j = body_warp(wi, wo, vec3(u_aniso.zw, u_body_alpha), c_ior, a, b);
+    return (j > 0.0 ? nb_table(a, b) * j : vec3(0.0)) + u_body_glow * glow_basis(wi, wo, c_ior);
 }
 #undef NB_BODY_GUIDE
 #define NB_BODY_GUIDE(wi, wo) nb_guide_aniso(wi, wo)
