@@ -10,8 +10,8 @@ body latent is the *direct* light's: the same stack with every medium's albedo 0
 absorbed. That body takes the warp, with the whole stack's tail (its anisotropy lessened by the unscattered share,
 decision 116). The rest, the isotropic equivalent's body less the direct one's, is fitted by a glow
 K t(wi) t(wo) / pi per channel (``neural.anisotropy.glow_basis``, t the coat's 1 - F), which every consumer adds
-to the body unwarped. The fit uses only the pairs where the direct light is under ``GLOW_SHARE`` of the body:
-inside the direct lobe the two codes differ by the networks' errors, not by scattered light.
+to the body unwarped. The fit weighs each pair by the squared scattered share of its light: inside the direct
+lobe the two codes differ by the networks' errors, not by scattered light.
 
 Deeper media scatter many times, and their light has a shape one glow cannot follow. Their stacks keep the
 isotropic equivalent's whole body.
@@ -31,8 +31,6 @@ Tensor = torch.Tensor
 #: chosen on a validation set in render space (``python tools/scattered_glow.py``): below it the split was better
 #: on every material, above it worse on most (decision 123).
 GLOW_MAX_DEPTH = 0.5
-#: The glow is fitted on the pairs where the direct light is less than this share of the whole body.
-GLOW_SHARE = 0.5
 #: Pairs the glow is fitted on: cosine-distributed, fixed scrambled Sobol points (a stack always gets one K;
 #: 1,024 give K within 0.2 % of 4,096 at a quarter of the cost: 6 ms, what a slider edit pays).
 GLOW_PAIRS = 1024
@@ -72,8 +70,9 @@ def scattered_glow(decoder: Decoder, full: Tensor, direct: Tensor) -> Tensor:
         scattered = (b_full - b_direct).clamp_min(0.0)
         eta = coat_of(direct.reshape(-1, size), decoder.spec.latent)[:, 1].float()  # (N * C,)
         basis = glow_basis(wi[None], wo[None], eta[:, None])  # (N * C, P)
-        # fitted where the scattered light dominates: inside the direct lobe the two codes' small differences
-        # are the networks' errors, not light a medium scattered
-        keep = (b_direct < GLOW_SHARE * b_full).to(basis.dtype)
+        # each pair weighted by the scattered share of its light, squared: inside the direct lobe the two codes'
+        # small differences are the networks' errors, not light a medium scattered (a weight, not a cut: a
+        # channel that scatters little still gets its glow)
+        keep = (scattered / b_full.clamp_min(1e-12)).clamp(0.0, 1.0) ** 2
         k = (keep * scattered * basis).sum(-1) / (keep * basis * basis).sum(-1).clamp_min(1e-12)
     return k.clamp_min(0.0).reshape(n, c).to(full.dtype)
