@@ -2,7 +2,8 @@
 conductors, bare and under a coat and a medium (``training.anisotropy_report``'s distributions with a seed of
 their own, not its held-out set nor the brushed set), each on SPEC section 9's lit sphere with the light at 3
 azimuths against its reference, scored with HDR-FLIP for each floor of the warped pair's elevation
-(``neural.anisotropy.FLOOR_Z``). References cached in runs/anisotropy_floor (a few minutes here).
+(``neural.anisotropy.FLOOR_Z_BARE`` and ``FLOOR_Z_COATED``, each class's column reading its own). References
+cached in runs/anisotropy_floor (a few minutes here).
 
     python tools/anisotropy_floor.py [--n 8] [--size 48] [--floors 0.02,0.2,0.35,0.5,0.7,1]
 """
@@ -38,11 +39,11 @@ def main() -> None:
     items = anisotropic_set(a.n, VALIDATION_SEED)
     refs = [[reference_render(m, g, 256, cache=cache, progress=False, noise_target=0.03, max_spp=4096)
              for g in geos] for _, m in items]
-    kept = anisotropy.FLOOR_Z
+    kept = anisotropy.FLOOR_Z_BARE, anisotropy.FLOOR_Z_COATED
     try:
         print("floor | " + " | ".join(f"{c} FLIP median / mean" for c in CLASSES))
         for floor in floors:
-            anisotropy.FLOOR_Z = floor
+            anisotropy.FLOOR_Z_BARE = anisotropy.FLOOR_Z_COATED = floor  # each class's column reads its own
             scores: dict[str, list[float]] = {c: [] for c in CLASSES}
             for (cls, m), rs in zip(items, refs):
                 f = brdf_for(m, Method.NEURAL)
@@ -50,7 +51,7 @@ def main() -> None:
             print(f"{floor:g} | " + " | ".join(f"{statistics.median(s):.4f} / {statistics.mean(s):.4f}"
                                                for s in scores.values()))
     finally:
-        anisotropy.FLOOR_Z = kept
+        anisotropy.FLOOR_Z_BARE, anisotropy.FLOOR_Z_COATED = kept
 
 
 if __name__ == "__main__":
