@@ -27,6 +27,23 @@ def depth_tested(ctx: moderngl.Context) -> Iterator[None]:
 
 
 @contextmanager
+def float_gbuffer(ctx: moderngl.Context, size: tuple[int, int],
+                  count: int = 2) -> Iterator[list[moderngl.Texture]]:
+    """A framebuffer of ``count`` RGBA float32 targets and a depth buffer at ``size``, bound and cleared (zeros,
+    depth 1) for one G-buffer draw, released after it; yields the targets (to read back inside the block)."""
+    targets = [ctx.texture(size, 4, dtype="f4") for _ in range(count)]
+    depth = ctx.depth_renderbuffer(size)
+    fbo = ctx.framebuffer(targets, depth)
+    try:
+        fbo.use()
+        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        yield targets
+    finally:
+        for r in (fbo, depth, *targets):
+            r.release()
+
+
+@contextmanager
 def flat(ctx: moderngl.Context) -> Iterator[None]:
     """Full-screen passes: neither the depth test nor blending."""
     ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)

@@ -52,7 +52,7 @@ from nbrdf.neural.material import Material
 from nbrdf.viewer.gpu.draw_kit import DrawKit
 from nbrdf.viewer.gpu.env_prefilter import sphere_radius, tangents_along_parallels
 from nbrdf.viewer.gpu.gl import use_compute
-from nbrdf.viewer.gpu.gl_state import accumulating, added, depth_tested, flat, masked
+from nbrdf.viewer.gpu.gl_state import accumulating, added, depth_tested, flat, float_gbuffer, masked
 from nbrdf.viewer.gpu.lit_passes import LitPasses, LitSettings, Rows, incidence
 from nbrdf.viewer.gpu.lit_sampling import LitSampling
 from nbrdf.viewer.gpu.pipeline import GpuBrdf, MaterialPipeline
@@ -373,20 +373,12 @@ class Renderer:
         normal_map = own.normal_map if own is not None else None
         p = self.programs.get(ProgramKey("gbuffer.frag", "object.vert"))
         vao = self.mesh_vao(p)
-        targets = [self.ctx.texture((w, h), 4, dtype="f4") for _ in range(2)]
-        depth = self.ctx.depth_renderbuffer((w, h))
-        fbo = self.ctx.framebuffer(targets, depth)
-        try:
-            fbo.use()
-            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        with float_gbuffer(self.ctx, (w, h)) as targets:
             self.surface_uniforms(p, state, w, h, normal_map)
             with depth_tested(self.ctx):
                 vao.render(moderngl.TRIANGLES)
             wi, wo = (np.frombuffer(t.read(), np.float32).reshape(h, w, 4)[::-1] for t in targets)
             return np.ascontiguousarray(wi[..., :3]), np.ascontiguousarray(wo[..., :3]), wi[..., 3] > 0.5
-        finally:
-            for r in (fbo, depth, *targets):
-                r.release()
 
     def material_ids(self, state: ViewState, size: tuple[int, int]) -> np.ndarray:
         """(H, W) int array, row 0 at the top: per pixel of the object view the index

@@ -23,6 +23,7 @@ from nbrdf.neural.anisotropy import anisotropic_layers
 from nbrdf.neural.material import Conductor, Dielectric, Material
 from nbrdf.training.refine import material_hash
 from nbrdf.viewer.gpu import shaders
+from nbrdf.viewer.gpu.gl_state import depth_tested, float_gbuffer
 from nbrdf.viewer.gpu.pipeline import GpuBrdf
 from nbrdf.viewer.gpu.renderer import Renderer
 from nbrdf.viewer.modes import View
@@ -116,23 +117,12 @@ class MonteCarloJobs:
                                                fragment_shader=shaders.source("reference_gbuffer.frag"))
         p = self._gbuf_prog
         vao = r.mesh_vao(p)  # kept by the renderer until its mesh changes
-        targets = [self.ctx.texture((w, h), 4, dtype="f4") for _ in range(2)]
-        depth = self.ctx.depth_renderbuffer((w, h))
-        fbo = self.ctx.framebuffer(targets, depth)
-        try:
-            fbo.use()
-            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self.ctx.enable(moderngl.DEPTH_TEST)
-            self.ctx.disable(moderngl.BLEND)
-            self.ctx.depth_func = "<"
+        with float_gbuffer(self.ctx, (w, h)) as targets, depth_tested(self.ctx):
             a = aspect if aspect is not None else w / h
             r.surface_uniforms(p, state, a * h, h, brdf.normal_map if brdf is not None else None)
             vao.render(moderngl.TRIANGLES)
             n, x = (np.frombuffer(t.read(), np.float32).reshape(h, w, 4)[::-1] for t in targets)
             return np.ascontiguousarray(n[..., :3]), np.ascontiguousarray(x[..., :3]), n[..., 3] > 0.5, x[..., 3].copy()
-        finally:
-            for res in (fbo, depth, *targets):
-                res.release()
 
     def lit_job(self, material: Material, state: ViewState, key: str, size: tuple[int, int],
                 brdf: GpuBrdf | None, aspect: float | None = None) -> LitJob:
