@@ -13,11 +13,12 @@ latent that brings it just inside the bound, to first order) until every
 incidence is within it. Codes within the bound (most stacks) are returned
 unchanged; the coat is closed form and never changed.
 
-``settle`` goes further for the layering network's codes: the albedo network
-(``neural.albedo_net``) predicts the walk's albedo from the code and its decoded
-albedo, and the body latent takes the smallest move (Gauss-Newton on every
-incidence at once) that brings the decoded albedo to that prediction, then the
-bound as above.
+``settle`` goes further for the layering network's codes when the bundle carries
+an albedo network (``neural.albedo_net``; the shipped one does not, decision
+122): the network predicts the walk's albedo from the code and its decoded
+albedo, and the body latent takes the smallest move (Levenberg-Marquardt on
+every incidence at once) that brings the decoded albedo to that prediction, then
+the bound as above.
 
 Every consumer of a uniform material's code -- the window, the Mitsuba plugins,
 the GLSL export, the command line -- gets it from ``NeuralModel.material_latent``,
