@@ -165,8 +165,8 @@ def code_tail(code: Tensor, iso_size: int) -> dict[str, object]:
         return {}
     rows = code.reshape(-1, code.shape[-1])
     t = [float(x) for x in rows[0, iso_size:iso_size + FRAME_PARAMS]]
-    glow = [float(x) for x in rows[:, iso_size + 5]]
-    return {"u_aniso": tuple(t[:4]), "u_body_alpha": t[4], "u_body_glow": tuple((glow * 3)[:3])}
+    glow = torch.broadcast_to(rows[:, iso_size + 5], (3,))  # per channel (a single row: the same in all three)
+    return {"u_aniso": tuple(t[:4]), "u_body_alpha": t[4], "u_body_glow": tuple(float(x) for x in glow)}
 
 
 def stretched_half(h: Tensor, v: Tensor, inverse: bool = False) -> Tensor:

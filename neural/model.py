@@ -145,14 +145,15 @@ def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, sta
     layering."""
     if stack.is_anisotropic:  # the networks see the isotropic equivalent; the code's tail stretches it back
         iso, coat_v, body = stack.isotropic_equivalent()
-        full = None
+        glow: Tensor | float = 0.0
         if thinly_scattering(stack):  # the media's scattered light: a glow of its own (decision 123)
             if decoder is None:
                 raise NbrdfError("an anisotropic stack over a scattering medium needs the decoder for its glow")
             full = layered_latents(leaf, layering, iso, z_base)
-            iso = stack.without_scattering().isotropic_equivalent()[0]
-        z = layered_latents(leaf, layering, iso, z_base)
-        glow = 0.0 if full is None or decoder is None else scattered_glow(decoder, full, z)[..., None]
+            z = layered_latents(leaf, layering, stack.without_scattering().isotropic_equivalent()[0], z_base)
+            glow = scattered_glow(decoder, full, z)[..., None]
+        else:
+            z = layered_latents(leaf, layering, iso, z_base)
         return with_frame(z, coat_v[:, None, :].to(z.dtype), body[:, None, :2].to(z.dtype),
                           body[:, None, 2:].to(z.dtype), glow)
     n, C = stack.n, stack.channels

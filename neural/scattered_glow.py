@@ -43,15 +43,13 @@ def _pairs(dtype: torch.dtype) -> tuple[Tensor, Tensor]:
 
 
 def thinly_scattering(stack: Stack) -> bool:
-    """Whether an anisotropic ``stack``'s body is split into direct light and a glow: its body is warped (an
-    anisotropic interface under the coat) and the media above it scatter, up to ``GLOW_MAX_DEPTH``. The
-    stacks of one call must agree (a material is one stack)."""
-    if not (stack.is_anisotropic and stack.scatters):
+    """Whether an anisotropic ``stack``'s body is split into direct light and a glow: media scatter above its
+    body's anisotropic interface (so the body is warped), up to ``GLOW_MAX_DEPTH``. The stacks of one call must
+    agree (a material is one stack)."""
+    if not stack.is_anisotropic:
         return False
-    _, _, body = stack.isotropic_equivalent()
-    depth = stack.body_scattering_depth()
-    warped = (body[:, :2] != 0).any(-1)
-    return bool((warped & (depth > 0) & (depth <= GLOW_MAX_DEPTH)).all())
+    depth = stack.body_scattering_depth()  # 0 without an anisotropic interface under the coat
+    return bool(((depth > 0) & (depth <= GLOW_MAX_DEPTH)).all())
 
 
 def scattered_glow(decoder: Decoder, full: Tensor, direct: Tensor) -> Tensor:

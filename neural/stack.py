@@ -93,11 +93,6 @@ class Stack:
         """Whether any interface or the base has a non-zero anisotropy (the rotation alone changes nothing)."""
         return any(t is not None and bool((t != 0).any()) for t in (self.anisotropy, self.base_anisotropy))
 
-    @property
-    def scatters(self) -> bool:
-        """Whether any medium has a non-zero albedo and extinction (light scattered in it)."""
-        return self.layers > 0 and bool(((self.albedo * self.sigma_t) > 0).any())
-
     def without_scattering(self) -> "Stack":
         """This stack with every medium's albedo 0: its light is what never scattered in a medium."""
         return replace(self, albedo=torch.zeros_like(self.albedo))

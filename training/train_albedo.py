@@ -131,9 +131,11 @@ def train_albedo(cfg: AlbedoTrainConfig, log=print) -> dict:
     for p in net.parameters():
         p.requires_grad_(False)
     model.albedo = net
-    settled = torch.stack([energy.albedo(model.decoder, c, *model.proxy(codes[i]), model.energy)
-                           for i in tqdm(val.tolist(), desc="settled codes", unit="stack")
-                           for c in [model.settled(codes[i])]]).reshape(-1, T)
+    rows = []  # the held-out codes settled, their albedo on the sample set settling used (the input's proxy)
+    for i in tqdm(val.tolist(), desc="settled codes", unit="stack"):
+        sigma, w = model.proxy(codes[i])
+        rows.append(energy.albedo(model.decoder, model.settled(codes[i]), sigma, w, model.energy))
+    settled = torch.stack(rows).reshape(-1, T)
     with torch.no_grad():
         figures = {"stacks": {"train": len(train), "val": len(val)},
                    "decoded": _summary(relative_errors(d_va, w_va, s_va)),

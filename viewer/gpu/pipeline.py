@@ -255,7 +255,7 @@ class MaterialPipeline:
         stack with interfaces): what ``latent`` returns."""
         return self.model.settled(code, layered)
 
-    def mix_unbounded(self, brdf: GpuBrdf | None) -> bool:
+    def mix_unsettled(self, brdf: GpuBrdf | None) -> bool:
         """Whether a component of ``brdf``'s OpenPBR mix has a code its settling would change (built with a
         slider's unsettled codes: ``build(conserve=False)``)."""
         return brdf is not None and any(b.kind == BrdfKind.NEURAL and b.latent is not None

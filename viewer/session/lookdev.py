@@ -302,7 +302,7 @@ class LookDev(SceneEdits, SessionEdits, Captures):
         if due is not None and time.monotonic() - due[1] >= CONSERVE_AFTER_S:
             self._conserve_due = None
             z = self.pipeline.settled(due[0], bool(self.material.interfaces) and not self.interp.active)
-            if not torch.equal(z, due[0]) or self.pipeline.mix_unbounded(self.brdf):  # the albedo moved
+            if not torch.equal(z, due[0]) or self.pipeline.mix_unsettled(self.brdf):  # the albedo moved
                 self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=z))
         refined = self.idle_refine.poll()
         if refined is not None:  # a code that beats the network's on the material's own simulation
