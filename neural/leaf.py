@@ -11,6 +11,11 @@ A conductor's F82 tint (OpenPBR's edge colour, SPEC section 11) enters through
 a second network whose output is added times (1 - tint): a tint of 1 gives
 exactly the latent of the paper's Schlick conductor, so every stack built on
 it (the layering network was trained on those latents) is unchanged.
+
+A lone conductor (no interface above it) may have encoders of its own, the
+conductor's pair fine-tuned on their own (decision 124): its latent is what is
+shown, not a layering input, so it can fit the closed form closer than the
+layering network's inputs may move.
 """
 from __future__ import annotations
 
@@ -29,8 +34,12 @@ LEAF_PARAMS: dict[str, tuple[str, ...]] = {k: tuple(p.name for p in KINDS[k].par
                                            for k in (CONDUCTOR, DIELECTRIC, DIFFUSE)}
 #: The conductor's F82-tint correction network (its output times 1 - tint is added to the conductor's latent).
 F82 = "conductor_f82"
-#: Every network of the leaf encoders; a bundle from before the F82 tint lacks the last.
-LEAF_NETS: tuple[str, ...] = (*LEAF_PARAMS, F82)
+#: A lone conductor's encoder and F82 correction (decision 124): the conductor's pair fine-tuned for latents that are
+#: shown as they are, never layered.
+BARE, BARE_F82 = "conductor_bare", "conductor_bare_f82"
+#: Every network of the leaf encoders; a bundle from before the F82 tint lacks F82, one from before decision 124
+#: the bare pair.
+LEAF_NETS: tuple[str, ...] = (*LEAF_PARAMS, F82, BARE, BARE_F82)
 
 
 def leaf_features(kind: str, params: Tensor) -> Tensor:
@@ -46,10 +55,10 @@ def leaf_features(kind: str, params: Tensor) -> Tensor:
 
 
 def leaf_spec(kind: str, width: int = 64, depth: int = 3) -> MLPSpec:
-    """Every leaf has two input features (``leaf_features``); the F82 correction three."""
+    """Every leaf has two input features (``leaf_features``); the F82 corrections three."""
     if kind not in LEAF_NETS:
         raise NbrdfError(f"no leaf encoder for {kind!r} (one of {', '.join(LEAF_PARAMS)})")
-    return MLPSpec(inputs=3 if kind == F82 else 2, outputs=32, width=width, depth=depth)
+    return MLPSpec(inputs=3 if kind in (F82, BARE_F82) else 2, outputs=32, width=width, depth=depth)
 
 
 class LeafEncoders(nn.Module):
@@ -58,7 +67,7 @@ class LeafEncoders(nn.Module):
 
     def __init__(self, specs: dict[str, MLPSpec] | None = None):
         super().__init__()
-        specs = specs or {k: leaf_spec(k) for k in LEAF_NETS}
+        specs = specs or {k: leaf_spec(k) for k in (*LEAF_PARAMS, F82)}
         missing = [k for k in LEAF_PARAMS if k not in specs]
         if missing:
             raise NbrdfError(f"leaf encoders: no network for {', '.join(missing)}")
@@ -70,7 +79,14 @@ class LeafEncoders(nn.Module):
         """Whether these encoders take a conductor's F82 tint (bundles from before it do not)."""
         return F82 in self.nets
 
-    def encode(self, kind: str, params: Tensor) -> Tensor:
+    @property
+    def has_bare(self) -> bool:
+        """Whether a lone conductor has encoders of its own (decision 124)."""
+        return BARE in self.nets and BARE_F82 in self.nets
+
+    def encode(self, kind: str, params: Tensor, bare: bool = False) -> Tensor:
+        """Latents (N, 32) of N leaves; ``bare``: the leaves are lone conductors, shown as they are (their own
+        encoders where these encoders have them, decision 124)."""
         if kind not in self.nets:
             raise NbrdfError(f"no leaf encoder for {kind!r} (one of {', '.join(LEAF_PARAMS)})")
         params = torch.as_tensor(params, dtype=torch.float32)
@@ -82,17 +98,19 @@ class LeafEncoders(nn.Module):
         x = leaf_features(kind, params)
         if kind != CONDUCTOR:
             return self.nets[kind](x)
-        z = self.nets[kind](x[:, :2])
+        own = bare and self.has_bare
+        z = self.nets[BARE if own else kind](x[:, :2])
         edge = 1.0 - params[:, 2:3]
         if self.has_f82:
-            return z + edge * self.nets[F82](x)
+            return z + edge * self.nets[BARE_F82 if own else F82](x)
         if bool((edge != 0).any()):
             raise NbrdfError("these leaf encoders predate the F82 tint (a conductor with f82_tint 1 only); "
                              "use the shipped weights or `nbrdf train leaf --part f82`")
         return z
 
-    def conductor(self, roughness: Tensor, r0: Tensor, f82_tint: Tensor | float = 1.0) -> Tensor:
-        return self.encode(CONDUCTOR, torch.stack(torch.broadcast_tensors(_t(roughness), _t(r0), _t(f82_tint)), -1))
+    def conductor(self, roughness: Tensor, r0: Tensor, f82_tint: Tensor | float = 1.0, bare: bool = False) -> Tensor:
+        return self.encode(CONDUCTOR, torch.stack(torch.broadcast_tensors(_t(roughness), _t(r0), _t(f82_tint)), -1),
+                           bare)
 
     def dielectric(self, roughness: Tensor, ior: Tensor) -> Tensor:
         return self.encode(DIELECTRIC, torch.stack(torch.broadcast_tensors(_t(roughness), _t(ior)), -1))

@@ -507,8 +507,17 @@ def material_hash(material: Material) -> str:
     return hashlib.sha256(json.dumps(blob, sort_keys=True).encode()).hexdigest()[:24]
 
 
-def cache_path(material: Material, decoder_id: str) -> Path:
-    return cache_dir() / f"{material_hash(material)}-{decoder_id[:12]}.json"
+def start_digest(start: Tensor) -> str:
+    """A digest of a refinement's warm start (the network's code) at 0.01: a refined code is stale when the
+    networks that made its start changed (a bundle's new leaf encoder, decision 124), not when float rounding
+    between callers differs."""
+    q = torch.round(torch.as_tensor(start).detach().double() * 100.0).long().numpy()
+    return hashlib.sha256(q.tobytes()).hexdigest()[:8]
+
+
+def cache_path(material: Material, decoder_id: str, start: Tensor) -> Path:
+    """The cache file of a material's refined code under a decoder, from the warm start ``start``."""
+    return cache_dir() / f"{material_hash(material)}-{decoder_id[:12]}-{start_digest(start)}.json"
 
 
 @dataclass
@@ -523,9 +532,10 @@ class CachedCode:
     network_error: float
 
 
-def load_cached(material: Material, decoder_id: str) -> CachedCode | None:
-    """The cached refined code of a material under a decoder (None: none, or an unreadable file)."""
-    p = cache_path(material, decoder_id)
+def load_cached(material: Material, decoder_id: str, start: Tensor) -> CachedCode | None:
+    """The cached refined code of a material under a decoder from the warm start ``start`` (None: none, or an
+    unreadable file)."""
+    p = cache_path(material, decoder_id, start)
     try:
         d = json.loads(p.read_text())
         if d.get("format") != CACHE_FORMAT or d.get("decoder") != decoder_id:
@@ -539,9 +549,11 @@ def load_cached(material: Material, decoder_id: str) -> CachedCode | None:
         return None
 
 
-def save_cached(material: Material, decoder_id: str, st: RefineState, budget: float) -> None:
-    """Writes a finished refinement (atomic; a failure to write only loses the cache entry)."""
-    p = cache_path(material, decoder_id)
+def save_cached(material: Material, decoder_id: str, start: Tensor, st: RefineState,
+                budget: float) -> None:
+    """Writes a finished refinement from the warm start ``start`` (atomic; a failure to write only loses the cache
+    entry)."""
+    p = cache_path(material, decoder_id, start)
     doc = {"format": CACHE_FORMAT, "decoder": decoder_id, "material": material.name, "budget": budget,
            "converged": st.converged, "seconds": round(st.seconds, 3), "rounds": st.rounds,
            "error": st.error, "network_error": st.network_error, "code": st.code.tolist()}
@@ -565,12 +577,12 @@ def refined_code(dec: Decoder, material: Material, network_code: Tensor, cfg: Re
     cfg.check()
     did = dec.weights_id()
     if cache:
-        hit = load_cached(material, did)
+        hit = load_cached(material, did, network_code)
         if serves(hit, cfg.budget):
             return hit.code, hit
     st = Refiner(dec, material, network_code, cfg).run()
     if cache:
-        save_cached(material, did, st, cfg.budget)
+        save_cached(material, did, network_code, st, cfg.budget)
     return st.code, st
 
 

@@ -33,10 +33,11 @@ from nbrdf.neural.decoder import DEFAULT_WEIGHTS, encode, loss_target, predicted
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC
 from nbrdf.neural.layering import CODE, MEDIUM_SETS, LayeringNet, layering_spec
-from nbrdf.neural.leaf import F82, LEAF_PARAMS, LeafEncoders, leaf_spec
+from nbrdf.neural.leaf import BARE, BARE_F82, F82, LEAF_PARAMS, LeafEncoders, leaf_spec
 from nbrdf.neural.model import NeuralModel, layered_latents, load_model, save_model
 from nbrdf.neural.stack import CLASSES, DEEP, THREE_LAYERED, P, params_to_stack
 from nbrdf.training.analytic import GGXConductor, Lambertian
+from nbrdf.training.bare_conductor import bare_encoders, bare_params
 from nbrdf.training.dataset import body_values, data_folders, load_manifest, load_split, pair_pdf, sample_pairs
 from nbrdf.training.distributions import mixed_params, random_leaf_params  # noqa: F401 (random_leaf_params re-exported)
 from nbrdf.training.plots import save_curves
@@ -102,10 +103,11 @@ class OpsConfig:
 class LeafConfig(OpsConfig):
     """``nbrdf train leaf``: leaf encoders, through the frozen decoder against closed-form layers."""
 
-    part: str = field(default="all", metadata={"choices": ("all", "f82")})
+    part: str = field(default="all", metadata={"choices": ("all", "f82", "bare")})
     """all: every leaf encoder from scratch (the layering network and sampler must then be retrained); f82: only
     the conductor's F82-tint correction, added to a bundle's encoders (a tint of 1 keeps their latents exactly,
-    so the bundle's layering network and sampler stay valid)"""
+    so the bundle's layering network and sampler stay valid); bare: a lone conductor's own pair (encoder and F82
+    correction), started from the conductor's and fine-tuned, every other network kept (decision 124)"""
     steps: int = 6000
     batch: int = 32
     pairs: int = 128
@@ -274,9 +276,11 @@ def train_leaf(cfg: OpsConfig, progress: bool = True) -> Path:
     torch.manual_seed(cfg.seed)
     g = torch.Generator().manual_seed(cfg.seed)
     pool = _PairPool(1 << 18, g, model.decoder.spec.encoding)
-    only_f82 = getattr(cfg, "part", "all") == "f82"
-    if only_f82:
+    part = getattr(cfg, "part", "all")
+    if part == "f82":
         return _train_leaf_f82(cfg, model, pool, g, progress)
+    if part == "bare":
+        return _train_leaf_bare(cfg, model, pool, g, progress)
     leaf = LeafEncoders()
     with torch.no_grad():  # start every encoder at the training latents' mean
         for name, net in leaf.nets.items():
@@ -349,6 +353,30 @@ def _train_leaf_f82(cfg: OpsConfig, model: NeuralModel, pool: "_PairPool", g: to
     model.leaf = leaf
     return finish_run("leaf_f82", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
                                                      "val_loss": history["val"][-1]})
+
+
+def _train_leaf_bare(cfg: OpsConfig, model: NeuralModel, pool: "_PairPool", g: torch.Generator,
+                     progress: bool) -> Path:
+    """Fine-tunes a lone conductor's pair (``training.bare_conductor``) through the frozen decoder against the
+    closed form; every other network of the bundle is kept, so no layered code moves."""
+    leaf = bare_encoders(model)
+    s_ = model.decoder.spec.loss_scale
+    gv = torch.Generator().manual_seed(cfg.seed + 1)
+    val = (bare_params(256, gv), *pool.draw(256, 512, gv))
+
+    def loss_of(params: Tensor, wi: Tensor, wo: Tensor, feats: Tensor) -> Tensor:
+        cos_o = wo[..., 2]
+        target = loss_target(leaf_values(CONDUCTOR, params, wi, wo), cos_o, s_)
+        return _decoder_loss(model, leaf.encode(CONDUCTOR, params, bare=True), feats, cos_o, target, s_)
+
+    t0 = time.perf_counter()
+    nets = torch.nn.ModuleDict({BARE: leaf.nets[BARE], BARE_F82: leaf.nets[BARE_F82]})
+    history = run_loop("leaf_bare", cfg, {"leaf_bare": nets}, cfg.steps,
+                       lambda _s: loss_of(bare_params(cfg.batch, g), *pool.draw(cfg.batch, cfg.pairs, g)),
+                       lambda: loss_of(*val).item(), progress, rng=g)
+    model.leaf = leaf
+    return finish_run("leaf_bare", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
+                                                      "val_loss": history["val"][-1]})
 
 
 # --- layering -------------------------------------------------------------------------------

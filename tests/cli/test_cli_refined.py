@@ -27,9 +27,10 @@ def test_eval_refined_writes_the_cached_code_values(tmp_path, capsys, monkeypatc
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     model = default_model()
     m = load_material(DEFAULT)
-    z = model.material_latent(m).clone()
+    start = model.material_latent(m)
+    z = start.clone()
     z[:, 3] -= 0.3
-    R.save_cached(m, model.decoder.weights_id(), R.RefineState(z, 1.0, 0.5, converged=True), budget=2.0)
+    R.save_cached(m, model.decoder.weights_id(), start, R.RefineState(z, 1.0, 0.5, converged=True), budget=2.0)
     monkeypatch.setattr(R.Refiner, "run", lambda *a, **k: pytest.fail("refined again despite a converged code"))
     pairs = random_pairs(64, 2)
     np.save(tmp_path / "p.npy", pairs)

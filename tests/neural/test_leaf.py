@@ -64,3 +64,37 @@ def test_the_shipped_f82_encoder_fits_tinted_conductors():
             plain.append(lobe_psnr(lobe_image(untinted.eval, th), a))
     assert np.median(tinted) >= 46.0, np.median(tinted)
     assert np.percentile(tinted, 10) > np.percentile(plain, 10) + 3.0, (np.percentile(tinted, 10), np.percentile(plain, 10))
+
+
+def test_a_bare_pair_encodes_lone_conductors_only():
+    """With a lone conductor's own pair (decision 124) a bare metal's latent comes from it, and a conductor under an
+    interface keeps the conductor's pair: the layering network's inputs do not move."""
+    from nbrdf.neural.leaf import BARE, BARE_F82, LEAF_NETS
+    from nbrdf.neural.material import parse_material
+    from nbrdf.neural.model import layered_latents
+    from nbrdf.neural.stack import material_stack
+
+    torch.manual_seed(1)
+    plain = LeafEncoders()
+    assert not plain.has_bare and set(plain.nets) == {*LEAF_PARAMS, F82}
+    leaf = LeafEncoders({k: leaf_spec(k) for k in LEAF_NETS})
+    for k in (*LEAF_PARAMS, F82):
+        leaf.nets[k].load_state_dict(plain.nets[k].state_dict())
+    with torch.no_grad():
+        for k in (BARE, BARE_F82):
+            for p in leaf.nets[k].parameters():
+                p.normal_()
+    assert leaf.has_bare
+    assert torch.equal(leaf.conductor(0.2, 0.8, 0.5), plain.conductor(0.2, 0.8, 0.5))
+    assert not torch.allclose(leaf.conductor(0.2, 0.8, 0.5, bare=True), plain.conductor(0.2, 0.8, 0.5))
+    assert torch.equal(plain.conductor(0.2, 0.8, 0.5, bare=True), plain.conductor(0.2, 0.8, 0.5))  # no pair: as before
+
+    model = default_model()
+    cond = {"type": "conductor", "roughness": 0.2, "r0": [0.9, 0.6, 0.3]}
+    lone = material_stack(parse_material({"format": "nbrdf-material/1", "layers": [cond]}))
+    coated = material_stack(parse_material({"format": "nbrdf-material/1", "layers": [
+        {"type": "dielectric", "roughness": 0.1, "ior": 1.5}, cond]}))
+    for stack, moves in ((lone, True), (coated, False)):
+        a = layered_latents(plain, model.layering, stack)
+        b = layered_latents(leaf, model.layering, stack)
+        assert moves != torch.equal(a, b)

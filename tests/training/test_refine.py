@@ -41,7 +41,7 @@ def test_a_cached_code_is_used_at_once(cache, model, monkeypatch):
     marked = z.clone()
     marked[:, 0] += 0.25  # a code no refinement makes: recognisable when read back
     st = R.RefineState(marked, network_error=1.0, error=0.5, converged=False)
-    R.save_cached(m, model.decoder.weights_id(), st, budget=10.0)
+    R.save_cached(m, model.decoder.weights_id(), z, st, budget=10.0)
     assert len(list(cache.glob("*.json"))) == 1
 
     def no_refinement(*a, **k):
@@ -60,11 +60,24 @@ def test_a_cached_code_is_used_at_once(cache, model, monkeypatch):
         brdf_for(m, Method.REFINED, model=model, budget=20.0)
 
 
+def test_a_cached_code_is_keyed_on_its_warm_start(cache, model):
+    """A refined code made from another network code (a bundle's new encoder, decision 124) is not served; float
+    jitter of the same start (relative 1e-6, as between callers) is."""
+    m = gold()
+    z = model.material_latent(m)
+    R.save_cached(m, model.decoder.weights_id(), z, R.RefineState(z + 0.1, 1.0, 0.5, converged=True), budget=10.0)
+    assert R.load_cached(m, model.decoder.weights_id(), z * (1 + 1e-6)) is not None
+    moved = z.clone()
+    moved[1, 5] += 0.05
+    assert R.load_cached(m, model.decoder.weights_id(), moved) is None
+
+
 def test_a_damaged_cache_file_is_ignored(cache, model, monkeypatch):
     m = gold()
     cache.mkdir(parents=True)
-    R.cache_path(m, model.decoder.weights_id()).write_text("{not json")
-    assert R.load_cached(m, model.decoder.weights_id()) is None
+    z = model.material_latent(m)
+    R.cache_path(m, model.decoder.weights_id(), z).write_text("{not json")
+    assert R.load_cached(m, model.decoder.weights_id(), z) is None
 
 
 def _doc(m):

@@ -227,10 +227,38 @@ def test_the_f82_part_adds_or_fine_tunes_the_correction_and_keeps_the_rest(bundl
         assert all(torch.equal(p, q) for p, q in zip(a.leaf.nets[k].parameters(), b.leaf.nets[k].parameters()))
 
 
-def _f82_config(decoder, out):
+def test_the_bare_part_trains_a_lone_conductors_pair_and_keeps_every_other_network(bundles):
+    """``--part bare`` (decision 124) starts a lone conductor's pair at the conductor's own (the same latents),
+    trains only that pair, and keeps the layering network; a bundle without the F82 correction is refused in
+    one line."""
+    from nbrdf.neural.leaf import BARE, BARE_F82, LEAF_PARAMS, LeafEncoders
+    from nbrdf.neural.model import save_model
+    from nbrdf.training.bare_conductor import bare_encoders
+
+    root, _, lay, _ = bundles
+    m = load_model(lay)
+    start = bare_encoders(m)
+    assert torch.equal(start.conductor(0.3, 0.7, 0.4, bare=True), m.leaf.conductor(0.3, 0.7, 0.4))
+    a = load_model(train_leaf(_f82_config(lay, root / "bare_a", part="bare"), progress=False))
+    assert a.leaf.has_bare and a.layering is not None
+    assert torch.equal(a.leaf.conductor(0.3, 0.7, 0.4), m.leaf.conductor(0.3, 0.7, 0.4))
+    assert not torch.equal(a.leaf.conductor(0.3, 0.7, 0.4, bare=True), m.leaf.conductor(0.3, 0.7, 0.4))
+    for k in m.leaf.nets:
+        assert all(torch.equal(p, q) for p, q in zip(a.leaf.nets[k].parameters(), m.leaf.nets[k].parameters()))
+    for name, p in m.layering.state_dict().items():
+        assert torch.equal(p, a.layering.state_dict()[name]), name
+    assert {BARE, BARE_F82} <= set(a.leaf.nets)
+    old = LeafEncoders({k: m.leaf.specs[k] for k in LEAF_PARAMS})
+    m.leaf = old
+    save_model(m, root / "no_f82_bare.safetensors", like=lay)
+    with pytest.raises(NbrdfError, match="^a bare pair needs encoders with the F82 correction"):
+        train_leaf(_f82_config(root / "no_f82_bare.safetensors", root / "bare_b", part="bare"), progress=False)
+
+
+def _f82_config(decoder, out, part="f82"):
     from nbrdf.training.train_operations import LeafConfig
 
-    return LeafConfig(decoder=str(decoder), out=str(out), steps=20, batch=8, pairs=32, part="f82")
+    return LeafConfig(decoder=str(decoder), out=str(out), steps=20, batch=8, pairs=32, part=part)
 
 
 def test_the_energy_term_measures_band_albedos():

@@ -36,7 +36,7 @@ ANISO = OpenPbr(base_color=(0.9, 0.6, 0.4), base_metalness=1.0, specular_roughne
 #: last: the anisotropic glow, decision 123, which isotropic texts carry inside #ifdef NB_ANISO only)
 SINGLE_DIGESTS = {"718aba7be9e02cb3": {
     "car_paint.json": "e690e80d9e48903748c9c3cdf2b00febb4203e63dfbe66dbe77f4011cdc663a8",
-    "rough_gold.json": "32a79627579dea0dcbd6988331a3bd20c698dee306dc398f3c014dc1c73c4185",
+    "rough_gold.json": "947779ab1e938f24173997c881543a89ed4dee1424f5f1f1828395474ec6d34b",  # record 124: a lone metal's pair
     "brushed_steel_lacquer.json": "3cc74e91a0198d2b0dd25deef1f710c52facf01838ad7d6499a3dee6f2a3b7cd",
 }}
 

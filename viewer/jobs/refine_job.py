@@ -111,7 +111,7 @@ class _RefineRun:
     def step(self) -> tuple[RefineResult, int, bool, None]:
         st = self.refiner.step(self.interrupted)
         if st.done:
-            save_cached(self.material, self.spec.decoder_id, st, self.spec.config.budget)
+            save_cached(self.material, self.spec.decoder_id, self.spec.code, st, self.spec.config.budget)
         res = RefineResult(st.code.numpy().astype(np.float32), st.error, st.network_error, st.seconds, st.rounds,
                            st.done)
         return res, st.rounds, st.done, None
@@ -165,7 +165,7 @@ class IdleRefiner:
         did = self._decoder_id()
         self._material, self._code = material, code.detach().numpy().astype(np.float32)
         self._key, self._since = job_key(material, did), self.clock()
-        hit = load_cached(material, did)
+        hit = load_cached(material, did, self._code)
         if serves(hit, self.settings.config.budget):
             self._key = None  # nothing left to do
             if hit.error < hit.network_error:
