@@ -166,7 +166,8 @@ class Compare(MonteCarloJobs):
         if view != View.OBJECT:
             return self._upload((key, r.spp if r else 0), img), 1.0
         body = self._upload((key, r.spp if r else 0), img, coverage=True)
-        if _has_coat(brdf):
+        coat_on = _has_coat(brdf)
+        if coat_on:
             sampling = self.renderer.sampling
             self.renderer.sampling = coat_sampling(sampling)
             try:
@@ -176,7 +177,7 @@ class Compare(MonteCarloJobs):
                 self.renderer.sampling = sampling
         else:
             tex = self.renderer.frame_texture(view, w, h, REFERENCE_SLOT)
-        return self._add_body(tex, float(max(passes, 1)), body, r is not None), 1.0
+        return self._add_body(tex, float(max(passes, 1)), body, r is not None, coat_on), 1.0
 
     def banded(self, material: Material, analytic: GpuBrdf | None, brdf: GpuBrdf | None) -> list[Shaded]:
         """The reference's own accumulations of the lit object, shaded with the neural image's passes in the
@@ -194,8 +195,10 @@ class Compare(MonteCarloJobs):
         return [(REFERENCE_SLOT, self._coat[3], self._coat[2])]
 
     def _add_body(self, coat: moderngl.Texture, passes: float, body: moderngl.Texture,
-                  has_body: bool) -> moderngl.Texture:
-        """The lit object's reference: the coat's accumulation (sum of ``passes``) plus the body image."""
+                  has_body: bool, coat_on: bool = True) -> moderngl.Texture:
+        """The lit object's reference: the coat's accumulation (sum of ``passes``) plus the body image;
+        without a coat pass (``coat_on`` False: ``coat`` only gives the size) the body image alone, over its own
+        coverage (the coat's coverage is what placed it, and a lone brushed metal has no coat pass)."""
         size = coat.size
         if self._sum is None or self._sum[1].size != size:
             if self._sum is not None:
@@ -211,6 +214,7 @@ class Compare(MonteCarloJobs):
         body.use(1)
         p["u_coat"].value, p["u_body"].value = 0, 1
         p["u_coat_passes"].value = passes
+        p["u_coat_on"].value = int(coat_on)
         p["u_has_body"].value = int(has_body)
         self._sum_vao.render(moderngl.TRIANGLES, vertices=3)
         self.renderer.unbind_textures(0, 1)
