@@ -23,6 +23,7 @@ def test_eval_refined_writes_the_cached_code_values(tmp_path, capsys, monkeypatc
     from nbrdf.neural.material import load_material
     from nbrdf.neural.model import default_model
     from nbrdf.training import refine as R
+    from nbrdf.training import refined_cache as C
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     model = default_model()
@@ -30,7 +31,7 @@ def test_eval_refined_writes_the_cached_code_values(tmp_path, capsys, monkeypatc
     start = model.material_latent(m)
     z = start.clone()
     z[:, 3] -= 0.3
-    R.save_cached(m, model.decoder.weights_id(), start, R.RefineState(z, 1.0, 0.5, converged=True), budget=2.0)
+    C.save_cached(m, model.decoder.weights_id(), start, R.RefineState(z, 1.0, 0.5, converged=True), budget=2.0)
     monkeypatch.setattr(R.Refiner, "run", lambda *a, **k: pytest.fail("refined again despite a converged code"))
     pairs = random_pairs(64, 2)
     np.save(tmp_path / "p.npy", pairs)

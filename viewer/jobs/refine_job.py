@@ -24,15 +24,8 @@ import torch
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material, material_to_dict, parse_material
 from nbrdf.neural.model import default_model
-from nbrdf.training.refine import (
-    RefineConfig,
-    Refiner,
-    check_refinable,
-    load_cached,
-    material_hash,
-    save_cached,
-    serves,
-)
+from nbrdf.training.refine import RefineConfig, Refiner, check_refinable
+from nbrdf.training.refined_cache import load_cached, material_hash, save_cached, serves
 
 
 @dataclass

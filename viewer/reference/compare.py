@@ -34,7 +34,7 @@ from nbrdf.imaging.tonemap import ToneMap
 from nbrdf.neural.anisotropy import anisotropy_vector, geometric_alpha
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.material import Material
-from nbrdf.training.refine import material_hash
+from nbrdf.training.refined_cache import material_hash
 from nbrdf.viewer.gpu import shaders
 from nbrdf.viewer.gpu.labels import Label, Labels
 from nbrdf.viewer.gpu.lit_sampling import LitSampling, Term

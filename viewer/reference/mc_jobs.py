@@ -21,7 +21,7 @@ import numpy as np
 
 from nbrdf.neural.anisotropy import anisotropic_layers
 from nbrdf.neural.material import Conductor, Dielectric, Material
-from nbrdf.training.refine import material_hash
+from nbrdf.training.refined_cache import material_hash
 from nbrdf.viewer.gpu import shaders
 from nbrdf.viewer.gpu.gl_state import depth_tested, float_gbuffer
 from nbrdf.viewer.gpu.pipeline import GpuBrdf

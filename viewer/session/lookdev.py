@@ -46,7 +46,7 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent_texture import blend
 from nbrdf.neural.material import Material
 from nbrdf.neural.model import NeuralModel
-from nbrdf.training.refine import material_hash
+from nbrdf.training.refined_cache import material_hash
 from nbrdf.viewer.gpu.backdrop import Backdrop, BackdropSettings
 from nbrdf.viewer.gpu.body_source import BodySource
 from nbrdf.viewer.gpu.pipeline import (
