@@ -416,8 +416,10 @@ class Compare(MonteCarloJobs):
 
 
 def _has_coat(brdf: GpuBrdf | None) -> bool:
-    """Whether the reference of ``brdf``'s lit object has a coat pass on the GPU (a neural BRDF of a stack)."""
-    return brdf is not None and brdf.kind == BrdfKind.NEURAL and any(b.material.interfaces for b in brdf.components())
+    """Whether the reference of ``brdf``'s lit object has a coat pass on the GPU: any neural BRDF. A lone interface's
+    pass draws its own coat (a bare dielectric's reflection) or none (a bare metal), and always the object's
+    coverage at the view's resolution, so the Monte Carlo image's silhouette is not its coarse texels'."""
+    return brdf is not None and brdf.kind == BrdfKind.NEURAL
 
 
 def _read_linear(tex: moderngl.Texture, passes: float) -> np.ndarray:
