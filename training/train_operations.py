@@ -331,28 +331,13 @@ def _train_leaf_f82(cfg: OpsConfig, model: NeuralModel, pool: "_PairPool", g: to
         with torch.no_grad():
             net.net[-1].weight.zero_()
             net.net[-1].bias.zero_()
-    s_ = model.decoder.spec.loss_scale
-    gv = torch.Generator().manual_seed(cfg.seed + 1)
 
     def tinted(n: int, gen: torch.Generator) -> Tensor:
         p = random_leaf_params(CONDUCTOR, n, gen)
         p[:, 2] = torch.rand(n, generator=gen)  # the correction only matters away from tint 1
         return p
 
-    val = (tinted(64, gv), *pool.draw(64, 512, gv))
-
-    def loss_of(params: Tensor, wi: Tensor, wo: Tensor, feats: Tensor) -> Tensor:
-        cos_o = wo[..., 2]
-        target = loss_target(leaf_values(CONDUCTOR, params, wi, wo), cos_o, s_)
-        return _decoder_loss(model, leaf.encode(CONDUCTOR, params), feats, cos_o, target, s_)
-
-    t0 = time.perf_counter()
-    history = run_loop("leaf_f82", cfg, {"leaf_f82": net}, cfg.steps,
-                        lambda _s: loss_of(tinted(cfg.batch, g), *pool.draw(cfg.batch, cfg.pairs, g)),
-                        lambda: loss_of(*val).item(), progress, rng=g)
-    model.leaf = leaf
-    return finish_run("leaf_f82", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
-                                                     "val_loss": history["val"][-1]})
+    return _conductor_run("leaf_f82", cfg, model, leaf, net, tinted, False, 64, pool, g, progress)
 
 
 def _train_leaf_bare(cfg: OpsConfig, model: NeuralModel, pool: "_PairPool", g: torch.Generator,
@@ -360,23 +345,31 @@ def _train_leaf_bare(cfg: OpsConfig, model: NeuralModel, pool: "_PairPool", g: t
     """Fine-tunes a lone conductor's pair (``training.bare_conductor``) through the frozen decoder against the
     closed form; every other network of the bundle is kept, so no layered code moves."""
     leaf = bare_encoders(model)
+    nets = torch.nn.ModuleDict({BARE: leaf.nets[BARE], BARE_F82: leaf.nets[BARE_F82]})
+    return _conductor_run("leaf_bare", cfg, model, leaf, nets, bare_params, True, 256, pool, g, progress)
+
+
+def _conductor_run(name: str, cfg: OpsConfig, model: NeuralModel, leaf: LeafEncoders, trained: torch.nn.Module,
+                   draw: Callable[[int, torch.Generator], Tensor], bare: bool, n_val: int, pool: "_PairPool",
+                   g: torch.Generator, progress: bool) -> Path:
+    """Trains ``trained`` (a part of ``leaf``) on conductors ``draw`` makes, through the frozen decoder against the
+    closed form (``bare``: as lone conductors are encoded), validated on ``n_val`` of them; writes the bundle."""
     s_ = model.decoder.spec.loss_scale
     gv = torch.Generator().manual_seed(cfg.seed + 1)
-    val = (bare_params(256, gv), *pool.draw(256, 512, gv))
+    val = (draw(n_val, gv), *pool.draw(n_val, 512, gv))
 
     def loss_of(params: Tensor, wi: Tensor, wo: Tensor, feats: Tensor) -> Tensor:
         cos_o = wo[..., 2]
         target = loss_target(leaf_values(CONDUCTOR, params, wi, wo), cos_o, s_)
-        return _decoder_loss(model, leaf.encode(CONDUCTOR, params, bare=True), feats, cos_o, target, s_)
+        return _decoder_loss(model, leaf.encode(CONDUCTOR, params, bare=bare), feats, cos_o, target, s_)
 
     t0 = time.perf_counter()
-    nets = torch.nn.ModuleDict({BARE: leaf.nets[BARE], BARE_F82: leaf.nets[BARE_F82]})
-    history = run_loop("leaf_bare", cfg, {"leaf_bare": nets}, cfg.steps,
-                       lambda _s: loss_of(bare_params(cfg.batch, g), *pool.draw(cfg.batch, cfg.pairs, g)),
+    history = run_loop(name, cfg, {name: trained}, cfg.steps,
+                       lambda _s: loss_of(draw(cfg.batch, g), *pool.draw(cfg.batch, cfg.pairs, g)),
                        lambda: loss_of(*val).item(), progress, rng=g)
     model.leaf = leaf
-    return finish_run("leaf_bare", cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
-                                                      "val_loss": history["val"][-1]})
+    return finish_run(name, cfg, model, history, {"seconds_this_run": round(time.perf_counter() - t0, 1),
+                                               "val_loss": history["val"][-1]})
 
 
 # --- layering -------------------------------------------------------------------------------

@@ -23,3 +23,10 @@ def sphere_geometry():
 def sphere_materials():
     """The materials the references were rendered from, by name."""
     return {n: sr.material(n) for n in sr.NAMES}
+
+
+@pytest.fixture
+def refined_cache_dir(tmp_path, monkeypatch):
+    """A private refined-code cache (``training.refined_cache``): its folder, not yet made."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    return tmp_path / "cache" / "nbrdf" / "refined"

@@ -21,12 +21,6 @@ TINY = R.RefineConfig(budget=600.0, round_pairs=128, heldout_pairs=128, spp=8, s
                       patience=2)
 
 
-@pytest.fixture
-def cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
-    return tmp_path / "cache" / "nbrdf" / "refined"
-
-
 @pytest.fixture(scope="module")
 def model():
     return default_model()
@@ -36,14 +30,14 @@ def gold():
     return load_material(LOOKDEV / "coated-gold.json")
 
 
-def test_a_cached_code_is_used_at_once(cache, model, monkeypatch):
+def test_a_cached_code_is_used_at_once(refined_cache_dir, model, monkeypatch):
     m = gold()
     z = model.material_latent(m)
     marked = z.clone()
     marked[:, 0] += 0.25  # a code no refinement makes: recognisable when read back
     st = R.RefineState(marked, network_error=1.0, error=0.5, converged=False)
     C.save_cached(m, model.decoder.weights_id(), z, st, budget=10.0)
-    assert len(list(cache.glob("*.json"))) == 1
+    assert len(list(refined_cache_dir.glob("*.json"))) == 1
 
     def no_refinement(*a, **k):
         raise AssertionError("refined again despite a cached code")
@@ -67,7 +61,7 @@ def _doc(m):
     return material_to_dict(m)
 
 
-def test_refinement_keeps_the_coat_and_never_returns_a_worse_code(cache, model):
+def test_refinement_keeps_the_coat_and_never_returns_a_worse_code(refined_cache_dir, model):
     m = gold()
     z = model.material_latent(m)
     code, st = R.refined_code(model.decoder, m, z, TINY)
@@ -75,10 +69,10 @@ def test_refinement_keeps_the_coat_and_never_returns_a_worse_code(cache, model):
     assert torch.equal(code[:, -2:], z[:, -2:])  # the coat is exact: never fitted
     assert st.rounds == 2 and st.error <= st.network_error  # the network's code is kept unless a round beats it
     assert len(st.history) == 3 and st.pairs == TINY.heldout_pairs + 2 * TINY.round_pairs
-    assert list(cache.glob("*.json")), "a finished refinement is cached"
+    assert list(refined_cache_dir.glob("*.json")), "a finished refinement is cached"
 
 
-def test_a_lone_dielectric_is_its_coat_and_is_kept_exact(cache, model, monkeypatch):
+def test_a_lone_dielectric_is_its_coat_and_is_kept_exact(refined_cache_dir, model, monkeypatch):
     """A single dielectric layer is the code's coat, exact in closed form, with no body below it: the
     refinement keeps the network's code without simulating anything (it once fitted a body to the whole
     reflection on top of the coat, twice the light; held-out dielectrics HDR-FLIP 0.24 against 0.00)."""
@@ -129,7 +123,7 @@ def test_placed_pairs_are_unit_and_above_the_horizon():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["black-lacquer", "coated-gold"])
-def test_refined_is_at_least_as_close_to_the_reference_as_neural(name, model, cache):
+def test_refined_is_at_least_as_close_to_the_reference_as_neural(name, model, refined_cache_dir):
     """Render space (the lit sphere of ``nbrdf report render``, 32 pixels, 512
     paths per pixel): HDR-FLIP of the refined code against the reference is
     no larger than the network's. Two materials of the look-development set
