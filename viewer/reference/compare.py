@@ -42,7 +42,7 @@ from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf, analytic_capable
 from nbrdf.viewer.gpu.renderer import Renderer, Shaded
 from nbrdf.viewer.modes import CompareMode, View
 from nbrdf.viewer.reference.flip_view import FlipView
-from nbrdf.viewer.reference.mc_jobs import MonteCarloJobs
+from nbrdf.viewer.reference.mc_jobs import MonteCarloJobs, coat_env_of
 from nbrdf.viewer.reference.worker import ReferenceJob, ReferenceWorker
 from nbrdf.viewer.view_settings import ViewState
 
@@ -105,6 +105,8 @@ class Compare(MonteCarloJobs):
         self.show_labels = True
         """Draw "neural" / "reference (...)" on the compared images."""
         self._ref_label = "reference"     # the reference's label, set by ``reference``
+        self.a_label = "neural"
+        """The shown image's name on the picture: the BRDF mode it is drawn with (set by the session)."""
         self.placeholder: str | None = None
         """Set by ``reference``: the words its side shows over the placeholder's hatch
         while there is no reference image (computing, failed, none for the material);
@@ -149,7 +151,7 @@ class Compare(MonteCarloJobs):
             return self._upload(None, np.zeros((1, 1, 3), np.float32)), 1.0
         vw, vh = view_size or (w, h)
         size = self.mc_size(view, vw, vh)
-        key = self.job_key(material, state, None if view == View.LOBE else size, scene)
+        key = self.job_key(material, state, None if view == View.LOBE else size, scene, coat_env_of(brdf))
         r = self.worker.cached(key)
         if (r is None or not (r.done or r.error)) and self.worker.computing != key:
             self.worker.request(self.job(material, state, key, size, brdf, vw / vh))  # new, or set aside by another
@@ -252,7 +254,7 @@ class Compare(MonteCarloJobs):
         view = View.parse(state.view)
         if view == View.OBJECT:
             state = replace(state, background=False)
-        key = self.job_key(material, state, None if view == View.LOBE else size, scene)
+        key = self.job_key(material, state, None if view == View.LOBE else size, scene, coat_env_of(brdf))
         job = self.job(material, state, key, size, brdf)
         job.max_spp = spp
         self.worker.request(job)
@@ -293,14 +295,15 @@ class Compare(MonteCarloJobs):
         this reference's)."""
         mode = CompareMode.parse(mode)
         ref = b_label or self._ref_label
+        a = self.a_label
         if mode == CompareMode.SIDE:
-            return [Label("neural", 0.0), Label(ref, 0.5)]
+            return [Label(a, 0.0), Label(ref, 0.5)]
         if mode == CompareMode.WIPE:
-            return [Label("neural", wipe, "right"), Label(ref, wipe)]
+            return [Label(a, wipe, "right"), Label(ref, wipe)]
         if mode == CompareMode.ERROR:
-            return [Label(f"relative error: neural vs {ref}", 0.0)]
+            return [Label(f"relative error: {a} vs {ref}", 0.0)]
         if mode == CompareMode.FLIP:
-            return [Label(f"HDR-FLIP: neural vs {ref}", 0.0)]
+            return [Label(f"HDR-FLIP: {a} vs {ref}", 0.0)]
         return []
 
     def plane_curve(self, material: Material, theta_i: float, wi: torch.Tensor, wo: torch.Tensor,
@@ -419,7 +422,7 @@ def _has_coat(brdf: GpuBrdf | None) -> bool:
     """Whether the reference of ``brdf``'s lit object has a coat pass on the GPU: any neural BRDF. A lone interface's
     pass draws its own coat (a bare dielectric's reflection) or none (a bare metal), and always the object's
     coverage at the view's resolution, so the Monte Carlo image's silhouette is not its coarse texels'."""
-    return brdf is not None and brdf.kind == BrdfKind.NEURAL
+    return not coat_env_of(brdf)
 
 
 def _read_linear(tex: moderngl.Texture, passes: float) -> np.ndarray:

@@ -66,6 +66,9 @@ class LitJob:
     """GGX alpha of the direction strategy around the mirror direction (None: none, a diffuse base)."""
     max_spp: int = 1024
     """Samples per pixel after which the job is done."""
+    coat_env: bool = False
+    """The coat's environment light too: no GPU coat pass adds it (a view whose BRDF is not the neural one, whose
+    closed-form coat the pass draws: Belcour's)."""
 
     def spec(self, start_spp: int, round_spp: int) -> "LitSpec":
         """The picklable form sent to the worker process."""
@@ -74,7 +77,8 @@ class LitJob:
                        np.ascontiguousarray(self.frame, np.float32), f32(self.wo), np.asarray(self.mask, bool),
                        opt(self.light_wi), float(self.light_radiance), opt(self.point_wi),
                        opt(self.point_irradiance), self.env_file, float(self.env_rotation),
-                       float(self.env_intensity), self.lobe_alpha, int(self.max_spp), start_spp, round_spp)
+                       float(self.env_intensity), self.lobe_alpha, int(self.max_spp), start_spp, round_spp,
+                       bool(self.coat_env))
 
 
 @dataclass
@@ -98,6 +102,7 @@ class LitSpec:
     max_spp: int
     start_spp: int
     round_spp: int
+    coat_env: bool = False
 
 
 def frames_from_normals(n: np.ndarray) -> np.ndarray:
@@ -195,7 +200,7 @@ def lit_samples(spec: LitSpec, material: Material, env, k: int, seed: int) -> np
         up = (d[:, 2] > 0) & (pdf > 0)
         if up.any():
             f, _ = mix_reference_eval(material, torch.from_numpy(d[up]), torch.from_numpy(wo[up]), spp=1,
-                                  seed=2 * seed + 2, top_reflection=False)
+                                  seed=2 * seed + 2, top_reflection=spec.coat_env)
             radiance = env_bilinear(env.radiance, d_lookup[up]) * spec.env_intensity
             out[up] += f.double().numpy() * radiance * (d[up, 2:3] / pdf[up, None])
     return out.reshape(n, k, 3)

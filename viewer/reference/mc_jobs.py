@@ -24,7 +24,7 @@ from nbrdf.neural.material import Conductor, Dielectric, Material
 from nbrdf.training.refined_cache import material_hash
 from nbrdf.viewer.gpu import shaders
 from nbrdf.viewer.gpu.gl_state import depth_tested, float_gbuffer
-from nbrdf.viewer.gpu.pipeline import GpuBrdf
+from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf
 from nbrdf.viewer.gpu.renderer import Renderer
 from nbrdf.viewer.modes import View
 from nbrdf.viewer.reference.lit import LitJob, frames_from_normals, to_local, turned_frames
@@ -45,6 +45,12 @@ def lobe_alpha(material: Material) -> float | None:
     if not isinstance(base, (Conductor, Dielectric)):
         return None
     return max(MIN_LOBE_ALPHA, float(base.roughness), *(float(i.roughness) for i, _ in material.interfaces))
+
+
+def coat_env_of(brdf: GpuBrdf | None) -> bool:
+    """Whether a lit object's Monte Carlo image holds its coat's environment light too: where no GPU coat pass adds
+    it in closed form, i.e. for any BRDF but the neural one (viewer/reference/compare.py ``_has_coat``)."""
+    return brdf is None or brdf.kind != BrdfKind.NEURAL
 
 
 class MonteCarloJobs:
@@ -77,9 +83,11 @@ class MonteCarloJobs:
             _remove(self._env_file[2])
             self._env_file = None
 
-    def job_key(self, material: Material, state: ViewState, size: tuple[int, int] | None, scene: str) -> str:
+    def job_key(self, material: Material, state: ViewState, size: tuple[int, int] | None, scene: str,
+                coat_env: bool = False) -> str:
         """The cache key of a view's reference: material document, view, and what
-        decides the pairs (incidence; size; camera, lights, environment and mesh)
+        decides the pairs (incidence; size; camera, lights, environment and mesh;
+        ``coat_env``: the lit object's coat environment light in the image too, ``coat_env_of``)
         -- not the compare mode, nor the render scale."""
         view = View.parse(state.view)
         doc = material_hash(material)  # the content (and a file layer's folder), not the name: a rename keeps it
@@ -89,7 +97,7 @@ class MonteCarloJobs:
         if view == View.OBJECT:
             env = (self._env_identity()[0], state.env_rotation, state.env_intensity) if state.env_on else None
             light = (tuple(state.light_dir), state.light_radiance, state.point_light, state.point_intensity, env,
-                     scene)
+                     scene, *(("coat_env",) if coat_env else ()))
         return hashlib.sha1(f"{doc}|{view.value}|{extra}|{cam}|{light}".encode()).hexdigest()
 
     def job(self, material: Material, state: ViewState, key: str, size: tuple[int, int],
@@ -136,7 +144,8 @@ class MonteCarloJobs:
         wo = to_local(frame, view / np.linalg.norm(view, axis=-1, keepdims=True))
         ld = np.asarray(state.light_dir, np.float64)
         job = LitJob(key, material, frame, wo, mask, light_wi=to_local(frame, ld / np.linalg.norm(ld)),
-                     light_radiance=float(state.light_radiance), lobe_alpha=lobe_alpha(material))
+                     light_radiance=float(state.light_radiance), lobe_alpha=lobe_alpha(material),
+                     coat_env=coat_env_of(brdf))
         if state.point_light is not None:
             d = np.asarray(state.point_light, np.float64) - p
             d2 = np.maximum((d * d).sum(-1, keepdims=True), 1e-8)

@@ -83,6 +83,10 @@ if TYPE_CHECKING:
     from nbrdf.viewer.options import ViewOptions
     from nbrdf.viewer.scene.gltf_import import MaterialGroup
 
+#: The compare view's name of the shown image, by the BRDF mode that draws it.
+A_LABELS = {BrdfMode.ANALYTIC: "closed form", BrdfMode.BELCOUR: "Belcour 2018"}
+
+
 @dataclass
 class Timings:
     """What the performance overlay shows."""
@@ -219,6 +223,7 @@ class LookDev(SceneEdits, SessionEdits, Captures):
         t0 = time.perf_counter()
         m = self.material
         mode = self.pipeline.resolve(m, self.brdf_mode)
+        self.compare_part.a_label = A_LABELS.get(mode, mode.value)  # the compared image's name: what draws it
         note = fallback_note(m, self.brdf_mode)
         if note or self.notice == self.brdf_note:
             self.notice = note
