@@ -64,7 +64,7 @@ class EnergySettings:
     seed: int = 11
     """The scramble of the Sobol points (fixed: a code always maps to the same code)."""
     match_steps: int = 2
-    """Gauss-Newton steps at most that move a network's code to the albedo network's prediction (``settle``)."""
+    """Levenberg-Marquardt steps at most that move a network's code to the albedo network's prediction (``settle``)."""
     match_tolerance: float = 0.01
     """``settle`` stops once every incidence and channel is this close (relative) to the prediction."""
     match_threshold: float = 0.03

@@ -167,9 +167,10 @@ def layered_latents(leaf: LeafEncoders | None, layering: LayeringNet | None, sta
         raise NbrdfError(f"a {stack.base} base needs the leaf encoders")
     elif stack.base == CONDUCTOR:
         r0 = stack.base_param("base_r0").expand(n, C).reshape(-1)
-        f82 = stack.base_f82 if stack.base_f82 is not None and (TINT_UNDER_INTERFACES or stack.layers == 0) else None
+        lone = stack.layers == 0  # nothing above the metal: its tint and its own encoders (decisions 119, 124)
+        f82 = stack.base_f82 if stack.base_f82 is not None and (TINT_UNDER_INTERFACES or lone) else None
         tint = (f82 if f82 is not None else torch.ones(1, 1)).expand(n, C).reshape(-1)
-        z = with_coat(leaf.conductor(chan(stack.base_param("base_roughness")), r0, tint, bare=stack.layers == 0), None)
+        z = with_coat(leaf.conductor(chan(stack.base_param("base_roughness")), r0, tint, bare=lone), None)
     elif stack.base == DIELECTRIC:  # a bare interface: all coat, achromatic, the encoder gives a black body
         z_b = leaf.dielectric(stack.base_param("base_roughness"), stack.base_param("base_ior"))
         z_b = z_b[:, None].expand(n, C, -1).reshape(n * C, -1)
