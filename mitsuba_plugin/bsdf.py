@@ -52,7 +52,9 @@ def _diffuse(kernel) -> bool:
 
 
 class NbrdfBSDF(mi.BSDF):
-    """``{"type": "nbrdf", "material": PATH[, "weights": BUNDLE, "pixel_angle": RADIANS, "body": "decoder"|"table"]}``:
+    """``{"type": "nbrdf", "material": PATH[, "weights": BUNDLE, "pixel_angle": RADIANS, "body": "decoder"|"table",
+    "calibrate": BOOL]}``: ``calibrate`` true gives a uniform layered material the walk's energy (its body scaled
+    to the walk's directional albedo, ``training.calibration``; the first load walks it, later ones read the cache).
     ``body`` "table" reads a uniform material's body from a table baked once
     at load (``TableBody``: noise-free, a small interpolation bias against the
     decoder, and no weights to load, so it renders fast in symbolic mode);
@@ -80,7 +82,8 @@ class NbrdfBSDF(mi.BSDF):
         self.path = str(path)
         self.pixel_angle = float(_prop(props, "pixel_angle", 0.0))
         self.body = str(_prop(props, "body", Body.DECODER.value))
-        self.kernel = code_kernel(self.path, _prop(props, "weights"), self.pixel_angle, self.body)
+        self.kernel = code_kernel(self.path, _prop(props, "weights"), self.pixel_angle, self.body,
+                                  bool(_prop(props, "calibrate", False)))
         self.normal_map = material_normal_map(self.path, "nbrdf")
         diffuse = all(_diffuse(k) for k in _components(self.kernel))
         self._lobe = mi.BSDFFlags.DiffuseReflection if diffuse else mi.BSDFFlags.GlossyReflection

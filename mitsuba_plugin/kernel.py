@@ -232,6 +232,32 @@ def _transmittance(w, eta: float):
 
 
 @dataclass(frozen=True)
+class BodyScaleKernel:
+    """A calibrated code's body scale g(theta_i) g(theta_o) per channel (``neural.body_scale.BodyScale``): g
+    linear in the angle between the knots, flat outside them; the same arithmetic in Dr.Jit."""
+
+    knots: tuple[float, ...]
+    """the knots' angles (degrees, increasing)"""
+    g: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]
+    """g per channel at the knots"""
+
+    def at(self, w) -> list:
+        """[g_r, g_g, g_b] at the directions w (their angle from the normal)."""
+        k = self.knots
+        t = dr.clip(dr.acos(dr.clip(w.z, -1.0, 1.0)) * (180.0 / math.pi), k[0], k[-1])
+        out = [0.0, 0.0, 0.0]
+        for j in range(len(k)):  # hat functions on the knots; they sum to 1 on [k_0, k_last]
+            up = (t - k[j - 1]) / (k[j] - k[j - 1]) if j > 0 else None
+            down = (k[j + 1] - t) / (k[j + 1] - k[j]) if j + 1 < len(k) else None
+            hat = dr.clip(down if up is None else up if down is None else dr.minimum(up, down), 0.0, 1.0)
+            out = [o + hat * g[j] for o, g in zip(out, self.g)]
+        return out
+
+    def __call__(self, wi, wo) -> list:
+        return [a * b for a, b in zip(self.at(wi), self.at(wo))]
+
+
+@dataclass(frozen=True)
 class BodyWarp:
     """The body's part of an anisotropic code's tail: the decoder (or its table) reads the body at the
     warped pair and its value takes the factor J (``neural.anisotropy.body_pair``: under a coat the pair
@@ -491,14 +517,21 @@ class CodeKernel:
     #: Whether the body varies over the surface (looked up per hit by uv).
     textured = False
 
-    def __init__(self, decoder: "DecoderKernel | TableBody", coat: Coat, proxy: Proxy, warp: BodyWarp | None = None):
+    def __init__(self, decoder: "DecoderKernel | TableBody", coat: Coat, proxy: Proxy, warp: BodyWarp | None = None,
+                 scale: BodyScaleKernel | None = None):
         """``decoder``: what gives the body (``DecoderKernel`` or ``TableBody``); ``warp``: an
-        anisotropic body's (``BodyWarp``), which either body is read through; None: isotropic."""
-        self.decoder, self.coat, self.proxy, self.warp = decoder, coat, proxy, warp
+        anisotropic body's (``BodyWarp``), which either body is read through; None: isotropic; ``scale``:
+        a calibrated code's body scale (None: none)."""
+        self.decoder, self.coat, self.proxy, self.warp, self.scale = decoder, coat, proxy, warp, scale
 
     def body(self, wi, wo, shares: list | None) -> list:
         """[f_r, f_g, f_b] of the body (1/sr), at the warped pair times J for an anisotropic one, plus its
-        glow."""
+        glow; times the body scale of a calibrated code."""
+        if self.scale is not None:
+            return [f * g for f, g in zip(self._body(wi, wo, shares), self.scale(wi, wo))]
+        return self._body(wi, wo, shares)
+
+    def _body(self, wi, wo, shares: list | None) -> list:
         if self.warp is None:
             return self.decoder.body(wi, wo, shares)
         bi, bo, j = self.warp.pair(wi, wo)

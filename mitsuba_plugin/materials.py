@@ -18,6 +18,7 @@ import torch
 from nbrdf.mitsuba.errors import PluginError
 from nbrdf.mitsuba.kernel import (
     Body,
+    BodyScaleKernel,
     BodyWarp,
     Coat,
     CodeKernel,
@@ -40,6 +41,7 @@ from nbrdf.neural.anisotropy import (
     require_isotropic,
     stretch,
 )
+from nbrdf.neural.body_scale import BodyScale
 from nbrdf.neural.body_table import TableSize, bake_body
 from nbrdf.neural.coat import IOR_RANGE, NO_COAT, ROUGHNESS_RANGE, coat_of
 from nbrdf.neural.errors import NbrdfError
@@ -49,7 +51,9 @@ from nbrdf.neural.mix import material_mix
 from nbrdf.neural.model import default_model, load_model
 from nbrdf.neural.stack import material_stack
 from nbrdf.neural.svbrdf import latent_texture
-from nbrdf.training.brdfs import DefensiveSampler, ReferenceBRDF
+from nbrdf.training import calibration
+from nbrdf.training.analytic import DefensiveSampler
+from nbrdf.training.brdfs import ReferenceBRDF
 from nbrdf.training.layered import simulate
 from nbrdf.training.reference import reference_eval, simulator_params
 
@@ -107,7 +111,7 @@ def _code_terms(model, code: torch.Tensor) -> tuple[Coat, Proxy, BodyWarp | None
 
 
 def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 0.0,
-                body: str = Body.DECODER) -> CodeKernel | MixedKernel:
+                body: str = Body.DECODER, calibrate: bool = False) -> CodeKernel | MixedKernel:
     """The Dr.Jit kernel of a material JSON or code file (``neural.material_code``);
     a texture-mapped material JSON gives a ``TexturedCodeKernel`` over its
     latent texture (mip-mapped by the ray cone of ``pixel_angle`` radians).
@@ -121,7 +125,9 @@ def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 
     uniform material, a parametric table over its (at most two) mapped
     albedos for a texture-mapped one, ``param_table``). A uniform material
     may be anisotropic (SPEC section 10: its tangent is the local frame's x,
-    ``_code_terms``); a texture-mapped one may not (one line)."""
+    ``_code_terms``); a texture-mapped one may not (one line). ``calibrate``: a uniform material JSON (each
+    component of a mix) takes the walk's energy (``training.calibration``: its body scaled to the walk's
+    albedo; the first load of a material walks it, 1-60 s, later loads read the cache)."""
     if body not in Body.words():
         raise PluginError(f'nbrdf: body {body!r} is not one of {", ".join(map(repr, Body.words()))}')
     try:
@@ -134,21 +140,29 @@ def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 
                     return param_table_kernel(m, model, pixel_angle)
                 return _textured_kernel(m, model, pixel_angle)
             parts = material_mix(m)
-            if len(parts) > 1:  # OpenPBR's linear mix: each component's kernel, weighted (neural.mix)
+            if len(parts) > 1 or calibrate:  # OpenPBR's linear mix: each component's kernel, weighted (neural.mix)
                 model = load_model(weights) if weights else default_model()
-                return MixedKernel([(w, _uniform_kernel(model, model.material_latent(c), body)) for w, c in parts])
+                kernels = [(w, _uniform_kernel(model, *_code(model, c, calibrate), body=body)) for w, c in parts]
+                return kernels[0][1] if len(kernels) == 1 else MixedKernel(kernels)
         model, code = load_code(material, weights)
-        return _uniform_kernel(model, code, body)
+        return _uniform_kernel(model, code, body=body)
     except (NbrdfError, ValueError) as e:
         raise PluginError(f"nbrdf: {e}") from None
 
 
-def _uniform_kernel(model, code: torch.Tensor, body: str) -> CodeKernel:
+def _code(model, material: Material, calibrate: bool) -> tuple[torch.Tensor, BodyScale | None]:
+    """A uniform material's code and, ``calibrate``d, its body scale (``training.calibration``)."""
+    return calibration.calibrate(model, material) if calibrate else (model.material_latent(material), None)
+
+
+def _uniform_kernel(model, code: torch.Tensor, scale: BodyScale | None = None, body: str = Body.DECODER) -> CodeKernel:
     """The kernel of one uniform code (3, 34) (or (3, 34 + FRAME_PARAMS), anisotropic): its coat, proxy and body
-    warp (``_code_terms``) over the decoder or its baked table (``body``)."""
+    warp (``_code_terms``) over the decoder or its baked table (``body``), its body times ``scale`` where given."""
     coat, proxy, warp = _code_terms(model, code)
     decoder = table_body(model.decoder, code) if body == Body.TABLE else decoder_kernel(model.decoder, code)
-    return CodeKernel(decoder, coat, proxy, warp)
+    scaled = None if scale is None else BodyScaleKernel(tuple(scale.knots), tuple(tuple(float(x) for x in row)
+                                                                                  for row in scale.g))
+    return CodeKernel(decoder, coat, proxy, warp, scaled)
 
 
 def _textured_kernel(material, model, pixel_angle: float) -> TexturedCodeKernel:

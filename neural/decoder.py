@@ -224,8 +224,9 @@ class Decoder(nn.Module):
         c = self.coat(z, wi, wo)
         return f if c is None else f + c.to(f.dtype)
 
-    def eval_rgb(self, z: Tensor, wi: Tensor, wo: Tensor) -> Tensor:
-        """RGB values (N, 3) of a material code (or bare latents) z (3, code) at N pairs."""
+    def eval_rgb(self, z: Tensor, wi: Tensor, wo: Tensor, body_scale=None) -> Tensor:
+        """RGB values (N, 3) of a material code (or bare latents) z (3, code) at N pairs; ``body_scale``
+        (pairs -> (N, 3), ``neural.body_scale.BodyScale``) multiplies the body, not the coat."""
         bi, bo, jac = self.body_pair(z[:1], wi, wo)  # the tail is the same in the three channels
         feats = self.encode(bi, bo)
         share = self.latent_share(z.to(feats.dtype))  # (3, W)
@@ -235,6 +236,8 @@ class Decoder(nn.Module):
             f = f * jac.to(f.dtype)[:, None] + self.glow(z[:, None, :], wi[None], wo[None]).T.to(f.dtype)
         up = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
         f = torch.where(up, f, torch.zeros_like(f))
+        if body_scale is not None:
+            f = f * body_scale(wi, wo).to(f.dtype)
         c = self.coat(z[:1], wi, wo)  # the coat is the same in the three channels
         return f if c is None else f + c.to(f.dtype)[:, None]
 

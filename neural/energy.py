@@ -72,11 +72,15 @@ class EnergySettings:
     (relative, at some incidence): the network's own error is about 1-2 %, and every move of the latent
     changes the lobe's shape as well as its albedo."""
 
+    walk_threshold: float = 0.004
+    """A code's body is scaled to the walk's albedo (``neural.body_scale``) only where the two differ by more than
+    this (relative, at some incidence and channel): about the walk estimate's own noise."""
+
     def check(self) -> "EnergySettings":
         if not (self.thetas and all(0.0 <= t < 90.0 for t in self.thetas) and 16 <= self.samples <= 1 << 16
                 and 0.5 <= self.bound <= 1.0 and 0 <= self.steps <= 10_000
                 and 1 <= self.screen_samples and 0.0 < self.screen_bound <= self.bound
-                and 0 <= self.match_steps <= 100 and self.match_tolerance > 0.0):
+                and 0 <= self.match_steps <= 100 and self.match_tolerance > 0.0 and self.walk_threshold >= 0.0):
             raise NbrdfError(f"energy: incidences in [0, 90), samples 16..65536, bound 0.5..1, steps >= 0 "
                              f"(got {self.thetas}, {self.samples}, {self.bound}, {self.steps})")
         return self
@@ -94,7 +98,7 @@ def incidence_count(decoder: Decoder, code: Tensor, s: EnergySettings) -> int:
     return len(s.thetas) * (1 if _tangent_turn(decoder, code) is None else 2)
 
 
-def _directions(code: Tensor, decoder: Decoder, sigma: float, w: float, s: EnergySettings,
+def sample_set(code: Tensor, decoder: Decoder, sigma: float, w: float, s: EnergySettings,
                 n: int | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor]:
     """(wi, wo, weight (N,), coat term (N,), features (N, K), body factor (N,)) of the fixed sample set
     (``n`` per incidence, default ``s.samples``): the code's sampler's directions, cos / pdf per pair (0
@@ -139,7 +143,7 @@ def albedo(decoder: Decoder, code: Tensor, sigma: float, w: float,
            settings: EnergySettings | None = None) -> Tensor:
     """The directional albedo (3, T) of a code (3, code) at ``settings.thetas`` (its own sampler)."""
     s = (settings or EnergySettings()).check()
-    wi, wo, weight, coat_f, feats, jac = _directions(code, decoder, sigma, w, s)
+    wi, wo, weight, coat_f, feats, jac = sample_set(code, decoder, sigma, w, s)
     with torch.no_grad():
         return _estimate(decoder, code[:, : decoder.spec.latent].float(), feats, wi, wo, weight, coat_f, jac,
                          incidence_count(decoder, code, s))
@@ -147,7 +151,7 @@ def albedo(decoder: Decoder, code: Tensor, sigma: float, w: float,
 
 def _estimate(decoder: Decoder, latent: Tensor, feats: Tensor, wi: Tensor, wo: Tensor, weight: Tensor,
               coat_f: Tensor, jac: Tensor, incidences: int) -> Tensor:
-    """The albedo (3, T) of body latents (3, L) plus the coat over a sample set of ``_directions``: the
+    """The albedo (3, T) of body latents (3, L) plus the coat over a sample set of ``sample_set``: the
     decoded body (zero below the horizon, times its factor ``jac``) and the coat's value, times cos / pdf,
     averaged per incidence."""
     y = decoder.log_f_from_share(decoder.latent_share(latent)[:, None, :], feats[None])
@@ -167,15 +171,15 @@ def conserve(decoder: Decoder, code: Tensor, sigma: float, w: float,
     L, T = decoder.spec.latent, incidence_count(decoder, code, s)
     z = code[:, :L].float()
     if s.screen_samples < s.samples:
-        wi, wo, weight, coat_f, feats, jac = _directions(code, decoder, sigma, w, s, s.screen_samples)
+        wi, wo, weight, coat_f, feats, jac = sample_set(code, decoder, sigma, w, s, s.screen_samples)
         with torch.no_grad():
             if float(_estimate(decoder, z, feats, wi, wo, weight, coat_f, jac, T).max()) < s.screen_bound:
                 return code
-    return _bounded(decoder, code, _directions(code, decoder, sigma, w, s), s)
+    return _bounded(decoder, code, sample_set(code, decoder, sigma, w, s), s)
 
 
 def _bounded(decoder: Decoder, code: Tensor, dirs: tuple[Tensor, ...], s: EnergySettings) -> Tensor:
-    """``conserve`` on the sample set ``dirs`` of ``_directions``."""
+    """``conserve`` on the sample set ``dirs`` of ``sample_set``."""
     wi, wo, weight, coat_f, feats, jac = dirs
     L, T = decoder.spec.latent, incidence_count(decoder, code, s)
     z = code[:, :L].float()
@@ -238,7 +242,7 @@ def settle(decoder: Decoder, code: Tensor, sigma: float, w: float, net: AlbedoNe
             or _tangent_turn(decoder, code) is not None or net.incidences != T):
         return conserve(decoder, code, sigma, w, s)
     L = decoder.spec.latent
-    dirs = _directions(code, decoder, sigma, w, s)
+    dirs = sample_set(code, decoder, sigma, w, s)
     wi, wo, weight, coat_f, feats, jac = dirs
     z = code[:, :L].float()
     a, J = _with_jacobian(decoder, z, feats, wi, wo, weight, coat_f, jac, T)

@@ -47,6 +47,7 @@ class Method(WordEnum):
     NEURAL = "neural"        #: the full neural path the viewer uses
     PROJECTED = "projected"  #: the decoder at a latent fitted to the reference
     REFINED = "refined"      #: the network's code refined against the Monte Carlo walk within a time budget
+    CALIBRATED = "calibrated"  #: the network's code with its directional albedo settled to the walk's
     ANALYTIC = "analytic"    #: closed form; the analytic layering approximation for stacks
     BELCOUR = "belcour"      #: Belcour 2018's layered model (statistical operators), a baseline
 

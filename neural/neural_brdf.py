@@ -11,6 +11,7 @@ from __future__ import annotations
 import torch
 
 from nbrdf.neural.anisotropy import body_tail
+from nbrdf.neural.body_scale import BodyScale
 from nbrdf.neural.brdf import ExactRGB, Sample
 from nbrdf.neural.coat import coat_of, has_coat
 from nbrdf.neural.decoder import Decoder
@@ -73,15 +74,17 @@ class NeuralBRDF(_CodeSampler):
 
 class LatentBRDF(_CodeSampler, ExactRGB):
     """The decoder at a material's code ``z`` (3, 34): RGB values (body plus
-    coat), one sampler for all three channels."""
+    coat), one sampler for all three channels; the body times ``scale``
+    where given (``neural.body_scale``: the walk's energy on the networks' lobe)."""
 
-    def __init__(self, decoder: Decoder, z: Tensor, sigma: float, w: float):
+    def __init__(self, decoder: Decoder, z: Tensor, sigma: float, w: float, scale: BodyScale | None = None):
         self.decoder, self.z = decoder, z.reshape(3, -1).float()
         self.sigma, self.w = float(sigma), float(w)
+        self.scale = scale
 
     def eval(self, wi: Tensor, wo: Tensor) -> Tensor:
         with torch.no_grad():
-            return self.decoder.eval_rgb(self.z, wi.float(), wo.float())
+            return self.decoder.eval_rgb(self.z, wi.float(), wo.float(), self.scale)
 
     def sample(self, w: Tensor, u: Tensor) -> Sample:
         wo, pdf, ok = self._draw(w, u)
@@ -108,14 +111,15 @@ def proxy_hint(m: Material) -> tuple[float, float]:
     return max(0.01, 0.71 * r), 0.5
 
 
-def latent_brdf(decoder: Decoder, z: Tensor, material: Material, sampler=None) -> LatentBRDF:
-    """The decoder at code z (3, 34) of ``material``, sampled through the
-    sampler network's proxy when given, else through ``proxy_hint``."""
+def latent_brdf(decoder: Decoder, z: Tensor, material: Material, sampler=None,
+                scale: BodyScale | None = None) -> LatentBRDF:
+    """The decoder at code z (3, 34) of ``material`` (its body times ``scale`` where given), sampled through
+    the sampler network's proxy when given, else through ``proxy_hint``."""
     if sampler is not None:
         with torch.no_grad():
             s, w = sampler.material_params(z)
-        return LatentBRDF(decoder, z, float(s), float(w))
-    return LatentBRDF(decoder, z, *proxy_hint(material))
+        return LatentBRDF(decoder, z, float(s), float(w), scale)
+    return LatentBRDF(decoder, z, *proxy_hint(material), scale)
 
 
 def neural_brdf(material: Material, model=None) -> LatentBRDF:

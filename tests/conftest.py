@@ -20,3 +20,5 @@ os.environ.setdefault("NBRDF_STATE_DIR", tempfile.mkdtemp(prefix="nbrdf-test-sta
 # Windows opened by tests show the network's codes: no refinement on idle, no user-cached refined code
 # (tests/viewer/test_refine_job.py turns it on where it is tested).
 os.environ.setdefault("NBRDF_IDLE_REFINE", "0")
+# ... nor a calibrated energy (tests/viewer/test_calibrate_job.py turns it on where it is tested)
+os.environ.setdefault("NBRDF_IDLE_CALIBRATE", "0")

@@ -228,3 +228,23 @@ class Lambertian:
         pdf = torch.where((w[..., 2] > 0) & (z > 0), z / math.pi, torch.zeros_like(z))
         f = torch.where(pdf > 0, self.eval(w, wo), torch.zeros_like(pdf))
         return Sample(wo, f, pdf)
+
+
+class DefensiveSampler:
+    """Half cosine lobe, half GGX reflection lobe of ``roughness`` (upper
+    hemisphere): a sampler for BRDFs that have none of their own."""
+
+    def __init__(self, roughness: float):
+        self.ggx = GGXConductor(roughness, 1.0)
+
+    def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
+        cos = torch.where(w[:, 2] > 0, w_other[:, 2].clamp_min(0) / math.pi, torch.zeros_like(w[:, 2]))
+        return 0.5 * cos + 0.5 * self.ggx.pdf(w, w_other)
+
+    def sample(self, w: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:
+        """(direction, pdf); u[:, 2] picks the lobe."""
+        wc = cosine_hemisphere(u[:, 0], u[:, 1]).to(w.dtype)
+        wg = self.ggx.sample(w, u).w
+        wo = torch.where((u[:, 2] < 0.5)[:, None], wc, wg)
+        pdf = self.pdf(w, wo)
+        return wo, torch.where((wo[:, 2] > 0) & (w[:, 2] > 0), pdf, torch.zeros_like(pdf))

@@ -21,7 +21,6 @@ of a cosine lobe and the GGX reflection lobe of the top layer's roughness
 """
 from __future__ import annotations
 
-import math
 from typing import Callable
 
 import torch
@@ -29,15 +28,15 @@ import torch
 from nbrdf.neural.brdf import RGBBRDF, ExactRGB, Sample
 from nbrdf.neural.decoder import default_decoder
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.geometry import cosine_hemisphere
 from nbrdf.neural.material import Conductor, Dielectric, Diffuse, LatentBase, Material, Measured
 from nbrdf.neural.methods import METHODS, Method
 from nbrdf.neural.mix import MixedBRDF, material_mix
 from nbrdf.neural.neural_brdf import latent_brdf, neural_brdf
-from nbrdf.training.analytic import GGXConductor, GGXDielectric, Lambertian
+from nbrdf.training.analytic import DefensiveSampler, GGXConductor, GGXDielectric, Lambertian
 from nbrdf.training.analytic_layering import analytic_layered_eval, check_analytic
 from nbrdf.training.belcour import atoms_of, belcour_eval_atoms
 from nbrdf.training.belcour_tables import default_tables
+from nbrdf.training.calibration import calibrated_brdf
 from nbrdf.training.merl import MerlBRDF
 from nbrdf.training.project import fit, material_samples
 from nbrdf.training.reference import check_uniform, reference_eval, single_layer_eval
@@ -72,26 +71,6 @@ class ClosedFormBRDF(ExactRGB):
         s = self.lobe.sample(w, u)
         f = torch.where((s.pdf > 0)[:, None], self.eval(w, s.w), torch.zeros(1, dtype=w.dtype))
         return Sample(s.w, f, s.pdf)
-
-
-class DefensiveSampler:
-    """Half cosine lobe, half GGX reflection lobe of ``roughness`` (upper
-    hemisphere): a sampler for BRDFs that have none of their own."""
-
-    def __init__(self, roughness: float):
-        self.ggx = GGXConductor(roughness, 1.0)
-
-    def pdf(self, w: Tensor, w_other: Tensor) -> Tensor:
-        cos = torch.where(w[:, 2] > 0, w_other[:, 2].clamp_min(0) / math.pi, torch.zeros_like(w[:, 2]))
-        return 0.5 * cos + 0.5 * self.ggx.pdf(w, w_other)
-
-    def sample(self, w: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:
-        """(direction, pdf); u[:, 2] picks the lobe."""
-        wc = cosine_hemisphere(u[:, 0], u[:, 1]).to(w.dtype)
-        wg = self.ggx.sample(w, u).w
-        wo = torch.where((u[:, 2] < 0.5)[:, None], wc, wg)
-        pdf = self.pdf(w, wo)
-        return wo, torch.where((wo[:, 2] > 0) & (w[:, 2] > 0), pdf, torch.zeros_like(pdf))
 
 
 def _top_roughness(material: Material) -> float:
@@ -201,6 +180,8 @@ def brdf_for(material: Material, method: Method, spp: int = 256, seed: int = 0, 
             return latent_brdf(dec, fit(dec, samples), material)
         case Method.REFINED:
             return refined_brdf(material, model, budget=budget, seed=seed)
+        case Method.CALIBRATED:
+            return calibrated_brdf(material, model)
         case Method.BELCOUR:
             return BelcourBRDF(material)
     # Method.ANALYTIC

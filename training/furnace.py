@@ -31,8 +31,7 @@ from nbrdf.neural.layer_kinds import CONDUCTOR, DIELECTRIC, DIFFUSE, MEDIUM
 from nbrdf.neural.material import FORMAT as MATERIAL_FORMAT
 from nbrdf.neural.material import Dielectric, Material, parse_material
 from nbrdf.training import distributions as D
-from nbrdf.training.analytic import GGXConductor, GGXDielectric
-from nbrdf.training.brdfs import DefensiveSampler
+from nbrdf.training.analytic import DefensiveSampler, GGXConductor, GGXDielectric
 from nbrdf.training.reference import reference_eval, stack_params
 
 Tensor = torch.Tensor
@@ -104,42 +103,77 @@ def _body_round(material: Material, thetas: tuple[float, ...], n: int, seed: int
     return w.reshape(len(thetas), n, 3)
 
 
+class AlbedoWalk:
+    """The ground-truth albedo of a stack, a round at a time (``reference_albedo``): each ``step`` walks one
+    round of paths for the incidences still short of ``target`` (the first ``paths`` each, then doubling the
+    total, at most ``round_paths`` a round) and says whether every incidence is done. A caller that must stay
+    responsive (the previewer's worker) stops between rounds and resumes."""
+
+    def __init__(self, material: Material, thetas: tuple[float, ...] = FURNACE_THETAS, paths: int = 1 << 14,
+                 max_paths: int = 1 << 18, target: float = 0.002, seed: int = 0, round_paths: int | None = None):
+        if not material.interfaces:
+            raise NbrdfError(f"{material.name or 'material'}: a single layer has a closed form, not a walk")
+        stack_params(material)  # a stack the walk cannot take (a latent or measured base) fails here
+        if paths < 2 or max_paths < paths or not target > 0 or (round_paths is not None and round_paths < 2):
+            raise NbrdfError(f"furnace: paths must be at least 2, max_paths at least paths, the target positive "
+                             f"and a round at least 2 paths (got {paths}, {max_paths}, {target}, {round_paths})")
+        self.material, self.thetas, self.max_paths, self.target = material, tuple(thetas), max_paths, target
+        self.seed, self.round_paths = seed, round_paths
+        self.g = torch.Generator().manual_seed(seed)
+        T = len(thetas)
+        top = material.layers[0]
+        top_w = _top_reflection(top, _wi(self.thetas, 1 << 16),
+                                torch.rand(T << 16, 3, generator=self.g, dtype=torch.float64)).reshape(T, 1 << 16)
+        self.top_m, self.top_var = top_w.mean(1), top_w.var(1) / top_w.shape[1]
+        self.s1, self.s2 = torch.zeros(T, 3, dtype=torch.float64), torch.zeros(T, 3, dtype=torch.float64)
+        self.count = torch.zeros(T, dtype=torch.float64)
+        self.todo, self.k, self.n = list(range(T)), 0, paths
+        self.worst = float("inf")
+        """The largest relative standard error of a channel so far."""
+
+    @property
+    def done(self) -> bool:
+        return not self.todo
+
+    def step(self) -> bool:
+        """Walks one round; True once every incidence is within the target or at ``max_paths``."""
+        if not self.todo:
+            return True
+        n = self.n if self.round_paths is None else min(self.n, self.round_paths)
+        w = _body_round(self.material, tuple(self.thetas[i] for i in self.todo), n,
+                        self.seed * 1_000_003 + 7 + self.k, self.g)
+        idx = torch.tensor(self.todo)
+        self.s1[idx] += w.sum(1)
+        self.s2[idx] += (w * w).sum(1)
+        self.count[idx] += n
+        mean, se = _pooled(self.s1, self.s2, self.count, self.top_m, self.top_var)
+        rel = (se / mean.clamp_min(1e-12)).max(1).values
+        self.worst = float(rel.max())
+        self.todo = [i for i in self.todo if rel[i] > self.target and self.count[i] < self.max_paths]
+        if self.todo:  # the next round doubles the total of the incidences still running (they ran together)
+            c = int(self.count[self.todo[0]])
+            self.n, self.k = min(c, self.max_paths - c), self.k + 1
+        return not self.todo
+
+    def result(self) -> Albedo:
+        mean, se = _pooled(self.s1, self.s2, self.count, self.top_m, self.top_var)
+        return Albedo(mean.numpy(), se.numpy(), self.count.numpy().astype(np.int64))
+
+
 def reference_albedo(material: Material, thetas: tuple[float, ...] = FURNACE_THETAS, paths: int = 1 << 14,
                      max_paths: int = 1 << 18, target: float = 0.002, seed: int = 0,
-                     progress: Callable[[str], None] | None = None) -> Albedo:
+                     progress: Callable[[str], None] | None = None, round_paths: int | None = None) -> Albedo:
     """The ground-truth albedo of a stack (module docstring): rounds of ``paths`` walk paths per incidence, each
-    doubling the total, until the relative standard error of every channel is at most ``target`` or an incidence
-    has ``max_paths``. One line (``NbrdfError``) for a material the walk cannot take."""
-    if not material.interfaces:
-        raise NbrdfError(f"{material.name or 'material'}: a single layer has a closed form, not a walk")
-    stack_params(material)  # a stack the walk cannot take (a latent or measured base) fails here
-    if paths < 2 or max_paths < paths or not target > 0:
-        raise NbrdfError(f"furnace: paths must be at least 2, max_paths at least paths and the target positive "
-                         f"(got {paths}, {max_paths}, {target})")
-    top = material.layers[0]
-    g = torch.Generator().manual_seed(seed)
-    T = len(thetas)
-    top_w = _top_reflection(top, _wi(thetas, 1 << 16), torch.rand(T << 16, 3, generator=g, dtype=torch.float64))
-    top_w = top_w.reshape(T, 1 << 16)
-    top_m, top_var = top_w.mean(1), top_w.var(1) / top_w.shape[1]
-    s1, s2 = torch.zeros(T, 3, dtype=torch.float64), torch.zeros(T, 3, dtype=torch.float64)
-    count = torch.zeros(T, dtype=torch.float64)
-    todo, k, n = list(range(T)), 0, paths
-    while todo:
-        w = _body_round(material, tuple(thetas[i] for i in todo), n, seed * 1_000_003 + 7 + k, g)
-        idx = torch.tensor(todo)
-        s1[idx] += w.sum(1)
-        s2[idx] += (w * w).sum(1)
-        count[idx] += n
-        mean, se = _pooled(s1, s2, count, top_m, top_var)
-        rel = (se / mean.clamp_min(1e-12)).max(1).values
-        todo = [i for i in todo if rel[i] > target and count[i] < max_paths]
-        if todo:  # the next round doubles the total of the incidences still running (they ran together)
-            n, k = min(int(count[todo[0]]), max_paths - int(count[todo[0]])), k + 1
+    doubling the total (at most ``round_paths`` a round), until the relative standard error of every channel is
+    at most ``target`` or an incidence has ``max_paths``. One line (``NbrdfError``) for a material the walk
+    cannot take."""
+    walk = AlbedoWalk(material, thetas, paths, max_paths, target, seed, round_paths)
+    while not walk.step():
         if progress is not None:
-            progress(f"{material.name}: {int(count.max())} paths, worst relative error {float(rel.max()):.2e}")
-    mean, se = _pooled(s1, s2, count, top_m, top_var)
-    return Albedo(mean.numpy(), se.numpy(), count.numpy().astype(np.int64))
+            progress(f"{material.name}: {int(walk.count.max())} paths, worst relative error {walk.worst:.2e}")
+    if progress is not None:
+        progress(f"{material.name}: {int(walk.count.max())} paths, worst relative error {walk.worst:.2e}")
+    return walk.result()
 
 
 def _pooled(s1: Tensor, s2: Tensor, count: Tensor, top_m: Tensor, top_var: Tensor) -> tuple[Tensor, Tensor]:

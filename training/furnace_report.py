@@ -21,7 +21,7 @@ from nbrdf.training.plots import _plt
 from nbrdf.training.reference import reference_eval
 
 #: Methods the report can score against the reference.
-FURNACE_METHODS = (Method.NEURAL, Method.REFINED)
+FURNACE_METHODS = (Method.NEURAL, Method.CALIBRATED, Method.REFINED)
 
 
 @dataclass

@@ -64,7 +64,7 @@ NAMED_SETS = ("lookdev", "openpbr", "brushed")
 #: Bumped when a change makes cached reference renders stale.
 CACHE_VERSION = 1
 #: The methods a render report scores (the reference is what they are scored against).
-METHODS = (Method.NEURAL, Method.PROJECTED, Method.REFINED, Method.BELCOUR)
+METHODS = (Method.NEURAL, Method.CALIBRATED, Method.PROJECTED, Method.REFINED, Method.BELCOUR)
 
 
 @dataclass

@@ -22,12 +22,14 @@ import numpy as np
 import torch
 
 from nbrdf.neural.anisotropy import code_tail
+from nbrdf.neural.body_scale import BodyScale
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.gpu_pack import STORE_CONST, PackedDecoder, _glsl_float, latent_share, pack
 from nbrdf.neural.material import Material, is_material_file, load_material
 from nbrdf.neural.material_code import code_parts, load_code
 from nbrdf.neural.mix import material_mix
 from nbrdf.neural.model import NeuralModel
+from nbrdf.training import calibration
 from nbrdf.viewer.gpu.shaders import MODE_DEFINES, source
 
 TEMPLATE = "export.glsl"
@@ -71,10 +73,24 @@ def _tail(model: NeuralModel, code: torch.Tensor) -> Tail | None:
             (float(glow[0]), float(glow[1]), float(glow[2])))
 
 
-def export_glsl(model: NeuralModel, code: torch.Tensor, name: str = "material") -> str:
+def _scale_lines(scales: Sequence[BodyScale | None], knots: tuple[float, ...]) -> list[str]:
+    """The defines of a calibrated export (body_scale.glsl) and every stack's g, knot by knot (ones: a stack
+    whose code needs no scale): one stack's as NB_SCALE_VALUES, a mix's as nb_part_scale."""
+    rows = []
+    for sc in scales:
+        g = torch.ones(3, len(knots)) if sc is None else sc.g
+        rows += [f"vec3({', '.join(_f(float(x)) for x in g[:, j])})" for j in range(len(knots))]
+    values = (f"#define NB_SCALE_VALUES {', '.join(rows)}" if len(scales) == 1 else
+              f"const vec3 nb_part_scale[{len(rows)}] = vec3[{len(rows)}]({', '.join(rows)});")
+    return ["#define NB_BODY_SCALE 1", f"#define NB_SCALE_COUNT {len(knots)}",
+            f"#define NB_SCALE_KNOTS {', '.join(_f(k) for k in knots)}", values]
+
+
+def export_glsl(model: NeuralModel, code: torch.Tensor, name: str = "material",
+                scale: BodyScale | None = None) -> str:
     """GLSL text defining nbrdf_eval / nbrdf_sample / nbrdf_pdf for the code (3, 34), or (3, 34 + FRAME_PARAMS)
     of an anisotropic material (its tail as constants, the body read at its warped pair plus its glow:
-    anisotropy.glsl)."""
+    anisotropy.glsl); its body times ``scale`` where given (a calibrated code: body_scale.glsl)."""
     (rough, ior), (sigma, w) = code_parts(model, code)
     packed = pack(model.decoder)
     share = latent_share(model.decoder, code)  # (width, 3)
@@ -98,6 +114,9 @@ def export_glsl(model: NeuralModel, code: torch.Tensor, name: str = "material") 
             f"#define NBRDF_BODY_TAIL vec3({_f(bx)}, {_f(by)}, {_f(alpha)})",
             f"#define NBRDF_BODY_GLOW vec3({', '.join(_f(g) for g in glow)})",
         ])
+    if scale is not None:
+        consts += "\n// calibrated: the body times g(theta_i) g(theta_o), the walk's energy (nbrdf export --calibrate)\n"
+        consts += "\n".join(_scale_lines([scale], tuple(scale.knots)))
     return _render(TEMPLATE, consts, packed)
 
 
@@ -114,17 +133,22 @@ def mix_edges(weights: Sequence[float]) -> list[float]:
     return [0.0] + [float(e) for e in run]
 
 
-def export_mix_glsl(model: NeuralModel, parts: Sequence[MixPart], name: str = "material") -> str:
+def export_mix_glsl(model: NeuralModel, parts: Sequence[MixPart], name: str = "material",
+                    scales: Sequence[BodyScale | None] | None = None) -> str:
     """GLSL text defining nbrdf_eval / nbrdf_sample / nbrdf_pdf for the weighted sum of the material codes
     ``parts`` (weights > 0 summing to 1, as ``MixedBRDF`` takes them): every stack's constants in one
-    program, the mixture's functions (module docstring). One part: ``export_glsl``'s text, unchanged."""
+    program, the mixture's functions (module docstring); each stack's body times its ``scales`` entry where
+    one is given (calibrated). One part: ``export_glsl``'s text, unchanged."""
     if not parts:
         raise NbrdfError("a mix needs at least one part")
     weights = [float(p[0]) for p in parts]
     if not all(math.isfinite(x) and x > 0.0 for x in weights) or not math.isclose(sum(weights), 1.0, abs_tol=1e-6):
         raise NbrdfError(f"a mix needs positive weights summing to 1 (got {weights})")
+    scales = list(scales) if scales is not None else [None] * len(parts)
+    if len(scales) != len(parts):
+        raise NbrdfError(f"a mix of {len(parts)} stacks needs as many body scales (got {len(scales)})")
     if len(parts) == 1:
-        return export_glsl(model, parts[0][1], name)
+        return export_glsl(model, parts[0][1], name, scales[0])
     k, width = len(parts), model.decoder.spec.width
     packed = pack(model.decoder)
     coats: list[str] = []
@@ -163,6 +187,10 @@ def export_mix_glsl(model: NeuralModel, parts: Sequence[MixPart], name: str = "m
             f"const vec3 nb_part_body_glow[{k}] = vec3[{k}]("
             + ", ".join(f"vec3({', '.join(_f(x) for x in g)})" for g in glows) + ");",
         ]
+    given = [sc for sc in scales if sc is not None]
+    if given:
+        consts += ["// calibrated: each stack's body times g(theta_i) g(theta_o), the walk's energy"]
+        consts += _scale_lines(scales, tuple(given[0].knots))
     return _render(MIX_TEMPLATE, "\n".join(consts), packed)
 
 
@@ -172,14 +200,25 @@ def material_parts(model: NeuralModel, material: Material) -> list[MixPart]:
     return [(w, model.material_latent(m), m.name) for w, m in material_mix(material)]
 
 
-def export_file_glsl(path: str | Path, weights: str | Path | None = None) -> tuple[str, list[MixPart]]:
+def export_file_glsl(path: str | Path, weights: str | Path | None = None,
+                     calibrate: bool = False) -> tuple[str, list[MixPart]]:
     """(the export of the material or code file ``path`` under the bundle ``weights``, the mix's parts: empty
     for a material that is no mix or a code file). Loads as ``neural.material_code.load_code`` (its notes
-    and one-line errors); a material file is read once more, quietly, for its mix."""
+    and one-line errors); a material file is read once more, quietly, for its mix. ``calibrate``: each
+    layered stack's body takes the walk's energy (``training.calibration``; a code file has no stack: refused)."""
     model, code = load_code(path, weights)
     name = Path(path).name
     material = load_material(path, []) if is_material_file(path) else None
-    parts = material_parts(model, material) if material is not None and not material.is_textured else []
+    if calibrate and material is None:  # (a texture-mapped material was refused by load_code)
+        raise NbrdfError(f"{Path(path).name}: a code file has no stack to walk; export its material with --calibrate")
+    stacks = material_mix(material) if material is not None and not material.is_textured else []
+    if calibrate:
+        done = [(w, *calibration.calibrate(model, m), m.name) for w, m in stacks]
+        parts, scales = [(w, z, n) for w, z, _, n in done], [sc for _, _, sc, _ in done]
+        if len(parts) <= 1:
+            return export_glsl(model, parts[0][1], name, scales[0]), []
+        return export_mix_glsl(model, parts, name, scales), parts
+    parts = material_parts(model, material) if stacks else []
     if len(parts) <= 1:
         return export_glsl(model, code, name), []
     return export_mix_glsl(model, parts, name), parts

@@ -65,7 +65,7 @@ def test_field_docs_are_the_string_literals_under_the_fields():
 def test_help_text_defaults_and_choices_come_from_the_dataclass():
     text = " ".join(parser().format_help().split())
     assert "--theta-i THETA_I incidence angle, degrees (default: 30.0)" in text
-    assert "--method {reference,neural,projected,refined,analytic,belcour} evaluation method (default: neural)" in text
+    assert "--method {reference,neural,projected,refined,calibrated,analytic,belcour} evaluation method (default: neural)" in text
     assert "--kind {a,b} which kind (default: b)" in text
     assert "--no-colour draw in colour" in text and "--verbose say more" in text
     assert "two numbers A:B (default: 1:2)" in text

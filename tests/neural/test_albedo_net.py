@@ -48,7 +48,7 @@ def stack(model):
 def test_the_jacobian_is_the_albedos(model, stack):
     _, z, (s, w) = stack
     st = energy.EnergySettings()
-    wi, wo, weight, coat_f, feats, jac = energy._directions(z, model.decoder, s, w, st)
+    wi, wo, weight, coat_f, feats, jac = energy.sample_set(z, model.decoder, s, w, st)
     lat = z[:, :32].float()
     a, J = energy._with_jacobian(model.decoder, lat, feats, wi, wo, weight, coat_f, jac, T)
     assert torch.allclose(a, energy._estimate(model.decoder, lat, feats, wi, wo, weight, coat_f, jac, T))

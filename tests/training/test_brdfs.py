@@ -133,4 +133,4 @@ def test_bad_requests_are_one_line_errors(tmp_path):
     for method in (Method.REFERENCE, Method.ANALYTIC):
         with pytest.raises(NbrdfError, match="texture-mapped"):
             brdf_for(textured, method)
-    assert set(METHODS) == {"reference", "analytic", "neural", "projected", "refined", "belcour"}
+    assert set(METHODS) == {"reference", "analytic", "neural", "projected", "refined", "calibrated", "belcour"}

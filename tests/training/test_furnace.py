@@ -9,7 +9,8 @@ import torch
 
 from nbrdf.neural.brdf import Sample
 from nbrdf.neural.material import Diffuse, parse_material
-from nbrdf.training.brdfs import ClosedFormBRDF, DefensiveSampler
+from nbrdf.training.analytic import DefensiveSampler
+from nbrdf.training.brdfs import ClosedFormBRDF
 from nbrdf.training.furnace import (
     ABSORBING,
     LOSSLESS,

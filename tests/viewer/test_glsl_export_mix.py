@@ -17,7 +17,7 @@ from gpu_brdfs import run_pairs
 
 from nbrdf.neural.anisotropy import FRAME_PARAMS, LIFT_Z
 from nbrdf.neural.errors import NbrdfError
-from nbrdf.neural.material import Material, load_material, parse_material
+from nbrdf.neural.material import Material, load_material, material_to_dict, parse_material
 from nbrdf.neural.material_code import load_code
 from nbrdf.neural.mix import MixedBRDF, material_mix
 from nbrdf.neural.model import default_model
@@ -33,11 +33,11 @@ ANISO = OpenPbr(base_color=(0.9, 0.6, 0.4), base_metalness=1.0, specular_roughne
                 coat_roughness=0.2, coat_roughness_anisotropy=0.6)
 #: sha256 of the single-material exports as they were before mixes were exported, under the shipped weights
 #: (decoder id): the mix must not touch them (re-record when the weights or a shader they include change on purpose;
-#: last: the anisotropic glow, decision 123, which isotropic texts carry inside #ifdef NB_ANISO only)
+#: last: the calibrated body scale, decision 125, which an uncalibrated text carries inside #ifdef NB_BODY_SCALE only)
 SINGLE_DIGESTS = {"718aba7be9e02cb3": {
-    "car_paint.json": "e690e80d9e48903748c9c3cdf2b00febb4203e63dfbe66dbe77f4011cdc663a8",
-    "rough_gold.json": "947779ab1e938f24173997c881543a89ed4dee1424f5f1f1828395474ec6d34b",  # record 124: a lone metal's pair
-    "brushed_steel_lacquer.json": "3cc74e91a0198d2b0dd25deef1f710c52facf01838ad7d6499a3dee6f2a3b7cd",
+    "car_paint.json": "badec5bc218db0d2246a8f7dd44361e288ef2515449aa842e58a3f96ce5c0cbc",
+    "rough_gold.json": "5c73181b9ef095e18350a52cc6671fd15873c0eb264d98fff47ffa96431cb870",
+    "brushed_steel_lacquer.json": "fb8c024da8f04a6cc7e72401aeb5a2f0107a2ac442bed4b12a84213a6480b5f5",
 }}
 
 
@@ -280,3 +280,77 @@ def test_exported_mix_samples_the_mixture_and_the_largest_stack_alone_does_not(g
     assert pdf_err > 10.0, pdf_err
     assert chi.p_value < 1e-9, str(chi)
     assert eval_err > 10.0, eval_err
+
+
+# --- calibrated exports (``nbrdf export --calibrate``: each stack's body at the walk's energy) ---------------
+
+@pytest.fixture
+def quick_walks(tmp_path, monkeypatch):
+    """A private walk-albedo cache and a quick walk (about 0.4 % relative error on a two-layer stack)."""
+    from nbrdf.training import calibration
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    quick = calibration.WalkAlbedoSettings(paths=4096, max_paths=1 << 15, target=0.004)
+    monkeypatch.setattr(calibration, "WalkAlbedoSettings", lambda: quick)
+
+
+def _calibrated_cpu(material: Material, model):
+    from nbrdf.neural.methods import Method
+    from nbrdf.training.brdfs import brdf_for
+
+    return brdf_for(material, Method.CALIBRATED, model=model)  # a mix: its stacks calibrated, weighted
+
+
+def test_a_calibrated_mix_export_scales_the_walked_stacks_only(quick_walks, tmp_path):
+    import json
+
+    from nbrdf.viewer.glsl_export import export_file_glsl
+
+    src = tmp_path / "mixed.json"
+    src.write_text(json.dumps(openpbr_to_material(MIXED, "mixed")[0]))
+    text, parts = export_file_glsl(src, calibrate=True)
+    assert len(parts) == 4 and "#define NB_BODY_SCALE 1" in text
+    block = re.search(r"const vec3 nb_part_scale\[36\] = vec3\[36\]\((.*?)\);", text)
+    assert block is not None
+    rows = re.findall(r"vec3\(([^)]*)\)", block.group(1))
+    ones = [all(float(x) == 1.0 for x in r.split(",")) for r in rows]
+    # the layered stacks (0: coated metal; 2, 3: dielectric over the base colour, coated or not) were walked and
+    # scaled; the bare metal (1), a single layer, keeps ones
+    assert [all(ones[9 * k: 9 * k + 9]) for k in range(4)] == [False, True, False, False]
+    plain, _ = export_file_glsl(src)
+    assert "NB_BODY_SCALE 1" not in plain
+    with pytest.raises(NbrdfError, match="no single code"):  # texture-mapped: refused, with or without
+        export_file_glsl(ASSETS / "worn_tiles.json", calibrate=True)
+    from nbrdf.neural.latent import MaterialLatent, save_latent
+
+    model = default_model()
+    save_latent(tmp_path / "z.safetensors", MaterialLatent(parts[0][1], model.decoder_id, {}))
+    assert export_file_glsl(tmp_path / "z.safetensors")[0]  # a code file exports as it is
+    with pytest.raises(NbrdfError, match="a code file has no stack to walk"):
+        export_file_glsl(tmp_path / "z.safetensors", calibrate=True)
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+@pytest.mark.ci_slow
+def test_a_calibrated_export_equals_the_torch_calibrated_brdf(gl, quick_walks, tmp_path):
+    import json
+
+    from nbrdf.training.furnace import furnace_set
+    from nbrdf.viewer.glsl_export import export_file_glsl
+
+    m = next(m for _, _, m in furnace_set() if m.name == "lossless-d2-09")  # the networks: 4-11 % off
+    src = tmp_path / "stack.json"
+    src.write_text(json.dumps(material_to_dict(m)))
+    text, _ = export_file_glsl(src, calibrate=True)
+    prog = _program(gl, text, sample=False, evaluate=True)
+    rng = np.random.default_rng(5)
+    wi, wo = _dirs(rng, 2048), _dirs(rng, 2048)
+    out = _run(prog, gl, wi, wo, 0)[:, :3]
+    cpu = _calibrated_cpu(load_material(src), default_model())
+    assert cpu.scale is not None
+    ref = cpu.eval(torch.from_numpy(wi), torch.from_numpy(wo)).numpy()
+    assert _rel_err(out, ref, 1e-4, 1e-4) <= 1.0  # SPEC section 7
+    plain = neural_brdf(load_material(src)).eval(torch.from_numpy(wi), torch.from_numpy(wo)).numpy()
+    assert _rel_err(out, plain, 1e-4, 1e-4) > 10.0  # the networks' energy is far outside it
+    prog.release()

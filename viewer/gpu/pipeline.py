@@ -22,6 +22,7 @@ import torch
 
 from nbrdf.imaging.image_io import read_normal_map
 from nbrdf.neural.anisotropy import anisotropic_layers, code_tail
+from nbrdf.neural.body_scale import BodyScale
 from nbrdf.neural.coat import code_coat
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.gpu_pack import latent_share
@@ -110,6 +111,9 @@ class GpuBrdf:
     mixed: tuple["GpuBrdf", ...] = ()
     """The mix's other components, each with its own ``weight``: a draw of this BRDF shades each
     of them too, over the same surface, and the images add up to the mix's."""
+    body_scale: BodyScale | None = None
+    """A calibrated code's body scale (``neural.body_scale``; its programs compile NB_BODY_SCALE and read
+    ``u_body_scale``); None: the body as decoded."""
 
     def components(self) -> tuple["GpuBrdf", ...]:
         """Every BRDF a draw of this one shades: itself, then the mix's other components."""
@@ -158,11 +162,12 @@ class NormalMaps:
 def gpu_brdf(ctx: moderngl.Context, material: Material, decoder: GpuDecoder | None = None,
              latent: torch.Tensor | None = None, proxy: tuple[float, float] | None = None,
              latent_texture: LatentTexture | GpuLatentTexture | None = None,
-             normal_maps: NormalMaps | None = None) -> GpuBrdf:
+             normal_maps: NormalMaps | None = None, body_scale: BodyScale | None = None) -> GpuBrdf:
     """The GPU resources of a material whose latent (or latent texture) is known.
 
     Without ``decoder`` the closed form is used; with it, the decoder at
-    ``latent`` (a (3, 34) code) or at ``latent_texture``. ``proxy`` is the sampler's
+    ``latent`` (a (3, 34) code) or at ``latent_texture``, its body times ``body_scale``
+    where given (a calibrated code). ``proxy`` is the sampler's
     (sigma, w) (None: a guess from the top layer's roughness -- slower to
     converge, never biased)."""
     nmap = (normal_maps or NormalMaps(ctx)).get(material)
@@ -181,8 +186,16 @@ def gpu_brdf(ctx: moderngl.Context, material: Material, decoder: GpuDecoder | No
     sigma, w = proxy if proxy is not None else proxy_hint(material)
     uniforms = {"u_proxy_sigma": float(sigma), "u_proxy_w": float(w), "u_coat": code_coat(decoder.dec.spec, latent),
                 **code_tail(latent, decoder.dec.spec.code)}
+    if body_scale is not None:
+        uniforms["u_body_scale"] = [tuple(float(x) for x in body_scale.g[:, j]) for j in range(len(body_scale.knots))]
     return GpuBrdf(material, BrdfKind.TEXTURED if gtex is not None else BrdfKind.NEURAL, uniforms, decoder, latent,
-                   latent_share(decoder.dec, latent).astype("f4").tobytes(), gtex, nmap)
+                   latent_share(decoder.dec, latent).astype("f4").tobytes(), gtex, nmap, body_scale=body_scale)
+
+
+def body_scale_defines(scale: BodyScale) -> dict[str, object]:
+    """The defines of a program that scales the body (body_scale.glsl): its knots, filled in."""
+    return {"NB_BODY_SCALE": 1, "NB_SCALE_COUNT": len(scale.knots),
+            "NB_SCALE_KNOTS": ", ".join(f"{float(k):.6f}" for k in scale.knots)}
 
 
 #: Latent textures a pipeline keeps beside those of the materials in use (``retain``): the most
@@ -309,13 +322,16 @@ class MaterialPipeline:
         return self._belcour
 
     def build(self, material: Material, mode: BrdfMode | str = BrdfMode.AUTO,
-              latent: torch.Tensor | None = None, conserve: bool = True) -> GpuBrdf:
+              latent: torch.Tensor | None = None, conserve: bool = True,
+              body_scale: BodyScale | None = None) -> GpuBrdf:
         """The GPU resources of ``material`` under ``mode``; ``latent`` overrides
-        the material's own (an interpolated latent). An OpenPBR mix: its layers' BRDF
+        the material's own (an interpolated latent), ``body_scale`` scales its body (a calibrated
+        code's). An OpenPBR mix: its layers' BRDF
         with the other components attached (``with_mix``). ``conserve`` False: the networks'
         codes before their albedo is bounded (a slider's frame; ``latent``)."""
         mode = self.resolve(material, mode)
-        return self.with_mix(material, self._build(material, mode, latent, conserve), mode, conserve)
+        brdf = self._build(material, mode, latent, conserve, body_scale)
+        return self.with_mix(material, brdf, mode, conserve)
 
     def with_mix(self, material: Material, brdf: GpuBrdf, mode: BrdfMode | str, conserve: bool = True) -> GpuBrdf:
         """``brdf`` (the material's layers: its OpenPBR mix's largest component) weighted, with the
@@ -334,7 +350,7 @@ class MaterialPipeline:
         return brdf
 
     def _build(self, material: Material, mode: BrdfMode, latent: torch.Tensor | None,
-               conserve: bool = True) -> GpuBrdf:
+               conserve: bool = True, body_scale: BodyScale | None = None) -> GpuBrdf:
         kind = brdf_kind(mode, material)
         if kind == BrdfKind.ANALYTIC:
             return gpu_brdf(self.ctx, material, normal_maps=self.normal_maps)
@@ -348,7 +364,7 @@ class MaterialPipeline:
                             normal_maps=self.normal_maps)
         z = self.latent(material, mode, conserve) if latent is None else latent
         return gpu_brdf(self.ctx, material, self.decoder, latent=z, proxy=self.proxy(z),
-                        normal_maps=self.normal_maps)
+                        normal_maps=self.normal_maps, body_scale=body_scale)
 
     def release(self) -> None:
         for t in self._textures.values():

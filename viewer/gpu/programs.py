@@ -12,7 +12,7 @@ from nbrdf.neural.errors import NbrdfError
 from nbrdf.viewer.gpu import shaders
 from nbrdf.viewer.gpu.belcour_gpu import brdf_snippet, kinds_snippet
 from nbrdf.viewer.gpu.neural_gpu import WeightStorage
-from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf
+from nbrdf.viewer.gpu.pipeline import BrdfKind, GpuBrdf, body_scale_defines
 
 #: The define of an anisotropic code's programs (anisotropy.glsl; the shading frame follows the tangent).
 ANISO_DEFINE = "NB_ANISO"
@@ -47,6 +47,8 @@ class ProgramKey:
         storage = brdf.decoder.compute_storage if neural and vertex is None else None
         if brdf is not None and brdf.anisotropic:
             defines = {**(defines or {}), ANISO_DEFINE: 1}
+        if brdf is not None and brdf.neural and brdf.body_scale is not None:
+            defines = {**(defines or {}), **body_scale_defines(brdf.body_scale)}
         return cls(shader, vertex, None if brdf is None else brdf.kind, id(brdf.decoder) if neural else 0,
                    storage, tuple(sorted((defines or {}).items())), version)
 

@@ -140,6 +140,11 @@ class IdleRefiner:
     def _decoder_id(self) -> str:
         return self._decoder().weights_id()
 
+    @property
+    def pending(self) -> bool:
+        """Whether the material on screen still waits for (or is in) a refinement."""
+        return self._key is not None
+
     def edited(self, material: Material | None, code: torch.Tensor | None) -> torch.Tensor | None:
         """The material on screen changed (None: one refinement does not take: a
         texture-mapped material, a blend); cancels any refinement at once.

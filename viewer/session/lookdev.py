@@ -42,14 +42,18 @@ import numpy as np
 import torch
 
 from nbrdf.imaging.env_presets import resolve_environment
+from nbrdf.neural.body_scale import BodyScale
 from nbrdf.neural.errors import NbrdfError
 from nbrdf.neural.latent_texture import blend
 from nbrdf.neural.material import Material
+from nbrdf.neural.mix import is_mix
 from nbrdf.neural.model import NeuralModel
+from nbrdf.training.calibration import scale_for
 from nbrdf.training.refined_cache import material_hash
 from nbrdf.viewer.gpu.backdrop import Backdrop, BackdropSettings
 from nbrdf.viewer.gpu.body_source import BodySource
 from nbrdf.viewer.gpu.pipeline import (
+    BrdfKind,
     GpuBrdf,
     MaterialPipeline,
     analytic_capable,
@@ -58,6 +62,7 @@ from nbrdf.viewer.gpu.pipeline import (
     material_key,
 )
 from nbrdf.viewer.gpu.renderer import Renderer
+from nbrdf.viewer.jobs.calibrate_job import IdleCalibrator
 from nbrdf.viewer.jobs.frame import Frame, Stage, render_linear
 from nbrdf.viewer.jobs.plane_curves import PlaneCurves
 from nbrdf.viewer.jobs.refine_job import IdleRefiner
@@ -148,6 +153,10 @@ class LookDev(SceneEdits, SessionEdits, Captures):
         # A still uniform material's code refined in the worker process (viewer/jobs/refine_job.py).
         compare, pipeline = self.compare_part, self.pipeline  # the parts it asks, not the session
         self.idle_refine = IdleRefiner(lambda: compare.worker, lambda: pipeline.model.decoder)
+        # A still layered material's energy walked in the worker process after the refinement
+        # (viewer/jobs/calibrate_job.py): the code shown takes the walk's energy (neural/body_scale.py).
+        refiner = self.idle_refine
+        self.idle_calibrate = IdleCalibrator(lambda: compare.worker, lambda: refiner.pending)
         self._apply_material()
         self.history.reset(self.snapshot())
 
@@ -191,6 +200,11 @@ class LookDev(SceneEdits, SessionEdits, Captures):
     def texture_progress(self) -> float | None:
         """The share of the latent texture being built that is done (None: none building)."""
         return self.textures.progress
+
+    @property
+    def calibrate_status(self) -> str:
+        """The idle calibration's line: "", "energy: walking...", "energy: the walk's" (viewer/jobs/calibrate_job.py)."""
+        return self.idle_calibrate.status
 
     @property
     def refine_status(self) -> str:
@@ -240,18 +254,23 @@ class LookDev(SceneEdits, SessionEdits, Captures):
             brdf = self.pipeline.with_mix(m, gpu_brdf(self.ctx, m, self.pipeline.decoder, z, self.pipeline.proxy(z),
                                                       tex, self.pipeline.normal_maps), mode)
             self.idle_refine.edited(None, None)
+            self.idle_calibrate.edited(None)
         elif mode == BrdfMode.NEURAL:
             # the networks' code now, its albedo settled once the edits pause (``update``): settling
             # costs tens of ms, a slider's frame has none to spare
             z = self.latent(conserve=False)
             refined = self.idle_refine.edited(None if self.interp.active else m, z)  # a cached refined code
+            self.idle_calibrate.edited(None if self.interp.active or is_mix(m) else m)  # a cached walk
+            scale = None
             if refined is not None:
                 refined = self.pipeline.conserved(refined)
+                scale = self._scale(refined)
             brdf = self.pipeline.build(m, BrdfMode.NEURAL, latent=z if refined is None else refined,
-                                       conserve=False)  # a mix's other components: bounded with the handover
+                                       conserve=False, body_scale=scale)  # a mix's other components: bounded
             self._conserve_due = (z, time.monotonic()) if refined is None else None
         else:
             self.idle_refine.edited(None, None)
+            self.idle_calibrate.edited(None)
             brdf = self.pipeline.build(m, mode)
         other = self.interp.other_material() if self.interp.brdf_blend else None
         self.other_brdf = None if other is None else self.pipeline.build(other, BrdfMode.NEURAL)
@@ -307,15 +326,29 @@ class LookDev(SceneEdits, SessionEdits, Captures):
         if due is not None and time.monotonic() - due[1] >= CONSERVE_AFTER_S:
             self._conserve_due = None
             z = self.pipeline.settled(due[0], bool(self.material.interfaces) and not self.interp.active)
-            if not torch.equal(z, due[0]) or self.pipeline.mix_unsettled(self.brdf):  # the albedo moved
-                self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=z))
+            scale = self._scale(z)
+            if not torch.equal(z, due[0]) or self.pipeline.mix_unsettled(self.brdf) or scale is not None:
+                self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=z, body_scale=scale))
         refined = self.idle_refine.poll()
         if refined is not None:  # a code that beats the network's on the material's own simulation
             self._conserve_due = None
             refined = self.pipeline.conserved(refined)
-            self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=refined))
+            self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=refined,
+                                               body_scale=self._scale(refined)))
+        if self.idle_calibrate.poll() is not None and self._conserve_due is None and self.brdf is not None \
+                and self.brdf.kind == BrdfKind.NEURAL and self.brdf.latent is not None:
+            scale = self._scale(self.brdf.latent)  # the walk's energy on the code shown
+            if scale is not None:
+                self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=self.brdf.latent,
+                                                   body_scale=scale))
         if self.turntables.capture is not None and self.brdf is not None:
             self.guarded(self._turntable_step)
+
+    def _scale(self, code: torch.Tensor) -> BodyScale | None:
+        """The body scale that gives ``code`` the walk's energy, once the material on screen has been walked
+        (``IdleCalibrator``); None before, or where the code needs none."""
+        walked = self.idle_calibrate.walked
+        return None if walked is None else scale_for(self.model, code, walked)
 
     def swap_brdf(self, brdf: GpuBrdf) -> None:
         """Shows ``brdf`` for the same material without an edit (idle refinement's better

@@ -39,6 +39,10 @@ vec3 nb_body_glow;
 #define NBRDF_BODY_TAIL nb_body_tail
 #define NBRDF_BODY_GLOW nb_body_glow
 #endif
+#ifdef NB_BODY_SCALE
+vec3 nb_scale[NB_SCALE_COUNT];  // the stack in use's body scale (ones: a stack that needs none)
+#define NB_SCALE(j) nb_scale[j]
+#endif
 #define NBRDF_COAT nb_coat
 #define NB_SHARE(j) nb_share[j]
 //@INCLUDE neural_decoder.glsl
@@ -52,6 +56,9 @@ void nb_use(int k) {
     for (int j = 0; j < NB_WIDTH; ++j) nb_share[j] = nb_part_share[k * NB_WIDTH + j];
     nb_coat = nb_part_coat[k];
     nb_proxy = nb_part_proxy[k];
+#ifdef NB_BODY_SCALE
+    for (int j = 0; j < NB_SCALE_COUNT; ++j) nb_scale[j] = nb_part_scale[k * NB_SCALE_COUNT + j];
+#endif
 #ifdef NB_ANISO
     nb_coat_aniso = nb_part_aniso[k].xy;
     nb_body_aniso = nb_part_aniso[k].zw;

@@ -12,6 +12,7 @@
 // NB_ANISO: a code with an anisotropic tail (anisotropy.glsl): u_aniso = (the coat's anisotropy
 // vector, the body's), u_body_alpha the body's masking alpha; the body is read at its warped pair,
 // plus u_body_glow (per channel) times glow_basis, unwarped.
+// NB_BODY_SCALE: a calibrated code's body times its scale (body_scale.glsl, the walk's energy).
 #if defined(NB_BODY_TABLE) || defined(NB_GUIDE_TABLE)
 //@INCLUDE body_table.glsl
 #define NB_BODY_GUIDE(wi, wo) nb_table(wi, wo)
@@ -37,12 +38,18 @@ uniform float u_proxy_w;
 uniform vec2 u_coat;  // (roughness, ior); ior 1: no coat
 #define NB_COAT u_coat
 #endif
+#ifdef NB_BODY_SCALE
+//@INCLUDE body_scale.glsl
+#define NB_SCALED(v, wi, wo) ((v) * nb_scale_pair(wi, wo))
+#else
+#define NB_SCALED(v, wi, wo) (v)
+#endif
 #ifdef NB_ANISO
 vec3 nb_body(vec3 wi, vec3 wo) {
     vec3 a, b;
     float c_ior = coat_params(NB_COAT).y;
     float j = body_warp(wi, wo, vec3(u_aniso.zw, u_body_alpha), c_ior, a, b);
-    return (j > 0.0 ? NB_BODY(a, b) * j : vec3(0.0)) + u_body_glow * glow_basis(wi, wo, c_ior);
+    return NB_SCALED((j > 0.0 ? NB_BODY(a, b) * j : vec3(0.0)) + u_body_glow * glow_basis(wi, wo, c_ior), wi, wo);
 }
 #ifdef NB_BODY_GUIDE  // the resampling target warped as the body is (a round target under a stretched body: fireflies)
 vec3 nb_guide_aniso(vec3 wi, vec3 wo) {
@@ -55,7 +62,7 @@ vec3 nb_guide_aniso(vec3 wi, vec3 wo) {
 #define NB_BODY_GUIDE(wi, wo) nb_guide_aniso(wi, wo)
 #endif
 #else
-#define nb_body(wi, wo) NB_BODY(wi, wo)
+#define nb_body(wi, wo) NB_SCALED(NB_BODY(wi, wo), wi, wo)
 #endif
 vec3 brdf(vec3 wi, vec3 wo) { return nb_body(wi, wo) + vec3(coat_eval(wi, wo, NB_COAT)); }
 // The split for the lit pass (lit_shade.glsl): body and coat estimated apart.

@@ -406,6 +406,8 @@ class Panels(MaterialWidgets):
         imgui.text(f"edit -> frame {t.edit_to_frame_ms:6.1f} ms")
         if ld.refine_status:  # "refined, N s" (viewer/jobs/refine_job.py)
             imgui.text(ld.refine_status)
+        if ld.calibrate_status:  # "energy: the walk's" (viewer/jobs/calibrate_job.py)
+            imgui.text(ld.calibrate_status)
         if ld.notice:
             imgui.text_wrapped(ld.notice)
         if ld.error:
