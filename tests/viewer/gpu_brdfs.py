@@ -1,6 +1,8 @@
 """Test helper: a material's ``GpuBrdf`` through the pipeline, the one way to hand the renderer a material."""
 from __future__ import annotations
 
+import torch
+
 from nbrdf.neural.material import load_material
 from nbrdf.viewer.gpu.body_source import table_sampling
 from nbrdf.viewer.gpu.body_table_gpu import BodyTables
@@ -50,3 +52,12 @@ def run_pairs(prog, ctx, a, b, mode: int, in_width: int, out_width: int):
     for r in (fbo, target, tex):
         r.release()
     return out
+
+
+def upper_pairs(n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """``n`` random (wi, wo) pairs above the horizon (z >= about 0.05), from ``seed``."""
+    g = torch.Generator().manual_seed(seed)
+    v = torch.randn(2 * n, 3, generator=g)
+    v[:, 2] = v[:, 2].abs() + 0.05
+    v = v / v.norm(dim=-1, keepdim=True)
+    return v[:n], v[n:]

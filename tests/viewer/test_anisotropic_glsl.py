@@ -9,6 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
+from gpu_brdfs import upper_pairs
 
 from nbrdf.neural.material import load_material, parse_material
 from nbrdf.neural.neural_brdf import neural_brdf
@@ -28,14 +29,6 @@ def _doc(rotation: float) -> dict:
         {"type": "conductor", "roughness": 0.3, "r0": [0.9, 0.8, 0.7], "anisotropy": 0.8}]}
 
 
-def _pairs(n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
-    g = torch.Generator().manual_seed(seed)
-    v = torch.randn(2 * n, 3, generator=g)
-    v[:, 2] = v[:, 2].abs() + 0.05
-    v = v / v.norm(dim=-1, keepdim=True)
-    return v[:n], v[n:]
-
-
 @pytest.fixture(scope="module")
 def pipeline(gl_ctx):
     return MaterialPipeline(gl_ctx)
@@ -46,7 +39,7 @@ def test_the_glsl_brdf_of_an_anisotropic_code_is_the_torch_one(gl_ctx, pipeline)
     brdf = pipeline.build(m, "neural")
     assert brdf.anisotropic and len(brdf.uniforms["u_aniso"]) == 4
     r = Renderer(gl_ctx, brdf=brdf, mesh="sphere")
-    wi, wo = _pairs(1500, 0)
+    wi, wo = upper_pairs(1500, 0)
     cpu = neural_brdf(m, pipeline.model).eval(wi, wo).numpy()
     glsl = probe_brdf(r, brdf, wi.numpy(), wo.numpy())
     rel = np.abs(glsl - cpu) / (np.abs(cpu) + 1e-3)
@@ -72,7 +65,7 @@ def test_the_baked_table_reads_the_warped_pair(gl_ctx, pipeline):
         brdf = tables.brdf(pipeline.build(m, "neural"), STILL)
         assert brdf.anisotropic
         r = Renderer(gl_ctx, brdf=brdf, mesh="sphere")
-        wi, wo = _pairs(1500, 1)
+        wi, wo = upper_pairs(1500, 1)
         cpu = neural_brdf(m, pipeline.model).eval(wi, wo).numpy()
         glsl = probe_brdf(r, brdf, wi.numpy(), wo.numpy())
         err = np.abs(glsl - cpu) / (np.abs(cpu) + 1e-2)
@@ -85,7 +78,7 @@ def test_the_glsl_sampler_draws_the_torch_directions_with_the_torch_pdf(gl_ctx, 
     m = parse_material(_doc(-40.0))
     brdf = pipeline.build(m, "neural")
     r = Renderer(gl_ctx, brdf=brdf, mesh="sphere")
-    _, wo = _pairs(2000, 2)
+    _, wo = upper_pairs(2000, 2)
     u = torch.rand(2000, 3, generator=torch.Generator().manual_seed(3))
     out = probe_lobe_sampling(r, brdf, wo.numpy(), u.numpy())
     ws, pdf = neural_brdf(m, pipeline.model)._draw(wo, u)[:2]

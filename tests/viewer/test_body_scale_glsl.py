@@ -5,8 +5,8 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-import pytest
 import torch
+from gpu_brdfs import upper_pairs
 
 from nbrdf.neural.body_scale import BodyScale
 from nbrdf.neural.energy import EnergySettings
@@ -21,20 +21,8 @@ DOC = {"format": "nbrdf-material/1", "name": "lacquer", "layers": [
     {"type": "diffuse", "albedo": [0.8, 0.6, 0.4]}]}
 
 
-def _pairs(n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
-    g = torch.Generator().manual_seed(seed)
-    v = torch.randn(2 * n, 3, generator=g)
-    v[:, 2] = v[:, 2].abs() + 0.02
-    v = v / v.norm(dim=-1, keepdim=True)
-    return v[:n], v[n:]
-
-
-@pytest.fixture(scope="module")
-def pipeline(gl_ctx):
-    return MaterialPipeline(gl_ctx)
-
-
-def test_the_glsl_body_scale_is_the_torch_one(gl_ctx, pipeline):
+def test_the_glsl_body_scale_is_the_torch_one(gl_ctx):
+    pipeline = MaterialPipeline(gl_ctx)
     m = parse_material(DOC)
     knots = EnergySettings().thetas
     # a scale that bends across the knots, differently per channel (the walk's corrections are a few per cent)
@@ -44,7 +32,7 @@ def test_the_glsl_body_scale_is_the_torch_one(gl_ctx, pipeline):
     brdf = pipeline.build(m, "neural", latent=z, body_scale=scale)
     assert len(brdf.uniforms["u_body_scale"]) == len(knots)
     r = Renderer(gl_ctx, brdf=brdf, mesh="sphere")
-    wi, wo = _pairs(1500, 2)
+    wi, wo = upper_pairs(1500, 2)
     cpu = latent_brdf(pipeline.model.decoder, z, m, pipeline.model.sampler, scale).eval(wi, wo).numpy()
     glsl = probe_brdf(r, brdf, wi.numpy(), wo.numpy())
     rel = np.abs(glsl - cpu) / (np.abs(cpu) + 1e-3)

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 import torch
+from idle_jobs import Clock, FakeWorker
 
 from nbrdf.neural.material import load_material, material_to_dict
 from nbrdf.training.calibration import WalkAlbedoSettings, finish_walk, start_walk
@@ -24,32 +25,6 @@ from nbrdf.viewer.jobs.calibrate_job import (
 from nbrdf.viewer.options import DEFAULT_MATERIAL
 
 LOOKDEV = DEFAULT_MATERIAL.parent
-
-
-class FakeWorker:
-    """The ``ReferenceWorker`` calls the calibrator makes, scripted."""
-
-    def __init__(self):
-        self.current = None
-        self.requests, self.cancels, self.results = [], 0, {}
-
-    def request(self, job):
-        self.requests.append(job)
-        self.current = job.key
-
-    def cancel(self):
-        self.cancels += 1
-        self.current = None
-
-    def result(self, key):
-        return self.results.get(key)
-
-
-class Clock:
-    t = 0.0
-
-    def __call__(self):
-        return self.t
 
 
 def _stack(name="lossless-d2-09"):

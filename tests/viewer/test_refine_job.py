@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from idle_jobs import Clock, FakeWorker
 
 from nbrdf.neural.material import load_material
 from nbrdf.training.refine import RefineConfig
@@ -20,32 +21,6 @@ BLACK = LOOKDEV / "car-paint-black.json"
 class FakeDecoder:
     def weights_id(self) -> str:
         return "f" * 40
-
-
-class FakeWorker:
-    """The ``ReferenceWorker`` calls the refiner makes, scripted."""
-
-    def __init__(self):
-        self.current = None
-        self.requests, self.cancels, self.results = [], 0, {}
-
-    def request(self, job):
-        self.requests.append(job)
-        self.current = job.key
-
-    def cancel(self):
-        self.cancels += 1
-        self.current = None
-
-    def result(self, key):
-        return self.results.get(key)
-
-
-class Clock:
-    t = 0.0
-
-    def __call__(self):
-        return self.t
 
 
 @pytest.fixture
