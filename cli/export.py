@@ -29,7 +29,7 @@ class ExportConfig:
     """bundle (default: the shipped weights)"""
     calibrate: bool = False
     """--glsl: each layered stack's body takes the walk's energy (its directional albedo, walked once and cached:
-    1-60 s the first time; the networks' is 2 % off at the median, up to 30 %)"""
+    5-90 s the first time; the networks' is 2 % off at the median, up to 30 %)"""
 
 
 def cmd_export(a: argparse.Namespace) -> int:

@@ -127,7 +127,7 @@ def code_kernel(material: str, weights: str | None = None, pixel_angle: float = 
     may be anisotropic (SPEC section 10: its tangent is the local frame's x,
     ``_code_terms``); a texture-mapped one may not (one line). ``calibrate``: a uniform material JSON (each
     component of a mix) takes the walk's energy (``training.calibration``: its body scaled to the walk's
-    albedo; the first load of a material walks it, 1-60 s, later loads read the cache)."""
+    albedo; the first load of a material walks it, 5-90 s, later loads read the cache)."""
     if body not in Body.words():
         raise PluginError(f'nbrdf: body {body!r} is not one of {", ".join(map(repr, Body.words()))}')
     try:

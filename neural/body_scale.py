@@ -20,8 +20,8 @@ from nbrdf.neural.energy import EnergySettings, sample_set
 from nbrdf.neural.errors import NbrdfError
 
 Tensor = torch.Tensor
-#: The relative noise of the fit's own albedo estimate (2,048 directions per incidence); a residual is weighed by
-#: it and the target's standard error together.
+#: The relative noise of the fit's own albedo estimate (4,096 directions per incidence: at most about 0.3 %); a
+#: residual is weighed by it and the target's standard error together.
 NOISE = 0.003
 #: The prior's width in log g: a weak pull toward 1 (a deep lossless stack needs g about 1.3).
 PRIOR = 0.5
@@ -30,8 +30,8 @@ PRIOR = 0.5
 CURVATURE = 0.05
 #: g's range: a body more than this far off is not the networks' lobe with the wrong energy.
 G_RANGE = (0.5, 2.0)
-#: Directions per incidence of the fit's albedo (the code's own sampler, fixed Sobol points).
-FIT_SAMPLES = 2048
+#: Directions per incidence of the fit's albedo (the code's own sampler, fixed Sobol points; 60-150 ms a fit here).
+FIT_SAMPLES = 4096
 
 
 @dataclass(frozen=True)
