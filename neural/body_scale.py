@@ -98,9 +98,9 @@ def fit(decoder: Decoder, code: Tensor, sigma: float, w: float, target: Tensor, 
         M = ((body * weight)[..., None] * P[None]).reshape(3, T, FIT_SAMPLES, T).mean(2)  # body_t = g_t (M g)_t
         C = (coat_f * weight).reshape(-1, T, FIT_SAMPLES).mean(-1).expand(3, T)
         goal = target.float().clamp(max=s.bound - 0.002)
-        sd = (se.pow(2) + (NOISE * goal).pow(2)).sqrt().clamp_min(1e-6)
         if float(((C + M.sum(-1) - goal).abs() / goal.clamp_min(1e-6)).amax()) <= s.walk_threshold:
             return None
+        sd = (se.pow(2) + (NOISE * goal).pow(2)).sqrt().clamp_min(1e-6)
         x = torch.zeros(3, T)  # log g
         eye = torch.eye(T)
         d2 = (eye[:-2] - 2.0 * eye[1:-1] + eye[2:]) / CURVATURE  # second differences across the knots

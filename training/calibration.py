@@ -130,11 +130,7 @@ def walk_albedo(material: Material, thetas: tuple[float, ...], settings: WalkAlb
     hit = cached_walk_albedo(material, thetas, settings)
     if hit is not None:
         return hit
-    walk = start_walk(material, thetas, settings)
-    while not walk.step():
-        if progress is not None:
-            progress(f"{material.name}: {int(walk.count.max())} paths, worst relative error {walk.worst:.2e}")
-    return finish_walk(walk, settings)
+    return finish_walk(start_walk(material, thetas, settings).run(progress), settings)
 
 
 def scale_for(model, code: Tensor, albedo: tuple[Tensor, Tensor]) -> BodyScale | None:

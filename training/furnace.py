@@ -155,6 +155,15 @@ class AlbedoWalk:
             self.n, self.k = min(c, self.max_paths - c), self.k + 1
         return not self.todo
 
+    def run(self, progress: Callable[[str], None] | None = None) -> "AlbedoWalk":
+        """Every round to the end, each told to ``progress`` (paths so far, the worst relative error)."""
+        while True:
+            done = self.step()
+            if progress is not None:
+                progress(f"{self.material.name}: {int(self.count.max())} paths, worst relative error {self.worst:.2e}")
+            if done:
+                return self
+
     def result(self) -> Albedo:
         mean, se = _pooled(self.s1, self.s2, self.count, self.top_m, self.top_var)
         return Albedo(mean.numpy(), se.numpy(), self.count.numpy().astype(np.int64))
@@ -167,13 +176,7 @@ def reference_albedo(material: Material, thetas: tuple[float, ...] = FURNACE_THE
     doubling the total (at most ``round_paths`` a round), until the relative standard error of every channel is
     at most ``target`` or an incidence has ``max_paths``. One line (``NbrdfError``) for a material the walk
     cannot take."""
-    walk = AlbedoWalk(material, thetas, paths, max_paths, target, seed, round_paths)
-    while not walk.step():
-        if progress is not None:
-            progress(f"{material.name}: {int(walk.count.max())} paths, worst relative error {walk.worst:.2e}")
-    if progress is not None:
-        progress(f"{material.name}: {int(walk.count.max())} paths, worst relative error {walk.worst:.2e}")
-    return walk.result()
+    return AlbedoWalk(material, thetas, paths, max_paths, target, seed, round_paths).run(progress).result()
 
 
 def _pooled(s1: Tensor, s2: Tensor, count: Tensor, top_m: Tensor, top_var: Tensor) -> tuple[Tensor, Tensor]:

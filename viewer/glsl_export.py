@@ -30,6 +30,7 @@ from nbrdf.neural.material_code import code_parts, load_code
 from nbrdf.neural.mix import material_mix
 from nbrdf.neural.model import NeuralModel
 from nbrdf.training import calibration
+from nbrdf.viewer.gpu.pipeline import body_scale_defines
 from nbrdf.viewer.gpu.shaders import MODE_DEFINES, source
 
 TEMPLATE = "export.glsl"
@@ -74,16 +75,17 @@ def _tail(model: NeuralModel, code: torch.Tensor) -> Tail | None:
 
 
 def _scale_lines(scales: Sequence[BodyScale | None], knots: tuple[float, ...]) -> list[str]:
-    """The defines of a calibrated export (body_scale.glsl) and every stack's g, knot by knot (ones: a stack
-    whose code needs no scale): one stack's as NB_SCALE_VALUES, a mix's as nb_part_scale."""
+    """The defines of a calibrated export (body_scale.glsl, as the previewer's programs get them) and every
+    stack's g, knot by knot (ones: a stack whose code needs no scale): one stack's as NB_SCALE_VALUES, a mix's as
+    nb_part_scale."""
     rows = []
     for sc in scales:
         g = torch.ones(3, len(knots)) if sc is None else sc.g
         rows += [f"vec3({', '.join(_f(float(x)) for x in g[:, j])})" for j in range(len(knots))]
     values = (f"#define NB_SCALE_VALUES {', '.join(rows)}" if len(scales) == 1 else
               f"const vec3 nb_part_scale[{len(rows)}] = vec3[{len(rows)}]({', '.join(rows)});")
-    return ["#define NB_BODY_SCALE 1", f"#define NB_SCALE_COUNT {len(knots)}",
-            f"#define NB_SCALE_KNOTS {', '.join(_f(k) for k in knots)}", values]
+    defines = body_scale_defines(BodyScale(knots, torch.ones(3, len(knots))))
+    return [f"#define {k} {v}" for k, v in defines.items()] + [values]
 
 
 def export_glsl(model: NeuralModel, code: torch.Tensor, name: str = "material",
@@ -213,8 +215,11 @@ def export_file_glsl(path: str | Path, weights: str | Path | None = None,
         raise NbrdfError(f"{Path(path).name}: a code file has no stack to walk; export its material with --calibrate")
     stacks = material_mix(material) if material is not None and not material.is_textured else []
     if calibrate:
-        done = [(w, *calibration.calibrate(model, m), m.name) for w, m in stacks]
-        parts, scales = [(w, z, n) for w, z, _, n in done], [sc for _, _, sc, _ in done]
+        parts, scales = [], []
+        for w, m in stacks:
+            z, sc = calibration.calibrate(model, m)
+            parts.append((w, z, m.name))
+            scales.append(sc)
         if len(parts) <= 1:
             return export_glsl(model, parts[0][1], name, scales[0]), []
         return export_mix_glsl(model, parts, name, scales), parts

@@ -328,19 +328,17 @@ class LookDev(SceneEdits, SessionEdits, Captures):
             z = self.pipeline.settled(due[0], bool(self.material.interfaces) and not self.interp.active)
             scale = self._scale(z)
             if not torch.equal(z, due[0]) or self.pipeline.mix_unsettled(self.brdf) or scale is not None:
-                self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=z, body_scale=scale))
+                self._show_code(z, scale)
         refined = self.idle_refine.poll()
         if refined is not None:  # a code that beats the network's on the material's own simulation
             self._conserve_due = None
             refined = self.pipeline.conserved(refined)
-            self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=refined,
-                                               body_scale=self._scale(refined)))
+            self._show_code(refined, self._scale(refined))
         if self.idle_calibrate.poll() is not None and self._conserve_due is None and self.brdf is not None \
                 and self.brdf.kind == BrdfKind.NEURAL and self.brdf.latent is not None:
             scale = self._scale(self.brdf.latent)  # the walk's energy on the code shown
             if scale is not None:
-                self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=self.brdf.latent,
-                                                   body_scale=scale))
+                self._show_code(self.brdf.latent, scale)
         if self.turntables.capture is not None and self.brdf is not None:
             self.guarded(self._turntable_step)
 
@@ -349,6 +347,10 @@ class LookDev(SceneEdits, SessionEdits, Captures):
         (``IdleCalibrator``); None before, or where the code needs none."""
         walked = self.idle_calibrate.walked
         return None if walked is None else scale_for(self.model, code, walked)
+
+    def _show_code(self, code: torch.Tensor, scale: BodyScale | None) -> None:
+        """Hands the material's neural BRDF over to ``code`` with its body ``scale`` (``swap_brdf``)."""
+        self.swap_brdf(self.pipeline.build(self.material, BrdfMode.NEURAL, latent=code, body_scale=scale))
 
     def swap_brdf(self, brdf: GpuBrdf) -> None:
         """Shows ``brdf`` for the same material without an edit (idle refinement's better
